@@ -1,0 +1,668 @@
+//! The generalized map: darts, alpha links, orbits and embeddings.
+
+use crate::embedding::{Column, Derived, Embedding, EmbeddingId, EmbeddingType, Policy, Value};
+use crate::marks::{with_marks, Marks};
+use crate::{Aggregate, Dart, EmbeddingError, GMapError, LinkError, OrbitType};
+
+/// Largest number of darts a map holds (indices are `u32`).
+pub const MAX_DARTS: usize = u32::MAX as usize - 1;
+
+/// A generalized map of dimension 2 (surfaces) or 3 (volumes).
+///
+/// Darts are indices into struct-of-arrays tables: `alpha[i][d]` for `i` in `0..=3` (alpha3 is
+/// kept and stays free in a 2-map). A free link points to the dart itself. Removed darts go
+/// to a free list and are reused by [`GMap::add_dart`].
+///
+/// Invariants (checked by [`GMap::validate`]): each `alpha_i` is an involution; `alpha_i o
+/// alpha_j` is an involution for `i + 2 <= j`; every embedding is constant on its orbits
+/// (the darts of an orbit share one slot, and no slot is shared by two orbits).
+///
+/// ```
+/// use topomech_gmap::{GMap, OrbitType};
+/// let mut g = GMap::new(2).unwrap();
+/// let a = g.add_darts(2);
+/// let b = topomech_gmap::Dart(a.0 + 1);
+/// g.link(0, a, b).unwrap();
+/// assert_eq!(g.alpha(0, a), b);
+/// assert_eq!(g.orbit(a, OrbitType::parse("<0>").unwrap()).len(), 2);
+/// assert!(g.is_valid());
+/// ```
+#[derive(Clone, Debug)]
+pub struct GMap {
+    pub(crate) dim: usize,
+    pub(crate) alpha: [Vec<u32>; 4],
+    pub(crate) alive: Vec<bool>,
+    pub(crate) free_darts: Vec<u32>,
+    pub(crate) n_alive: usize,
+    pub(crate) version: u64,
+    pub(crate) embeddings: Vec<Embedding>,
+}
+
+/// Counts of the cells of a map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct CellCounts {
+    /// Number of darts.
+    pub darts: usize,
+    /// Vertex orbits `<1..n>`.
+    pub vertices: usize,
+    /// Edge orbits `<0,2..n>`.
+    pub edges: usize,
+    /// Face orbits `<0,1,3..n>` (a face between two volumes counts once).
+    pub faces: usize,
+    /// Volume orbits `<0,1,2>` (0 for a 2-map).
+    pub volumes: usize,
+    /// Connected components `<0..n>`.
+    pub components: usize,
+    /// Boundary cells: in 3D the faces `<0,1>` whose darts are 3-free; in 2D the edges `<0>`
+    /// whose darts are 2-free.
+    pub boundary: usize,
+}
+
+impl GMap {
+    /// An empty map of dimension 2 or 3.
+    pub fn new(dim: usize) -> Result<Self, GMapError> {
+        if dim != 2 && dim != 3 {
+            return Err(GMapError::Dimension(dim));
+        }
+        Ok(GMap {
+            dim,
+            alpha: Default::default(),
+            alive: Vec::new(),
+            free_darts: Vec::new(),
+            n_alive: 0,
+            version: 0,
+            embeddings: Vec::new(),
+        })
+    }
+
+    /// The dimension `n` (2 or 3).
+    #[inline]
+    pub fn dimension(&self) -> usize {
+        self.dim
+    }
+
+    /// The number of live darts.
+    #[inline]
+    pub fn n_darts(&self) -> usize {
+        self.n_alive
+    }
+
+    /// One more than the largest dart index ever used: tables have this length.
+    #[inline]
+    pub fn capacity(&self) -> usize {
+        self.alive.len()
+    }
+
+    /// The topology version: it changes whenever a link changes or a dart is added or removed.
+    /// Caches derived from the topology (plans) key on it.
+    #[inline]
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+
+    /// Whether `d` is a live dart of this map.
+    #[inline]
+    pub fn is_alive(&self, d: Dart) -> bool {
+        self.alive.get(d.index()).copied().unwrap_or(false)
+    }
+
+    /// The live darts, in index order.
+    pub fn darts(&self) -> impl Iterator<Item = Dart> + '_ {
+        self.alive
+            .iter()
+            .enumerate()
+            .filter(|(_, &a)| a)
+            .map(|(i, _)| Dart(i as u32))
+    }
+
+    /// `alpha_i(d)`. `d` must be live and `i <= 3`.
+    #[inline]
+    pub fn alpha(&self, i: usize, d: Dart) -> Dart {
+        Dart(self.alpha[i][d.index()])
+    }
+
+    /// `alpha_I(d)` with the dimension known at compile time.
+    #[inline]
+    pub fn alpha_c<const I: usize>(&self, d: Dart) -> Dart {
+        Dart(self.alpha[I][d.index()])
+    }
+
+    /// Whether `d` is free at dimension `i`.
+    #[inline]
+    pub fn is_free(&self, i: usize, d: Dart) -> bool {
+        self.alpha[i][d.index()] == d.0
+    }
+
+    pub(crate) fn check_dart(&self, d: Dart) -> Result<(), LinkError> {
+        if self.is_alive(d) {
+            Ok(())
+        } else {
+            Err(LinkError::NoSuchDart(d))
+        }
+    }
+
+    pub(crate) fn check_dim(&self, i: usize) -> Result<(), LinkError> {
+        if i <= self.dim {
+            Ok(())
+        } else {
+            Err(LinkError::Dimension { dim: i, n: self.dim })
+        }
+    }
+
+    /// Adds one free dart, reusing a removed index when there is one.
+    pub fn add_dart(&mut self) -> Dart {
+        if let Some(i) = self.free_darts.pop() {
+            let iu = i as usize;
+            self.alive[iu] = true;
+            for a in &mut self.alpha {
+                a[iu] = i;
+            }
+            self.n_alive += 1;
+            self.version += 1;
+            for e in &mut self.embeddings {
+                if !e.is_direct() {
+                    let s = e.alloc_slot(1);
+                    e.slot_of[iu] = s;
+                } else {
+                    let w = e.ty.width();
+                    match &e.values {
+                        Column::Real(_) => e.values.set(w, iu, &Value::Real(vec![0.0; w])),
+                        Column::Int(_) => e.values.set(w, iu, &Value::Int(0)),
+                        Column::Bool(_) => e.values.set(w, iu, &Value::Bool(false)),
+                    }
+                }
+            }
+            Dart(i)
+        } else {
+            self.add_darts(1)
+        }
+    }
+
+    /// Appends `k` free darts with consecutive indices (never from the free list) and returns
+    /// the first. Panics past [`MAX_DARTS`].
+    pub fn add_darts(&mut self, k: usize) -> Dart {
+        let first = self.alive.len();
+        assert!(first + k <= MAX_DARTS, "too many darts");
+        let end = first + k;
+        for a in &mut self.alpha {
+            a.extend(first as u32..end as u32);
+        }
+        self.alive.resize(end, true);
+        self.n_alive += k;
+        self.version += 1;
+        for e in &mut self.embeddings {
+            let w = e.ty.width();
+            if e.is_direct() {
+                for _ in 0..k {
+                    e.values.push_default(w);
+                }
+            } else {
+                e.slot_of.reserve(k);
+                for _ in 0..k {
+                    let s = e.alloc_slot(1);
+                    e.slot_of.push(s);
+                }
+            }
+        }
+        Dart(first as u32)
+    }
+
+    /// Removes a dart that is free in every dimension.
+    pub fn remove_dart(&mut self, d: Dart) -> Result<(), LinkError> {
+        self.check_dart(d)?;
+        for i in 0..=3 {
+            if !self.is_free(i, d) {
+                return Err(LinkError::StillLinked {
+                    dart: d,
+                    dim: i,
+                    to: self.alpha(i, d),
+                });
+            }
+        }
+        self.alive[d.index()] = false;
+        self.free_darts.push(d.0);
+        self.n_alive -= 1;
+        self.version += 1;
+        for e in &mut self.embeddings {
+            if !e.is_direct() {
+                let s = e.slot_of[d.index()];
+                e.release(s);
+            }
+        }
+        Ok(())
+    }
+
+    /// Links `a` and `b` by `alpha_i` (both must be `i`-free; `a == b` is refused).
+    ///
+    /// This is the raw operation: it does not keep embeddings constant on orbits, and may
+    /// break the cycle invariant. Use [`GMap::sew`] to keep the map valid.
+    pub fn link(&mut self, i: usize, a: Dart, b: Dart) -> Result<(), LinkError> {
+        self.check_dim(i)?;
+        self.check_dart(a)?;
+        self.check_dart(b)?;
+        for x in [a, b] {
+            if !self.is_free(i, x) || a == b {
+                return Err(LinkError::NotFree {
+                    dim: i,
+                    a,
+                    b,
+                    busy: x,
+                    to: self.alpha(i, x),
+                });
+            }
+        }
+        self.alpha[i][a.index()] = b.0;
+        self.alpha[i][b.index()] = a.0;
+        self.version += 1;
+        Ok(())
+    }
+
+    /// Unlinks `a` from its `alpha_i` partner and returns the partner (raw, like [`GMap::link`]).
+    pub fn unlink(&mut self, i: usize, a: Dart) -> Result<Dart, LinkError> {
+        self.check_dim(i)?;
+        self.check_dart(a)?;
+        let b = self.alpha(i, a);
+        if b == a {
+            return Err(LinkError::AlreadyFree { dim: i, dart: a });
+        }
+        self.alpha[i][a.index()] = a.0;
+        self.alpha[i][b.index()] = b.0;
+        self.version += 1;
+        Ok(b)
+    }
+
+    /// Visits the orbit `o` of `d` depth-first, marking with `marks`; calls `f` on each dart
+    /// newly marked. Dimensions above the map's are ignored.
+    pub fn visit_orbit(&self, d: Dart, o: OrbitType, marks: &mut Marks, mut f: impl FnMut(Dart)) {
+        if !marks.mark(d) {
+            return;
+        }
+        let dims: [usize; 4] = [0, 1, 2, 3];
+        let mut stack = vec![d];
+        while let Some(x) = stack.pop() {
+            f(x);
+            for &i in &dims[..=self.dim] {
+                if o.contains(i) {
+                    let y = Dart(self.alpha[i][x.index()]);
+                    if marks.mark(y) {
+                        stack.push(y);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The darts of the orbit `o` of `d`, `d` first.
+    pub fn orbit(&self, d: Dart, o: OrbitType) -> Vec<Dart> {
+        let mut out = Vec::new();
+        with_marks(self.capacity(), |m| self.visit_orbit(d, o, m, |x| out.push(x)));
+        out
+    }
+
+    /// One dart per orbit of type `o` (the smallest index of each), in increasing order.
+    pub fn orbit_representatives(&self, o: OrbitType) -> Vec<Dart> {
+        let mut out = Vec::new();
+        let mut m = Marks::with_capacity(self.capacity());
+        for d in self.darts() {
+            if !m.is_marked(d) {
+                out.push(d);
+                self.visit_orbit(d, o, &mut m, |_| {});
+            }
+        }
+        out
+    }
+
+    /// The number of orbits of type `o`.
+    pub fn count_orbits(&self, o: OrbitType) -> usize {
+        let mut n = 0;
+        let mut m = Marks::with_capacity(self.capacity());
+        for d in self.darts() {
+            if !m.is_marked(d) {
+                n += 1;
+                self.visit_orbit(d, o, &mut m, |_| {});
+            }
+        }
+        n
+    }
+
+    /// Labels every live dart with the index of its orbit of type `o` (numbered in order of
+    /// their smallest dart); removed darts get `u32::MAX`. Returns the labels and the count.
+    pub fn orbit_labels(&self, o: OrbitType) -> (Vec<u32>, usize) {
+        let mut label = vec![u32::MAX; self.capacity()];
+        let mut n = 0u32;
+        let mut m = Marks::with_capacity(self.capacity());
+        for d in self.darts() {
+            if !m.is_marked(d) {
+                self.visit_orbit(d, o, &mut m, |x| label[x.index()] = n);
+                n += 1;
+            }
+        }
+        (label, n as usize)
+    }
+
+    /// Counts of vertices, edges, faces, volumes, components and boundary cells.
+    pub fn cell_counts(&self) -> CellCounts {
+        let n = self.dim;
+        let boundary = if n == 3 {
+            self.orbit_representatives(OrbitType::parse("<0,1>").expect("static"))
+                .into_iter()
+                .filter(|&d| self.is_free(3, d))
+                .count()
+        } else {
+            self.orbit_representatives(OrbitType::parse("<0>").expect("static"))
+                .into_iter()
+                .filter(|&d| self.is_free(2, d))
+                .count()
+        };
+        CellCounts {
+            darts: self.n_darts(),
+            vertices: self.count_orbits(OrbitType::vertex(n)),
+            edges: self.count_orbits(OrbitType::edge(n)),
+            faces: self.count_orbits(OrbitType::face(n)),
+            volumes: if n == 3 { self.count_orbits(OrbitType::volume()) } else { 0 },
+            components: self.count_orbits(OrbitType::all(n)),
+            boundary,
+        }
+    }
+
+    /// Bytes used by the topology tables (alpha links and liveness).
+    pub fn topology_bytes(&self) -> usize {
+        self.alpha.iter().map(|a| a.capacity() * 4).sum::<usize>()
+            + self.alive.capacity()
+            + self.free_darts.capacity() * 4
+    }
+
+    /// Bytes used by the topology and every embedding.
+    pub fn memory_bytes(&self) -> usize {
+        self.topology_bytes() + self.embeddings.iter().map(Embedding::memory_bytes).sum::<usize>()
+    }
+
+    // ---------------------------------------------------------------- embeddings
+
+    fn check_name(&self, name: &str) -> Result<(), EmbeddingError> {
+        if name.is_empty()
+            || !name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(EmbeddingError::BadName(name.to_string()));
+        }
+        if self.embedding_id(name).is_some() {
+            return Err(EmbeddingError::Duplicate(name.to_string()));
+        }
+        Ok(())
+    }
+
+    /// Declares an embedding on orbit type `orbit`, with a zero value on every orbit.
+    pub fn add_embedding(
+        &mut self,
+        name: &str,
+        ty: EmbeddingType,
+        orbit: OrbitType,
+        policy: Policy,
+    ) -> Result<EmbeddingId, EmbeddingError> {
+        self.check_name(name)?;
+        if orbit.max_dim().is_some_and(|m| m > self.dim) {
+            return Err(EmbeddingError::Dimension {
+                name: name.into(),
+                orbit,
+                n: self.dim,
+            });
+        }
+        if matches!(ty, EmbeddingType::Bool) && matches!(policy, Policy::Sum | Policy::Mean)
+            || matches!(ty, EmbeddingType::I64) && policy == Policy::Mean
+        {
+            return Err(EmbeddingError::Policy {
+                name: name.into(),
+                policy: policy.name().into(),
+                ty: ty.to_string(),
+            });
+        }
+        let e = self.build_embedding(Embedding::new(name, ty, orbit, policy, None));
+        self.embeddings.push(e);
+        Ok(EmbeddingId(self.embeddings.len() as u32 - 1))
+    }
+
+    /// Declares a derived embedding on `orbit`: the aggregate of `source` over the distinct
+    /// source orbits inside each orbit. The source's orbit must be a sub-orbit of `orbit`.
+    /// It is computed now and by every [`GMap::refresh_derived`].
+    pub fn add_derived(
+        &mut self,
+        name: &str,
+        source: &str,
+        orbit: OrbitType,
+        aggregate: Aggregate,
+    ) -> Result<EmbeddingId, EmbeddingError> {
+        self.check_name(name)?;
+        let sid = self
+            .embedding_id(source)
+            .ok_or_else(|| EmbeddingError::Unknown(source.into()))?;
+        let src = &self.embeddings[sid.0 as usize];
+        if orbit.max_dim().is_some_and(|m| m > self.dim) {
+            return Err(EmbeddingError::Dimension {
+                name: name.into(),
+                orbit,
+                n: self.dim,
+            });
+        }
+        if !src.orbit.is_subset_of(orbit) {
+            return Err(EmbeddingError::NotSubOrbit {
+                name: name.into(),
+                orbit,
+                source_name: source.into(),
+                source_orbit: src.orbit,
+            });
+        }
+        let ty = match aggregate {
+            Aggregate::Count => EmbeddingType::I64,
+            Aggregate::Mean if !src.ty.is_real() => {
+                return Err(EmbeddingError::Policy {
+                    name: name.into(),
+                    policy: "mean".into(),
+                    ty: src.ty.to_string(),
+                })
+            }
+            Aggregate::Sum if src.ty == EmbeddingType::Bool => {
+                return Err(EmbeddingError::Policy {
+                    name: name.into(),
+                    policy: "sum".into(),
+                    ty: src.ty.to_string(),
+                })
+            }
+            _ => src.ty,
+        };
+        let derived = Derived { source: sid, aggregate };
+        let e = self.build_embedding(Embedding::new(name, ty, orbit, Policy::Copy, Some(derived)));
+        self.embeddings.push(e);
+        let id = EmbeddingId(self.embeddings.len() as u32 - 1);
+        self.recompute(id);
+        Ok(id)
+    }
+
+    /// Fills the slot tables of a new embedding: one slot per orbit.
+    fn build_embedding(&self, mut e: Embedding) -> Embedding {
+        let w = e.ty.width();
+        if e.is_direct() {
+            for _ in 0..self.capacity() {
+                e.values.push_default(w);
+            }
+            return e;
+        }
+        e.slot_of = vec![u32::MAX; self.capacity()];
+        let mut m = Marks::with_capacity(self.capacity());
+        for d in self.darts() {
+            if !m.is_marked(d) {
+                let s = e.alloc_slot(0);
+                let mut k = 0;
+                self.visit_orbit(d, e.orbit, &mut m, |x| {
+                    e.slot_of[x.index()] = s;
+                    k += 1;
+                });
+                e.slot_use[s as usize] = k;
+            }
+        }
+        // Removed darts point at slot 0 (never read); keep the table dense.
+        for s in &mut e.slot_of {
+            if *s == u32::MAX {
+                *s = 0;
+            }
+        }
+        e
+    }
+
+    /// The id of the embedding named `name`.
+    pub fn embedding_id(&self, name: &str) -> Option<EmbeddingId> {
+        self.embeddings
+            .iter()
+            .position(|e| e.name == name)
+            .map(|i| EmbeddingId(i as u32))
+    }
+
+    /// The id of `name`, or an error naming it.
+    pub fn require(&self, name: &str) -> Result<EmbeddingId, EmbeddingError> {
+        self.embedding_id(name)
+            .ok_or_else(|| EmbeddingError::Unknown(name.to_string()))
+    }
+
+    /// The embedding `id`.
+    pub fn embedding(&self, id: EmbeddingId) -> &Embedding {
+        &self.embeddings[id.0 as usize]
+    }
+
+    /// All embeddings, in declaration order.
+    pub fn embeddings(&self) -> &[Embedding] {
+        &self.embeddings
+    }
+
+    fn check_live(&self, d: Dart) -> Result<(), EmbeddingError> {
+        if self.is_alive(d) {
+            Ok(())
+        } else {
+            Err(EmbeddingError::NoSuchDart(d))
+        }
+    }
+
+    /// The value of embedding `id` on the orbit of `d`. A derived embedding must be fresh.
+    pub fn value(&self, id: EmbeddingId, d: Dart) -> Result<Value, EmbeddingError> {
+        self.check_live(d)?;
+        let e = self.embedding(id);
+        if e.derived.is_some() && self.is_stale(id) {
+            return Err(EmbeddingError::Stale(e.name.clone()));
+        }
+        Ok(e.values.get(e.ty.width(), e.slot(d)))
+    }
+
+    /// The real value (scalar, vector or matrix) of `id` on `d`'s orbit, without checks of
+    /// freshness: for hot paths. Panics if the type is not real.
+    #[inline]
+    pub fn real(&self, id: EmbeddingId, d: Dart) -> &[f64] {
+        let e = &self.embeddings[id.0 as usize];
+        let w = e.ty.width();
+        let s = e.slot(d);
+        match &e.values {
+            Column::Real(v) => &v[s * w..(s + 1) * w],
+            _ => panic!("embedding '{}' is not real", e.name),
+        }
+    }
+
+    /// Writes `v` on the orbit of `d` (every dart of the orbit sees it).
+    pub fn set_value(&mut self, id: EmbeddingId, d: Dart, v: &Value) -> Result<(), EmbeddingError> {
+        self.check_live(d)?;
+        let e = &mut self.embeddings[id.0 as usize];
+        if e.derived.is_some() {
+            return Err(EmbeddingError::Derived(e.name.clone()));
+        }
+        e.check_value(v)?;
+        let s = e.slot(d);
+        e.values.set(e.ty.width(), s, v);
+        e.writes += 1;
+        Ok(())
+    }
+
+    /// Writes a real value (scalar, vector, matrix: `width` numbers) on the orbit of `d`.
+    pub fn set_real(&mut self, id: EmbeddingId, d: Dart, v: &[f64]) -> Result<(), EmbeddingError> {
+        self.set_value(id, d, &Value::Real(v.to_vec()))
+    }
+
+    /// Whether the derived embedding `id` was computed before the last change of its source or
+    /// of the topology (always `false` for a stored embedding).
+    pub fn is_stale(&self, id: EmbeddingId) -> bool {
+        let e = self.embedding(id);
+        match e.derived {
+            None => false,
+            Some(der) => {
+                e.refreshed_at != Some((self.version, self.embedding(der.source).writes))
+            }
+        }
+    }
+
+    /// Recomputes every stale derived embedding from its source.
+    pub fn refresh_derived(&mut self) {
+        for k in 0..self.embeddings.len() {
+            let id = EmbeddingId(k as u32);
+            if self.is_stale(id) {
+                self.recompute(id);
+            }
+        }
+    }
+
+    /// Recomputes derived embedding `id`.
+    fn recompute(&mut self, id: EmbeddingId) {
+        let Some(der) = self.embedding(id).derived else {
+            return;
+        };
+        let mut e = std::mem::replace(
+            &mut self.embeddings[id.0 as usize],
+            Embedding::new("", EmbeddingType::F64, OrbitType::EMPTY, Policy::Copy, None),
+        );
+        let src = self.embedding(der.source);
+        let w = src.ty.width();
+        let mut m = Marks::with_capacity(self.capacity());
+        let mut seen: Vec<usize> = Vec::new();
+        for d in self.darts() {
+            if m.is_marked(d) {
+                continue;
+            }
+            seen.clear();
+            self.visit_orbit(d, e.orbit, &mut m, |x| {
+                let s = src.slot(x);
+                if !seen.contains(&s) {
+                    seen.push(s);
+                }
+            });
+            let target = e.slot(d);
+            match der.aggregate {
+                Aggregate::Count => {
+                    e.values.set(1, target, &Value::Int(seen.len() as i64));
+                }
+                agg => {
+                    let policy = if agg == Aggregate::Sum { Policy::Sum } else { Policy::Mean };
+                    // merge src slots into a scratch value, then copy into the target column
+                    let mut scratch = src.values.clone_slots(w, &seen);
+                    let idx: Vec<usize> = (0..seen.len()).collect();
+                    scratch.merge(w, policy, &idx, 0);
+                    let v = scratch.get(w, 0);
+                    e.values.set(w, target, &v);
+                }
+            }
+        }
+        e.refreshed_at = Some((self.version, src.writes));
+        self.embeddings[id.0 as usize] = e;
+    }
+}
+
+impl Column {
+    /// A new column holding copies of `slots`, in order.
+    pub(crate) fn clone_slots(&self, width: usize, slots: &[usize]) -> Column {
+        match self {
+            Column::Real(v) => Column::Real(
+                slots
+                    .iter()
+                    .flat_map(|&s| v[s * width..(s + 1) * width].iter().copied())
+                    .collect(),
+            ),
+            Column::Int(v) => Column::Int(slots.iter().map(|&s| v[s]).collect()),
+            Column::Bool(v) => Column::Bool(slots.iter().map(|&s| v[s]).collect()),
+        }
+    }
+}

@@ -1,0 +1,129 @@
+//! Marks: per-call visited sets for traversals.
+//!
+//! A [`Marks`] is owned by the traversal that uses it, never stored in the map, so any
+//! number of traversals may run at once on a shared `&GMap` from several threads.
+//! [`with_marks`] lends one from a per-thread pool so that repeated small traversals do not
+//! reallocate; clearing costs the number of darts marked, not the size of the map.
+
+use std::cell::RefCell;
+
+use crate::Dart;
+
+/// A set of marked darts: a bit set plus the list of what was set, for cheap clearing.
+#[derive(Debug, Default, Clone)]
+pub struct Marks {
+    bits: Vec<u64>,
+    set: Vec<u32>,
+}
+
+impl Marks {
+    /// Empty marks able to hold darts `0..capacity`.
+    pub fn with_capacity(capacity: usize) -> Self {
+        Marks {
+            bits: vec![0; capacity.div_ceil(64)],
+            set: Vec::new(),
+        }
+    }
+
+    /// Grows the set to hold darts `0..capacity` (marks are kept).
+    pub fn reserve_darts(&mut self, capacity: usize) {
+        let words = capacity.div_ceil(64);
+        if self.bits.len() < words {
+            self.bits.resize(words, 0);
+        }
+    }
+
+    /// Whether `d` is marked.
+    #[inline]
+    pub fn is_marked(&self, d: Dart) -> bool {
+        let i = d.index();
+        self.bits
+            .get(i >> 6)
+            .is_some_and(|w| w & (1u64 << (i & 63)) != 0)
+    }
+
+    /// Marks `d`; returns `true` if it was not marked before.
+    #[inline]
+    pub fn mark(&mut self, d: Dart) -> bool {
+        let i = d.index();
+        if i >> 6 >= self.bits.len() {
+            self.reserve_darts(i + 1);
+        }
+        let w = &mut self.bits[i >> 6];
+        let b = 1u64 << (i & 63);
+        if *w & b != 0 {
+            return false;
+        }
+        *w |= b;
+        self.set.push(d.0);
+        true
+    }
+
+    /// The number of marked darts.
+    pub fn len(&self) -> usize {
+        self.set.len()
+    }
+
+    /// Whether nothing is marked.
+    pub fn is_empty(&self) -> bool {
+        self.set.is_empty()
+    }
+
+    /// Unmarks everything, in time proportional to what was marked.
+    pub fn clear(&mut self) {
+        if self.set.len() * 8 > self.bits.len() {
+            self.bits.fill(0);
+        } else {
+            for &i in &self.set {
+                self.bits[(i >> 6) as usize] = 0;
+            }
+        }
+        self.set.clear();
+    }
+}
+
+thread_local! {
+    static POOL: RefCell<Vec<Marks>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Runs `f` with cleared marks from this thread's pool, sized for `capacity` darts.
+pub fn with_marks<R>(capacity: usize, f: impl FnOnce(&mut Marks) -> R) -> R {
+    let mut m = POOL
+        .with(|p| p.borrow_mut().pop())
+        .unwrap_or_default();
+    m.reserve_darts(capacity);
+    let r = f(&mut m);
+    m.clear();
+    POOL.with(|p| p.borrow_mut().push(m));
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mark_and_clear() {
+        let mut m = Marks::with_capacity(10);
+        assert!(m.mark(Dart(3)));
+        assert!(!m.mark(Dart(3)));
+        assert!(m.mark(Dart(200)), "grows on demand");
+        assert!(m.is_marked(Dart(3)) && m.is_marked(Dart(200)));
+        assert!(!m.is_marked(Dart(4)));
+        m.clear();
+        assert!(!m.is_marked(Dart(3)) && !m.is_marked(Dart(200)) && m.is_empty());
+    }
+
+    #[test]
+    fn pooled_marks_come_back_clear() {
+        with_marks(100, |m| {
+            m.mark(Dart(5));
+        });
+        with_marks(100, |m| assert!(!m.is_marked(Dart(5))));
+        // nested use takes a second set
+        with_marks(10, |a| {
+            a.mark(Dart(1));
+            with_marks(10, |b| assert!(!b.is_marked(Dart(1))));
+        });
+    }
+}
