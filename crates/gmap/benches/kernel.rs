@@ -31,7 +31,11 @@ fn main() {
     let (g, _) = build(&mesh, &opts).expect("valid");
     let n = g.n_darts();
     println!("kernel benchmark: box of {n_tets} tetrahedra, {n} darts (median of 5 runs)");
-    println!("  build G-map (with position embedding)  {:8.1} ms   {:6.1} ns/dart", build_s * 1e3, build_s * 1e9 / n as f64);
+    println!(
+        "  build G-map (with position embedding)  {:8.1} ms   {:6.1} ns/dart",
+        build_s * 1e3,
+        build_s * 1e9 / n as f64
+    );
     println!(
         "  memory: {:.1} bytes/dart in all ({:.1} topology: 4 alpha links of 4 bytes + liveness), {:.0} bytes/tet",
         g.memory_bytes() as f64 / n as f64,
@@ -47,10 +51,17 @@ fn main() {
     ] {
         let mut count = 0;
         let s = median_seconds(5, || count = black_box(g.count_orbits(o)));
-        println!("  count {name:18} {count:9}  {:8.1} ms   {:6.1} ns/dart", s * 1e3, s * 1e9 / n as f64);
+        println!(
+            "  count {name:18} {count:9}  {:8.1} ms   {:6.1} ns/dart",
+            s * 1e3,
+            s * 1e9 / n as f64
+        );
     }
     let s = median_seconds(3, || {
         black_box(g.is_valid());
     });
-    println!("  is_valid (all invariants)              {:8.1} ms", s * 1e3);
+    println!(
+        "  is_valid (all invariants)              {:8.1} ms",
+        s * 1e3
+    );
 }

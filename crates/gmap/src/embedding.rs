@@ -65,12 +65,11 @@ impl EmbeddingType {
             "vec3" => Some(EmbeddingType::Vec3),
             _ => {
                 let dims = s.strip_prefix("mat")?;
-                let (r, c) = match dims.split_once('x') {
-                    Some((r, c)) => (r.parse::<u8>().ok()?, c.parse::<u8>().ok()?),
-                    None => {
-                        let k = dims.parse::<u8>().ok()?;
-                        (k, k)
-                    }
+                let (r, c) = if let Some((r, c)) = dims.split_once('x') {
+                    (r.parse::<u8>().ok()?, c.parse::<u8>().ok()?)
+                } else {
+                    let k = dims.parse::<u8>().ok()?;
+                    (k, k)
                 };
                 Self::matrix(r, c)
             }
@@ -248,12 +247,10 @@ impl Column {
 
     pub(crate) fn slots_equal(&self, width: usize, a: usize, b: usize) -> bool {
         match self {
-            Column::Real(v) => {
-                v[a * width..(a + 1) * width]
-                    .iter()
-                    .zip(&v[b * width..(b + 1) * width])
-                    .all(|(x, y)| x.to_bits() == y.to_bits())
-            }
+            Column::Real(v) => v[a * width..(a + 1) * width]
+                .iter()
+                .zip(&v[b * width..(b + 1) * width])
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
             Column::Int(v) => v[a] == v[b],
             Column::Bool(v) => v[a] == v[b],
         }
@@ -274,7 +271,9 @@ impl Column {
                             }
                         }
                         if policy == Policy::Mean {
-                            acc.iter_mut().for_each(|a| *a /= k as f64);
+                            for a in &mut acc {
+                                *a /= k as f64;
+                            }
                         }
                         v[to * width..(to + 1) * width].copy_from_slice(&acc);
                     }
@@ -491,7 +490,10 @@ mod tests {
         assert_eq!(EmbeddingType::parse("vec3").unwrap().width(), 3);
         assert_eq!(EmbeddingType::parse("mat3").unwrap().width(), 9);
         assert_eq!(EmbeddingType::parse("mat12").unwrap().width(), 144);
-        assert_eq!(EmbeddingType::parse("mat3x4").unwrap().to_string(), "mat3x4");
+        assert_eq!(
+            EmbeddingType::parse("mat3x4").unwrap().to_string(),
+            "mat3x4"
+        );
         assert!(EmbeddingType::parse("mat13").is_none());
         assert!(EmbeddingType::parse("mat0").is_none());
         assert!(EmbeddingType::parse("vec4").is_none());
@@ -509,6 +511,9 @@ mod tests {
         assert_eq!(c.get(2, 0), Value::Real(vec![1.0, 1.5]));
         let mut i = Column::Int(vec![7, 0, 0]);
         i.split_sum(1, 0, &[1, 2]);
-        assert_eq!((i.get(1, 0), i.get(1, 1), i.get(1, 2)), (Value::Int(3), Value::Int(2), Value::Int(2)));
+        assert_eq!(
+            (i.get(1, 0), i.get(1, 1), i.get(1, 2)),
+            (Value::Int(3), Value::Int(2), Value::Int(2))
+        );
     }
 }

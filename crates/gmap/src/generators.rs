@@ -104,7 +104,11 @@ pub fn cuboid(n: [usize; 3], size: [f64; 3], element: BoxElement) -> Mesh {
                 };
                 match element {
                     _ if is_hex(i) => {
-                        push(&mut mesh, CellKind::Hexa, vec![c(0), c(1), c(3), c(2), c(4), c(5), c(7), c(6)]);
+                        push(
+                            &mut mesh,
+                            CellKind::Hexa,
+                            vec![c(0), c(1), c(3), c(2), c(4), c(5), c(7), c(6)],
+                        );
                     }
                     BoxElement::Tetra => {
                         for (a, b) in [(1, 2), (2, 1), (1, 4), (4, 1), (2, 4), (4, 2)] {
@@ -112,14 +116,26 @@ pub fn cuboid(n: [usize; 3], size: [f64; 3], element: BoxElement) -> Mesh {
                         }
                     }
                     BoxElement::Wedge => {
-                        push(&mut mesh, CellKind::Wedge, vec![c(0), c(1), c(3), c(4), c(5), c(7)]);
-                        push(&mut mesh, CellKind::Wedge, vec![c(0), c(3), c(2), c(4), c(7), c(6)]);
+                        push(
+                            &mut mesh,
+                            CellKind::Wedge,
+                            vec![c(0), c(1), c(3), c(4), c(5), c(7)],
+                        );
+                        push(
+                            &mut mesh,
+                            CellKind::Wedge,
+                            vec![c(0), c(3), c(2), c(4), c(7), c(6)],
+                        );
                     }
                     _ => {
                         // pyramids on each face of the cube, apex at its centre
                         let centre = mesh.points.len();
                         let (a, b) = (mesh.points[c(0)], mesh.points[c(7)]);
-                        mesh.points.push([(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0, (a[2] + b[2]) / 2.0]);
+                        mesh.points.push([
+                            f64::midpoint(a[0], b[0]),
+                            f64::midpoint(a[1], b[1]),
+                            f64::midpoint(a[2], b[2]),
+                        ]);
                         let faces: [([usize; 4], bool); 6] = [
                             ([0, 2, 6, 4], i > 0 && is_hex(i - 1)),
                             ([1, 3, 7, 5], i + 1 < nx && is_hex(i + 1)),
@@ -131,7 +147,11 @@ pub fn cuboid(n: [usize; 3], size: [f64; 3], element: BoxElement) -> Mesh {
                         for (f, faces_hex) in faces {
                             let base = f.map(c);
                             if element == BoxElement::Pyramid || faces_hex {
-                                push(&mut mesh, CellKind::Pyramid, vec![base[0], base[1], base[2], base[3], centre]);
+                                push(
+                                    &mut mesh,
+                                    CellKind::Pyramid,
+                                    vec![base[0], base[1], base[2], base[3], centre],
+                                );
                             } else {
                                 // two tetrahedra, split along the diagonal through the base
                                 // vertex of smallest index, the same on both sides of the face

@@ -145,7 +145,10 @@ impl GMap {
         if i <= self.dim {
             Ok(())
         } else {
-            Err(LinkError::Dimension { dim: i, n: self.dim })
+            Err(LinkError::Dimension {
+                dim: i,
+                n: self.dim,
+            })
         }
     }
 
@@ -160,16 +163,16 @@ impl GMap {
             self.n_alive += 1;
             self.version += 1;
             for e in &mut self.embeddings {
-                if !e.is_direct() {
-                    let s = e.alloc_slot(1);
-                    e.slot_of[iu] = s;
-                } else {
+                if e.is_direct() {
                     let w = e.ty.width();
                     match &e.values {
                         Column::Real(_) => e.values.set(w, iu, &Value::Real(vec![0.0; w])),
                         Column::Int(_) => e.values.set(w, iu, &Value::Int(0)),
                         Column::Bool(_) => e.values.set(w, iu, &Value::Bool(false)),
                     }
+                } else {
+                    let s = e.alloc_slot(1);
+                    e.slot_of[iu] = s;
                 }
             }
             Dart(i)
@@ -295,7 +298,9 @@ impl GMap {
     /// The darts of the orbit `o` of `d`, `d` first.
     pub fn orbit(&self, d: Dart, o: OrbitType) -> Vec<Dart> {
         let mut out = Vec::new();
-        with_marks(self.capacity(), |m| self.visit_orbit(d, o, m, |x| out.push(x)));
+        with_marks(self.capacity(), |m| {
+            self.visit_orbit(d, o, m, |x| out.push(x))
+        });
         out
     }
 
@@ -359,7 +364,11 @@ impl GMap {
             vertices: self.count_orbits(OrbitType::vertex(n)),
             edges: self.count_orbits(OrbitType::edge(n)),
             faces: self.count_orbits(OrbitType::face(n)),
-            volumes: if n == 3 { self.count_orbits(OrbitType::volume()) } else { 0 },
+            volumes: if n == 3 {
+                self.count_orbits(OrbitType::volume())
+            } else {
+                0
+            },
             components: self.count_orbits(OrbitType::all(n)),
             boundary,
         }
@@ -374,7 +383,12 @@ impl GMap {
 
     /// Bytes used by the topology and every embedding.
     pub fn memory_bytes(&self) -> usize {
-        self.topology_bytes() + self.embeddings.iter().map(Embedding::memory_bytes).sum::<usize>()
+        self.topology_bytes()
+            + self
+                .embeddings
+                .iter()
+                .map(Embedding::memory_bytes)
+                .sum::<usize>()
     }
 
     // ---------------------------------------------------------------- embeddings
@@ -471,7 +485,10 @@ impl GMap {
             }
             _ => src.ty,
         };
-        let derived = Derived { source: sid, aggregate };
+        let derived = Derived {
+            source: sid,
+            aggregate,
+        };
         let e = self.build_embedding(Embedding::new(name, ty, orbit, Policy::Copy, Some(derived)));
         self.embeddings.push(e);
         let id = EmbeddingId(self.embeddings.len() as u32 - 1);
@@ -590,9 +607,7 @@ impl GMap {
         let e = self.embedding(id);
         match e.derived {
             None => false,
-            Some(der) => {
-                e.refreshed_at != Some((self.version, self.embedding(der.source).writes))
-            }
+            Some(der) => e.refreshed_at != Some((self.version, self.embedding(der.source).writes)),
         }
     }
 
@@ -636,7 +651,11 @@ impl GMap {
                     e.values.set(1, target, &Value::Int(seen.len() as i64));
                 }
                 agg => {
-                    let policy = if agg == Aggregate::Sum { Policy::Sum } else { Policy::Mean };
+                    let policy = if agg == Aggregate::Sum {
+                        Policy::Sum
+                    } else {
+                        Policy::Mean
+                    };
                     // merge src slots into a scratch value, then copy into the target column
                     let mut scratch = src.values.clone_slots(w, &seen);
                     let idx: Vec<usize> = (0..seen.len()).collect();

@@ -9,7 +9,7 @@
 //! | dimension | u32 (2 or 3) |
 //! | capacity `C` (dart indices `0..C`) | u32 |
 //! | alive flags | `C` x u8 (0 or 1) |
-//! | alpha_0 .. alpha_3 | 4 x `C` x u32 (a free link is the dart itself) |
+//! | `alpha_0` .. `alpha_3` | 4 x `C` x u32 (a free link is the dart itself) |
 //! | number of embeddings | u32 |
 //! | each embedding: name | u32 length + UTF-8 bytes |
 //! | orbit | u8 bit mask (bit i: dimension i) |
@@ -115,7 +115,9 @@ pub fn to_bytes(g: &GMap) -> Vec<u8> {
             }
         }
         match &e.values {
-            Column::Real(v) => v.iter().for_each(|x| w.extend_from_slice(&x.to_bits().to_le_bytes())),
+            Column::Real(v) => v
+                .iter()
+                .for_each(|x| w.extend_from_slice(&x.to_bits().to_le_bytes())),
             Column::Int(v) => v.iter().for_each(|x| w.extend_from_slice(&x.to_le_bytes())),
             Column::Bool(v) => w.extend(v.iter().map(|&b| u8::from(b))),
         }
@@ -148,11 +150,15 @@ impl<'a> Reader<'a> {
     }
 
     fn u32(&mut self) -> Result<u32, FormatError> {
-        Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
+        Ok(u32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
     }
 
     fn u64(&mut self) -> Result<u64, FormatError> {
-        Ok(u64::from_le_bytes(self.take(8)?.try_into().expect("8 bytes")))
+        Ok(u64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        ))
     }
 
     /// Refuses counts that the rest of the file cannot hold (so garbage never allocates
@@ -165,7 +171,10 @@ impl<'a> Reader<'a> {
     }
 
     fn corrupt(&self, why: impl Into<String>) -> FormatError {
-        FormatError::Corrupt { at: self.at, why: why.into() }
+        FormatError::Corrupt {
+            at: self.at,
+            why: why.into(),
+        }
     }
 }
 
@@ -202,7 +211,9 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
         for _ in 0..cap {
             let x = r.u32()?;
             if x as usize >= cap {
-                return Err(r.corrupt(format!("alpha{i} points at dart {x}, past the capacity {cap}")));
+                return Err(r.corrupt(format!(
+                    "alpha{i} points at dart {x}, past the capacity {cap}"
+                )));
             }
             col.push(x);
         }
@@ -216,13 +227,17 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
             .map_err(|_| r.corrupt(format!("embedding {k}: name is not UTF-8")))?
             .to_string();
         let valid_name = !name.is_empty()
-            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
         if !valid_name || g.embedding_id(&name).is_some() {
             return Err(r.corrupt(format!("embedding {k}: bad or duplicate name {name:?}")));
         }
         let orbit = OrbitType::from_mask(r.u8()?).map_err(|e| r.corrupt(e.to_string()))?;
         if orbit.max_dim().is_some_and(|m| m > dim) {
-            return Err(r.corrupt(format!("embedding '{name}': orbit {orbit} above dimension {dim}")));
+            return Err(r.corrupt(format!(
+                "embedding '{name}': orbit {orbit} above dimension {dim}"
+            )));
         }
         let (tag, rows, cols) = (r.u8()?, r.u8()?, r.u8()?);
         let ty = match tag {
@@ -247,7 +262,9 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
             1 => {
                 let source = r.u32()?;
                 if source as usize >= k {
-                    return Err(r.corrupt(format!("embedding '{name}': source {source} not declared before it")));
+                    return Err(r.corrupt(format!(
+                        "embedding '{name}': source {source} not declared before it"
+                    )));
                 }
                 let aggregate = match r.u8()? {
                     0 => Aggregate::Sum,
@@ -255,7 +272,10 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
                     2 => Aggregate::Count,
                     t => return Err(r.corrupt(format!("embedding '{name}': aggregate tag {t}"))),
                 };
-                Some(Derived { source: crate::EmbeddingId(source), aggregate })
+                Some(Derived {
+                    source: crate::EmbeddingId(source),
+                    aggregate,
+                })
             }
             t => return Err(r.corrupt(format!("embedding '{name}': derived flag {t}"))),
         };
@@ -263,7 +283,9 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
         let n_slots = r.u32()? as usize;
         if e.is_direct() {
             if n_slots != cap {
-                return Err(r.corrupt(format!("embedding '{name}' on <> has {n_slots} slots for {cap} darts")));
+                return Err(r.corrupt(format!(
+                    "embedding '{name}' on <> has {n_slots} slots for {cap} darts"
+                )));
             }
         } else {
             r.expect_room(cap, 4)?;
@@ -272,20 +294,29 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
             for d in 0..cap {
                 let s = r.u32()?;
                 if s as usize >= n_slots && g.alive[d] {
-                    return Err(r.corrupt(format!("embedding '{name}': dart {d} has slot {s} of {n_slots}")));
+                    return Err(r.corrupt(format!(
+                        "embedding '{name}': dart {d} has slot {s} of {n_slots}"
+                    )));
                 }
                 if g.alive[d] {
                     e.slot_use[s as usize] += 1;
                 }
                 e.slot_of.push(s);
             }
-            e.free_slots = (0..n_slots as u32).rev().filter(|&s| e.slot_use[s as usize] == 0).collect();
+            e.free_slots = (0..n_slots as u32)
+                .rev()
+                .filter(|&s| e.slot_use[s as usize] == 0)
+                .collect();
         }
         let w = ty.width();
         e.values = match ty {
             EmbeddingType::I64 => {
                 r.expect_room(n_slots, 8)?;
-                Column::Int((0..n_slots).map(|_| r.u64().map(|x| x as i64)).collect::<Result<_, _>>()?)
+                Column::Int(
+                    (0..n_slots)
+                        .map(|_| r.u64().map(|x| x as i64))
+                        .collect::<Result<_, _>>()?,
+                )
             }
             EmbeddingType::Bool => {
                 r.expect_room(n_slots, 1)?;
@@ -297,14 +328,25 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
             }
             _ => {
                 r.expect_room(n_slots.saturating_mul(w), 8)?;
-                Column::Real((0..n_slots * w).map(|_| r.u64().map(f64::from_bits)).collect::<Result<_, _>>()?)
+                Column::Real(
+                    (0..n_slots * w)
+                        .map(|_| r.u64().map(f64::from_bits))
+                        .collect::<Result<_, _>>()?,
+                )
             }
         };
         if let Some(d) = derived {
             let src = &g.embeddings[d.source.0 as usize];
-            let expected = if d.aggregate == Aggregate::Count { EmbeddingType::I64 } else { src.ty };
+            let expected = if d.aggregate == Aggregate::Count {
+                EmbeddingType::I64
+            } else {
+                src.ty
+            };
             if expected != ty || !src.orbit.is_subset_of(orbit) {
-                return Err(r.corrupt(format!("embedding '{name}': inconsistent with its source '{}'", src.name)));
+                return Err(r.corrupt(format!(
+                    "embedding '{name}': inconsistent with its source '{}'",
+                    src.name
+                )));
             }
         }
         g.embeddings.push(e);

@@ -16,8 +16,8 @@
 mod dart;
 mod embedding;
 mod error;
-mod gmap;
 pub mod generators;
+mod gmap;
 pub mod io;
 pub mod marks;
 pub mod mesh;

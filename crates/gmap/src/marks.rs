@@ -88,9 +88,7 @@ thread_local! {
 
 /// Runs `f` with cleared marks from this thread's pool, sized for `capacity` darts.
 pub fn with_marks<R>(capacity: usize, f: impl FnOnce(&mut Marks) -> R) -> R {
-    let mut m = POOL
-        .with(|p| p.borrow_mut().pop())
-        .unwrap_or_default();
+    let mut m = POOL.with(|p| p.borrow_mut().pop()).unwrap_or_default();
     m.reserve_darts(capacity);
     let r = f(&mut m);
     m.clear();

@@ -218,8 +218,20 @@ fn local_faces(kind: CellKind) -> &'static [&'static [usize]] {
             &[2, 3, 7, 6],
             &[3, 0, 4, 7],
         ],
-        CellKind::Wedge => &[&[0, 1, 2], &[3, 5, 4], &[0, 3, 4, 1], &[1, 4, 5, 2], &[2, 5, 3, 0]],
-        CellKind::Pyramid => &[&[0, 3, 2, 1], &[0, 1, 4], &[1, 2, 4], &[2, 3, 4], &[3, 0, 4]],
+        CellKind::Wedge => &[
+            &[0, 1, 2],
+            &[3, 5, 4],
+            &[0, 3, 4, 1],
+            &[1, 4, 5, 2],
+            &[2, 5, 3, 0],
+        ],
+        CellKind::Pyramid => &[
+            &[0, 3, 2, 1],
+            &[0, 1, 4],
+            &[1, 2, 4],
+            &[2, 3, 4],
+            &[3, 0, 4],
+        ],
         CellKind::Polygon => &[],
     }
 }
@@ -268,7 +280,11 @@ pub fn signed_volume(kind: CellKind, verts: &[usize], points: &[[f64; 3]]) -> f6
     let mut vol = 0.0;
     for face in local_faces(kind) {
         for t in 1..face.len() - 1 {
-            let (a, b, d) = (sub(p(face[0]), c), sub(p(face[t]), c), sub(p(face[t + 1]), c));
+            let (a, b, d) = (
+                sub(p(face[0]), c),
+                sub(p(face[t]), c),
+                sub(p(face[t + 1]), c),
+            );
             vol += dot(a, cross(b, d)) / 6.0;
         }
     }
@@ -316,12 +332,19 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
         return Err(MeshError::Empty);
     }
     if mesh.kinds.len() != mesh.cells.len() {
-        return Err(MeshError::KindCount { kinds: mesh.kinds.len(), cells: mesh.cells.len() });
+        return Err(MeshError::KindCount {
+            kinds: mesh.kinds.len(),
+            cells: mesh.cells.len(),
+        });
     }
     let dim = mesh.kinds[0].dimension();
     for (c, (&kind, verts)) in mesh.kinds.iter().zip(&mesh.cells).enumerate() {
         if kind.dimension() != dim {
-            return Err(MeshError::MixedDimension { cell: c, kind: kind.name(), dim });
+            return Err(MeshError::MixedDimension {
+                cell: c,
+                kind: kind.name(),
+                dim,
+            });
         }
         let expected = kind.n_vertices();
         let bad_count = match expected {
@@ -356,7 +379,10 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
     }
     for (i, p) in mesh.points.iter().enumerate() {
         if p.iter().any(|x| !x.is_finite()) {
-            return Err(MeshError::NonFinite { point: i, coords: *p });
+            return Err(MeshError::NonFinite {
+                point: i,
+                coords: *p,
+            });
         }
     }
     Ok(dim)
@@ -480,7 +506,9 @@ fn check_manifold_vertices(
         what: "vertex",
         why: "the cells around a vertex must be joined through edges (2D) or faces (3D)",
         vertices: vec![v],
-        cells: (0..mesh.cells.len()).filter(|&c| mesh.cells[c].contains(&v)).collect(),
+        cells: (0..mesh.cells.len())
+            .filter(|&c| mesh.cells[c].contains(&v))
+            .collect(),
     })
 }
 
@@ -494,7 +522,10 @@ fn build_surface(
         let n = norm(polygon_normal(verts, points));
         let l = max_edge(verts, points);
         if n <= DEGENERATE * l * l {
-            return Err(MeshError::Degenerate { cell: c, why: "zero area".into() });
+            return Err(MeshError::Degenerate {
+                cell: c,
+                why: "zero area".into(),
+            });
         }
     }
     let mut shared = shared_edges(&mesh.cells)?;
@@ -540,7 +571,13 @@ fn build_surface(
         .cells
         .iter()
         .zip(&flip)
-        .map(|(v, &fl)| if fl { reversed(CellKind::Polygon, v) } else { v.clone() })
+        .map(|(v, &fl)| {
+            if fl {
+                reversed(CellKind::Polygon, v)
+            } else {
+                v.clone()
+            }
+        })
         .collect();
     if !report.reoriented.is_empty() {
         shared = shared_edges(&cells)?; // sides are numbered anew in the flipped faces
@@ -571,8 +608,11 @@ fn build_surface(
 /// A side of a face: (face, side index, whether it runs from the smaller vertex index).
 type Side = (u32, u32, bool);
 
+/// An edge (its two vertices, smaller first) and the two sides on it.
+type SharedEdge = ((u32, u32), [Side; 2]);
+
 /// The edges shared by two faces, sorted, with the side of each face; refuses an edge on 3+.
-fn shared_edges(cells: &[Vec<usize>]) -> Result<Vec<((u32, u32), [Side; 2])>, MeshError> {
+fn shared_edges(cells: &[Vec<usize>]) -> Result<Vec<SharedEdge>, MeshError> {
     let mut edges: std::collections::HashMap<(u32, u32), Vec<Side>> =
         std::collections::HashMap::new();
     for (f, verts) in cells.iter().enumerate() {
@@ -626,11 +666,18 @@ fn build_volume(
         let vol = signed_volume(kind, verts, points);
         let l = max_edge(verts, points);
         if vol.abs() <= DEGENERATE * l * l * l {
-            return Err(MeshError::Degenerate { cell: c, why: "zero volume".into() });
+            return Err(MeshError::Degenerate {
+                cell: c,
+                why: "zero volume".into(),
+            });
         }
         if vol < 0.0 {
             if !opts.reorient {
-                return Err(MeshError::Inverted { cell: c, kind: kind.name(), volume: vol });
+                return Err(MeshError::Inverted {
+                    cell: c,
+                    kind: kind.name(),
+                    volume: vol,
+                });
             }
             report.reoriented.push(c);
             cells.push(reversed(kind, verts));
@@ -665,7 +712,11 @@ fn build_volume(
                 vert_of_dart.push(fv[j]);
                 vert_of_dart.push(fv[(j + 1) % k]);
             }
-            local.push(BuiltFace { verts: fv, len: k as u8, first });
+            local.push(BuiltFace {
+                verts: fv,
+                len: k as u8,
+                first,
+            });
         }
         // alpha2 inside the cell: the two faces of each edge
         for (fi, f) in local.iter().enumerate() {
@@ -717,7 +768,11 @@ fn build_volume(
 }
 
 fn non_manifold_face(key: &[u32; 4], cells: &[Vec<usize>], kinds: &[CellKind]) -> MeshError {
-    let verts: Vec<usize> = key.iter().filter(|&&v| v != u32::MAX).map(|&v| v as usize).collect();
+    let verts: Vec<usize> = key
+        .iter()
+        .filter(|&&v| v != u32::MAX)
+        .map(|&v| v as usize)
+        .collect();
     let mut on_face = Vec::new();
     for (c, (cv, &kind)) in cells.iter().zip(kinds).enumerate() {
         for lf in local_faces(kind) {
@@ -758,7 +813,11 @@ pub fn extract(g: &GMap) -> Result<Mesh, MeshError> {
             points[l] = [p[0], p[1], p[2]];
         }
     }
-    let mut mesh = Mesh { points, kinds: Vec::new(), cells: Vec::new() };
+    let mut mesh = Mesh {
+        points,
+        kinds: Vec::new(),
+        cells: Vec::new(),
+    };
     if n == 2 {
         for d in g.orbit_representatives(OrbitType::face(2)) {
             let verts = face_cycle(g, d, &labels)?;
@@ -797,7 +856,9 @@ fn face_cycle(g: &GMap, d0: Dart, labels: &[u32]) -> Result<Vec<(Dart, usize)>, 
             return Ok(out);
         }
         if out.len() > g.capacity() {
-            return Err(MeshError::Extract(format!("the face of dart {d0} does not close")));
+            return Err(MeshError::Extract(format!(
+                "the face of dart {d0} does not close"
+            )));
         }
     }
 }
@@ -815,7 +876,9 @@ fn volume_cell(
     let mut verts: Vec<usize> = Vec::new();
     for &x in &darts {
         if g.is_free(2, x) {
-            return Err(MeshError::Extract(format!("the volume of dart {d} is open at {x}")));
+            return Err(MeshError::Extract(format!(
+                "the volume of dart {d} is open at {x}"
+            )));
         }
         let v = labels[x.index()] as usize;
         if !verts.contains(&v) {
@@ -841,7 +904,11 @@ fn volume_cell(
             )))
         }
     };
-    let base_len = if matches!(kind, CellKind::Tetra | CellKind::Wedge) { 3 } else { 4 };
+    let base_len = if matches!(kind, CellKind::Tetra | CellKind::Wedge) {
+        3
+    } else {
+        4
+    };
     let base = faces.iter().find(|f| f.len() == base_len).expect("counted");
     let mut order: Vec<usize> = base.iter().map(|&(_, v)| v).collect();
     // the vertex across the edge leaving each base corner: alpha2 to the side face, alpha1

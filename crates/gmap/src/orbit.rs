@@ -193,15 +193,30 @@ mod tests {
         for s in ["<>", "<0>", "<1,2>", "<0,2,3>", "<0,1,2,3>"] {
             assert_eq!(OrbitType::parse(s).unwrap().to_string(), s);
         }
-        assert_eq!(OrbitType::parse(" < 2 , 0 > ").unwrap().to_string(), "<0,2>");
+        assert_eq!(
+            OrbitType::parse(" < 2 , 0 > ").unwrap().to_string(),
+            "<0,2>"
+        );
     }
 
     #[test]
     fn parse_rejects_bad_input() {
-        assert!(matches!(OrbitType::parse("<4>"), Err(OrbitTypeError::Dimension(4))));
-        assert!(matches!(OrbitType::parse("<1,1>"), Err(OrbitTypeError::Duplicate(1))));
-        assert!(matches!(OrbitType::parse("0,1"), Err(OrbitTypeError::Syntax(_))));
-        assert!(matches!(OrbitType::parse("<a>"), Err(OrbitTypeError::Syntax(_))));
+        assert!(matches!(
+            OrbitType::parse("<4>"),
+            Err(OrbitTypeError::Dimension(4))
+        ));
+        assert!(matches!(
+            OrbitType::parse("<1,1>"),
+            Err(OrbitTypeError::Duplicate(1))
+        ));
+        assert!(matches!(
+            OrbitType::parse("0,1"),
+            Err(OrbitTypeError::Syntax(_))
+        ));
+        assert!(matches!(
+            OrbitType::parse("<a>"),
+            Err(OrbitTypeError::Syntax(_))
+        ));
         assert!(OrbitType::from_mask(0b1_0000).is_err());
     }
 

@@ -61,7 +61,12 @@ impl GMap {
         while let Some((x, y)) = stack.pop() {
             for z in [x, y] {
                 if !self.is_free(i, z) {
-                    return Err(SewError::NotFree { dim: i, a, b, busy: z });
+                    return Err(SewError::NotFree {
+                        dim: i,
+                        a,
+                        b,
+                        busy: z,
+                    });
                 }
             }
             pairs.push((x, y));
@@ -158,7 +163,12 @@ impl GMap {
 
     /// After linking `pairs` by `alpha_i`: gives each merged orbit one slot. With `dry`, only
     /// checks the `error` policies and returns the first embedding that refuses.
-    fn merge_embeddings(&mut self, i: usize, pairs: &[(Dart, Dart)], dry: bool) -> Result<(), String> {
+    fn merge_embeddings(
+        &mut self,
+        i: usize,
+        pairs: &[(Dart, Dart)],
+        dry: bool,
+    ) -> Result<(), String> {
         let cap = self.capacity();
         for k in 0..self.embeddings.len() {
             if !self.embeddings[k].orbit.contains(i) {
@@ -210,7 +220,12 @@ impl GMap {
     }
 
     /// After unlinking `pairs` by `alpha_i`: gives each part of a split orbit its own slot.
-    fn split_embeddings(&mut self, i: usize, pairs: &[(Dart, Dart)], dry: bool) -> Result<(), String> {
+    fn split_embeddings(
+        &mut self,
+        i: usize,
+        pairs: &[(Dart, Dart)],
+        dry: bool,
+    ) -> Result<(), String> {
         let cap = self.capacity();
         for k in 0..self.embeddings.len() {
             if !self.embeddings[k].orbit.contains(i) {

@@ -120,7 +120,11 @@ impl GMap {
             for i in 0..=3 {
                 let e = self.alpha[i][d.index()];
                 if e >= cap || !self.alive[e as usize] {
-                    out.push(Violation::DanglingLink { dim: i, dart: d, to: Dart(e) });
+                    out.push(Violation::DanglingLink {
+                        dim: i,
+                        dart: d,
+                        to: Dart(e),
+                    });
                 } else if self.alpha[i][e as usize] != d.0 {
                     out.push(Violation::NotInvolution {
                         dim: i,
@@ -165,17 +169,20 @@ impl GMap {
                 }
                 let s = e.slot_of[d.index()] as usize;
                 if s >= owner.len() {
-                    out.push(Violation::SlotCount { embedding: e.name.clone(), slot: s });
+                    out.push(Violation::SlotCount {
+                        embedding: e.name.clone(),
+                        slot: s,
+                    });
                     return out;
                 }
-                if owner[s] != u32::MAX {
+                if owner[s] == u32::MAX {
+                    owner[s] = d.0;
+                } else {
                     out.push(Violation::SharedSlot {
                         embedding: e.name.clone(),
                         a: Dart(owner[s]),
                         b: d,
                     });
-                } else {
-                    owner[s] = d.0;
                 }
                 let mut bad = None;
                 self.visit_orbit(d, e.orbit, &mut m, |x| {
@@ -188,7 +195,11 @@ impl GMap {
                     }
                 });
                 if let Some(b) = bad {
-                    out.push(Violation::NotConstant { embedding: e.name.clone(), a: d, b });
+                    out.push(Violation::NotConstant {
+                        embedding: e.name.clone(),
+                        a: d,
+                        b,
+                    });
                 }
                 if out.len() >= limit {
                     return out;
@@ -196,7 +207,10 @@ impl GMap {
             }
             for (s, (&c, &u)) in counts.iter().zip(&e.slot_use).enumerate() {
                 if c != u {
-                    out.push(Violation::SlotCount { embedding: e.name.clone(), slot: s });
+                    out.push(Violation::SlotCount {
+                        embedding: e.name.clone(),
+                        slot: s,
+                    });
                     if out.len() >= limit {
                         return out;
                     }

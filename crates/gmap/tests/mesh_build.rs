@@ -1,6 +1,9 @@
 //! Building maps from meshes: counts against independent counts, Euler characteristic,
 //! positions, round trips through `extract`, and every refusal of bad input.
 
+// Positions are copied, never computed: exact equality is expected.
+#![allow(clippy::float_cmp)]
+
 mod common;
 
 use proptest::prelude::*;
@@ -83,7 +86,11 @@ fn extract_round_trips_every_element() {
                 .sum()
         };
         assert!((vol(&back) - 4.0).abs() < 1e-12, "{e:?}: {}", vol(&back));
-        assert!(back.kinds.iter().zip(&back.cells).all(|(&k, c)| topomech_gmap::mesh::signed_volume(k, c, &back.points) > 0.0));
+        assert!(back
+            .kinds
+            .iter()
+            .zip(&back.cells)
+            .all(|(&k, c)| topomech_gmap::mesh::signed_volume(k, c, &back.points) > 0.0));
         let g2 = built(&back);
         assert_eq!(common::actual(&g2), common::actual(&g));
     }
@@ -115,42 +122,100 @@ proptest! {
 }
 
 fn tet_mesh(cells: Vec<Vec<usize>>, points: Vec<[f64; 3]>) -> Mesh {
-    Mesh { kinds: vec![CellKind::Tetra; cells.len()], cells, points }
+    Mesh {
+        kinds: vec![CellKind::Tetra; cells.len()],
+        cells,
+        points,
+    }
 }
 
 fn unit_tet_points() -> Vec<[f64; 3]> {
-    vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]]
+    vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [1.0, 1.0, 1.0],
+    ]
 }
 
 #[test]
 fn out_of_range_vertex_names_the_cell() {
     let m = tet_mesh(vec![vec![0, 1, 2, 3], vec![1, 2, 3, 9]], unit_tet_points());
     let e = build(&m, &BuildOptions::default()).unwrap_err();
-    assert_eq!(e, MeshError::VertexOutOfRange { cell: 1, vertex: 9, n_points: 5 });
+    assert_eq!(
+        e,
+        MeshError::VertexOutOfRange {
+            cell: 1,
+            vertex: 9,
+            n_points: 5
+        }
+    );
     assert!(e.to_string().contains("cell 1"));
 }
 
 #[test]
 fn wrong_vertex_count_is_refused() {
-    let m = Mesh { kinds: vec![CellKind::Hexa], cells: vec![vec![0, 1, 2, 3]], points: unit_tet_points() };
-    assert!(matches!(build(&m, &BuildOptions::default()), Err(MeshError::VertexCount { cell: 0, got: 4, expected: 8, .. })));
-    let m = Mesh { kinds: vec![CellKind::Polygon], cells: vec![vec![0, 1]], points: unit_tet_points() };
-    assert!(matches!(build(&m, &BuildOptions::default()), Err(MeshError::VertexCount { cell: 0, .. })));
+    let m = Mesh {
+        kinds: vec![CellKind::Hexa],
+        cells: vec![vec![0, 1, 2, 3]],
+        points: unit_tet_points(),
+    };
+    assert!(matches!(
+        build(&m, &BuildOptions::default()),
+        Err(MeshError::VertexCount {
+            cell: 0,
+            got: 4,
+            expected: 8,
+            ..
+        })
+    ));
+    let m = Mesh {
+        kinds: vec![CellKind::Polygon],
+        cells: vec![vec![0, 1]],
+        points: unit_tet_points(),
+    };
+    assert!(matches!(
+        build(&m, &BuildOptions::default()),
+        Err(MeshError::VertexCount { cell: 0, .. })
+    ));
 }
 
 #[test]
 fn degenerate_elements_are_refused() {
     let m = tet_mesh(vec![vec![0, 1, 1, 3]], unit_tet_points());
-    assert!(matches!(build(&m, &BuildOptions::default()), Err(MeshError::Degenerate { cell: 0, .. })));
-    let flat = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]];
+    assert!(matches!(
+        build(&m, &BuildOptions::default()),
+        Err(MeshError::Degenerate { cell: 0, .. })
+    ));
+    let flat = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+    ];
     let m = tet_mesh(vec![vec![0, 1, 2, 3]], flat.clone());
     let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
     assert!(matches!(e, MeshError::Degenerate { cell: 0, .. }), "{e}");
-    let m = Mesh { kinds: vec![CellKind::Polygon], cells: vec![vec![0, 1, 1]], points: flat.clone() };
-    assert!(matches!(build(&m, &BuildOptions::default()), Err(MeshError::Degenerate { cell: 0, .. })));
+    let m = Mesh {
+        kinds: vec![CellKind::Polygon],
+        cells: vec![vec![0, 1, 1]],
+        points: flat.clone(),
+    };
+    assert!(matches!(
+        build(&m, &BuildOptions::default()),
+        Err(MeshError::Degenerate { cell: 0, .. })
+    ));
     let line = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
-    let m = Mesh { kinds: vec![CellKind::Polygon], cells: vec![vec![0, 1, 2]], points: line };
-    assert!(matches!(build(&m, &BuildOptions::default()), Err(MeshError::Degenerate { cell: 0, .. })));
+    let m = Mesh {
+        kinds: vec![CellKind::Polygon],
+        cells: vec![vec![0, 1, 2]],
+        points: line,
+    };
+    assert!(matches!(
+        build(&m, &BuildOptions::default()),
+        Err(MeshError::Degenerate { cell: 0, .. })
+    ));
 }
 
 #[test]
@@ -159,9 +224,16 @@ fn inverted_tet_is_refused_or_repaired_with_a_report() {
     // cell 1 = (1,3,2,4): is it inverted? compute independently
     let p = unit_tet_points();
     let s = |c: &[usize]| {
-        let d = |k: usize| [p[c[k]][0] - p[c[0]][0], p[c[k]][1] - p[c[0]][1], p[c[k]][2] - p[c[0]][2]];
+        let d = |k: usize| {
+            [
+                p[c[k]][0] - p[c[0]][0],
+                p[c[k]][1] - p[c[0]][1],
+                p[c[k]][2] - p[c[0]][2],
+            ]
+        };
         let (a, b, e) = (d(1), d(2), d(3));
-        a[0] * (b[1] * e[2] - b[2] * e[1]) - a[1] * (b[0] * e[2] - b[2] * e[0]) + a[2] * (b[0] * e[1] - b[1] * e[0])
+        a[0] * (b[1] * e[2] - b[2] * e[1]) - a[1] * (b[0] * e[2] - b[2] * e[0])
+            + a[2] * (b[0] * e[1] - b[1] * e[0])
     };
     assert!(s(&m.cells[0]) > 0.0 && s(&m.cells[1]) < 0.0);
     let e = build(&m, &BuildOptions::default()).unwrap_err();
@@ -171,7 +243,11 @@ fn inverted_tet_is_refused_or_repaired_with_a_report() {
     assert_eq!(report.reoriented, vec![1]);
     assert!(g.is_valid());
     assert_eq!(g.cell_counts().faces, 7);
-    assert_eq!(g.cell_counts().components, 1, "the repaired tets are sewn by alpha3");
+    assert_eq!(
+        g.cell_counts().components,
+        1,
+        "the repaired tets are sewn by alpha3"
+    );
 }
 
 #[test]
@@ -180,30 +256,57 @@ fn non_manifold_face_names_the_cells() {
     p.push([-0.5, -0.5, -0.5]);
     p.push([0.9, 0.9, 0.9]);
     // three tets on face (1,2,3)
-    let mut m = tet_mesh(vec![vec![0, 1, 2, 3], vec![1, 3, 2, 4], vec![1, 3, 2, 6]], p);
+    let mut m = tet_mesh(
+        vec![vec![0, 1, 2, 3], vec![1, 3, 2, 4], vec![1, 3, 2, 6]],
+        p,
+    );
     let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
     match e {
-        MeshError::NonManifold { what: "face", vertices, cells, .. } => {
+        MeshError::NonManifold {
+            what: "face",
+            vertices,
+            cells,
+            ..
+        } => {
             assert_eq!(vertices, vec![1, 2, 3]);
             assert_eq!(cells, vec![0, 1, 2]);
         }
         other => panic!("{other}"),
     }
     // two tets touching at one vertex only
-    m.points.extend([[2.0, 0.0, 1.0], [0.0, 2.0, 1.0], [0.0, 0.0, 3.0]]);
+    m.points
+        .extend([[2.0, 0.0, 1.0], [0.0, 2.0, 1.0], [0.0, 0.0, 3.0]]);
     m.cells = vec![vec![0, 1, 2, 3], vec![3, 7, 8, 9]];
     m.kinds.truncate(2);
     let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
-    assert!(matches!(e, MeshError::NonManifold { what: "vertex", .. }), "{e}");
+    assert!(
+        matches!(e, MeshError::NonManifold { what: "vertex", .. }),
+        "{e}"
+    );
 }
 
 #[test]
 fn non_manifold_edge_in_2d() {
-    let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.5, -1.0, 0.0], [0.5, 0.0, 1.0]];
-    let m = Mesh { kinds: vec![CellKind::Polygon; 3], cells: vec![vec![0, 1, 2], vec![1, 0, 3], vec![0, 1, 4]], points: p };
+    let p = vec![
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.5, 1.0, 0.0],
+        [0.5, -1.0, 0.0],
+        [0.5, 0.0, 1.0],
+    ];
+    let m = Mesh {
+        kinds: vec![CellKind::Polygon; 3],
+        cells: vec![vec![0, 1, 2], vec![1, 0, 3], vec![0, 1, 4]],
+        points: p,
+    };
     let e = build(&m, &BuildOptions::default()).unwrap_err();
     match e {
-        MeshError::NonManifold { what: "edge", vertices, cells, .. } => {
+        MeshError::NonManifold {
+            what: "edge",
+            vertices,
+            cells,
+            ..
+        } => {
             assert_eq!(vertices, vec![0, 1]);
             assert_eq!(cells, vec![0, 1, 2]);
         }
@@ -219,7 +322,10 @@ fn surface_orientation_is_checked_and_repaired() {
     assert!(matches!(e, MeshError::Orientation { .. }), "{e}");
     let (g, report) = build(&m, &BuildOptions { reorient: true }).unwrap();
     assert_eq!(report.reoriented, vec![3]);
-    assert_eq!(common::actual(&g), common::expected(&grid([2, 2], [1.0, 1.0], GridElement::Quad)));
+    assert_eq!(
+        common::actual(&g),
+        common::expected(&grid([2, 2], [1.0, 1.0], GridElement::Quad))
+    );
 }
 
 #[test]
@@ -227,14 +333,23 @@ fn non_finite_points_and_empty_meshes_are_refused() {
     let mut p = unit_tet_points();
     p[2][1] = f64::NAN;
     let m = tet_mesh(vec![vec![0, 1, 2, 3]], p);
-    assert!(matches!(build(&m, &BuildOptions::default()), Err(MeshError::NonFinite { point: 2, .. })));
-    assert_eq!(build(&Mesh::default(), &BuildOptions::default()).unwrap_err(), MeshError::Empty);
+    assert!(matches!(
+        build(&m, &BuildOptions::default()),
+        Err(MeshError::NonFinite { point: 2, .. })
+    ));
+    assert_eq!(
+        build(&Mesh::default(), &BuildOptions::default()).unwrap_err(),
+        MeshError::Empty
+    );
     let m = Mesh {
         kinds: vec![CellKind::Tetra, CellKind::Polygon],
         cells: vec![vec![0, 1, 2, 3], vec![0, 1, 2]],
         points: unit_tet_points(),
     };
-    assert!(matches!(build(&m, &BuildOptions::default()), Err(MeshError::MixedDimension { cell: 1, .. })));
+    assert!(matches!(
+        build(&m, &BuildOptions::default()),
+        Err(MeshError::MixedDimension { cell: 1, .. })
+    ));
 }
 
 #[test]
@@ -248,7 +363,12 @@ fn non_conforming_faces_are_refused() {
     m.cells[1] = vec![c1[3], c1[1], c1[2], c1[0], c1[4], c1[5], c1[6], c1[7]];
     let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
     assert!(
-        matches!(e, MeshError::NonConforming { .. } | MeshError::Degenerate { .. } | MeshError::NonManifold { .. }),
+        matches!(
+            e,
+            MeshError::NonConforming { .. }
+                | MeshError::Degenerate { .. }
+                | MeshError::NonManifold { .. }
+        ),
         "{e}"
     );
 }

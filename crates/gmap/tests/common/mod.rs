@@ -18,11 +18,25 @@ pub fn faces_of(kind: CellKind, v: &[usize]) -> Vec<Vec<usize>> {
             &[2, 3, 7, 6],
             &[3, 0, 4, 7],
         ],
-        CellKind::Wedge => &[&[0, 1, 2], &[3, 4, 5], &[0, 1, 4, 3], &[1, 2, 5, 4], &[2, 0, 3, 5]],
-        CellKind::Pyramid => &[&[0, 1, 2, 3], &[0, 1, 4], &[1, 2, 4], &[2, 3, 4], &[3, 0, 4]],
+        CellKind::Wedge => &[
+            &[0, 1, 2],
+            &[3, 4, 5],
+            &[0, 1, 4, 3],
+            &[1, 2, 5, 4],
+            &[2, 0, 3, 5],
+        ],
+        CellKind::Pyramid => &[
+            &[0, 1, 2, 3],
+            &[0, 1, 4],
+            &[1, 2, 4],
+            &[2, 3, 4],
+            &[3, 0, 4],
+        ],
         CellKind::Polygon => return vec![v.to_vec()],
     };
-    f.iter().map(|f| f.iter().map(|&k| v[k]).collect()).collect()
+    f.iter()
+        .map(|f| f.iter().map(|&k| v[k]).collect())
+        .collect()
 }
 
 /// Counts computed from the lists alone.
