@@ -1,0 +1,67 @@
+# topomech: build, test and demo targets. Needs Rust (cargo) and Python 3.9+ (3.11 preferred).
+#
+#   make venv     .venv with the build and test tools
+#   make develop  build the extension (release) and install the package into .venv
+#   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest
+#   make demo     run `topomech demo` (writes out/demo)
+#   make bench    kernel benchmarks
+#   make clean    remove build outputs and the venv
+#
+# Stamp files under .venv make the targets idempotent: `make test` twice rebuilds nothing
+# unless a Rust source, a Cargo manifest or pyproject.toml changed.
+
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV := .venv
+VPY := $(VENV)/bin/python
+CARGO ?= cargo
+
+RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml Cargo.lock
+VENV_STAMP := $(VENV)/.stamp-venv
+DEVELOP_STAMP := $(VENV)/.stamp-develop
+DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff mypy
+
+.PHONY: venv develop test rust-test py-test lint demo bench clean
+
+venv: $(VENV_STAMP)
+
+$(VENV_STAMP):
+	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --upgrade pip
+	$(VPY) -m pip install --quiet $(foreach t,$(DEV_TOOLS),'$(t)')
+	touch $@
+
+develop: $(DEVELOP_STAMP)
+
+$(DEVELOP_STAMP): $(VENV_STAMP) $(RUST_SOURCES) pyproject.toml
+	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH \
+		$(VENV)/bin/maturin develop --release --quiet
+	touch $@
+
+test: rust-test develop lint py-test
+
+rust-test:
+	$(CARGO) fmt --all --check
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	$(CARGO) test
+
+lint: $(DEVELOP_STAMP)
+	$(VENV)/bin/ruff check python tests
+	$(VENV)/bin/ruff format --check python tests
+	MYPY_CACHE_DIR=$(VENV)/.mypy_cache $(VPY) -m mypy
+	MYPY_CACHE_DIR=$(VENV)/.mypy_cache $(VPY) -m mypy.stubtest topomech._core
+
+py-test: $(DEVELOP_STAMP)
+	$(VPY) -m pytest -q
+
+demo: $(DEVELOP_STAMP)
+	$(VENV)/bin/topomech demo
+
+bench:
+	$(CARGO) bench -p topomech-gmap
+
+clean:
+	$(CARGO) clean
+	rm -rf $(VENV) out .pytest_cache .ruff_cache .mypy_cache .hypothesis
+	rm -f python/topomech/_core*.so python/topomech/_core*.pyd
+	find python tests -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,0 +1,237 @@
+//! The one place where Rust errors become Python exceptions.
+//!
+//! ```text
+//! Exception
+//! └── TopomechError              everything the kernel refuses
+//!     ├── MeshError              a mesh that cannot become a G-map (mesh::MeshError)
+//!     ├── MeshReadError          a mesh file that cannot be read (raised by topomech.io)
+//!     ├── TopologyError          links, sews, orbits, invalid maps
+//!     ├── EmbeddingError         embeddings
+//!     ├── FileFormatError        the .tmg format (io::FormatError)
+//!     └── InternalError          a bug: a Rust panic, caught before it reaches Python
+//! ```
+//!
+//! Arguments checked at the boundary raise Python's own classes: `ValueError` for shapes and
+//! values, `TypeError` for types, `IndexError` for dart and dimension indices.
+//!
+//! Every exported function runs its body through [`guard`], so a Rust panic never unwinds into
+//! Python: it becomes an `InternalError` carrying the panic's message and location.
+
+use std::any::Any;
+use std::cell::RefCell;
+use std::fmt::Display;
+use std::panic::{self, AssertUnwindSafe};
+use std::sync::Once;
+
+use pyo3::exceptions::{PyException, PyIndexError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use topomech_gmap::io::FormatError;
+use topomech_gmap::mesh::MeshError as KernelMeshError;
+use topomech_gmap::{
+    EmbeddingError as KernelEmbeddingError, GMapError, LinkError, OrbitTypeError, SewError,
+};
+
+pyo3::create_exception!(
+    topomech._core,
+    TopomechError,
+    PyException,
+    "Base class of every error raised by topomech."
+);
+pyo3::create_exception!(
+    topomech._core,
+    MeshError,
+    TopomechError,
+    "A mesh that cannot become a G-map; the message names the cell or point."
+);
+pyo3::create_exception!(
+    topomech._core,
+    MeshReadError,
+    TopomechError,
+    "A mesh file that cannot be read: missing, unreadable, or not a mesh."
+);
+pyo3::create_exception!(
+    topomech._core,
+    TopologyError,
+    TopomechError,
+    "A refused operation on darts, links or orbits, or a map that breaks an invariant."
+);
+pyo3::create_exception!(
+    topomech._core,
+    EmbeddingError,
+    TopomechError,
+    "A refused operation on an embedding (unknown name, wrong type, stale derived value)."
+);
+pyo3::create_exception!(
+    topomech._core,
+    FileFormatError,
+    TopomechError,
+    "A .tmg file that cannot be written or read back."
+);
+pyo3::create_exception!(
+    topomech._core,
+    InternalError,
+    TopomechError,
+    "A bug in topomech (a Rust panic, caught at the boundary). Please report it."
+);
+
+/// Registers the exception classes in the module.
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("TopomechError", py.get_type::<TopomechError>())?;
+    m.add("MeshError", py.get_type::<MeshError>())?;
+    m.add("MeshReadError", py.get_type::<MeshReadError>())?;
+    m.add("TopologyError", py.get_type::<TopologyError>())?;
+    m.add("EmbeddingError", py.get_type::<EmbeddingError>())?;
+    m.add("FileFormatError", py.get_type::<FileFormatError>())?;
+    m.add("InternalError", py.get_type::<InternalError>())?;
+    install_panic_hook();
+    Ok(())
+}
+
+/// Any error a binding can meet; `?` converts the kernel's errors into it, and `PyO3` turns it
+/// into the right Python exception.
+#[derive(Debug)]
+pub(crate) enum Error {
+    /// A mesh refused by the kernel.
+    Mesh(KernelMeshError),
+    /// A mesh refused at the boundary (a check the kernel cannot make, e.g. a negative index).
+    MeshInput(String),
+    /// Links, sews, map construction, orbit types, invalid maps.
+    Topology(String),
+    /// Embeddings.
+    Embedding(KernelEmbeddingError),
+    /// An embedding problem found by the bindings.
+    EmbeddingInput(String),
+    /// The `.tmg` format.
+    Format(FormatError),
+    /// An error that is already a Python exception (argument checks).
+    Py(PyErr),
+}
+
+impl From<KernelMeshError> for Error {
+    fn from(e: KernelMeshError) -> Self {
+        Error::Mesh(e)
+    }
+}
+
+impl From<LinkError> for Error {
+    fn from(e: LinkError) -> Self {
+        Error::Topology(e.to_string())
+    }
+}
+
+impl From<SewError> for Error {
+    fn from(e: SewError) -> Self {
+        Error::Topology(e.to_string())
+    }
+}
+
+impl From<GMapError> for Error {
+    fn from(e: GMapError) -> Self {
+        Error::Topology(e.to_string())
+    }
+}
+
+impl From<OrbitTypeError> for Error {
+    fn from(e: OrbitTypeError) -> Self {
+        Error::Topology(e.to_string())
+    }
+}
+
+impl From<KernelEmbeddingError> for Error {
+    fn from(e: KernelEmbeddingError) -> Self {
+        Error::Embedding(e)
+    }
+}
+
+impl From<FormatError> for Error {
+    fn from(e: FormatError) -> Self {
+        Error::Format(e)
+    }
+}
+
+impl From<PyErr> for Error {
+    fn from(e: PyErr) -> Self {
+        Error::Py(e)
+    }
+}
+
+impl From<Error> for PyErr {
+    fn from(e: Error) -> PyErr {
+        match e {
+            Error::Mesh(e) => MeshError::new_err(e.to_string()),
+            Error::MeshInput(msg) => MeshError::new_err(msg),
+            Error::Topology(msg) => TopologyError::new_err(msg),
+            Error::Embedding(e) => EmbeddingError::new_err(e.to_string()),
+            Error::EmbeddingInput(msg) => EmbeddingError::new_err(msg),
+            Error::Format(e) => FileFormatError::new_err(e.to_string()),
+            Error::Py(e) => e,
+        }
+    }
+}
+
+/// A `ValueError` (bad shape or value of an argument).
+pub(crate) fn value_error(msg: impl Display) -> Error {
+    Error::Py(PyValueError::new_err(msg.to_string()))
+}
+
+/// A `TypeError` (an argument of the wrong type).
+pub(crate) fn type_error(msg: impl Display) -> Error {
+    Error::Py(PyTypeError::new_err(msg.to_string()))
+}
+
+/// An `IndexError` (a dart or dimension out of range).
+pub(crate) fn index_error(msg: impl Display) -> Error {
+    Error::Py(PyIndexError::new_err(msg.to_string()))
+}
+
+/// The result type of the bindings' internals.
+pub(crate) type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Runs `f`, turning a panic into `InternalError` and an [`Error`] into its Python exception.
+///
+/// Every exported function goes through here: a Rust panic must never unwind into Python.
+pub(crate) fn guard<T>(f: impl FnOnce() -> Result<T>) -> PyResult<T> {
+    match panic::catch_unwind(AssertUnwindSafe(f)) {
+        Ok(r) => r.map_err(PyErr::from),
+        Err(payload) => Err(InternalError::new_err(panic_report(payload.as_ref()))),
+    }
+}
+
+thread_local! {
+    /// Where the last panic on this thread happened, recorded by the hook for [`guard`].
+    static LAST_PANIC_LOCATION: RefCell<Option<String>> = const { RefCell::new(None) };
+}
+
+/// Replaces the default panic hook (which prints to stderr) by one that records the location
+/// for the `InternalError` message; with `TOPOMECH_BACKTRACE=1` the default hook runs too.
+/// The hook belongs to this extension's copy of the Rust runtime only.
+fn install_panic_hook() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let default_hook = panic::take_hook();
+        panic::set_hook(Box::new(move |info| {
+            let location = info.location().map(ToString::to_string);
+            LAST_PANIC_LOCATION.with(|l| *l.borrow_mut() = location);
+            if std::env::var_os("TOPOMECH_BACKTRACE").is_some_and(|v| v != "0") {
+                default_hook(info);
+            }
+        }));
+    });
+}
+
+/// The message of an `InternalError`: the panic's payload and where it happened.
+fn panic_report(payload: &(dyn Any + Send)) -> String {
+    let msg = if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic payload".to_string()
+    };
+    let at = LAST_PANIC_LOCATION
+        .with(|l| l.borrow_mut().take())
+        .map(|loc| format!(" at {loc}"))
+        .unwrap_or_default();
+    format!("internal error in topomech (Rust panic{at}): {msg}; please report this bug")
+}

@@ -1,0 +1,315 @@
+//! `topomech._core.GMap`: the kernel's map, with numpy arrays in and out.
+
+use std::path::PathBuf;
+
+use numpy::{IntoPyArray, PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict};
+use topomech_gmap::mesh::{self, BuildOptions};
+use topomech_gmap::{io, EmbeddingType, GMap, OrbitType};
+
+use crate::convert::{dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, rows_to_array, FlatMesh};
+use crate::errors::{guard, Error, InternalError, Result};
+
+/// A generalized map of dimension 2 (surfaces) or 3 (volumes).
+///
+/// Build one with `GMap.from_flat` (or the friendlier `topomech.GMap.from_mesh`), or load a
+/// `.tmg` file with `GMap.load`.
+#[pyclass(name = "GMap", module = "topomech._core")]
+pub(crate) struct PyGMap {
+    inner: GMap,
+    /// Set when a panic interrupted a method that changes the map: its state is then unknown,
+    /// and every later call refuses with `InternalError` rather than read a broken map.
+    poisoned: bool,
+}
+
+impl PyGMap {
+    fn new(inner: GMap) -> Self {
+        PyGMap {
+            inner,
+            poisoned: false,
+        }
+    }
+
+    /// The map, unless a panic left it in an unknown state.
+    fn map(&self) -> PyResult<&GMap> {
+        if self.poisoned {
+            Err(InternalError::new_err(
+                "this map was left in an unknown state by an earlier internal error and cannot be used",
+            ))
+        } else {
+            Ok(&self.inner)
+        }
+    }
+
+    /// Runs a changing operation; a panic poisons the map.
+    fn mutate<T>(&mut self, py: Python<'_>, f: impl FnOnce(&mut GMap) -> Result<T>) -> PyResult<T> {
+        self.map()?;
+        let r = guard(|| f(&mut self.inner));
+        if r.as_ref()
+            .is_err_and(|e| e.is_instance_of::<InternalError>(py))
+        {
+            self.poisoned = true;
+        }
+        r
+    }
+}
+
+/// The counts of `GMap::cell_counts` as a dict.
+fn counts_dict<'py>(py: Python<'py>, g: &GMap) -> PyResult<Bound<'py, PyDict>> {
+    let c = guard(|| Ok(g.cell_counts()))?;
+    let d = PyDict::new(py);
+    d.set_item("darts", c.darts)?;
+    d.set_item("vertices", c.vertices)?;
+    d.set_item("edges", c.edges)?;
+    d.set_item("faces", c.faces)?;
+    d.set_item("volumes", c.volumes)?;
+    d.set_item("components", c.components)?;
+    d.set_item("boundary", c.boundary)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl PyGMap {
+    /// Builds a map from a flat mesh: `points` float64 (N, 3); `kinds` the meshio name of each
+    /// cell (`polygon`, `tetra`, `hexahedron`, `wedge`, `pyramid`); `offsets` int64 (M + 1,);
+    /// `connectivity` int64. Returns the map and a report
+    /// `{"reoriented": [cells], "unused_points": [points]}`.
+    #[staticmethod]
+    #[pyo3(signature = (points, kinds, offsets, connectivity, reorient = false))]
+    fn from_flat<'py>(
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+        kinds: Vec<String>,
+        offsets: &Bound<'py, PyAny>,
+        connectivity: &Bound<'py, PyAny>,
+        reorient: bool,
+    ) -> PyResult<(PyGMap, Bound<'py, PyDict>)> {
+        let mesh = guard(move || mesh_from_flat(points, &kinds, offsets, connectivity))?;
+        let opts = BuildOptions { reorient };
+        let (g, report) = py.detach(|| guard(|| Ok(mesh::build(&mesh, &opts)?)))?;
+        let d = PyDict::new(py);
+        d.set_item("reoriented", report.reoriented)?;
+        d.set_item("unused_points", report.unused_points)?;
+        Ok((PyGMap::new(g), d))
+    }
+
+    /// Loads a map saved by `save` (a `.tmg` file).
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<PyGMap> {
+        let g = py.detach(move || guard(|| Ok(io::load(&path)?)))?;
+        Ok(PyGMap::new(g))
+    }
+
+    /// Reads a map from the bytes of a `.tmg` file.
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: Vec<u8>) -> PyResult<PyGMap> {
+        let g = py.detach(move || guard(|| Ok(io::from_bytes(&data)?)))?;
+        Ok(PyGMap::new(g))
+    }
+
+    /// Saves the map, with its embeddings, to a `.tmg` file (round-trip exact).
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let g = self.map()?;
+        py.detach(move || guard(|| Ok(io::save(g, &path)?)))
+    }
+
+    /// The bytes of the map's `.tmg` file.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let g = self.map()?;
+        let b = py.detach(|| guard(|| Ok(io::to_bytes(g))))?;
+        Ok(PyBytes::new(py, &b))
+    }
+
+    /// The dimension n: 2 (surface) or 3 (volume).
+    #[getter]
+    fn dimension(&self) -> PyResult<usize> {
+        Ok(self.map()?.dimension())
+    }
+
+    /// The number of live darts.
+    #[getter]
+    fn n_darts(&self) -> PyResult<usize> {
+        Ok(self.map()?.n_darts())
+    }
+
+    /// The topology version: it changes whenever a link changes or a dart is added or removed.
+    #[getter]
+    fn version(&self) -> PyResult<u64> {
+        Ok(self.map()?.version())
+    }
+
+    /// Counts of darts, vertices, edges, faces, volumes, connected components and boundary
+    /// cells (faces in 3D, edges in 2D).
+    fn cell_counts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        counts_dict(py, self.map()?)
+    }
+
+    /// Whether every invariant holds (involutions, cycles, embeddings constant on orbits).
+    fn is_valid(&self, py: Python<'_>) -> PyResult<bool> {
+        let g = self.map()?;
+        py.detach(|| guard(|| Ok(g.is_valid())))
+    }
+
+    /// Each violated invariant, described (empty for a valid map).
+    fn violations(&self, py: Python<'_>) -> PyResult<Vec<String>> {
+        let g = self.map()?;
+        py.detach(|| guard(|| Ok(g.validate().iter().map(ToString::to_string).collect())))
+    }
+
+    /// Vertex positions, float64 (V, 3): row k is the vertex orbit labelled k by
+    /// `vertex_labels`.
+    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let g = self.map()?;
+        let rows = guard(|| {
+            let id = g.require("position")?;
+            let ty = g.embedding(id).ty();
+            if ty != EmbeddingType::Vec3 {
+                return Err(Error::EmbeddingInput(format!(
+                    "embedding 'position' holds {ty}, expected vec3"
+                )));
+            }
+            let (labels, n) = g.orbit_labels(OrbitType::vertex(g.dimension()));
+            let mut rows = vec![[0.0f64; 3]; n];
+            let mut seen = vec![false; n];
+            for d in g.darts() {
+                let k = labels[d.index()] as usize;
+                if !seen[k] {
+                    seen[k] = true;
+                    let p = g.real(id, d);
+                    rows[k] = [p[0], p[1], p[2]];
+                }
+            }
+            Ok(rows)
+        })?;
+        guard(|| rows_to_array(py, &rows))
+    }
+
+    /// The vertex index of each dart, int64 (capacity,): -1 for removed darts.
+    fn vertex_labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let g = self.map()?;
+        let labels = guard(|| {
+            let (labels, _) = g.orbit_labels(OrbitType::vertex(g.dimension()));
+            Ok(labels
+                .into_iter()
+                .map(|l| if l == u32::MAX { -1 } else { i64::from(l) })
+                .collect::<Vec<i64>>())
+        })?;
+        Ok(labels.into_pyarray(py))
+    }
+
+    /// The map as a flat mesh `(points, kinds, offsets, connectivity)`: one point per vertex
+    /// orbit, one cell per face (2D) or volume (3D).
+    fn to_flat<'py>(&self, py: Python<'py>) -> PyResult<FlatMesh<'py>> {
+        let g = self.map()?;
+        let mesh = py.detach(|| guard(|| Ok(mesh::extract(g)?)))?;
+        guard(|| mesh_to_flat(py, &mesh))
+    }
+
+    /// `alpha_i(dart)`; a free link returns the dart itself.
+    fn alpha(&self, i: &Bound<'_, PyAny>, dart: &Bound<'_, PyAny>) -> PyResult<u32> {
+        let g = self.map()?;
+        guard(|| {
+            let i = dim_arg(g, i)?;
+            let d = dart_arg(g, dart)?;
+            Ok(g.alpha(i, d).0)
+        })
+    }
+
+    /// The darts of the orbit of `dart` of type `orbit` (e.g. `"<0,1>"`), `dart` first.
+    fn orbit<'py>(
+        &self,
+        py: Python<'py>,
+        dart: &Bound<'py, PyAny>,
+        orbit: &str,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let g = self.map()?;
+        let darts = guard(|| {
+            let d = dart_arg(g, dart)?;
+            let o = OrbitType::parse(orbit)?;
+            Ok(g.orbit(d, o)
+                .into_iter()
+                .map(|x| i64::from(x.0))
+                .collect::<Vec<i64>>())
+        })?;
+        Ok(darts.into_pyarray(py))
+    }
+
+    /// Sews `a` and `b` along dimension `i`, keeping the map valid; on error nothing changes.
+    fn sew(
+        &mut self,
+        py: Python<'_>,
+        i: &Bound<'_, PyAny>,
+        a: &Bound<'_, PyAny>,
+        b: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        self.mutate(py, |g| {
+            let i = dim_arg(g, i)?;
+            let a = dart_arg(g, a)?;
+            let b = dart_arg(g, b)?;
+            Ok(g.sew(i, a, b)?)
+        })
+    }
+
+    /// Unsews the orbit of `a` along dimension `i`; on error nothing changes.
+    fn unsew(
+        &mut self,
+        py: Python<'_>,
+        i: &Bound<'_, PyAny>,
+        a: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        self.mutate(py, |g| {
+            let i = dim_arg(g, i)?;
+            let a = dart_arg(g, a)?;
+            Ok(g.unsew(i, a)?)
+        })
+    }
+
+    /// The names of the embeddings, in declaration order.
+    fn embedding_names(&self) -> PyResult<Vec<String>> {
+        let g = self.map()?;
+        Ok(g.embeddings()
+            .iter()
+            .map(|e| e.name().to_string())
+            .collect())
+    }
+
+    /// `{"name", "type", "orbit", "policy", "derived"}` of an embedding; `derived` is `None`
+    /// or `{"source": name, "aggregate": "sum" | "mean" | "count"}`.
+    fn embedding_info<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
+        let g = self.map()?;
+        let id = guard(|| Ok(g.require(name)?))?;
+        let e = g.embedding(id);
+        let d = PyDict::new(py);
+        d.set_item("name", e.name())?;
+        d.set_item("type", e.ty().to_string())?;
+        d.set_item("orbit", e.orbit().to_string())?;
+        d.set_item("policy", e.policy().name())?;
+        match e.derived() {
+            None => d.set_item("derived", py.None())?,
+            Some(der) => {
+                let s = PyDict::new(py);
+                s.set_item("source", g.embedding(der.source).name())?;
+                s.set_item("aggregate", der.aggregate.name())?;
+                d.set_item("derived", s)?;
+            }
+        }
+        Ok(d)
+    }
+
+    /// Bytes used by the topology and every embedding.
+    fn memory_bytes(&self) -> PyResult<usize> {
+        Ok(self.map()?.memory_bytes())
+    }
+
+    fn __repr__(&self) -> String {
+        if self.poisoned {
+            return "<topomech._core.GMap (unusable after an internal error)>".to_string();
+        }
+        format!(
+            "<topomech._core.GMap dimension={} darts={}>",
+            self.inner.dimension(),
+            self.inner.n_darts()
+        )
+    }
+}

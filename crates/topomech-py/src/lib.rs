@@ -1,0 +1,26 @@
+//! `topomech._core`: the Python bindings of the topomech kernel.
+//!
+//! - [`gmap`]: the `GMap` class (numpy arrays in and out, every index checked).
+//! - [`generators`]: `grid` and `box`, generated meshes in the flat layout of [`convert`].
+//! - [`errors`]: the exception hierarchy, and the guard that keeps Rust panics out of Python.
+//!
+//! Python users import `topomech`, whose `GMap` wraps this module's with mesh conversions.
+#![warn(missing_docs)]
+
+mod convert;
+mod errors;
+mod generators;
+mod gmap;
+
+use pyo3::prelude::*;
+
+/// The topomech kernel: generalized maps and the meshes they are built from.
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    m.add_class::<gmap::PyGMap>()?;
+    m.add_function(wrap_pyfunction!(generators::grid, m)?)?;
+    m.add_function(wrap_pyfunction!(generators::cuboid, m)?)?;
+    Ok(())
+}

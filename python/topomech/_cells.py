@@ -1,0 +1,281 @@
+"""Meshes as meshio writes them (points and typed cell blocks) <-> the kernel's flat layout.
+
+The kernel takes ``points`` float64 ``(N, 3)``, one kind name per cell (``polygon``, ``tetra``,
+``hexahedron``, ``wedge``, ``pyramid``), ``offsets`` int64 ``(M + 1,)`` and ``connectivity``
+int64. This module accepts what users have instead: 2D or 3D points, and cells as
+``[(type, array), ...]`` pairs, meshio ``CellBlock`` objects, a ``{type: array}`` dict, or one
+array with an explicit kind. Cells are numbered in the order given, across blocks; every
+error names the cell.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from topomech._core import MeshError
+
+__all__ = [
+    "CellBlock",
+    "FlatMesh",
+    "cell_dimension",
+    "flat_to_blocks",
+    "normalize_cells",
+    "normalize_points",
+    "to_flat",
+]
+
+# meshio type -> (kernel kind, vertices per cell or None for any polygon).
+LINEAR_TYPES: dict[str, tuple[str, int | None]] = {
+    "triangle": ("polygon", 3),
+    "quad": ("polygon", 4),
+    "polygon": ("polygon", None),
+    "tetra": ("tetra", 4),
+    "hexahedron": ("hexahedron", 8),
+    "wedge": ("wedge", 6),
+    "pyramid": ("pyramid", 5),
+}
+
+_DIMENSION_BY_PREFIX = (
+    ("vertex", 0),
+    ("line", 1),
+    ("triangle", 2),
+    ("quad", 2),
+    ("polygon", 2),
+    ("tetra", 3),
+    ("hexahedron", 3),
+    ("wedge", 3),
+    ("pyramid", 3),
+)
+_LAGRANGE_DIMENSION = {
+    "CURVE": 1,
+    "TRIANGLE": 2,
+    "QUADRILATERAL": 2,
+    "TETRAHEDRON": 3,
+    "HEXAHEDRON": 3,
+    "WEDGE": 3,
+    "PYRAMID": 3,
+}
+_INT64_MAX = np.iinfo(np.int64).max
+
+
+class CellBlock(NamedTuple):
+    """Cells of one meshio type: ``data`` is ``(M, k)`` or, for polygons, a list of lists."""
+
+    type: str
+    data: Any
+
+
+class FlatMesh(NamedTuple):
+    """The kernel's flat layout (see the module docstring)."""
+
+    points: npt.NDArray[np.float64]
+    kinds: list[str]
+    offsets: npt.NDArray[np.int64]
+    connectivity: npt.NDArray[np.int64]
+
+
+def cell_dimension(cell_type: str) -> int | None:
+    """The topological dimension of a meshio cell type, ``None`` if unknown."""
+    if cell_type.startswith("VTK_LAGRANGE_"):
+        return _LAGRANGE_DIMENSION.get(cell_type[len("VTK_LAGRANGE_") :])
+    for prefix, dim in _DIMENSION_BY_PREFIX:
+        suffix = cell_type[len(prefix) :]
+        if cell_type.startswith(prefix) and (suffix == "" or suffix.isdigit()):
+            return dim
+    return None
+
+
+def normalize_points(points: Any) -> npt.NDArray[np.float64]:
+    """``points`` as float64 ``(N, 3)``; 2 columns get z = 0."""
+    try:
+        p = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"points must be a numeric array of shape (N, 2) or (N, 3): {e}") from e
+    if p.ndim != 2 or p.shape[1] not in (2, 3):
+        raise ValueError(f"points must have shape (N, 2) or (N, 3), got {tuple(p.shape)}")
+    if p.shape[1] == 2:
+        p = np.column_stack([p, np.zeros(len(p))])
+    return np.ascontiguousarray(p)
+
+
+def _is_block(item: Any) -> bool:
+    if hasattr(item, "type") and hasattr(item, "data"):
+        return True
+    return isinstance(item, (tuple, list)) and len(item) == 2 and isinstance(item[0], str)
+
+
+def normalize_cells(cells: Any, kind: str | None = None) -> list[CellBlock]:
+    """The blocks of ``cells`` in order, whatever form it came in."""
+    if kind is not None:
+        if isinstance(cells, Mapping) or (
+            isinstance(cells, (list, tuple)) and cells and _is_block(cells[0])
+        ):
+            raise ValueError("kind= is only for a single cell array, not for typed cell blocks")
+        return [CellBlock(kind, cells)]
+    if isinstance(cells, Mapping):
+        return [CellBlock(str(t), d) for t, d in cells.items()]
+    if isinstance(cells, np.ndarray):
+        raise TypeError(
+            "cells is a bare array: say what its cells are with kind=, e.g. kind='tetra'"
+        )
+    if isinstance(cells, Iterable) and not isinstance(cells, (str, bytes)):
+        blocks = []
+        for item in cells:
+            if hasattr(item, "type") and hasattr(item, "data"):
+                blocks.append(CellBlock(str(item.type), item.data))
+            elif _is_block(item):
+                blocks.append(CellBlock(item[0], item[1]))
+            else:
+                raise TypeError(
+                    "cells must be (type, array) pairs, meshio CellBlocks, a {type: array} "
+                    "dict, or one array with kind=; got an item "
+                    f"{type(item).__name__} {item!r:.60}"
+                )
+        return blocks
+    raise TypeError(
+        "cells must be (type, array) pairs, meshio CellBlocks, a {type: array} dict, "
+        f"or one array with kind=; got {type(cells).__name__}"
+    )
+
+
+def _kernel_kind(cell_type: str, first_cell: int) -> tuple[str, int | None]:
+    if cell_type in LINEAR_TYPES:
+        return LINEAR_TYPES[cell_type]
+    if re.fullmatch(r"polygon\d+", cell_type):
+        return "polygon", int(cell_type[len("polygon") :])
+    dim = cell_dimension(cell_type)
+    if dim in (2, 3):
+        raise MeshError(
+            f"cell {first_cell} is a {cell_type}: higher-order cells are not supported, "
+            "use linear elements (triangle, quad, polygon, tetra, hexahedron, wedge, pyramid)"
+        )
+    if dim is not None:
+        raise MeshError(
+            f"cell {first_cell} is a {cell_type}, a {dim}D cell: a G-map is built from "
+            "surface (2D) or volume (3D) cells only"
+        )
+    raise MeshError(
+        f"cell {first_cell} has unknown type {cell_type!r}: expected triangle, quad, polygon, "
+        "tetra, hexahedron, wedge or pyramid"
+    )
+
+
+def _index_array(data: Any, first_cell: int, cell_type: str) -> npt.NDArray[np.int64]:
+    """A rectangular block of vertex indices as int64, refusing non-integers and overflow."""
+    a = np.asarray(data)
+    if a.dtype.kind in "iu":
+        if a.dtype.kind == "u" and a.size and a.max() > _INT64_MAX:
+            flat = int(np.argmax(a.reshape(len(a), -1).max(axis=1) > _INT64_MAX))
+            raise MeshError(
+                f"cell {first_cell + flat} ({cell_type}) refers to vertex "
+                f"{int(a.reshape(len(a), -1)[flat].max())}, which is out of range"
+            )
+        return a.astype(np.int64, copy=False)
+    if a.dtype.kind == "f":
+        bad = ~np.isfinite(a) | (a != np.round(a)) if a.size else np.zeros(a.shape, bool)
+        if bad.any():
+            row = int(np.argmax(bad.reshape(len(a), -1).any(axis=1)))
+            raise MeshError(
+                f"cell {first_cell + row} ({cell_type}) has a vertex index that is not an "
+                f"integer: {a.reshape(len(a), -1)[row].tolist()}"
+            )
+        if a.size and np.abs(a).max() > _INT64_MAX:
+            raise MeshError(f"cells {first_cell}.. ({cell_type}) have vertex indices out of range")
+        return a.astype(np.int64)
+    if a.size == 0:
+        return a.astype(np.int64)
+    raise TypeError(
+        f"the vertex indices of the {cell_type} cells from cell {first_cell} must be integers, "
+        f"got an array of dtype {a.dtype}"
+    )
+
+
+def _ragged(data: Any) -> bool:
+    if isinstance(data, np.ndarray):
+        return bool(data.dtype == object)
+    if isinstance(data, Sequence) and not isinstance(data, (str, bytes)):
+        lengths = {len(c) if isinstance(c, (Sequence, np.ndarray)) else -1 for c in data}
+        return len(lengths) > 1
+    return False
+
+
+def to_flat(points: Any, cells: Any, kind: str | None = None) -> FlatMesh:
+    """The flat layout of points and cells in any accepted form (see the module docstring)."""
+    pts = normalize_points(points)
+    kinds: list[str] = []
+    conn_parts: list[npt.NDArray[np.int64]] = []
+    sizes: list[npt.NDArray[np.int64]] = []
+    first = 0
+    for block in normalize_cells(cells, kind):
+        kernel_kind, nv = _kernel_kind(block.type, first)
+        if _ragged(block.data):
+            rows = [
+                _index_array(np.asarray(c).reshape(1, -1), first + k, block.type)[0]
+                for k, c in enumerate(block.data)
+            ]
+            if nv is not None:
+                for k, r in enumerate(rows):
+                    if len(r) != nv:
+                        raise MeshError(
+                            f"cell {first + k} is a {block.type} with {len(r)} vertices, "
+                            f"expected {nv}"
+                        )
+            m = len(rows)
+            row_sizes = np.array([len(r) for r in rows], dtype=np.int64)
+            conn = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        else:
+            a = _index_array(block.data, first, block.type)
+            if a.size == 0 and a.ndim < 2:
+                continue
+            if a.ndim != 2:
+                raise ValueError(
+                    f"the {block.type} cells from cell {first} must be a 2D array "
+                    f"(cells, vertices per cell), got shape {tuple(a.shape)}"
+                )
+            m = a.shape[0]
+            if m == 0:
+                continue
+            if nv is not None and a.shape[1] != nv:
+                raise MeshError(
+                    f"cell {first} is a {block.type} with {a.shape[1]} vertices, expected {nv}"
+                )
+            row_sizes = np.full(m, a.shape[1], dtype=np.int64)
+            conn = np.ascontiguousarray(a).reshape(-1)
+        kinds.extend([kernel_kind] * m)
+        sizes.append(row_sizes)
+        conn_parts.append(conn)
+        first += m
+    offsets = np.zeros(len(kinds) + 1, dtype=np.int64)
+    if sizes:
+        np.cumsum(np.concatenate(sizes), out=offsets[1:])
+    connectivity = np.concatenate(conn_parts) if conn_parts else np.zeros(0, dtype=np.int64)
+    return FlatMesh(pts, kinds, offsets, connectivity.astype(np.int64, copy=False))
+
+
+def flat_to_blocks(
+    kinds: Sequence[str], offsets: npt.NDArray[np.int64], connectivity: npt.NDArray[np.int64]
+) -> list[CellBlock]:
+    """meshio cell blocks from the flat layout, keeping the cell order: consecutive cells of
+    one meshio type share a block; polygons of 3 and 4 vertices are triangles and quads."""
+    blocks: list[CellBlock] = []
+    run_type: str | None = None
+    run: list[npt.NDArray[np.int64]] = []
+
+    def close() -> None:
+        if run_type is not None and run:
+            blocks.append(CellBlock(run_type, np.stack(run)))
+
+    for c, kind in enumerate(kinds):
+        verts = connectivity[offsets[c] : offsets[c + 1]]
+        t = {3: "triangle", 4: "quad"}.get(len(verts), "polygon") if kind == "polygon" else kind
+        if t != run_type or (t == "polygon" and run and len(run[0]) != len(verts)):
+            close()
+            run_type, run = t, []
+        run.append(verts)
+    close()
+    return blocks

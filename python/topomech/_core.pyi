@@ -1,0 +1,98 @@
+"""The native kernel of topomech (Rust, PyO3). See the ``topomech`` package for the friendly API."""
+
+import os
+from typing import Any, final
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "EmbeddingError",
+    "FileFormatError",
+    "GMap",
+    "InternalError",
+    "MeshError",
+    "MeshReadError",
+    "TopologyError",
+    "TopomechError",
+    "__version__",
+    "box",
+    "grid",
+]
+
+__version__: str
+
+_Path = str | os.PathLike[str]
+_FlatMesh = tuple[npt.NDArray[np.float64], list[str], npt.NDArray[np.int64], npt.NDArray[np.int64]]
+
+class TopomechError(Exception):
+    """Base class of every error raised by topomech."""
+
+class MeshError(TopomechError):
+    """A mesh that cannot become a G-map; the message names the cell or point."""
+
+class MeshReadError(TopomechError):
+    """A mesh file that cannot be read: missing, unreadable, or not a mesh."""
+
+class TopologyError(TopomechError):
+    """A refused operation on darts, links or orbits, or a map that breaks an invariant."""
+
+class EmbeddingError(TopomechError):
+    """A refused operation on an embedding (unknown name, wrong type, stale derived value)."""
+
+class FileFormatError(TopomechError):
+    """A .tmg file that cannot be written or read back."""
+
+class InternalError(TopomechError):
+    """A bug in topomech (a Rust panic, caught at the boundary). Please report it."""
+
+@final
+class GMap:
+    """A generalized map of dimension 2 (surfaces) or 3 (volumes)."""
+
+    @staticmethod
+    def from_flat(
+        points: npt.NDArray[np.float64],
+        kinds: list[str],
+        offsets: npt.NDArray[np.int64],
+        connectivity: npt.NDArray[np.int64],
+        reorient: bool = False,
+    ) -> tuple[GMap, dict[str, list[int]]]: ...
+    @staticmethod
+    def load(path: _Path) -> GMap: ...
+    @staticmethod
+    def from_bytes(data: bytes) -> GMap: ...
+    def save(self, path: _Path) -> None: ...
+    def to_bytes(self) -> bytes: ...
+    @property
+    def dimension(self) -> int: ...
+    @property
+    def n_darts(self) -> int: ...
+    @property
+    def version(self) -> int: ...
+    def cell_counts(self) -> dict[str, int]: ...
+    def is_valid(self) -> bool: ...
+    def violations(self) -> list[str]: ...
+    def positions(self) -> npt.NDArray[np.float64]: ...
+    def vertex_labels(self) -> npt.NDArray[np.int64]: ...
+    def to_flat(self) -> _FlatMesh: ...
+    def alpha(self, i: int, dart: int) -> int: ...
+    def orbit(self, dart: int, orbit: str) -> npt.NDArray[np.int64]: ...
+    def sew(self, i: int, a: int, b: int) -> None: ...
+    def unsew(self, i: int, a: int) -> None: ...
+    def embedding_names(self) -> list[str]: ...
+    def embedding_info(self, name: str) -> dict[str, Any]: ...
+    def memory_bytes(self) -> int: ...
+
+def grid(
+    nx: int, ny: int, sx: float = 1.0, sy: float = 1.0, element: str = "quad"
+) -> _FlatMesh: ...
+def box(
+    nx: int,
+    ny: int,
+    nz: int,
+    sx: float = 1.0,
+    sy: float = 1.0,
+    sz: float = 1.0,
+    element: str = "hexahedron",
+) -> _FlatMesh: ...

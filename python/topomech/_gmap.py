@@ -1,0 +1,241 @@
+"""``topomech.GMap``: the kernel's G-map with mesh conversions (numpy and meshio)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, TypedDict, Union
+
+import numpy as np
+import numpy.typing as npt
+
+from topomech import _core
+from topomech._cells import FlatMesh, flat_to_blocks, to_flat
+from topomech._core import TopologyError
+
+if TYPE_CHECKING:
+    import meshio
+
+__all__ = ["BuildReport", "CellCounts", "GMap"]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+class CellCounts(TypedDict):
+    """What :meth:`GMap.cell_counts` returns."""
+
+    darts: int
+    vertices: int
+    edges: int
+    faces: int
+    volumes: int
+    components: int
+    boundary: int
+
+
+@dataclass(frozen=True)
+class BuildReport:
+    """What building a map changed or noticed."""
+
+    #: Cells whose vertex order was reversed (only with ``reorient=True``).
+    reoriented: list[int] = field(default_factory=list)
+    #: Points used by no cell: they are not in the map.
+    unused_points: list[int] = field(default_factory=list)
+
+
+class GMap:
+    """A generalized map of dimension 2 (a surface) or 3 (a volume).
+
+    Build one from a mesh with :meth:`from_mesh` or :meth:`from_meshio`, or load a ``.tmg``
+    file with :meth:`load`. The kernel object is :attr:`core`; this class adds the mesh
+    conversions and delegates the rest.
+
+    >>> g = GMap.from_mesh([[0, 0], [1, 0], [0, 1]], [("triangle", [[0, 1, 2]])])
+    >>> g.cell_counts()["edges"]
+    3
+    """
+
+    __slots__ = ("_core", "report")
+
+    def __init__(self, core: _core.GMap, report: BuildReport | None = None) -> None:
+        if not isinstance(core, _core.GMap):
+            raise TypeError(
+                "GMap wraps a topomech._core.GMap; build one with GMap.from_mesh, "
+                "GMap.from_meshio or GMap.load"
+            )
+        self._core = core
+        #: What building the map changed or noticed (empty for a loaded map).
+        self.report = report if report is not None else BuildReport()
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def from_flat(
+        cls,
+        points: Any,
+        kinds: list[str],
+        offsets: Any,
+        connectivity: Any,
+        reorient: bool = False,
+    ) -> GMap:
+        """From the kernel's flat layout (see :mod:`topomech._cells`)."""
+        core, report = _core.GMap.from_flat(
+            np.ascontiguousarray(points, dtype=np.float64),
+            list(kinds),
+            np.ascontiguousarray(offsets, dtype=np.int64),
+            np.ascontiguousarray(connectivity, dtype=np.int64),
+            reorient,
+        )
+        return cls(core, BuildReport(list(report["reoriented"]), list(report["unused_points"])))
+
+    @classmethod
+    def from_mesh(
+        cls, points: Any, cells: Any, reorient: bool = False, *, kind: str | None = None
+    ) -> GMap:
+        """From points ``(N, 2)`` or ``(N, 3)`` and cells.
+
+        ``cells`` is a list of ``(meshio_type, array)`` pairs or meshio ``CellBlock`` objects,
+        a ``{meshio_type: array}`` dict, or one array with ``kind="tetra"`` (say). Types:
+        ``triangle``, ``quad``, ``polygon`` (a list of vertex lists), ``tetra``, ``hexahedron``,
+        ``wedge``, ``pyramid``, with VTK's vertex order. Cells are numbered in the order given;
+        a refused mesh raises :class:`MeshError` naming the cell or point. With
+        ``reorient=True``, inverted cells are turned over and listed in :attr:`report`.
+        """
+        flat = to_flat(points, cells, kind)
+        return cls.from_flat(*flat, reorient=reorient)
+
+    @classmethod
+    def from_meshio(cls, mesh: meshio.Mesh, reorient: bool = False) -> GMap:
+        """From a ``meshio.Mesh``, keeping the cells of the highest dimension (the lower
+        dimensional ones, such as the boundary triangles Gmsh writes beside tetrahedra, are
+        dropped; :func:`topomech.io.read_mesh` says which)."""
+        from topomech.io import select_cells
+
+        kept, _dropped = select_cells(mesh.cells)
+        return cls.from_mesh(mesh.points, kept, reorient)
+
+    @classmethod
+    def load(cls, path: PathLike) -> GMap:
+        """A map saved by :meth:`save` (a ``.tmg`` file)."""
+        return cls(_core.GMap.load(os.fspath(path)))
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> GMap:
+        """A map from the bytes of a ``.tmg`` file."""
+        return cls(_core.GMap.from_bytes(bytes(data)))
+
+    # ------------------------------------------------------------------ output
+
+    def save(self, path: PathLike) -> None:
+        """Saves the map with its embeddings to a ``.tmg`` file (round-trip exact)."""
+        self._core.save(os.fspath(path))
+
+    def to_bytes(self) -> bytes:
+        """The bytes of the map's ``.tmg`` file."""
+        return self._core.to_bytes()
+
+    def to_flat(self) -> FlatMesh:
+        """``(points, kinds, offsets, connectivity)``: one point per vertex, one cell per face
+        (2D) or volume (3D)."""
+        return FlatMesh(*self._core.to_flat())
+
+    def to_meshio(self) -> meshio.Mesh:
+        """The map as a ``meshio.Mesh`` (polygons of 3 and 4 vertices become triangles and
+        quads; the cell order is kept)."""
+        import meshio
+
+        points, kinds, offsets, connectivity = self._core.to_flat()
+        blocks = flat_to_blocks(kinds, offsets, connectivity)
+        return meshio.Mesh(points, [(b.type, b.data) for b in blocks])
+
+    # ------------------------------------------------------------------ queries
+
+    @property
+    def core(self) -> _core.GMap:
+        """The kernel object."""
+        return self._core
+
+    @property
+    def dimension(self) -> int:
+        """2 (surface) or 3 (volume)."""
+        return self._core.dimension
+
+    @property
+    def n_darts(self) -> int:
+        """The number of darts."""
+        return self._core.n_darts
+
+    @property
+    def version(self) -> int:
+        """The topology version: it changes with every change of links or darts."""
+        return self._core.version
+
+    def cell_counts(self) -> CellCounts:
+        """Darts, vertices, edges, faces, volumes, connected components, and boundary cells
+        (faces in 3D, edges in 2D)."""
+        c = self._core.cell_counts()
+        return CellCounts(
+            darts=c["darts"],
+            vertices=c["vertices"],
+            edges=c["edges"],
+            faces=c["faces"],
+            volumes=c["volumes"],
+            components=c["components"],
+            boundary=c["boundary"],
+        )
+
+    def is_valid(self) -> bool:
+        """Whether every invariant of a G-map holds."""
+        return self._core.is_valid()
+
+    def violations(self) -> list[str]:
+        """Each violated invariant, described."""
+        return self._core.violations()
+
+    def check(self) -> None:
+        """Raises :class:`TopologyError` listing the violated invariants, if any."""
+        v = self._core.violations()
+        if v:
+            shown = "\n  ".join(v[:20])
+            more = f"\n  ... and {len(v) - 20} more" if len(v) > 20 else ""
+            raise TopologyError(f"the G-map breaks {len(v)} invariant(s):\n  {shown}{more}")
+
+    def positions(self) -> npt.NDArray[np.float64]:
+        """Vertex positions ``(V, 3)``, row k for the vertex labelled k in
+        :meth:`vertex_labels`."""
+        return self._core.positions()
+
+    def vertex_labels(self) -> npt.NDArray[np.int64]:
+        """The vertex of each dart (-1 for removed darts)."""
+        return self._core.vertex_labels()
+
+    def alpha(self, i: int, dart: int) -> int:
+        """``alpha_i(dart)`` (the dart itself when free)."""
+        return self._core.alpha(i, dart)
+
+    def orbit(self, dart: int, orbit: str) -> npt.NDArray[np.int64]:
+        """The darts of the orbit of ``dart`` of type ``orbit`` (e.g. ``"<0,1>"``)."""
+        return self._core.orbit(dart, orbit)
+
+    def sew(self, i: int, a: int, b: int) -> None:
+        """Sews ``a`` and ``b`` along dimension ``i``."""
+        self._core.sew(i, a, b)
+
+    def unsew(self, i: int, a: int) -> None:
+        """Unsews ``a`` along dimension ``i``."""
+        self._core.unsew(i, a)
+
+    def embedding_names(self) -> list[str]:
+        """The embeddings' names."""
+        return self._core.embedding_names()
+
+    def embedding_info(self, name: str) -> dict[str, Any]:
+        """Name, type, orbit, policy and derivation of an embedding."""
+        return self._core.embedding_info(name)
+
+    def memory_bytes(self) -> int:
+        """Bytes used by the topology and the embeddings."""
+        return self._core.memory_bytes()
+
+    def __repr__(self) -> str:
+        return f"topomech.GMap(dimension={self.dimension}, darts={self.n_darts})"
