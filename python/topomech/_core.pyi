@@ -16,6 +16,7 @@ __all__ = [
     "TopologyError",
     "TopomechError",
     "__version__",
+    "_panic_for_tests",
     "box",
     "grid",
 ]
@@ -96,3 +97,5 @@ def box(
     sz: float = 1.0,
     element: str = "hexahedron",
 ) -> _FlatMesh: ...
+def _panic_for_tests(message: str) -> None:
+    """Panics in Rust, for the tests of the panic guard."""

@@ -108,9 +108,10 @@ def _quiet_read(p: Path, fmt: str) -> tuple[meshio.Mesh | None, str, str]:
 
 
 def _clean(text: str) -> str:
-    """meshio's printed lines, joined, without its generic "Couldn't read file" line."""
-    lines = (line.strip() for line in text.splitlines())
-    return "; ".join(x for x in lines if x and not x.startswith("Error: Couldn't read file"))
+    """What meshio printed, on one line, without the generic "Couldn't read file" error it
+    prints last, just before ``sys.exit``."""
+    text = text.split("Error: Couldn't read file")[0]
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
 
 
 def read_mesh(path: PathLike) -> tuple[meshio.Mesh, list[DroppedBlock]]:

@@ -22,5 +22,13 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<gmap::PyGMap>()?;
     m.add_function(wrap_pyfunction!(generators::grid, m)?)?;
     m.add_function(wrap_pyfunction!(generators::cuboid, m)?)?;
+    m.add_function(wrap_pyfunction!(panic_for_tests, m)?)?;
     Ok(())
+}
+
+/// Panics with `message` inside the boundary guard: the tests check that a Rust panic reaches
+/// Python as `InternalError`, never as a crash or a `PanicException`.
+#[pyfunction(name = "_panic_for_tests")]
+fn panic_for_tests(message: &str) -> PyResult<()> {
+    errors::guard(|| panic!("{message}"))
 }
