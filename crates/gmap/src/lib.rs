@@ -22,6 +22,7 @@ pub mod io;
 pub mod marks;
 pub mod mesh;
 mod orbit;
+mod rewire;
 mod sew;
 mod valid;
 
@@ -33,4 +34,5 @@ pub use error::{EmbeddingError, GMapError, LinkError, SewError};
 pub use gmap::{CellCounts, GMap, MAX_DARTS};
 pub use marks::Marks;
 pub use orbit::{OrbitType, OrbitTypeError, MAX_DIM};
+pub use rewire::RewireError;
 pub use valid::Violation;

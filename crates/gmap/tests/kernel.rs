@@ -423,3 +423,51 @@ proptest! {
         prop_assert!(to_bytes(&from_bytes(&b).unwrap()) == b);
     }
 }
+
+/// `rewire` with the links of an unsew gives the same map as `unsew`: same counts, same
+/// values on every dart, totals of `sum` embeddings kept; a batch that would break an
+/// involution is refused and changes nothing.
+#[test]
+fn rewire_matches_unsew_and_refuses_bad_batches() {
+    let (mut a, _) = build(
+        &grid([2, 2], [1.0, 1.0], GridElement::Quad),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let m = a
+        .add_embedding("m", EmbeddingType::F64, o("<1,2>"), Policy::Sum)
+        .unwrap();
+    for d in a.orbit_representatives(o("<1,2>")) {
+        a.set_real(m, d, &[1.0]).unwrap();
+    }
+    let mut b = a.clone();
+    let d = a.darts().find(|&d| !a.is_free(2, d)).unwrap();
+    let e = a.alpha(0, d);
+    let (pd, pe) = (a.alpha(2, d), a.alpha(2, e));
+    a.unsew(2, d).unwrap();
+    let snapshot = to_bytes(&b);
+    assert!(matches!(
+        b.rewire(&[(2, d, d)], &[], &[]),
+        Err(topomech_gmap::RewireError::NotInvolution { .. })
+    ));
+    assert!(to_bytes(&b) == snapshot, "a refused batch changes nothing");
+    b.rewire(&[(2, d, d), (2, pd, pd), (2, e, e), (2, pe, pe)], &[], &[])
+        .unwrap();
+    assert!(b.validate().is_empty(), "{:?}", b.validate());
+    assert_eq!(a.cell_counts(), b.cell_counts());
+    let pos = a.require("position").unwrap();
+    for x in a.darts() {
+        assert_eq!(a.real(pos, x), b.real(pos, x));
+        assert_eq!(a.real(m, x), b.real(m, x));
+    }
+    // new darts: two fresh darts linked by alpha0 get one zero <0,1> value, and removing them
+    // again restores the counts
+    let before = b.cell_counts();
+    let f = b.add_darts(2);
+    let g2 = Dart(f.0 + 1);
+    b.rewire(&[(0, f, g2), (0, g2, f)], &[f, g2], &[]).unwrap();
+    assert!(b.is_valid());
+    b.rewire(&[(0, f, f), (0, g2, g2)], &[], &[f, g2]).unwrap();
+    assert!(b.is_valid());
+    assert_eq!(b.cell_counts(), before);
+}
