@@ -299,7 +299,7 @@ impl GMap {
     pub fn orbit(&self, d: Dart, o: OrbitType) -> Vec<Dart> {
         let mut out = Vec::new();
         with_marks(self.capacity(), |m| {
-            self.visit_orbit(d, o, m, |x| out.push(x))
+            self.visit_orbit(d, o, m, |x| out.push(x));
         });
         out
     }
