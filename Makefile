@@ -19,7 +19,8 @@ CARGO ?= cargo
 RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml Cargo.lock
 VENV_STAMP := $(VENV)/.stamp-venv
 DEVELOP_STAMP := $(VENV)/.stamp-develop
-DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff mypy
+# Linters are pinned to a minor (ruff) or major (mypy) version: new releases add checks.
+DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 mypy>=2,<3
 
 .PHONY: venv develop test rust-test py-test lint demo bench clean
 

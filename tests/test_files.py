@@ -119,8 +119,9 @@ def test_lower_dimensional_blocks_are_dropped_and_listed(tmp_path: Path) -> None
         ("line", 2, 1),
     }
     assert topomech.GMap.from_meshio(kept).cell_counts() == g.cell_counts()
-    # from_meshio drops them too
-    assert topomech.GMap.from_meshio(mesh).cell_counts() == g.cell_counts()
+    # from_meshio drops them too, and warns
+    with pytest.warns(UserWarning, match=r"dropped 48 triangle cells \(2D\), 2 line cells \(1D\)"):
+        assert topomech.GMap.from_meshio(mesh).cell_counts() == g.cell_counts()
 
 
 def boundary_triangles(tets: np.ndarray) -> np.ndarray:

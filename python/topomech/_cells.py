@@ -168,21 +168,22 @@ def _kernel_kind(cell_type: str, first_cell: int) -> tuple[str, int | None]:
 def _index_array(data: Any, first_cell: int, cell_type: str) -> npt.NDArray[np.int64]:
     """A rectangular block of vertex indices as int64, refusing non-integers and overflow."""
     a = np.asarray(data)
+    rows = np.atleast_2d(a)  # for messages: one row per cell
     if a.dtype.kind in "iu":
         if a.dtype.kind == "u" and a.size and a.max() > _INT64_MAX:
-            flat = int(np.argmax(a.reshape(len(a), -1).max(axis=1) > _INT64_MAX))
+            row = int(np.argmax((rows > _INT64_MAX).any(axis=1)))
             raise MeshError(
-                f"cell {first_cell + flat} ({cell_type}) refers to vertex "
-                f"{int(a.reshape(len(a), -1)[flat].max())}, which is out of range"
+                f"cell {first_cell + row} ({cell_type}) refers to vertex "
+                f"{int(rows[row].max())}, which is out of range"
             )
         return a.astype(np.int64, copy=False)
     if a.dtype.kind == "f":
-        bad = ~np.isfinite(a) | (a != np.round(a)) if a.size else np.zeros(a.shape, bool)
+        bad = ~np.isfinite(rows) | (rows != np.round(rows))
         if bad.any():
-            row = int(np.argmax(bad.reshape(len(a), -1).any(axis=1)))
+            row = int(np.argmax(bad.any(axis=1)))
             raise MeshError(
                 f"cell {first_cell + row} ({cell_type}) has a vertex index that is not an "
-                f"integer: {a.reshape(len(a), -1)[row].tolist()}"
+                f"integer: {rows[row].tolist()}"
             )
         if a.size and np.abs(a).max() > _INT64_MAX:
             raise MeshError(f"cells {first_cell}.. ({cell_type}) have vertex indices out of range")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypedDict, Union
 
@@ -108,10 +109,13 @@ class GMap:
     def from_meshio(cls, mesh: meshio.Mesh, reorient: bool = False) -> GMap:
         """From a ``meshio.Mesh``, keeping the cells of the highest dimension (the lower
         dimensional ones, such as the boundary triangles Gmsh writes beside tetrahedra, are
-        dropped; :func:`topomech.io.read_mesh` says which)."""
+        dropped with a warning naming them)."""
         from topomech.io import select_cells
 
-        kept, _dropped = select_cells(mesh.cells)
+        kept, dropped = select_cells(mesh.cells)
+        if dropped:
+            what = ", ".join(map(str, dropped))
+            warnings.warn(f"dropped {what}: lower-dimensional cells", stacklevel=2)
         return cls.from_mesh(mesh.points, kept, reorient)
 
     @classmethod
