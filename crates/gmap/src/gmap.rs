@@ -596,6 +596,26 @@ impl GMap {
         Ok(())
     }
 
+    /// Writes `v` into slot `slot` of embedding `id`: the value of the orbit that owns the slot
+    /// (see [`Embedding::slot`]). For engines that group their writes by slot.
+    pub fn set_slot_value(&mut self, id: EmbeddingId, slot: usize, v: &Value) -> Result<(), EmbeddingError> {
+        let e = &mut self.embeddings[id.0 as usize];
+        if e.derived.is_some() {
+            return Err(EmbeddingError::Derived(e.name.clone()));
+        }
+        e.check_value(v)?;
+        if slot >= e.n_slots() {
+            return Err(EmbeddingError::Type {
+                name: e.name.clone(),
+                expected: format!("a slot below {}", e.n_slots()),
+                got: format!("slot {slot}"),
+            });
+        }
+        e.values.set(e.ty.width(), slot, v);
+        e.writes += 1;
+        Ok(())
+    }
+
     /// Writes a real value (scalar, vector, matrix: `width` numbers) on the orbit of `d`.
     pub fn set_real(&mut self, id: EmbeddingId, d: Dart, v: &[f64]) -> Result<(), EmbeddingError> {
         self.set_value(id, d, &Value::Real(v.to_vec()))

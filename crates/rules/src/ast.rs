@@ -1,0 +1,203 @@
+//! The syntax tree of a rule file, with source positions.
+
+use crate::value::{BinOp, UnOp};
+
+/// A position in a source file (1-based line and column).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, PartialOrd, Ord, Hash)]
+pub struct Pos {
+    /// Line, from 1.
+    pub line: u32,
+    /// Column, from 1 (in characters).
+    pub col: u32,
+}
+
+/// An orbit label as written: a dimension, or `_` (a deleted implicit arc).
+pub type Label = Option<u8>;
+
+/// A node declaration in a left or right graph.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeDecl {
+    /// Its name.
+    pub name: String,
+    /// Its orbit type, position by position.
+    pub orbit: Vec<Label>,
+    /// Whether it is marked `hook`.
+    pub hook: bool,
+    /// Where it is declared.
+    pub pos: Pos,
+    /// Where its orbit type starts.
+    pub orbit_pos: Pos,
+}
+
+/// An explicit arc `a -i- b`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ArcDecl {
+    /// One end.
+    pub a: String,
+    /// The dimension, as written (checked against the map's dimension later).
+    pub dim: u32,
+    /// The other end.
+    pub b: String,
+    /// Where it is written.
+    pub pos: Pos,
+}
+
+/// A left or right graph.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Graph {
+    /// Its nodes.
+    pub nodes: Vec<NodeDecl>,
+    /// Its explicit arcs.
+    pub arcs: Vec<ArcDecl>,
+    /// Where the graph starts.
+    pub pos: Pos,
+}
+
+/// An expression.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Expr {
+    /// What it is.
+    pub kind: ExprKind,
+    /// Where it starts.
+    pub pos: Pos,
+}
+
+/// The kinds of expressions.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ExprKind {
+    /// A real literal.
+    Real(f64),
+    /// An integer literal.
+    Int(i64),
+    /// `true` / `false`.
+    Bool(bool),
+    /// A variable, parameter or (as an aggregate argument) node name.
+    Name(String),
+    /// `node.embedding`.
+    Read {
+        /// The node.
+        node: String,
+        /// The embedding.
+        emb: String,
+    },
+    /// `f(args)`.
+    Call {
+        /// The function.
+        name: String,
+        /// Its arguments.
+        args: Vec<Expr>,
+    },
+    /// `sum<o>(n.e)`, `mean<o>(n.e)`, `count<o>(n)`.
+    Aggregate {
+        /// `sum`, `mean` or `count`.
+        kind: AggKind,
+        /// The orbit, as written.
+        orbit: Vec<u32>,
+        /// The node.
+        node: String,
+        /// The embedding (absent for `count`).
+        emb: Option<String>,
+    },
+    /// `a op b`.
+    Binary(BinOp, Box<Expr>, Box<Expr>),
+    /// `op a`.
+    Unary(UnOp, Box<Expr>),
+    /// `if c { a } else { b }`.
+    If(Box<Expr>, Box<Expr>, Box<Expr>),
+    /// `{ let x = e; ... ; result }`.
+    Block(Vec<Stmt>, Box<Expr>),
+}
+
+/// The aggregates over orbits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum AggKind {
+    /// Sum over the distinct embedding orbits.
+    Sum,
+    /// Mean over the distinct embedding orbits.
+    Mean,
+    /// Number of distinct orbits.
+    Count,
+}
+
+/// A statement of a `compute` block.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stmt {
+    /// `let x = e`.
+    Let {
+        /// The variable.
+        name: String,
+        /// Its value.
+        value: Expr,
+        /// Where.
+        pos: Pos,
+    },
+    /// `n.e = value`.
+    Write {
+        /// The node.
+        node: String,
+        /// The embedding.
+        emb: String,
+        /// The value.
+        value: Expr,
+        /// Where.
+        pos: Pos,
+    },
+}
+
+/// A rule parameter `name: type`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Param {
+    /// Its name.
+    pub name: String,
+    /// Its type, as written.
+    pub ty: String,
+    /// Where.
+    pub pos: Pos,
+}
+
+/// A rule.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RuleDecl {
+    /// Its name.
+    pub name: String,
+    /// Its parameters.
+    pub params: Vec<Param>,
+    /// The left graph.
+    pub left: Option<Graph>,
+    /// The right graph (absent: same as the left; the rule only computes).
+    pub right: Option<Graph>,
+    /// The statements of its `compute` block.
+    pub compute: Vec<Stmt>,
+    /// Its `where` guard.
+    pub guard: Option<Expr>,
+    /// Where it is declared.
+    pub pos: Pos,
+}
+
+/// An embedding declaration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmbeddingDecl {
+    /// Its name.
+    pub name: String,
+    /// Its type, as written.
+    pub ty: String,
+    /// Its orbit, as written.
+    pub orbit: Vec<u32>,
+    /// Its merge/split policy, as written (`copy` by default).
+    pub policy: Option<String>,
+    /// For a derived embedding: the aggregate and the source embedding.
+    pub derived: Option<(String, String)>,
+    /// Where.
+    pub pos: Pos,
+}
+
+/// A whole rule file.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct File {
+    /// `dimension n`, with its position.
+    pub dimension: Option<(u32, Pos)>,
+    /// Its embeddings.
+    pub embeddings: Vec<EmbeddingDecl>,
+    /// Its rules.
+    pub rules: Vec<RuleDecl>,
+}

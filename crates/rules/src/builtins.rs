@@ -1,0 +1,1817 @@
+//! Built-in functions of the expression language: constructors, accessors, scalar math,
+//! vector and matrix algebra, and the block helpers of finite-element assembly.
+//!
+//! [`call_type`] checks a call before evaluation; [`call`] evaluates it and fails only for
+//! numerical reasons (an index out of range, a singular matrix, a non-finite input to a
+//! decomposition); [`catalogue`] lists every built-in with its signature.
+//!
+//! In the signatures, `num` is `f64` or `i64` (an `i64` argument is promoted to `f64`), `vecN`
+//! is `vec2` or `vec3`, `col` is `vec2`, `vec3` or a column `matNx1` (the element vectors of
+//! finite elements), `matN` is a square matrix and `same` is the type of the first argument.
+//! Indices are `i64`, counted from 0.
+//!
+//! Scalar functions follow IEEE 754 (`sqrt(-1)` is NaN, `log(0)` is `-inf`); a rule can test
+//! a result with `is_finite`. `min`, `max` and `clamp` propagate NaN instead of hiding it.
+//!
+//! Methods, with their sources:
+//! - `det`: closed forms up to 3x3, with Kahan's fused-multiply-add difference of products for
+//!   the 2x2 minors (Jeannerod, Louvet, Muller 2013, "Further analysis of Kahan's algorithm for
+//!   the accurate computation of 2x2 determinants", Math. Comp. 82, doi:10.1090/S0025-5718-2013-02679-8);
+//!   above, LU with partial pivoting (Golub & Van Loan, *Matrix Computations*, 4th ed., §3.4).
+//! - `inverse`: Gauss-Jordan elimination with partial pivoting (Golub & Van Loan §3.4; Higham,
+//!   *Accuracy and Stability of Numerical Algorithms*, 2nd ed., §14.4 for its residual bound).
+//! - `polar`: the rotation of the polar decomposition, as used by co-rotational FEM
+//!   (Müller & Gross 2004, "Interactive virtual materials", Graphics Interface), with the
+//!   convention of Irving, Teran & Fedkiw 2004 ("Invertible finite elements for robust
+//!   simulation of large deformation", SCA, doi:10.1145/1028523.1028541) for inverted
+//!   elements. 3x3: one-sided Jacobi SVD (Hestenes 1958, doi:10.1137/0106005; accurate small
+//!   singular values: Demmel & Veselić 1992, doi:10.1137/0613074). 2x2: closed form.
+//! - `eigvals_sym3`: cyclic Jacobi (Golub & Van Loan §8.5).
+//! - `angle`: `atan2(|a x b|, a . b)` (Kahan 2006, "How futile are mindless assessments of
+//!   roundoff in floating-point computation?", §12), accurate near 0 and pi where `acos` is not.
+
+use crate::value::{EvalError, Mat, Ty, Val};
+
+/// Every built-in: name, signature, description.
+const CATALOGUE: &[(&str, &str, &str)] = &[
+    // Constructors.
+    ("vec2", "vec2(x: num, y: num) -> vec2", "The 2-vector (x, y)."),
+    ("vec3", "vec3(x: num, y: num, z: num) -> vec3", "The 3-vector (x, y, z)."),
+    (
+        "mat2",
+        "mat2(a: num, b: num, c: num, d: num) -> mat2",
+        "The 2x2 matrix with rows (a, b) and (c, d).",
+    ),
+    (
+        "mat3",
+        "mat3(a: num, b: num, c: num, d: num, e: num, f: num, g: num, h: num, i: num) -> mat3",
+        "The 3x3 matrix with rows (a, b, c), (d, e, f) and (g, h, i).",
+    ),
+    (
+        "mat_from_cols2",
+        "mat_from_cols2(a: vec2, b: vec2) -> mat2",
+        "The 2x2 matrix with columns a and b.",
+    ),
+    (
+        "mat_from_rows2",
+        "mat_from_rows2(a: vec2, b: vec2) -> mat2",
+        "The 2x2 matrix with rows a and b.",
+    ),
+    (
+        "mat_from_cols3",
+        "mat_from_cols3(a: vec3, b: vec3, c: vec3) -> mat3",
+        "The 3x3 matrix with columns a, b and c (e.g. the edge matrix of a tetrahedron).",
+    ),
+    (
+        "mat_from_rows3",
+        "mat_from_rows3(a: vec3, b: vec3, c: vec3) -> mat3",
+        "The 3x3 matrix with rows a, b and c.",
+    ),
+    ("identity2", "identity2() -> mat2", "The 2x2 identity matrix."),
+    ("identity3", "identity3() -> mat3", "The 3x3 identity matrix."),
+    ("zeros2", "zeros2() -> mat2", "The 2x2 zero matrix."),
+    ("zeros3", "zeros3() -> mat3", "The 3x3 zero matrix."),
+    (
+        "zeros6",
+        "zeros6() -> mat6",
+        "The 6x6 zero matrix (the element matrix of a linear triangle in 2D).",
+    ),
+    (
+        "zeros6x1",
+        "zeros6x1() -> mat6x1",
+        "The zero 6-column (the element vector of a linear triangle in 2D).",
+    ),
+    (
+        "zeros12",
+        "zeros12() -> mat12",
+        "The 12x12 zero matrix (the element matrix of a linear tetrahedron).",
+    ),
+    (
+        "zeros12x1",
+        "zeros12x1() -> mat12x1",
+        "The zero 12-column (the element vector of a linear tetrahedron).",
+    ),
+    // Accessors.
+    ("x", "x(v: vecN) -> f64", "The first component of v."),
+    ("y", "y(v: vecN) -> f64", "The second component of v."),
+    ("z", "z(v: vec3) -> f64", "The third component of v."),
+    (
+        "elem",
+        "elem(v: col, i: i64) -> f64",
+        "Component i of a vector or column; error if out of range.",
+    ),
+    (
+        "get",
+        "get(m: matRxC | vecN, i: i64, j: i64) -> f64",
+        "Entry (i, j) of m (a vector is a column: j = 0); error if out of range.",
+    ),
+    (
+        "set",
+        "set(m: matRxC | vecN, i: i64, j: i64, x: num) -> same",
+        "A copy of m with entry (i, j) set to x (a vector is a column: j = 0); error if out of range.",
+    ),
+    (
+        "row2",
+        "row2(m: matRx2, i: i64) -> vec2",
+        "Row i of a matrix with 2 columns; error if out of range.",
+    ),
+    (
+        "col2",
+        "col2(m: mat2xC, j: i64) -> vec2",
+        "Column j of a matrix with 2 rows; error if out of range.",
+    ),
+    (
+        "row3",
+        "row3(m: matRx3, i: i64) -> vec3",
+        "Row i of a matrix with 3 columns; error if out of range.",
+    ),
+    (
+        "col3",
+        "col3(m: mat3xC, j: i64) -> vec3",
+        "Column j of a matrix with 3 rows; error if out of range.",
+    ),
+    // Finite-element blocks.
+    (
+        "block2",
+        "block2(m: mat(2p)x(2q), i: i64, j: i64) -> mat2",
+        "The 2x2 block (i, j) of m: rows 2i, 2i+1 and columns 2j, 2j+1; error if out of range.",
+    ),
+    (
+        "set_block2",
+        "set_block2(m: mat(2p)x(2q), i: i64, j: i64, b: mat2) -> same",
+        "A copy of m with its 2x2 block (i, j) replaced by b; error if out of range.",
+    ),
+    (
+        "vecn_get2",
+        "vecn_get2(v: mat(2p)x1, i: i64) -> vec2",
+        "Entries 2i, 2i+1 of a column (node i's part of an element vector); error if out of range.",
+    ),
+    (
+        "vecn_set2",
+        "vecn_set2(v: mat(2p)x1, i: i64, x: vec2) -> same",
+        "A copy of v with entries 2i, 2i+1 set to x; error if out of range.",
+    ),
+    (
+        "block3",
+        "block3(m: mat(3p)x(3q), i: i64, j: i64) -> mat3",
+        "The 3x3 block (i, j) of m: rows 3i..3i+2 and columns 3j..3j+2; error if out of range.",
+    ),
+    (
+        "set_block3",
+        "set_block3(m: mat(3p)x(3q), i: i64, j: i64, b: mat3) -> same",
+        "A copy of m with its 3x3 block (i, j) replaced by b; error if out of range.",
+    ),
+    (
+        "vecn_get3",
+        "vecn_get3(v: mat(3p)x1, i: i64) -> vec3",
+        "Entries 3i..3i+2 of a column (node i's part of an element vector); error if out of range.",
+    ),
+    (
+        "vecn_set3",
+        "vecn_set3(v: mat(3p)x1, i: i64, x: vec3) -> same",
+        "A copy of v with entries 3i..3i+2 set to x; error if out of range.",
+    ),
+    // Conversions.
+    (
+        "to_f64",
+        "to_f64(x: i64 | f64 | bool) -> f64",
+        "x as a real (true is 1, false is 0).",
+    ),
+    (
+        "to_i64",
+        "to_i64(x: f64 | i64 | bool) -> i64",
+        "x truncated toward zero; error if x is NaN, infinite or outside the i64 range.",
+    ),
+    // Scalar math.
+    (
+        "abs",
+        "abs(x: f64) -> f64 | abs(x: i64) -> i64",
+        "Absolute value; error for the i64 minimum, whose absolute value is not an i64.",
+    ),
+    (
+        "sign",
+        "sign(x: f64) -> f64 | sign(x: i64) -> i64",
+        "-1, 0 or 1 by the sign of x (0 for -0.0, NaN for NaN).",
+    ),
+    ("sqrt", "sqrt(x: num) -> f64", "Square root (NaN for x < 0)."),
+    ("exp", "exp(x: num) -> f64", "The exponential e^x."),
+    (
+        "log",
+        "log(x: num) -> f64",
+        "Natural logarithm (-inf at 0, NaN for x < 0).",
+    ),
+    ("sin", "sin(x: num) -> f64", "Sine of x in radians."),
+    ("cos", "cos(x: num) -> f64", "Cosine of x in radians."),
+    ("tan", "tan(x: num) -> f64", "Tangent of x in radians."),
+    (
+        "asin",
+        "asin(x: num) -> f64",
+        "Arcsine in [-pi/2, pi/2] (NaN outside [-1, 1]).",
+    ),
+    (
+        "acos",
+        "acos(x: num) -> f64",
+        "Arccosine in [0, pi] (NaN outside [-1, 1]; angle(a, b) is more accurate for vectors).",
+    ),
+    ("atan", "atan(x: num) -> f64", "Arctangent in [-pi/2, pi/2]."),
+    (
+        "atan2",
+        "atan2(y: num, x: num) -> f64",
+        "The angle of the point (x, y) from the x axis, in [-pi, pi].",
+    ),
+    ("pow", "pow(x: num, y: num) -> f64", "x raised to the power y."),
+    ("floor", "floor(x: num) -> f64", "The largest integer <= x, as f64."),
+    ("ceil", "ceil(x: num) -> f64", "The smallest integer >= x, as f64."),
+    (
+        "min",
+        "min(a: num, b: num) -> num",
+        "The smaller of a and b (i64 if both are i64; NaN if either is NaN).",
+    ),
+    (
+        "max",
+        "max(a: num, b: num) -> num",
+        "The larger of a and b (i64 if all are i64; NaN if either is NaN).",
+    ),
+    (
+        "clamp",
+        "clamp(x: num, lo: num, hi: num) -> num",
+        "x limited to [lo, hi] (i64 if all are i64; NaN if any is NaN); error if lo > hi.",
+    ),
+    (
+        "select",
+        "select(c: bool, a: T, b: T) -> T",
+        "a if c, else b, for any type T (an i64 and an f64 give f64); both are evaluated.",
+    ),
+    (
+        "is_finite",
+        "is_finite(x: num | vecN | matRxC) -> bool",
+        "Whether every entry of x is finite, neither NaN nor infinite (always true for i64).",
+    ),
+    // Vectors.
+    (
+        "dot",
+        "dot(a: col, b: col) -> f64",
+        "Dot product of two vectors or columns of the same type.",
+    ),
+    (
+        "cross",
+        "cross(a: vec3, b: vec3) -> vec3 | cross(a: vec2, b: vec2) -> f64",
+        "Cross product; in 2D its z-component a.x*b.y - a.y*b.x.",
+    ),
+    (
+        "norm",
+        "norm(v: col) -> f64",
+        "Euclidean length, scaled so that large entries do not overflow.",
+    ),
+    ("norm2", "norm2(v: col) -> f64", "Squared Euclidean length."),
+    (
+        "normalize",
+        "normalize(v: col) -> same",
+        "v / norm(v), the unit vector along v; the zero vector for a zero input.",
+    ),
+    (
+        "outer",
+        "outer(a: col, b: col) -> matMxN",
+        "Outer product a b^T, M and N being the lengths of a and b.",
+    ),
+    (
+        "angle",
+        "angle(a: vecN, b: vecN) -> f64",
+        "Unsigned angle in [0, pi] between a and b, atan2(|a x b|, a . b) (Kahan): accurate near \
+         0 and pi; 0 if either is zero.",
+    ),
+    // Matrices.
+    (
+        "transpose",
+        "transpose(m: matRxC) -> matCxR",
+        "The transpose of m.",
+    ),
+    ("trace", "trace(m: matN) -> f64", "Sum of the diagonal of m."),
+    (
+        "det",
+        "det(m: matN) -> f64",
+        "Determinant: closed forms up to 3x3, LU with partial pivoting above.",
+    ),
+    (
+        "inverse",
+        "inverse(m: matN) -> matN",
+        "Inverse by Gauss-Jordan elimination with partial pivoting; error if m is singular (a \
+         pivot below 1e-300), not finite, or its inverse overflows.",
+    ),
+    (
+        "frobenius",
+        "frobenius(m: matRxC) -> f64",
+        "Frobenius norm, the square root of the sum of squared entries (scaled: no overflow).",
+    ),
+    ("sym", "sym(m: matN) -> matN", "Symmetric part (m + m^T) / 2."),
+    (
+        "polar",
+        "polar(m: mat2 | mat3) -> same",
+        "The rotation R (det R = +1) of the polar decomposition m = R S: the rotation closest \
+         to m; for det m < 0 the smallest singular value is negated (Irving et al. 2004); error \
+         if m is not finite.",
+    ),
+    (
+        "eigvals_sym2",
+        "eigvals_sym2(m: mat2) -> vec2",
+        "Eigenvalues of sym(m), in descending order (closed form).",
+    ),
+    (
+        "eigvals_sym3",
+        "eigvals_sym3(m: mat3) -> vec3",
+        "Eigenvalues of sym(m), in descending order (cyclic Jacobi); error if m is not finite.",
+    ),
+];
+
+/// Every built-in, as (name, signature text, one-line description), for documentation and
+/// `topomech` help.
+pub fn catalogue() -> &'static [(&'static str, &'static str, &'static str)] {
+    CATALOGUE
+}
+
+/// The signature of a built-in.
+fn signature(name: &str) -> Option<&'static str> {
+    CATALOGUE
+        .iter()
+        .find(|(n, _, _)| *n == name)
+        .map(|(_, sig, _)| *sig)
+}
+
+/// The number of arguments in a signature `name(a: t, b: t) -> r` (all overloads of a
+/// built-in have the same number).
+fn arity(sig: &str) -> usize {
+    // Commas at depth 1 of the first parenthesized group; types such as `mat(3p)x(3q)` nest.
+    let mut depth = 0;
+    let (mut commas, mut empty) = (0, true);
+    for ch in sig.chars() {
+        match ch {
+            '(' => depth += 1,
+            ')' if depth == 1 => break,
+            ')' => depth -= 1,
+            ',' if depth == 1 => commas += 1,
+            c if depth >= 1 && !c.is_whitespace() => empty = false,
+            _ => {}
+        }
+    }
+    if empty {
+        0
+    } else {
+        commas + 1
+    }
+}
+
+/// Levenshtein distance, for suggestions.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+/// The message for an unknown function, with up to three close names.
+fn unknown(name: &str) -> String {
+    let mut close: Vec<(usize, &str)> = CATALOGUE
+        .iter()
+        .map(|(n, _, _)| (edit_distance(name, n), *n))
+        .filter(|&(d, n)| d <= 2.min(n.len().saturating_sub(1)) && d < name.len().max(1))
+        .collect();
+    close.sort_unstable();
+    let close: Vec<String> = close
+        .iter()
+        .take(3)
+        .map(|(_, n)| format!("`{n}`"))
+        .collect();
+    match close.len() {
+        0 => format!("unknown function `{name}`"),
+        1 => format!("unknown function `{name}`; did you mean {}?", close[0]),
+        _ => format!(
+            "unknown function `{name}`; did you mean one of {}?",
+            close.join(", ")
+        ),
+    }
+}
+
+fn is_num(t: Ty) -> bool {
+    matches!(t, Ty::F64 | Ty::I64)
+}
+
+/// The length of a vector or column type.
+fn col_len(t: Ty) -> Option<usize> {
+    match t {
+        Ty::Vec2 => Some(2),
+        Ty::Vec3 => Some(3),
+        Ty::Mat(r, 1) => Some(usize::from(r)),
+        _ => None,
+    }
+}
+
+/// A matrix type made of `k x k` blocks.
+fn is_blocked(t: Ty, k: u8) -> bool {
+    matches!(t, Ty::Mat(r, c) if r % k == 0 && c % k == 0)
+}
+
+/// The type of `name(args...)`, or why it does not apply (an unknown function's message names
+/// it and lists close names).
+pub fn call_type(name: &str, args: &[Ty]) -> Result<Ty, String> {
+    let Some(sig) = signature(name) else {
+        return Err(unknown(name));
+    };
+    let n = arity(sig);
+    if args.len() != n {
+        let s = if n == 1 { "" } else { "s" };
+        return Err(format!(
+            "`{name}` takes {n} argument{s}, got {}: {sig}",
+            args.len()
+        ));
+    }
+    result_type(name, args).ok_or_else(|| {
+        let got: Vec<String> = args.iter().map(|t| t.name()).collect();
+        format!("`{name}` does not apply to ({}): {sig}", got.join(", "))
+    })
+}
+
+/// The result type of a known built-in with the right number of arguments, `None` if the
+/// argument types do not fit.
+fn result_type(name: &str, args: &[Ty]) -> Option<Ty> {
+    use Ty::{Bool, Mat, Vec2, Vec3, F64, I64};
+    let all_num = args.iter().all(|&t| is_num(t));
+    let all_int = args.iter().all(|&t| t == I64);
+    let r = match (name, args) {
+        ("vec2", _) if all_num => Vec2,
+        ("vec3", _) if all_num => Vec3,
+        ("mat2", _) if all_num => Mat(2, 2),
+        ("mat3", _) if all_num => Mat(3, 3),
+        ("mat_from_cols2" | "mat_from_rows2", [Vec2, Vec2]) => Mat(2, 2),
+        ("mat_from_cols3" | "mat_from_rows3", [Vec3, Vec3, Vec3]) => Mat(3, 3),
+        ("identity2" | "zeros2", []) => Mat(2, 2),
+        ("identity3" | "zeros3", []) => Mat(3, 3),
+        ("zeros6", []) => Mat(6, 6),
+        ("zeros6x1", []) => Mat(6, 1),
+        ("zeros12", []) => Mat(12, 12),
+        ("zeros12x1", []) => Mat(12, 1),
+        ("x" | "y", [Vec2 | Vec3]) | ("z", [Vec3]) => F64,
+        ("elem", [v, I64]) if col_len(*v).is_some() => F64,
+        ("get", [Mat(..) | Vec2 | Vec3, I64, I64]) => F64,
+        ("set", [m @ (Mat(..) | Vec2 | Vec3), I64, I64, x]) if is_num(*x) => *m,
+        ("row2", [Mat(_, 2), I64]) | ("col2", [Mat(2, _), I64]) => Vec2,
+        ("row3", [Mat(_, 3), I64]) | ("col3", [Mat(3, _), I64]) => Vec3,
+        ("block2", [m, I64, I64]) if is_blocked(*m, 2) => Mat(2, 2),
+        ("block3", [m, I64, I64]) if is_blocked(*m, 3) => Mat(3, 3),
+        ("set_block2", [m, I64, I64, Mat(2, 2)]) if is_blocked(*m, 2) => *m,
+        ("set_block3", [m, I64, I64, Mat(3, 3)]) if is_blocked(*m, 3) => *m,
+        ("vecn_get2", [Mat(r, 1), I64]) if r % 2 == 0 => Vec2,
+        ("vecn_get3", [Mat(r, 1), I64]) if r % 3 == 0 => Vec3,
+        ("vecn_set2", [v @ Mat(r, 1), I64, Vec2]) if r % 2 == 0 => *v,
+        ("vecn_set3", [v @ Mat(r, 1), I64, Vec3]) if r % 3 == 0 => *v,
+        ("to_f64", [F64 | I64 | Bool]) => F64,
+        ("to_i64", [F64 | I64 | Bool]) => I64,
+        ("abs" | "sign" | "min" | "max" | "clamp", _) if all_int => I64,
+        ("abs" | "sign" | "min" | "max" | "clamp", _) if all_num => F64,
+        (
+            "sqrt" | "exp" | "log" | "sin" | "cos" | "tan" | "asin" | "acos" | "atan" | "atan2"
+            | "pow" | "floor" | "ceil",
+            _,
+        ) if all_num => F64,
+        ("select", [Bool, a, b]) if a == b => *a,
+        ("select", [Bool, a, b]) if is_num(*a) && is_num(*b) => F64,
+        ("is_finite", [t]) if *t != Bool => Bool,
+        ("dot", [a, b]) if a == b && col_len(*a).is_some() => F64,
+        ("cross", [Vec3, Vec3]) => Vec3,
+        ("cross", [Vec2, Vec2]) => F64,
+        ("norm" | "norm2", [v]) if col_len(*v).is_some() => F64,
+        ("normalize", [v]) if col_len(*v).is_some() => *v,
+        ("outer", [a, b]) => Ty::mat(col_len(*a)?, col_len(*b)?)?,
+        ("angle", [Vec2, Vec2] | [Vec3, Vec3]) => F64,
+        ("transpose", [Mat(r, c)]) => Mat(*c, *r),
+        ("frobenius", [Mat(..)]) => F64,
+        ("trace" | "det", [Mat(r, c)]) if r == c => F64,
+        ("inverse" | "sym", [m @ Mat(r, c)]) if r == c => *m,
+        ("polar", [m @ (Mat(2, 2) | Mat(3, 3))]) => *m,
+        ("eigvals_sym2", [Mat(2, 2)]) => Vec2,
+        ("eigvals_sym3", [Mat(3, 3)]) => Vec3,
+        _ => return None,
+    };
+    Some(r)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Evaluation.
+
+fn err(msg: impl Into<String>) -> EvalError {
+    EvalError(msg.into())
+}
+
+/// The error for arguments whose types [`call_type`] would have refused.
+fn unchecked(name: &str, args: &[Val]) -> EvalError {
+    let tys: Vec<String> = args.iter().map(|v| v.ty().name()).collect();
+    err(format!(
+        "internal error: `{name}` evaluated on ({}) (types not checked)",
+        tys.join(", ")
+    ))
+}
+
+/// A `num` argument as a real.
+fn real(v: &Val) -> Option<f64> {
+    v.as_f64()
+}
+
+/// The scalars of a vector or column.
+fn col(v: &Val) -> Option<&[f64]> {
+    match v {
+        Val::V2(x) => Some(x),
+        Val::V3(x) => Some(x),
+        Val::M(m) if m.cols == 1 => Some(&m.data),
+        _ => None,
+    }
+}
+
+/// A value of the same vector or column type as `like`, from its scalars.
+fn col_like(like: &Val, x: &[f64]) -> Val {
+    Val::from_reals(like.ty(), x)
+}
+
+/// An `i64` index checked against `0..len`.
+fn index(name: &str, what: &str, i: i64, len: usize) -> Result<usize, EvalError> {
+    usize::try_from(i)
+        .ok()
+        .filter(|&k| k < len)
+        .ok_or_else(|| err(format!("{name}: {what} {i} out of range 0..{len}")))
+}
+
+fn mat_of(rows: usize, cols: usize, data: Vec<f64>) -> Val {
+    Val::M(Mat { rows, cols, data })
+}
+
+fn mat_rows<const R: usize, const C: usize>(rows: [[f64; C]; R]) -> Mat {
+    Mat {
+        rows: R,
+        cols: C,
+        data: rows.concat(),
+    }
+}
+
+/// Evaluates a built-in (argument types already checked by [`call_type`]).
+pub fn call(name: &str, args: &[Val]) -> Result<Val, EvalError> {
+    match eval(name, args)? {
+        Some(v) => Ok(v),
+        None if signature(name).is_none() => Err(err(unknown(name))),
+        None => Err(unchecked(name, args)),
+    }
+}
+
+/// Evaluation: `Ok(None)` when the arguments do not fit.
+fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
+    use Val::{B, F, I, M, V2, V3};
+    let nums: Option<Vec<f64>> = args.iter().map(real).collect();
+    let v = match (name, args) {
+        ("vec2", [_, _]) => nums.map(|x| V2([x[0], x[1]])),
+        ("vec3", [_, _, _]) => nums.map(|x| V3([x[0], x[1], x[2]])),
+        ("mat2", [_, _, _, _]) => nums.map(|x| mat_of(2, 2, x)),
+        ("mat3", [_, _, _, _, _, _, _, _, _]) => nums.map(|x| mat_of(3, 3, x)),
+        ("mat_from_rows2", [V2(a), V2(b)]) => Some(M(mat_rows([*a, *b]))),
+        ("mat_from_cols2", [V2(a), V2(b)]) => Some(M(mat_rows([*a, *b]).transpose())),
+        ("mat_from_rows3", [V3(a), V3(b), V3(c)]) => Some(M(mat_rows([*a, *b, *c]))),
+        ("mat_from_cols3", [V3(a), V3(b), V3(c)]) => Some(M(mat_rows([*a, *b, *c]).transpose())),
+        ("identity2", []) => Some(M(Mat::identity(2))),
+        ("identity3", []) => Some(M(Mat::identity(3))),
+        ("zeros2", []) => Some(M(Mat::zeros(2, 2))),
+        ("zeros3", []) => Some(M(Mat::zeros(3, 3))),
+        ("zeros6", []) => Some(M(Mat::zeros(6, 6))),
+        ("zeros6x1", []) => Some(M(Mat::zeros(6, 1))),
+        ("zeros12", []) => Some(M(Mat::zeros(12, 12))),
+        ("zeros12x1", []) => Some(M(Mat::zeros(12, 1))),
+        ("x", [V2([x, _]) | V3([x, _, _])])
+        | ("y", [V2([_, x]) | V3([_, x, _])])
+        | ("z", [V3([_, _, x])]) => Some(F(*x)),
+        ("elem", [v, I(i)]) => match col(v) {
+            Some(x) => Some(F(x[index(name, "index", *i, x.len())?])),
+            None => None,
+        },
+        ("get", [m, I(i), I(j)]) => get(m, *i, *j)?,
+        ("set", [m, I(i), I(j), x]) => match real(x) {
+            Some(x) => set(m, *i, *j, x)?,
+            None => None,
+        },
+        ("row2" | "row3", [M(m), I(i)]) if m.cols == name_k(name) => {
+            let i = index(name, "row", *i, m.rows)?;
+            Some(col_val(&m.data[i * m.cols..(i + 1) * m.cols]))
+        }
+        ("col2" | "col3", [M(m), I(j)]) if m.rows == name_k(name) => {
+            let j = index(name, "column", *j, m.cols)?;
+            let x: Vec<f64> = (0..m.rows).map(|i| m.get(i, j)).collect();
+            Some(col_val(&x))
+        }
+        ("block2" | "block3", [M(m), I(i), I(j)]) => {
+            let k = name_k(name);
+            let (bi, bj) = block_index(name, m, k, *i, *j)?;
+            let mut b = Mat::zeros(k, k);
+            for r in 0..k {
+                for c in 0..k {
+                    b.set(r, c, m.get(bi + r, bj + c));
+                }
+            }
+            Some(M(b))
+        }
+        ("set_block2" | "set_block3", [M(m), I(i), I(j), M(b)])
+            if b.rows == name_k(name) && b.cols == b.rows =>
+        {
+            let k = name_k(name);
+            let (bi, bj) = block_index(name, m, k, *i, *j)?;
+            let mut out = m.clone();
+            for r in 0..k {
+                for c in 0..k {
+                    out.set(bi + r, bj + c, b.get(r, c));
+                }
+            }
+            Some(M(out))
+        }
+        ("vecn_get2" | "vecn_get3", [M(v), I(i)]) if v.cols == 1 => {
+            let k = name_k(name);
+            let i = index(name, "node", *i, v.rows / k)?;
+            Some(col_val(&v.data[k * i..k * i + k]))
+        }
+        ("vecn_set2" | "vecn_set3", [M(v), I(i), x]) if v.cols == 1 => match col(x) {
+            Some(x) if x.len() == name_k(name) => {
+                let k = x.len();
+                let i = index(name, "node", *i, v.rows / k)?;
+                let mut out = v.clone();
+                out.data[k * i..k * i + k].copy_from_slice(x);
+                Some(M(out))
+            }
+            _ => None,
+        },
+        ("to_f64", [x]) => match x {
+            B(b) => Some(F(if *b { 1.0 } else { 0.0 })),
+            x => real(x).map(F),
+        },
+        ("to_i64", [x]) => match x {
+            I(i) => Some(I(*i)),
+            B(b) => Some(I(i64::from(*b))),
+            F(x) => Some(I(to_i64(*x)?)),
+            _ => None,
+        },
+        ("abs", [I(i)]) => Some(I(i
+            .checked_abs()
+            .ok_or_else(|| err(format!("abs: |{i}| is not an i64")))?)),
+        ("sign", [I(i)]) => Some(I(i.signum())),
+        ("min", [I(a), I(b)]) => Some(I(*a.min(b))),
+        ("max", [I(a), I(b)]) => Some(I(*a.max(b))),
+        ("clamp", [I(x), I(lo), I(hi)]) => {
+            if lo > hi {
+                return Err(err(format!(
+                    "clamp: lower bound {lo} above upper bound {hi}"
+                )));
+            }
+            Some(I(*x.max(lo).min(hi)))
+        }
+        ("select", [B(c), a, b]) => Some(select(*c, a, b)),
+        ("is_finite", [x]) => Some(B(is_finite(x))),
+        ("dot", [a, b]) => match (col(a), col(b)) {
+            (Some(x), Some(y)) if x.len() == y.len() => Some(F(dot(x, y))),
+            _ => None,
+        },
+        ("cross", [V3(a), V3(b)]) => Some(V3(cross(a, b))),
+        ("cross", [V2(a), V2(b)]) => Some(F(diff_of_products(a[0], b[1], a[1], b[0]))),
+        ("norm", [v]) => col(v).map(|x| F(norm(x))),
+        ("norm2", [v]) => col(v).map(|x| F(dot(x, x))),
+        ("normalize", [v]) => col(v).map(|x| col_like(v, &normalize(x))),
+        ("outer", [a, b]) => match (col(a), col(b)) {
+            (Some(x), Some(y)) => {
+                let data = x.iter().flat_map(|&p| y.iter().map(move |&q| p * q));
+                Some(mat_of(x.len(), y.len(), data.collect()))
+            }
+            _ => None,
+        },
+        ("angle", [V2(a), V2(b)]) => Some(F(angle(a, b))),
+        ("angle", [V3(a), V3(b)]) => Some(F(angle(a, b))),
+        ("transpose", [M(m)]) => Some(M(m.transpose())),
+        ("frobenius", [M(m)]) => Some(F(norm(&m.data))),
+        ("trace", [M(m)]) if m.rows == m.cols => Some(F((0..m.rows).map(|i| m.get(i, i)).sum())),
+        ("det", [M(m)]) if m.rows == m.cols => Some(F(det(m))),
+        ("inverse", [M(m)]) if m.rows == m.cols => Some(M(inverse(m)?)),
+        ("sym", [M(m)]) if m.rows == m.cols => Some(M(sym(m))),
+        ("polar", [M(m)]) if m.rows == 2 && m.cols == 2 => Some(M(polar2(m)?)),
+        ("polar", [M(m)]) if m.rows == 3 && m.cols == 3 => Some(M(polar3(m)?)),
+        ("eigvals_sym2", [M(m)]) if m.rows == 2 && m.cols == 2 => Some(V2(eigvals_sym2(m))),
+        ("eigvals_sym3", [M(m)]) if m.rows == 3 && m.cols == 3 => Some(V3(eigvals_sym3(m)?)),
+        (
+            "abs" | "sign" | "sqrt" | "exp" | "log" | "sin" | "cos" | "tan" | "asin" | "acos"
+            | "atan" | "floor" | "ceil",
+            [_],
+        ) => nums.map(|x| F(scalar1(name, x[0]))),
+        ("atan2" | "pow" | "min" | "max", [_, _]) => nums.map(|x| F(scalar2(name, x[0], x[1]))),
+        ("clamp", [_, _, _]) => match nums {
+            Some(x) => Some(F(clamp(x[0], x[1], x[2])?)),
+            None => None,
+        },
+        _ => None,
+    };
+    Ok(v)
+}
+
+/// The block size in a name ending in `2` or `3`.
+fn name_k(name: &str) -> usize {
+    if name.ends_with('2') {
+        2
+    } else {
+        3
+    }
+}
+
+/// A `vec2` or `vec3` from 2 or 3 scalars.
+fn col_val(x: &[f64]) -> Val {
+    match *x {
+        [a, b] => Val::V2([a, b]),
+        [a, b, c] => Val::V3([a, b, c]),
+        _ => Val::M(Mat {
+            rows: x.len(),
+            cols: 1,
+            data: x.to_vec(),
+        }),
+    }
+}
+
+/// The first row and column of block `(i, j)` of size `k`.
+fn block_index(name: &str, m: &Mat, k: usize, i: i64, j: i64) -> Result<(usize, usize), EvalError> {
+    let (p, q) = (m.rows / k, m.cols / k);
+    let bad = || {
+        err(format!(
+            "{name}: block ({i}, {j}) outside the {p}x{q} blocks of a {}x{} matrix",
+            m.rows, m.cols
+        ))
+    };
+    let bi = usize::try_from(i).ok().filter(|&b| b < p).ok_or_else(bad)?;
+    let bj = usize::try_from(j).ok().filter(|&b| b < q).ok_or_else(bad)?;
+    Ok((bi * k, bj * k))
+}
+
+/// `get(m, i, j)`; a vector is a column.
+fn get(m: &Val, i: i64, j: i64) -> Result<Option<Val>, EvalError> {
+    let (rows, cols, data): (usize, usize, &[f64]) = match m {
+        Val::M(m) => (m.rows, m.cols, &m.data),
+        v => match col(v) {
+            Some(x) => (x.len(), 1, x),
+            None => return Ok(None),
+        },
+    };
+    let (i, j) = entry_index("get", m, i, j, rows, cols)?;
+    Ok(Some(Val::F(data[i * cols + j])))
+}
+
+/// `set(m, i, j, x)`; a vector is a column.
+fn set(m: &Val, i: i64, j: i64, x: f64) -> Result<Option<Val>, EvalError> {
+    let mut out = m.clone();
+    let (rows, cols, data): (usize, usize, &mut [f64]) = match &mut out {
+        Val::M(m) => (m.rows, m.cols, &mut m.data),
+        Val::V2(v) => (2, 1, v),
+        Val::V3(v) => (3, 1, v),
+        _ => return Ok(None),
+    };
+    let (i, j) = entry_index("set", m, i, j, rows, cols)?;
+    data[i * cols + j] = x;
+    Ok(Some(out))
+}
+
+fn entry_index(
+    name: &str,
+    m: &Val,
+    i: i64,
+    j: i64,
+    rows: usize,
+    cols: usize,
+) -> Result<(usize, usize), EvalError> {
+    let bad = || err(format!("{name}: entry ({i}, {j}) outside a {}", m.ty()));
+    let i = usize::try_from(i)
+        .ok()
+        .filter(|&i| i < rows)
+        .ok_or_else(bad)?;
+    let j = usize::try_from(j)
+        .ok()
+        .filter(|&j| j < cols)
+        .ok_or_else(bad)?;
+    Ok((i, j))
+}
+
+/// Truncation toward zero, refusing what has no `i64` value.
+fn to_i64(x: f64) -> Result<i64, EvalError> {
+    // 2^63: the first real above the i64 range; -2^63 is i64::MIN.
+    const TWO_63: f64 = 9_223_372_036_854_775_808.0;
+    let t = x.trunc();
+    if t.is_finite() && (-TWO_63..TWO_63).contains(&t) {
+        Ok(t as i64)
+    } else {
+        Err(err(format!("to_i64: {x} has no i64 value")))
+    }
+}
+
+fn scalar1(name: &str, x: f64) -> f64 {
+    match name {
+        "abs" => x.abs(),
+        "sign" => {
+            if x > 0.0 {
+                1.0
+            } else if x < 0.0 {
+                -1.0
+            } else {
+                // 0 for ±0, NaN for NaN.
+                x * 0.0
+            }
+        }
+        "sqrt" => x.sqrt(),
+        "exp" => x.exp(),
+        "log" => x.ln(),
+        "sin" => x.sin(),
+        "cos" => x.cos(),
+        "tan" => x.tan(),
+        "asin" => x.asin(),
+        "acos" => x.acos(),
+        "atan" => x.atan(),
+        "floor" => x.floor(),
+        _ => x.ceil(),
+    }
+}
+
+fn scalar2(name: &str, a: f64, b: f64) -> f64 {
+    match name {
+        "atan2" => a.atan2(b),
+        "pow" => a.powf(b),
+        _ if a.is_nan() || b.is_nan() => f64::NAN,
+        "min" => a.min(b),
+        _ => a.max(b),
+    }
+}
+
+/// `x` limited to `[lo, hi]`, propagating NaN.
+fn clamp(x: f64, lo: f64, hi: f64) -> Result<f64, EvalError> {
+    if x.is_nan() || lo.is_nan() || hi.is_nan() {
+        return Ok(f64::NAN);
+    }
+    if lo > hi {
+        return Err(err(format!(
+            "clamp: lower bound {lo} above upper bound {hi}"
+        )));
+    }
+    Ok(x.max(lo).min(hi))
+}
+
+fn select(c: bool, a: &Val, b: &Val) -> Val {
+    let chosen = if c { a } else { b };
+    match (chosen, a.ty() == b.ty()) {
+        (Val::I(i), false) => Val::F(*i as f64),
+        (v, _) => v.clone(),
+    }
+}
+
+fn is_finite(x: &Val) -> bool {
+    match x {
+        Val::F(x) => x.is_finite(),
+        Val::I(_) | Val::B(_) => true,
+        Val::V2(v) => v.iter().all(|x| x.is_finite()),
+        Val::V3(v) => v.iter().all(|x| x.is_finite()),
+        Val::M(m) => m.data.iter().all(|x| x.is_finite()),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Vector and matrix algebra.
+
+fn dot(x: &[f64], y: &[f64]) -> f64 {
+    x.iter().zip(y).map(|(a, b)| a * b).sum()
+}
+
+/// `a * b - c * d` with one rounding error instead of two (Kahan's algorithm with a fused
+/// multiply-add).
+fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
+    let w = c * d;
+    let e = (-c).mul_add(d, w);
+    let f = a.mul_add(b, -w);
+    f + e
+}
+
+fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [
+        diff_of_products(a[1], b[2], a[2], b[1]),
+        diff_of_products(a[2], b[0], a[0], b[2]),
+        diff_of_products(a[0], b[1], a[1], b[0]),
+    ]
+}
+
+/// The largest absolute value, NaN if any entry is NaN.
+fn max_abs(x: &[f64]) -> f64 {
+    x.iter().fold(0.0_f64, |m, &v| {
+        if v.is_nan() || m.is_nan() {
+            f64::NAN
+        } else {
+            m.max(v.abs())
+        }
+    })
+}
+
+/// Euclidean norm, scaled by the largest entry so that it neither overflows nor underflows.
+fn norm(x: &[f64]) -> f64 {
+    let m = max_abs(x);
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    m * x.iter().map(|v| (v / m) * (v / m)).sum::<f64>().sqrt()
+}
+
+/// `x / |x|`, the zero vector for a zero input.
+fn normalize(x: &[f64]) -> Vec<f64> {
+    let m = max_abs(x);
+    if m == 0.0 {
+        return x.iter().map(|_| 0.0).collect();
+    }
+    // Scale first: the norm of huge or tiny entries stays representable.
+    let y: Vec<f64> = x.iter().map(|v| v / m).collect();
+    let n = norm(&y);
+    y.iter().map(|v| v / n).collect()
+}
+
+/// Unsigned angle `atan2(|a x b|, a . b)`, each vector first scaled by its largest entry.
+fn angle<const N: usize>(a: &[f64; N], b: &[f64; N]) -> f64 {
+    let scale = |v: &[f64; N]| {
+        let m = max_abs(v);
+        if m > 0.0 && m.is_finite() {
+            v.map(|x| x / m)
+        } else {
+            *v
+        }
+    };
+    let (a, b) = (scale(a), scale(b));
+    let sin = match (a.as_slice(), b.as_slice()) {
+        (&[a0, a1, a2], &[b0, b1, b2]) => norm(&cross(&[a0, a1, a2], &[b0, b1, b2])),
+        (&[a0, a1], &[b0, b1]) => diff_of_products(a0, b1, a1, b0).abs(),
+        _ => f64::NAN,
+    };
+    sin.atan2(dot(&a, &b))
+}
+
+fn sym(m: &Mat) -> Mat {
+    let t = m.transpose();
+    Mat {
+        rows: m.rows,
+        cols: m.cols,
+        data: m
+            .data
+            .iter()
+            .zip(&t.data)
+            .map(|(a, b)| 0.5 * a + 0.5 * b)
+            .collect(),
+    }
+}
+
+/// Determinant: closed forms up to 3x3, LU with partial pivoting above.
+fn det(m: &Mat) -> f64 {
+    let a = &m.data;
+    match m.rows {
+        0 => 1.0,
+        1 => a[0],
+        2 => diff_of_products(a[0], a[3], a[1], a[2]),
+        3 => {
+            a[0] * diff_of_products(a[4], a[8], a[5], a[7])
+                - a[1] * diff_of_products(a[3], a[8], a[5], a[6])
+                + a[2] * diff_of_products(a[3], a[7], a[4], a[6])
+        }
+        n => {
+            let mut a = a.clone();
+            let mut d = 1.0;
+            for k in 0..n {
+                let p = pivot_row(&a, n, k);
+                if a[p * n + k] == 0.0 {
+                    return 0.0;
+                }
+                if p != k {
+                    swap_rows(&mut a, n, p, k);
+                    d = -d;
+                }
+                let piv = a[k * n + k];
+                d *= piv;
+                for i in k + 1..n {
+                    let f = a[i * n + k] / piv;
+                    for j in k..n {
+                        a[i * n + j] -= f * a[k * n + j];
+                    }
+                }
+            }
+            d
+        }
+    }
+}
+
+/// The row `>= k` with the largest entry in column `k` (NaN entries are never chosen).
+fn pivot_row(a: &[f64], n: usize, k: usize) -> usize {
+    let mut p = k;
+    for i in k + 1..n {
+        if a[i * n + k].abs() > a[p * n + k].abs() {
+            p = i;
+        }
+    }
+    p
+}
+
+fn swap_rows(a: &mut [f64], n: usize, p: usize, k: usize) {
+    for j in 0..n {
+        a.swap(p * n + j, k * n + j);
+    }
+}
+
+/// The smallest pivot magnitude accepted by `inverse`.
+const MIN_PIVOT: f64 = 1e-300;
+
+/// Inverse by Gauss-Jordan elimination with partial pivoting.
+fn inverse(m: &Mat) -> Result<Mat, EvalError> {
+    let n = m.rows;
+    if !m.data.iter().all(|x| x.is_finite()) {
+        return Err(err(format!(
+            "inverse: the {n}x{n} matrix has non-finite entries"
+        )));
+    }
+    let mut a = m.data.clone();
+    let mut inv = Mat::identity(n).data;
+    for k in 0..n {
+        let p = pivot_row(&a, n, k);
+        let piv = a[p * n + k];
+        if piv.abs() < MIN_PIVOT {
+            return Err(err(format!(
+                "inverse: the {n}x{n} matrix is singular (pivot {piv:e} in column {k})"
+            )));
+        }
+        swap_rows(&mut a, n, p, k);
+        swap_rows(&mut inv, n, p, k);
+        for j in 0..n {
+            a[k * n + j] /= piv;
+            inv[k * n + j] /= piv;
+        }
+        for i in (0..n).filter(|&i| i != k) {
+            let f = a[i * n + k];
+            if f != 0.0 {
+                for j in 0..n {
+                    a[i * n + j] -= f * a[k * n + j];
+                    inv[i * n + j] -= f * inv[k * n + j];
+                }
+            }
+        }
+    }
+    if inv.iter().all(|x| x.is_finite()) {
+        Ok(Mat {
+            rows: n,
+            cols: n,
+            data: inv,
+        })
+    } else {
+        Err(err(format!(
+            "inverse: the {n}x{n} matrix is singular to working precision (its inverse overflows)"
+        )))
+    }
+}
+
+fn require_finite(name: &str, m: &Mat) -> Result<(), EvalError> {
+    if m.data.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(err(format!(
+            "{name}: the {}x{} matrix has non-finite entries",
+            m.rows, m.cols
+        )))
+    }
+}
+
+/// The closest rotation to a 2x2 matrix: the angle maximizing `tr(R^T m)`, in closed form.
+/// When no rotation is closer than another (`m = [[a, b], [b, -a]]`), the identity.
+fn polar2(m: &Mat) -> Result<Mat, EvalError> {
+    require_finite("polar", m)?;
+    let a = &m.data;
+    // Scale first: the sums below must not overflow.
+    let s = max_abs(a);
+    if s == 0.0 {
+        return Ok(Mat::identity(2));
+    }
+    let (c, d) = (
+        a[0] / s + a[3] / s, // tr(m) / s
+        a[2] / s - a[1] / s, // (m10 - m01) / s
+    );
+    let t = d.atan2(c);
+    let (sin, cos) = t.sin_cos();
+    Ok(mat_rows([[cos, -sin], [sin, cos]]))
+}
+
+/// The closest rotation to a 3x3 matrix, by a one-sided Jacobi SVD `m = U S V^T`:
+/// `R = U V^T` with `det U = det V = +1`, the sign of the smallest singular value carrying
+/// `det m` (Irving et al. 2004). Rank-deficient input still gives a rotation: missing left
+/// singular directions are completed orthogonally.
+fn polar3(m: &Mat) -> Result<Mat, EvalError> {
+    require_finite("polar", m)?;
+    let s = max_abs(&m.data);
+    if s == 0.0 {
+        return Ok(Mat::identity(3));
+    }
+    // Columns of A = (m / s) V, and of V.
+    let mut a = [[0.0; 3]; 3];
+    for (j, col) in a.iter_mut().enumerate() {
+        for (i, x) in col.iter_mut().enumerate() {
+            *x = m.get(i, j) / s;
+        }
+    }
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..64 {
+        let mut rotated = false;
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            let alpha = dot(&a[p], &a[p]);
+            let beta = dot(&a[q], &a[q]);
+            let gamma = dot(&a[p], &a[q]);
+            if gamma == 0.0 || gamma.abs() <= f64::EPSILON * alpha.sqrt() * beta.sqrt() {
+                continue;
+            }
+            rotated = true;
+            // The rotation making columns p and q orthogonal (Hestenes 1958).
+            let zeta = (beta - alpha) / (2.0 * gamma);
+            let t = zeta.signum() / (zeta.abs() + zeta.hypot(1.0));
+            let c = 1.0 / t.hypot(1.0);
+            let sn = c * t;
+            for w in [&mut a, &mut v] {
+                for i in 0..3 {
+                    let (x, y) = (w[p][i], w[q][i]);
+                    w[p][i] = c * x - sn * y;
+                    w[q][i] = sn * x + c * y;
+                }
+            }
+        }
+        if !rotated {
+            break;
+        }
+    }
+    // Order by decreasing singular value.
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| norm(&a[j]).total_cmp(&norm(&a[i])));
+    let a = order.map(|k| a[k]);
+    let mut v = order.map(|k| v[k]);
+    if det3_cols(&v) < 0.0 {
+        v[2] = v[2].map(|x| -x);
+    }
+    // U with det +1: u3 follows from u1 and u2, so its sign carries det m.
+    let u1 = unit_or(&a[0], [1.0, 0.0, 0.0]);
+    let mut w = a[1];
+    for _ in 0..2 {
+        let d = dot(&u1, &w);
+        w = [w[0] - d * u1[0], w[1] - d * u1[1], w[2] - d * u1[2]];
+    }
+    let u2 = if norm(&w) > 1e-290 {
+        unit_or(&w, perpendicular(&u1))
+    } else {
+        perpendicular(&u1)
+    };
+    let u3 = unit_or(&cross(&u1, &u2), [0.0, 0.0, 1.0]);
+    let u = [u1, u2, u3];
+    let mut r = Mat::zeros(3, 3);
+    for i in 0..3 {
+        for j in 0..3 {
+            r.set(i, j, (0..3).map(|k| u[k][i] * v[k][j]).sum());
+        }
+    }
+    Ok(r)
+}
+
+/// The determinant of the matrix with columns `c`.
+fn det3_cols(c: &[[f64; 3]; 3]) -> f64 {
+    dot(&c[0], &cross(&c[1], &c[2]))
+}
+
+/// `x / |x|`, or `fallback` for a zero `x`.
+fn unit_or(x: &[f64; 3], fallback: [f64; 3]) -> [f64; 3] {
+    let n = norm(x);
+    if n > 0.0 && n.is_finite() {
+        x.map(|c| c / n)
+    } else {
+        fallback
+    }
+}
+
+/// A unit vector orthogonal to the unit vector `u`: the axis least aligned with `u`, minus its
+/// component along `u`.
+fn perpendicular(u: &[f64; 3]) -> [f64; 3] {
+    let k = (0..3)
+        .min_by(|&i, &j| u[i].abs().total_cmp(&u[j].abs()))
+        .unwrap_or(0);
+    let mut w = u.map(|x| -u[k] * x);
+    w[k] += 1.0;
+    unit_or(&w, [0.0, 0.0, 1.0])
+}
+
+/// Eigenvalues of `sym(m)` for 2x2, descending: `mean ± hypot(half difference, off-diagonal)`.
+fn eigvals_sym2(m: &Mat) -> [f64; 2] {
+    let s = sym(m);
+    let (a, b, d) = (s.data[0], s.data[1], s.data[3]);
+    let mean = 0.5 * a + 0.5 * d;
+    let r = (0.5 * a - 0.5 * d).hypot(b);
+    [mean + r, mean - r]
+}
+
+/// Eigenvalues of `sym(m)` for 3x3, descending, by cyclic Jacobi on the scaled matrix.
+fn eigvals_sym3(m: &Mat) -> Result<[f64; 3], EvalError> {
+    require_finite("eigvals_sym3", m)?;
+    let s = max_abs(&m.data);
+    if s == 0.0 {
+        return Ok([0.0; 3]);
+    }
+    let sm = sym(m);
+    let mut a = [[0.0; 3]; 3];
+    for (i, row) in a.iter_mut().enumerate() {
+        for (j, x) in row.iter_mut().enumerate() {
+            *x = sm.get(i, j) / s;
+        }
+    }
+    // Off-diagonal entries below this change no eigenvalue by more than a rounding error.
+    let tiny = f64::EPSILON * 1e-3 * norm(&a.concat());
+    for _sweep in 0..64 {
+        let mut rotated = false;
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            let apq = a[p][q];
+            if apq.abs() <= tiny {
+                continue;
+            }
+            rotated = true;
+            let theta = (a[q][q] - a[p][p]) / (2.0 * apq);
+            let t = theta.signum() / (theta.abs() + theta.hypot(1.0));
+            let c = 1.0 / t.hypot(1.0);
+            let sn = t * c;
+            a[p][p] -= t * apq;
+            a[q][q] += t * apq;
+            a[p][q] = 0.0;
+            a[q][p] = 0.0;
+            let r = 3 - p - q;
+            let (arp, arq) = (a[r][p], a[r][q]);
+            a[r][p] = c * arp - sn * arq;
+            a[p][r] = a[r][p];
+            a[r][q] = sn * arp + c * arq;
+            a[q][r] = a[r][q];
+        }
+        if !rotated {
+            break;
+        }
+    }
+    let mut e = [a[0][0] * s, a[1][1] * s, a[2][2] * s];
+    e.sort_by(|x, y| y.total_cmp(x));
+    Ok(e)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m(rows: usize, cols: usize, data: &[f64]) -> Mat {
+        Mat {
+            rows,
+            cols,
+            data: data.to_vec(),
+        }
+    }
+
+    fn c(name: &str, args: &[Val]) -> Val {
+        let tys: Vec<Ty> = args.iter().map(Val::ty).collect();
+        let t = call_type(name, &tys).unwrap_or_else(|e| panic!("{e}"));
+        let v = call(name, args).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(v.ty(), t, "{name}: value type differs from call_type");
+        v
+    }
+
+    fn f(v: &Val) -> f64 {
+        v.as_f64().unwrap()
+    }
+
+    fn max_diff(a: &Mat, b: &Mat) -> f64 {
+        a.data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// Rotation about a unit axis (Rodrigues).
+    fn rot3(axis: [f64; 3], t: f64) -> Mat {
+        let n = norm(&axis);
+        let [x, y, z] = axis.map(|c| c / n);
+        let (s, co) = t.sin_cos();
+        let k = 1.0 - co;
+        m(
+            3,
+            3,
+            &[
+                co + x * x * k,
+                x * y * k - z * s,
+                x * z * k + y * s,
+                y * x * k + z * s,
+                co + y * y * k,
+                y * z * k - x * s,
+                z * x * k - y * s,
+                z * y * k + x * s,
+                co + z * z * k,
+            ],
+        )
+    }
+
+    /// The catalogue names are unique, each has a documented signature starting with its
+    /// name, and call_type knows each (no "unknown function").
+    #[test]
+    fn catalogue_is_consistent() {
+        let mut names: Vec<&str> = catalogue().iter().map(|e| e.0).collect();
+        names.sort_unstable();
+        let n = names.len();
+        names.dedup();
+        assert_eq!(names.len(), n, "duplicate names");
+        for (name, sig, doc) in catalogue() {
+            assert!(sig.starts_with(&format!("{name}(")), "{sig}");
+            assert!(sig.contains("->"), "{sig}");
+            assert!(doc.ends_with('.') && doc.len() > 10, "{doc}");
+            let e = call_type(name, &[Ty::Bool; 13]).unwrap_err();
+            assert!(e.contains("takes"), "{e}");
+        }
+    }
+
+    /// Unknown names are refused with close suggestions; wrong arity and wrong types say what
+    /// the signature is.
+    #[test]
+    fn call_type_messages() {
+        assert_eq!(
+            call_type("nrom", &[Ty::Vec3]).unwrap_err(),
+            "unknown function `nrom`; did you mean `norm`?"
+        );
+        assert_eq!(
+            call_type("invers", &[Ty::Mat(3, 3)]).unwrap_err(),
+            "unknown function `invers`; did you mean `inverse`?"
+        );
+        assert_eq!(
+            call_type("frobnicate", &[]).unwrap_err(),
+            "unknown function `frobnicate`"
+        );
+        assert_eq!(
+            call_type("dot", &[Ty::Vec3]).unwrap_err(),
+            "`dot` takes 2 arguments, got 1: dot(a: col, b: col) -> f64"
+        );
+        assert_eq!(
+            call_type("dot", &[Ty::Vec3, Ty::Vec2]).unwrap_err(),
+            "`dot` does not apply to (vec3, vec2): dot(a: col, b: col) -> f64"
+        );
+        assert!(call_type("det", &[Ty::Mat(3, 4)]).is_err());
+        assert!(call_type("polar", &[Ty::Mat(4, 4)]).is_err());
+        assert!(call_type("block3", &[Ty::Mat(12, 4), Ty::I64, Ty::I64]).is_err());
+        assert!(call_type("get", &[Ty::Mat(3, 3), Ty::F64, Ty::I64]).is_err());
+        assert!(call_type("sqrt", &[Ty::Vec3]).is_err());
+        assert!(call_type("select", &[Ty::Bool, Ty::Vec3, Ty::F64]).is_err());
+        assert!(call_type("is_finite", &[Ty::Bool]).is_err());
+        assert!(call_type("outer", &[Ty::Mat(12, 1), Ty::Mat(3, 3)]).is_err());
+    }
+
+    /// The overloads: integers stay integers where the signature says so, otherwise promote.
+    #[test]
+    fn call_type_overloads() {
+        use Ty::{Bool, Mat, Vec2, Vec3, F64, I64};
+        let ok = |name: &str, args: &[Ty], r: Ty| assert_eq!(call_type(name, args), Ok(r));
+        ok("vec3", &[I64, F64, I64], Vec3);
+        ok("abs", &[I64], I64);
+        ok("abs", &[F64], F64);
+        ok("min", &[I64, I64], I64);
+        ok("min", &[I64, F64], F64);
+        ok("clamp", &[I64, I64, I64], I64);
+        ok("clamp", &[F64, I64, I64], F64);
+        ok("sqrt", &[I64], F64);
+        ok("select", &[Bool, Mat(12, 12), Mat(12, 12)], Mat(12, 12));
+        ok("select", &[Bool, I64, F64], F64);
+        ok("cross", &[Vec2, Vec2], F64);
+        ok("cross", &[Vec3, Vec3], Vec3);
+        ok("outer", &[Vec3, Vec2], Mat(3, 2));
+        ok("outer", &[Mat(12, 1), Vec3], Mat(12, 3));
+        ok("dot", &[Mat(12, 1), Mat(12, 1)], F64);
+        ok("transpose", &[Mat(3, 12)], Mat(12, 3));
+        ok("block3", &[Mat(12, 6), I64, I64], Mat(3, 3));
+        ok("set_block2", &[Mat(6, 6), I64, I64, Mat(2, 2)], Mat(6, 6));
+        ok("vecn_get3", &[Mat(12, 1), I64], Vec3);
+        ok("vecn_set3", &[Mat(9, 1), I64, Vec3], Mat(9, 1));
+        ok("get", &[Vec3, I64, I64], F64);
+        ok("set", &[Vec2, I64, I64, I64], Vec2);
+        ok("is_finite", &[Mat(3, 4)], Bool);
+        ok("row3", &[Mat(12, 3), I64], Vec3);
+        ok("col2", &[Mat(2, 5), I64], Vec2);
+    }
+
+    #[test]
+    fn constructors_and_accessors() {
+        use Val::{F, I, M, V2, V3};
+        assert_eq!(c("vec3", &[I(1), F(2.5), I(-3)]), V3([1.0, 2.5, -3.0]));
+        let a = c("mat3", &(1..=9).map(I).collect::<Vec<_>>());
+        let Val::M(am) = &a else { panic!() };
+        assert_eq!(am.get(0, 1), 2.0);
+        assert_eq!(am.get(2, 0), 7.0);
+        let cols = c(
+            "mat_from_cols3",
+            &[
+                V3([1.0, 4.0, 7.0]),
+                V3([2.0, 5.0, 8.0]),
+                V3([3.0, 6.0, 9.0]),
+            ],
+        );
+        assert_eq!(cols, a);
+        let rows = c(
+            "mat_from_rows3",
+            &[
+                V3([1.0, 2.0, 3.0]),
+                V3([4.0, 5.0, 6.0]),
+                V3([7.0, 8.0, 9.0]),
+            ],
+        );
+        assert_eq!(rows, a);
+        assert_eq!(
+            c("mat_from_cols2", &[V2([1.0, 3.0]), V2([2.0, 4.0])]),
+            c("mat2", &[I(1), I(2), I(3), I(4)])
+        );
+        assert_eq!(c("row3", &[a.clone(), I(1)]), V3([4.0, 5.0, 6.0]));
+        assert_eq!(c("col3", &[a.clone(), I(2)]), V3([3.0, 6.0, 9.0]));
+        assert_eq!(c("get", &[a.clone(), I(2), I(1)]), F(8.0));
+        let b = c("set", &[a.clone(), I(2), I(1), I(0)]);
+        assert_eq!(c("get", &[b, I(2), I(1)]), F(0.0));
+        assert_eq!(c("get", &[a.clone(), I(1), I(1)]), F(5.0), "set copies");
+        let v = V3([1.0, 2.0, 3.0]);
+        assert_eq!(c("x", &[v.clone()]), F(1.0));
+        assert_eq!(c("z", &[v.clone()]), F(3.0));
+        assert_eq!(c("elem", &[v.clone(), I(1)]), F(2.0));
+        assert_eq!(c("get", &[v.clone(), I(2), I(0)]), F(3.0));
+        assert_eq!(
+            c("set", &[v.clone(), I(0), I(0), F(9.0)]),
+            V3([9.0, 2.0, 3.0])
+        );
+        assert_eq!(c("identity3", &[]), M(Mat::identity(3)));
+        assert_eq!(c("zeros12x1", &[]), M(Mat::zeros(12, 1)));
+        assert_eq!(c("to_i64", &[F(-2.7)]), I(-2));
+        assert_eq!(c("to_i64", &[F(2.7)]), I(2));
+        assert_eq!(c("to_f64", &[Val::B(true)]), F(1.0));
+    }
+
+    /// Indices out of range, negative or huge, are errors naming the function.
+    #[test]
+    fn index_errors() {
+        use Val::{F, I, M, V3};
+        let a = M(Mat::identity(3));
+        for (i, j) in [(3, 0), (0, 3), (-1, 0), (i64::MIN, i64::MAX)] {
+            let e = call("get", &[a.clone(), I(i), I(j)]).unwrap_err();
+            assert!(e.0.starts_with("get: entry"), "{e}");
+            assert!(call("set", &[a.clone(), I(i), I(j), F(0.0)]).is_err());
+        }
+        assert_eq!(
+            call("get", &[V3([0.0; 3]), I(0), I(1)]).unwrap_err().0,
+            "get: entry (0, 1) outside a vec3"
+        );
+        assert_eq!(
+            call("elem", &[V3([0.0; 3]), I(3)]).unwrap_err().0,
+            "elem: index 3 out of range 0..3"
+        );
+        let k = M(Mat::zeros(12, 12));
+        assert_eq!(
+            call("block3", &[k.clone(), I(4), I(0)]).unwrap_err().0,
+            "block3: block (4, 0) outside the 4x4 blocks of a 12x12 matrix"
+        );
+        assert!(call("vecn_get3", &[M(Mat::zeros(12, 1)), I(4)]).is_err());
+        assert!(call(
+            "vecn_set2",
+            &[M(Mat::zeros(6, 1)), I(-1), Val::V2([0.0; 2])]
+        )
+        .is_err());
+        assert!(call("row2", &[M(Mat::zeros(2, 2)), I(2)]).is_err());
+        assert!(call("to_i64", &[F(f64::NAN)]).is_err());
+        assert!(call("to_i64", &[F(9.3e18)]).is_err());
+        assert_eq!(
+            call("to_i64", &[F(-9.223_372_036_854_775_808e18)]),
+            Ok(I(i64::MIN))
+        );
+        assert!(call("abs", &[I(i64::MIN)]).is_err());
+        assert!(call("clamp", &[I(0), I(2), I(1)]).is_err());
+        assert!(call("clamp", &[F(0.0), F(2.0), F(1.0)]).is_err());
+        assert!(call("nope", &[])
+            .unwrap_err()
+            .0
+            .contains("unknown function"));
+        assert!(call("dot", &[F(1.0)])
+            .unwrap_err()
+            .0
+            .contains("internal error"));
+    }
+
+    /// The 12x12 block helpers address the 3x3 block of nodes (i, j) of a tetrahedron's
+    /// stiffness, and the 3-entry part of node i of its force column.
+    #[test]
+    fn fem_blocks() {
+        use Val::{I, M, V3};
+        let mut k = Mat::zeros(12, 12);
+        for (n, x) in k.data.iter_mut().enumerate() {
+            *x = n as f64;
+        }
+        let b = c("block3", &[M(k.clone()), I(2), I(1)]);
+        let Val::M(bm) = &b else { panic!() };
+        assert_eq!(bm.get(0, 0), k.get(6, 3));
+        assert_eq!(bm.get(2, 1), k.get(8, 4));
+        let k2 = c(
+            "set_block3",
+            &[M(k.clone()), I(3), I(3), M(Mat::identity(3))],
+        );
+        let Val::M(k2) = k2 else { panic!() };
+        assert_eq!(k2.get(9, 9), 1.0);
+        assert_eq!(k2.get(9, 10), 0.0);
+        assert_eq!(k2.get(8, 8), k.get(8, 8));
+        let f = c(
+            "vecn_set3",
+            &[c("zeros12x1", &[]), I(1), V3([1.0, 2.0, 3.0])],
+        );
+        let Val::M(fm) = &f else { panic!() };
+        assert_eq!(fm.data[3..6], [1.0, 2.0, 3.0]);
+        assert_eq!(c("vecn_get3", &[f, I(1)]), V3([1.0, 2.0, 3.0]));
+        let k6 = c(
+            "set_block2",
+            &[c("zeros6", &[]), I(2), I(0), c("identity2", &[])],
+        );
+        assert_eq!(c("block2", &[k6.clone(), I(2), I(0)]), c("identity2", &[]));
+        assert_eq!(
+            c("vecn_get2", &[c("zeros6x1", &[]), I(2)]),
+            Val::V2([0.0; 2])
+        );
+    }
+
+    #[test]
+    fn scalar_math() {
+        use Val::{B, F, I};
+        assert_eq!(c("abs", &[I(-3)]), I(3));
+        assert_eq!(c("abs", &[F(-3.5)]), F(3.5));
+        assert_eq!(c("sign", &[F(-0.0)]), F(0.0));
+        assert_eq!(c("sign", &[F(2.0)]), F(1.0));
+        assert_eq!(c("sign", &[I(-7)]), I(-1));
+        assert!(f(&c("sign", &[F(f64::NAN)])).is_nan());
+        assert_eq!(c("sqrt", &[I(9)]), F(3.0));
+        assert_eq!(c("pow", &[I(2), I(10)]), F(1024.0));
+        assert_eq!(
+            c("atan2", &[F(1.0), F(0.0)]),
+            F(std::f64::consts::FRAC_PI_2)
+        );
+        assert_eq!(c("floor", &[F(-1.5)]), F(-2.0));
+        assert_eq!(c("ceil", &[F(-1.5)]), F(-1.0));
+        assert_eq!(c("min", &[I(3), I(-2)]), I(-2));
+        assert_eq!(c("max", &[I(3), F(4.5)]), F(4.5));
+        assert!(
+            f(&c("min", &[F(f64::NAN), F(1.0)])).is_nan(),
+            "NaN propagates"
+        );
+        assert_eq!(c("clamp", &[F(5.0), I(0), I(1)]), F(1.0));
+        assert_eq!(c("clamp", &[I(-5), I(0), I(1)]), I(0));
+        assert!(f(&c("clamp", &[F(f64::NAN), F(0.0), F(1.0)])).is_nan());
+        assert_eq!(c("select", &[B(false), I(1), F(2.5)]), F(2.5));
+        assert_eq!(c("select", &[B(true), I(1), F(2.5)]), F(1.0));
+        assert_eq!(c("select", &[B(true), I(1), I(2)]), I(1));
+        assert_eq!(
+            c("is_finite", &[Val::V3([1.0, f64::INFINITY, 0.0])]),
+            B(false)
+        );
+        assert_eq!(c("is_finite", &[I(1)]), B(true));
+        assert!(f(&c("log", &[F(-1.0)])).is_nan());
+    }
+
+    #[test]
+    fn vectors() {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        use Val::{F, V2, V3};
+        let (a, b) = (V3([1.0, 0.0, 0.0]), V3([0.0, 2.0, 0.0]));
+        assert_eq!(c("dot", &[a.clone(), b.clone()]), F(0.0));
+        assert_eq!(c("cross", &[a.clone(), b.clone()]), V3([0.0, 0.0, 2.0]));
+        assert_eq!(c("cross", &[V2([1.0, 0.0]), V2([0.0, 2.0])]), F(2.0));
+        assert_eq!(c("norm", &[V3([3.0, 4.0, 12.0])]), F(13.0));
+        assert_eq!(c("norm2", &[V2([3.0, 4.0])]), F(25.0));
+        // Scaled norm: 3e200 and 4e200 square to infinity, the norm does not.
+        assert!((f(&c("norm", &[V2([3e200, 4e200])])) / 5e200 - 1.0).abs() < 1e-15);
+        assert_eq!(
+            c("normalize", &[V3([0.0, 0.0, -2.0])]),
+            V3([0.0, 0.0, -1.0])
+        );
+        assert_eq!(
+            c("normalize", &[V3([0.0; 3])]),
+            V3([0.0; 3]),
+            "zero stays zero"
+        );
+        let n = c("normalize", &[V2([1e-310, 1e-310])]);
+        assert!((f(&c("norm", &[n])) - 1.0).abs() < 1e-15, "subnormal input");
+        let o = c("outer", &[V3([1.0, 2.0, 3.0]), V2([1.0, -1.0])]);
+        assert_eq!(o, Val::M(m(3, 2, &[1.0, -1.0, 2.0, -2.0, 3.0, -3.0])));
+        assert_eq!(c("angle", &[a.clone(), b.clone()]), F(FRAC_PI_2));
+        assert_eq!(c("angle", &[V2([1.0, 0.0]), V2([-1.0, 0.0])]), F(PI));
+        assert_eq!(c("angle", &[a.clone(), V3([0.0; 3])]), F(0.0));
+        // Nearly parallel: acos(dot) would round the cosine to 1 and give 0 (or 1.5e-8).
+        let t = 1e-10_f64;
+        let got = f(&c("angle", &[a, V3([t.cos(), t.sin(), 0.0])]));
+        assert!((got - t).abs() < 1e-24, "{got}");
+    }
+
+    /// Determinants against hand-computed values; the 2x2 uses no cancellation-prone formula.
+    #[test]
+    fn det_hand_computed() {
+        assert_eq!(det(&m(1, 1, &[-4.0])), -4.0);
+        assert_eq!(det(&m(2, 2, &[1.0, 2.0, 3.0, 4.0])), -2.0);
+        assert_eq!(
+            det(&m(3, 3, &[2.0, 0.0, 1.0, 1.0, 3.0, 2.0, 1.0, 1.0, 1.0])),
+            // 2(3-2) - 0 + 1(1-3)
+            0.0
+        );
+        assert_eq!(
+            det(&m(3, 3, &[6.0, 1.0, 1.0, 4.0, -2.0, 5.0, 2.0, 8.0, 7.0])),
+            // 6(-14-40) - 1(28-10) + 1(32+4)
+            -306.0
+        );
+        // 4x4 with a zero leading entry (the pivot search must swap):
+        // expanding along the first column, det = -1 * det([[1,1,0],[0,2,1],[1,0,3]]) * ...
+        let a = m(
+            4,
+            4,
+            &[
+                0.0, 1.0, 2.0, 3.0, 1.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 2.0, 2.0, 0.0, 0.0, 1.0,
+            ],
+        );
+        // Cofactor expansion by hand along column 0:
+        // -1 * det([[1,2,3],[1,0,2],[0,0,1]]) - 2 * det([[1,2,3],[0,1,0],[1,0,2]])
+        // = -1 * (1*(0-0) - 2*(1-0) + 3*0) - 2 * (1*2 - 2*0 + 3*(0-1)) = 2 + 2 = 4
+        assert!((det(&a) - 4.0).abs() < 1e-14);
+        // Triangular 5x5: the product of the diagonal.
+        let mut t = Mat::identity(5);
+        for i in 0..5 {
+            t.set(i, i, (i + 1) as f64);
+            for j in i + 1..5 {
+                t.set(i, j, 7.0);
+            }
+        }
+        assert!((det(&t) - 120.0).abs() < 1e-12);
+        // A row permutation of the identity: its sign.
+        let mut p = Mat::zeros(6, 6);
+        for (i, j) in [(0, 1), (1, 0), (2, 2), (3, 4), (4, 5), (5, 3)] {
+            p.set(i, j, 1.0);
+        }
+        assert_eq!(det(&p), -1.0);
+        assert_eq!(det(&Mat::zeros(12, 12)), 0.0);
+        // Kahan's case: ad - bc with cancellation, exact with the fused multiply-add.
+        let (a, b) = (1.0 + f64::EPSILON, 1.0 - f64::EPSILON);
+        assert_eq!(
+            det(&m(2, 2, &[a, b, b, a])),
+            4.0 * f64::EPSILON,
+            "(1+e)^2 - (1-e)^2 = 4e"
+        );
+    }
+
+    #[test]
+    fn inverse_hand_computed() {
+        let a = m(2, 2, &[4.0, 7.0, 2.0, 6.0]);
+        let inv = inverse(&a).unwrap();
+        // 1/10 * [[6, -7], [-2, 4]]
+        assert!(max_diff(&inv, &m(2, 2, &[0.6, -0.7, -0.2, 0.4])) < 1e-15);
+        let b = m(3, 3, &[1.0, 2.0, 3.0, 0.0, 1.0, 4.0, 5.0, 6.0, 0.0]);
+        let inv = inverse(&b).unwrap();
+        // The classic example: det 1, inverse [[-24, 18, 5], [20, -15, -4], [-5, 4, 1]].
+        let want = m(3, 3, &[-24.0, 18.0, 5.0, 20.0, -15.0, -4.0, -5.0, 4.0, 1.0]);
+        assert!(max_diff(&inv, &want) < 1e-13);
+    }
+
+    /// Singular, non-finite and overflowing inverses are errors naming the size.
+    #[test]
+    fn singular_inverse_is_an_error() {
+        let e = inverse(&m(2, 2, &[1.0, 2.0, 2.0, 4.0])).unwrap_err();
+        assert!(
+            e.0.starts_with("inverse: the 2x2 matrix is singular"),
+            "{e}"
+        );
+        let mut s = Mat::identity(12);
+        s.set(7, 7, 0.0);
+        assert!(inverse(&s).unwrap_err().0.contains("12x12"));
+        assert!(inverse(&Mat::zeros(3, 3)).is_err());
+        assert!(inverse(&m(1, 1, &[1e-301])).is_err());
+        assert!(inverse(&m(1, 1, &[f64::NAN]))
+            .unwrap_err()
+            .0
+            .contains("non-finite"));
+        // Rank 2 in 3D: the last pivot is a rounding residue or zero, never a NaN result.
+        let r2 = m(3, 3, &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+        match inverse(&r2) {
+            Err(_) => {}
+            Ok(x) => assert!(x.data.iter().all(|v| v.is_finite())),
+        }
+        assert!(call("inverse", &[Val::M(Mat::zeros(4, 4))]).is_err());
+    }
+
+    /// R of a pure rotation is that rotation; of rotation * SPD stretch, that rotation
+    /// (tolerance: a few hundred ulps, the Jacobi sweeps and products of 3x3 matrices).
+    #[test]
+    fn polar_of_rotation_and_stretch() {
+        for (axis, t) in [
+            ([0.0, 0.0, 1.0], 0.3),
+            ([1.0, 2.0, 3.0], 2.9),
+            ([1.0, -1.0, 0.5], std::f64::consts::PI),
+            ([0.0, 1.0, 0.0], 0.0),
+        ] {
+            let r = rot3(axis, t);
+            assert!(max_diff(&polar3(&r).unwrap(), &r) < 1e-14, "{axis:?} {t}");
+            // S = Q diag(3, 0.5, 1e-3) Q^T, SPD and anisotropic.
+            let q = rot3([0.3, 0.2, -1.0], 1.1);
+            let mut d = Mat::zeros(3, 3);
+            for (i, x) in [3.0, 0.5, 1e-3].into_iter().enumerate() {
+                d.set(i, i, x);
+            }
+            let s = q.mul(&d).mul(&q.transpose());
+            let f = r.mul(&s);
+            assert!(
+                max_diff(&polar3(&f).unwrap(), &r) < 1e-12,
+                "{axis:?} {t}: {:?}",
+                polar3(&f)
+            );
+            // The same with a repeated singular value.
+            let s = q
+                .mul(&m(3, 3, &[2.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.5]))
+                .mul(&q.transpose());
+            assert!(max_diff(&polar3(&r.mul(&s)).unwrap(), &r) < 1e-13);
+        }
+        for t in [0.0, 0.7, -2.0, 3.1] {
+            let (s, co) = f64::sin_cos(t);
+            let r = m(2, 2, &[co, -s, s, co]);
+            assert!(max_diff(&polar2(&r).unwrap(), &r) < 1e-15);
+            let stretch = m(2, 2, &[2.0, 0.3, 0.3, 0.1]);
+            assert!(max_diff(&polar2(&r.mul(&stretch)).unwrap(), &r) < 1e-14);
+        }
+    }
+
+    /// Inverted elements: a reflection's closest rotation flips the direction of least
+    /// stretch (Irving et al. 2004), and a flat element still gets a rotation.
+    #[test]
+    fn polar_of_inverted_and_flat() {
+        // diag(2, 1, -0.5): the smallest singular value is negated, R = I.
+        let f = m(3, 3, &[2.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.5]);
+        assert!(max_diff(&polar3(&f).unwrap(), &Mat::identity(3)) < 1e-15);
+        // diag(-3, 1, 2): the smallest singular value (1, axis y) is negated:
+        // R = diag(-1, -1, 1), a half-turn about z.
+        let f = m(3, 3, &[-3.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 2.0]);
+        let want = m(3, 3, &[-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0]);
+        assert!(max_diff(&polar3(&f).unwrap(), &want) < 1e-15);
+        // A flat tetrahedron (rank 2) and a needle (rank 1) and zero.
+        for f in [
+            m(3, 3, &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]),
+            m(3, 3, &[1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 0.0, 0.0]),
+            m(3, 3, &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]),
+            Mat::zeros(3, 3),
+        ] {
+            let r = polar3(&f).unwrap();
+            assert!(max_diff(&r.transpose().mul(&r), &Mat::identity(3)) < 1e-14);
+            assert!((det(&r) - 1.0).abs() < 1e-14);
+        }
+        // The flat diag(1, 1, 0) is already closest to the identity.
+        let f = m(3, 3, &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]);
+        assert!(max_diff(&polar3(&f).unwrap(), &Mat::identity(3)) < 1e-15);
+        // 2D reflection diag(1, -2): the smaller singular value (1) is negated, R = -I.
+        let r = polar2(&m(2, 2, &[1.0, 0.0, 0.0, -2.0])).unwrap();
+        assert!(max_diff(&r, &m(2, 2, &[-1.0, 0.0, 0.0, -1.0])) < 1e-15);
+        assert!(polar3(&m(3, 3, &[f64::NAN; 9])).is_err());
+        assert!(polar2(&m(2, 2, &[f64::INFINITY, 0.0, 0.0, 1.0])).is_err());
+    }
+
+    /// Eigenvalues of symmetric matrices with known spectra (tolerance: Jacobi is backward
+    /// stable, errors of a few ulps of the largest eigenvalue).
+    #[test]
+    fn symmetric_eigenvalues() {
+        let q = rot3([1.0, 2.0, -0.5], 0.9);
+        let d = m(3, 3, &[5.0, 0.0, 0.0, 0.0, -2.0, 0.0, 0.0, 0.0, 1e-3]);
+        let s = q.mul(&d).mul(&q.transpose());
+        let e = eigvals_sym3(&s).unwrap();
+        for (x, y) in e.iter().zip([5.0, 1e-3, -2.0]) {
+            assert!((x - y).abs() < 1e-14 * 5.0, "{e:?}");
+        }
+        assert_eq!(eigvals_sym3(&Mat::identity(3)).unwrap(), [1.0; 3]);
+        // Only the symmetric part counts.
+        let skewed = m(3, 3, &[1.0, 5.0, 0.0, -5.0, 2.0, 0.0, 0.0, 0.0, 3.0]);
+        assert_eq!(eigvals_sym3(&skewed).unwrap(), [3.0, 2.0, 1.0]);
+        let e2 = eigvals_sym2(&m(2, 2, &[2.0, 1.0, 1.0, 2.0]));
+        assert_eq!(e2, [3.0, 1.0]);
+        assert!(eigvals_sym3(&m(3, 3, &[f64::NAN; 9])).is_err());
+    }
+
+    #[test]
+    fn matrix_helpers() {
+        use Val::{F, M};
+        let a = M(m(2, 3, &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
+        assert_eq!(
+            c("transpose", &[a.clone()]),
+            M(m(3, 2, &[1.0, 4.0, 2.0, 5.0, 3.0, 6.0]))
+        );
+        assert_eq!(c("frobenius", &[a]), F(91.0_f64.sqrt()));
+        assert_eq!(c("trace", &[M(Mat::identity(12))]), F(12.0));
+        assert_eq!(
+            c("sym", &[M(m(2, 2, &[1.0, 4.0, 2.0, 3.0]))]),
+            M(m(2, 2, &[1.0, 3.0, 3.0, 3.0]))
+        );
+        assert_eq!(c("det", &[c("identity3", &[])]), F(1.0));
+    }
+}

@@ -1,0 +1,881 @@
+//! Matching and application of checked rules on a G-map.
+//!
+//! A match of a rule at hook darts: the hook's orbit is walked breadth-first, each dart a
+//! *row*; every node of the left graph gets one dart per row, reached from the hook through
+//! explicit arcs, and must show the node's orbit type (relabelled) and arcs on those darts.
+//! Application evaluates every expression on the map as it was before the rule (values
+//! are read before any write), then rewrites the topology in one batch
+//! ([`GMap::rewire`]), then writes the values. Global application finds every match first —
+//! matches never overlap: the whole footprint of a match is marked — then applies them all.
+
+use std::collections::HashMap;
+use std::fmt;
+
+use topomech_gmap::{Dart, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType, RewireError, Value};
+
+use crate::ast::AggKind;
+use crate::builtins;
+use crate::check::{Checked, EmbDecl, Rule, Source, TExpr, TStmt};
+use crate::value::{binop, unop, BinOp, Ty, Val};
+
+/// Why a rule did not apply.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ApplyError {
+    /// No rule of that name.
+    #[error("no rule named '{0}'")]
+    UnknownRule(String),
+    /// The rule does not match at the given hook(s).
+    #[error("rule '{rule}' does not match at {at}: {reason}")]
+    NoMatch {
+        /// The rule.
+        rule: String,
+        /// The hook darts.
+        at: String,
+        /// Which arc, orbit or dart failed.
+        reason: String,
+    },
+    /// Wrong number of hook darts, or a dart that does not exist.
+    #[error("rule '{rule}': {message}")]
+    Hooks {
+        /// The rule.
+        rule: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The map does not fit the rule file (dimension, embedding declarations).
+    #[error("{0}")]
+    Map(String),
+    /// A missing, unknown or mistyped parameter.
+    #[error("rule '{rule}': {message}")]
+    Param {
+        /// The rule.
+        rule: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A numerical error while evaluating an expression.
+    #[error("rule '{rule}' at dart {dart}: {message}")]
+    Eval {
+        /// The rule.
+        rule: String,
+        /// The row's dart of the hook.
+        dart: Dart,
+        /// What failed.
+        message: String,
+    },
+    /// Two writes of different values to one orbit.
+    #[error("rule '{rule}': embedding-write-conflict: '{embedding}' gets two different values on the orbit of dart {dart}")]
+    WriteConflict {
+        /// The rule.
+        rule: String,
+        /// The embedding.
+        embedding: String,
+        /// A dart of the orbit.
+        dart: Dart,
+    },
+    /// The rewrite was refused by the kernel (should not happen for checked rules; reported,
+    /// never a panic).
+    #[error("rule '{rule}': {source}")]
+    Rewire {
+        /// The rule.
+        rule: String,
+        /// The kernel's reason.
+        source: RewireError,
+    },
+}
+
+/// A match: rows of the hook orbit and one dart per row for each left node.
+#[derive(Clone, Debug)]
+pub struct Match {
+    /// Number of rows.
+    pub rows: usize,
+    /// `next[r * arity + t]`: the row reached from row `r` through orbit position `t`.
+    pub next: Vec<u32>,
+    /// For each node, its darts by row (empty for created nodes).
+    pub darts: Vec<Vec<Dart>>,
+}
+
+impl Match {
+    fn all_darts(&self) -> impl Iterator<Item = Dart> + '_ {
+        self.darts.iter().flatten().copied()
+    }
+}
+
+/// Rule parameters by name.
+pub type Params = HashMap<String, Val>;
+
+/// What an application did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ApplyReport {
+    /// Matches applied.
+    pub matches: usize,
+    /// Darts created.
+    pub created: usize,
+    /// Darts deleted.
+    pub deleted: usize,
+}
+
+/// Rows of the orbit of `d` with the given labels, breadth-first; `next` as in [`Match`].
+fn rows_of(g: &GMap, d: Dart, labels: &[u8]) -> (Vec<Dart>, Vec<u32>) {
+    let k = labels.len();
+    let mut darts = vec![d];
+    let mut row_of: HashMap<Dart, u32> = HashMap::from([(d, 0)]);
+    let mut next = Vec::new();
+    let mut r = 0;
+    while r < darts.len() {
+        let x = darts[r];
+        for &l in labels {
+            let y = g.alpha(l as usize, x);
+            let s = *row_of.entry(y).or_insert_with(|| {
+                darts.push(y);
+                (darts.len() - 1) as u32
+            });
+            next.push(s);
+        }
+        r += 1;
+    }
+    debug_assert_eq!(next.len(), darts.len() * k);
+    (darts, next)
+}
+
+/// Tries to match `rule` with its hooks at `hooks` (one dart per hook, in order).
+pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> {
+    let arity = rule.arity;
+    let (first, next) = rows_of(g, hooks[0], &rule.hook_orbit);
+    let rows = first.len();
+    let mut darts: Vec<Vec<Dart>> = vec![Vec::new(); rule.nodes.len()];
+    for (j, &h) in rule.hooks.iter().enumerate() {
+        let col = if j == 0 {
+            first.clone()
+        } else {
+            // the other hooks' orbits, walked in parallel with the first
+            let mut col: Vec<Option<Dart>> = vec![None; rows];
+            col[0] = Some(hooks[j]);
+            for r in 0..rows {
+                let x = col[r].ok_or_else(|| {
+                    format!(
+                        "hook '{}': its orbit differs in shape from hook '{}'",
+                        rule.nodes[h].name, rule.nodes[rule.hooks[0]].name
+                    )
+                })?;
+                for (t, &l) in rule.hook_orbit.iter().enumerate() {
+                    let y = g.alpha(l as usize, x);
+                    let s = next[r * arity + t] as usize;
+                    match col[s] {
+                        None => col[s] = Some(y),
+                        Some(z) if z == y => {}
+                        Some(_) => {
+                            return Err(format!(
+                                "hook '{}': its orbit differs in shape from hook '{}'",
+                                rule.nodes[h].name, rule.nodes[rule.hooks[0]].name
+                            ))
+                        }
+                    }
+                }
+            }
+            col.into_iter().map(|x| x.expect("filled")).collect()
+        };
+        darts[h] = col;
+    }
+    // other left nodes, through the left arcs
+    loop {
+        let mut progress = false;
+        let mut missing = false;
+        for &(a, i, b) in &rule.left_arcs {
+            for (p, q) in [(a, b), (b, a)] {
+                if !darts[p].is_empty() && darts[q].is_empty() {
+                    darts[q] = darts[p].iter().map(|&x| g.alpha(i as usize, x)).collect();
+                    progress = true;
+                }
+            }
+            missing |= darts[a].is_empty() || darts[b].is_empty();
+        }
+        if !progress || !missing {
+            break;
+        }
+    }
+    for (k, nd) in rule.nodes.iter().enumerate() {
+        if nd.left.is_some() && darts[k].is_empty() {
+            return Err(format!("node '{}' is not reached from a hook", nd.name));
+        }
+    }
+    // arcs and loops
+    for &(a, i, b) in &rule.left_arcs {
+        for r in 0..rows {
+            let x = darts[a][r];
+            let y = g.alpha(i as usize, x);
+            if a != b && y == x {
+                return Err(format!("arc {} -{i}- {}: dart {x} is {i}-free", rule.nodes[a].name, rule.nodes[b].name));
+            }
+            if y != darts[b][r] {
+                let what = if a == b {
+                    format!(
+                        "loop {} -{i}- {}: dart {x} is not {i}-free (alpha{i}({x}) = {y})",
+                        rule.nodes[a].name, rule.nodes[a].name
+                    )
+                } else {
+                    format!(
+                        "arc {} -{i}- {}: alpha{i}({x}) = {y}, expected {}",
+                        rule.nodes[a].name, rule.nodes[b].name, darts[b][r]
+                    )
+                };
+                return Err(what);
+            }
+        }
+    }
+    // orbit types
+    for (k, nd) in rule.nodes.iter().enumerate() {
+        let Some(labels) = &nd.left else { continue };
+        for (t, l) in labels.iter().enumerate() {
+            let Some(i) = l else { continue };
+            for r in 0..rows {
+                let x = darts[k][r];
+                let want = darts[k][next[r * arity + t] as usize];
+                let y = g.alpha(*i as usize, x);
+                if y != want {
+                    return Err(format!("node '{}': orbit label {i} at position {t}: alpha{i}({x}) = {y}, but the orbit needs {want}", nd.name));
+                }
+            }
+        }
+    }
+    // kept nodes gaining an explicit arc need free darts
+    for (k, nd) in rule.nodes.iter().enumerate() {
+        if !nd.is_kept() {
+            continue;
+        }
+        for i in 0..=g.dimension() {
+            if nd.left_src[i] == Source::None && nd.right_src[i] != Source::None {
+                if let Some(&x) = darts[k].iter().find(|&&x| !g.is_free(i, x)) {
+                    return Err(format!(
+                        "node '{}' gains label {i} but dart {x} is already {i}-linked to {}",
+                        nd.name,
+                        g.alpha(i, x)
+                    ));
+                }
+            }
+        }
+    }
+    // no dart twice
+    let mut seen = Marks::with_capacity(g.capacity());
+    for (k, col) in darts.iter().enumerate() {
+        for &x in col {
+            if !seen.mark(x) {
+                return Err(format!("dart {x} would be matched twice (node '{}'): the pattern folds onto itself here", rule.nodes[k].name));
+            }
+        }
+    }
+    Ok(Match { rows, next, darts })
+}
+
+/// A rule file loaded and checked, ready to apply on maps of its dimension.
+#[derive(Clone, Debug)]
+pub struct RuleSet {
+    checked: Checked,
+}
+
+struct Bound<'a> {
+    rule: &'a Rule,
+    embs: &'a [EmbDecl],
+    ids: Vec<EmbeddingId>,
+    params: Vec<Val>,
+}
+
+impl RuleSet {
+    /// Wraps checked rules.
+    pub fn new(checked: Checked) -> Self {
+        RuleSet { checked }
+    }
+
+    /// The dimension of the rules.
+    pub fn dimension(&self) -> usize {
+        self.checked.dim
+    }
+
+    /// The rules.
+    pub fn rules(&self) -> &[Rule] {
+        &self.checked.rules
+    }
+
+    /// The declared embeddings.
+    pub fn embeddings(&self) -> &[EmbDecl] {
+        &self.checked.embeddings
+    }
+
+    /// The rule named `name`.
+    pub fn rule(&self, name: &str) -> Result<&Rule, ApplyError> {
+        self.checked
+            .rules
+            .iter()
+            .find(|r| r.name == name)
+            .ok_or_else(|| ApplyError::UnknownRule(name.to_string()))
+    }
+
+    /// Checks that `g` fits the rules: same dimension, and every declared embedding present
+    /// with the same type and orbit (an absent one is added, zero everywhere; a derived one is
+    /// added and computed). Refreshes stale derived embeddings.
+    pub fn prepare(&self, g: &mut GMap) -> Result<Vec<EmbeddingId>, ApplyError> {
+        if g.dimension() != self.checked.dim {
+            return Err(ApplyError::Map(format!(
+                "the rules are for dimension {}, the map has dimension {}",
+                self.checked.dim,
+                g.dimension()
+            )));
+        }
+        let mut ids = Vec::new();
+        for e in &self.checked.embeddings {
+            let ty = emb_type(e.ty);
+            let id = if let Some(id) = g.embedding_id(&e.name) {
+                let have = g.embedding(id);
+                if have.ty() != ty || have.orbit() != e.orbit {
+                    return Err(ApplyError::Map(format!(
+                        "embedding '{}' is {} on {} in the map but {} on {} in the rules",
+                        e.name,
+                        have.ty(),
+                        have.orbit(),
+                        ty,
+                        e.orbit
+                    )));
+                }
+                id
+            } else if let Some((agg, src)) = e.derived {
+                let src = &self.checked.embeddings[src].name;
+                g.add_derived(&e.name, src, e.orbit, agg)
+                    .map_err(|x| ApplyError::Map(x.to_string()))?
+            } else {
+                g.add_embedding(&e.name, ty, e.orbit, e.policy)
+                    .map_err(|x| ApplyError::Map(x.to_string()))?
+            };
+            ids.push(id);
+        }
+        g.refresh_derived();
+        Ok(ids)
+    }
+
+    fn bind<'a>(
+        &'a self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+    ) -> Result<Bound<'a>, ApplyError> {
+        let rule = self.rule(name)?;
+        let ids = self.prepare(g)?;
+        let mut vals = Vec::new();
+        for (p, ty) in &rule.params {
+            let v = params.get(p).ok_or_else(|| ApplyError::Param {
+                rule: name.into(),
+                message: format!("missing parameter '{p}' ({ty})"),
+            })?;
+            let v = match (v, ty) {
+                (Val::I(i), Ty::F64) => Val::F(*i as f64),
+                (v, t) if v.ty() == *t => v.clone(),
+                (v, t) => {
+                    return Err(ApplyError::Param {
+                        rule: name.into(),
+                        message: format!("parameter '{p}' is {t}, got a {}", v.ty()),
+                    })
+                }
+            };
+            vals.push(v);
+        }
+        for k in params.keys() {
+            if !rule.params.iter().any(|(p, _)| p == k) {
+                return Err(ApplyError::Param {
+                    rule: name.into(),
+                    message: format!("unknown parameter '{k}'"),
+                });
+            }
+        }
+        Ok(Bound {
+            rule,
+            embs: &self.checked.embeddings,
+            ids,
+            params: vals,
+        })
+    }
+
+    /// Applies rule `name` once, with its hooks at `hooks`.
+    pub fn apply_at(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        hooks: &[Dart],
+        params: &Params,
+    ) -> Result<ApplyReport, ApplyError> {
+        let b = self.bind(g, name, params)?;
+        let rule = b.rule;
+        if hooks.len() != rule.hooks.len() {
+            return Err(ApplyError::Hooks {
+                rule: name.into(),
+                message: format!(
+                    "it has {} hook(s), {} dart(s) given",
+                    rule.hooks.len(),
+                    hooks.len()
+                ),
+            });
+        }
+        for &h in hooks {
+            if !g.is_alive(h) {
+                return Err(ApplyError::Hooks {
+                    rule: name.into(),
+                    message: format!("dart {h} does not exist"),
+                });
+            }
+        }
+        let at = hooks
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", ");
+        let m = match_at(g, rule, hooks).map_err(|reason| ApplyError::NoMatch {
+            rule: name.into(),
+            at: at.clone(),
+            reason,
+        })?;
+        if let Some(guard) = &rule.guard {
+            let mut ev = Eval::new(g, &b, &m);
+            let ok = ev
+                .eval(guard, 0)
+                .map_err(|e| eval_err(name, hooks[0], &e))?;
+            if ok != Val::B(true) {
+                return Err(ApplyError::NoMatch {
+                    rule: name.into(),
+                    at,
+                    reason: "the 'where' guard is false".into(),
+                });
+            }
+        }
+        apply_matches(g, &b, vec![m])
+    }
+
+    /// Every non-overlapping match of rule `name` (single-hook rules), in dart order, whose
+    /// guard holds.
+    pub fn find_matches(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+    ) -> Result<Vec<Match>, ApplyError> {
+        let b = self.bind(g, name, params)?;
+        find_all(g, &b)
+    }
+
+    /// Applies rule `name` at every match at once (see the module docs).
+    pub fn apply_everywhere(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+    ) -> Result<ApplyReport, ApplyError> {
+        let b = self.bind(g, name, params)?;
+        let ms = find_all(g, &b)?;
+        apply_matches(g, &b, ms)
+    }
+
+    /// The number of matches [`RuleSet::apply_everywhere`] would apply.
+    pub fn count_matches(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+    ) -> Result<usize, ApplyError> {
+        Ok(self.find_matches(g, name, params)?.len())
+    }
+}
+
+fn emb_type(t: Ty) -> EmbeddingType {
+    match t {
+        Ty::F64 => EmbeddingType::F64,
+        Ty::I64 => EmbeddingType::I64,
+        Ty::Bool => EmbeddingType::Bool,
+        Ty::Vec2 => EmbeddingType::Vec2,
+        Ty::Vec3 => EmbeddingType::Vec3,
+        Ty::Mat(r, c) => EmbeddingType::Mat { rows: r, cols: c },
+    }
+}
+
+fn eval_err(rule: &str, dart: Dart, e: &crate::value::EvalError) -> ApplyError {
+    ApplyError::Eval {
+        rule: rule.into(),
+        dart,
+        message: e.0.clone(),
+    }
+}
+
+fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
+    let rule = b.rule;
+    if rule.hooks.len() != 1 {
+        return Err(ApplyError::Hooks {
+            rule: rule.name.clone(),
+            message: format!(
+                "it has {} hooks: apply it at explicit darts, one per hook",
+                rule.hooks.len()
+            ),
+        });
+    }
+    let mut used = Marks::with_capacity(g.capacity());
+    let mut out = Vec::new();
+    for d in g.darts() {
+        if used.is_marked(d) {
+            continue;
+        }
+        let Ok(m) = match_at(g, rule, &[d]) else {
+            continue;
+        };
+        if m.all_darts().any(|x| used.is_marked(x)) {
+            continue;
+        }
+        if let Some(guard) = &rule.guard {
+            let mut ev = Eval::new(g, b, &m);
+            let ok = ev.eval(guard, 0).map_err(|e| eval_err(&rule.name, d, &e))?;
+            if ok != Val::B(true) {
+                continue;
+            }
+        }
+        for x in m.all_darts() {
+            used.mark(x);
+        }
+        out.push(m);
+    }
+    Ok(out)
+}
+
+/// One evaluated write: the node, the embedding, and per row the value (by row class).
+struct Pending {
+    node: usize,
+    emb: usize,
+    /// For each row, its value.
+    values: Vec<Val>,
+}
+
+fn apply_matches(g: &mut GMap, b: &Bound, ms: Vec<Match>) -> Result<ApplyReport, ApplyError> {
+    let rule = b.rule;
+    // 1. evaluate every write on the map as it is
+    let mut pending: Vec<Vec<Pending>> = Vec::with_capacity(ms.len());
+    for m in &ms {
+        let mut ev = Eval::new(g, b, m);
+        let mut ps = Vec::new();
+        for s in &rule.program {
+            let TStmt::Write {
+                node,
+                emb,
+                value,
+                uniform,
+            } = s
+            else {
+                continue;
+            };
+            let classes = row_classes(m, rule.arity, uniform);
+            let mut by_class: HashMap<u32, Val> = HashMap::new();
+            let mut values = Vec::with_capacity(m.rows);
+            for (r, &cls) in classes.iter().enumerate() {
+                let v = if let Some(v) = by_class.get(&cls) {
+                    v.clone()
+                } else {
+                    ev.clear_locals();
+                    let v = ev
+                        .run_to(value, s, r)
+                        .map_err(|e| eval_err(&rule.name, m.darts[rule.hooks[0]][r], &e))?;
+                    by_class.insert(cls, v.clone());
+                    v
+                };
+                values.push(v);
+            }
+            ps.push(Pending {
+                node: *node,
+                emb: *emb,
+                values,
+            });
+        }
+        pending.push(ps);
+    }
+    // 2. rewrite the topology
+    let mut report = ApplyReport {
+        matches: ms.len(),
+        ..ApplyReport::default()
+    };
+    let mut node_darts: Vec<Vec<Vec<Dart>>> = Vec::with_capacity(ms.len());
+    if rule.changes_topology {
+        let mut changes = Vec::new();
+        let mut fresh = Vec::new();
+        let mut remove = Vec::new();
+        for m in &ms {
+            let mut nd_darts = m.darts.clone();
+            for (k, nd) in rule.nodes.iter().enumerate() {
+                if nd.left.is_none() {
+                    let first = g.add_darts(m.rows);
+                    nd_darts[k] = (0..m.rows as u32).map(|r| Dart(first.0 + r)).collect();
+                    fresh.extend(nd_darts[k].iter().copied());
+                    report.created += m.rows;
+                }
+            }
+            for (k, nd) in rule.nodes.iter().enumerate() {
+                if nd.right.is_none() {
+                    for &x in &nd_darts[k] {
+                        for i in 0..=g.dimension() {
+                            changes.push((i, x, x));
+                        }
+                        remove.push(x);
+                    }
+                    report.deleted += m.rows;
+                    continue;
+                }
+                for i in 0..=g.dimension() {
+                    let kept_mentioned = nd.is_kept() && nd.left_src[i] != Source::None;
+                    for r in 0..m.rows {
+                        let x = nd_darts[k][r];
+                        let y = match nd.right_src[i] {
+                            Source::Orbit(t) => nd_darts[k][m.next[r * rule.arity + t] as usize],
+                            Source::Arc(o) => nd_darts[o][r],
+                            Source::Loop => x,
+                            Source::None if kept_mentioned => x,
+                            Source::None => continue,
+                        };
+                        changes.push((i, x, y));
+                    }
+                }
+            }
+            node_darts.push(nd_darts);
+        }
+        g.rewire(&changes, &fresh, &remove)
+            .map_err(|source| ApplyError::Rewire {
+                rule: rule.name.clone(),
+                source,
+            })?;
+    } else {
+        node_darts = ms.iter().map(|m| m.darts.clone()).collect();
+    }
+    // 3. write, one value per orbit
+    let mut written: HashMap<(usize, usize), Val> = HashMap::new();
+    for (ps, nd_darts) in pending.into_iter().zip(&node_darts) {
+        for p in ps {
+            let id = b.ids[p.emb];
+            let e = g.embedding(id);
+            for (r, v) in p.values.into_iter().enumerate() {
+                let x = nd_darts[p.node][r];
+                let slot = e.slot(x);
+                match written.get(&(p.emb, slot)) {
+                    Some(w) if *w == v => {}
+                    Some(_) => {
+                        return Err(ApplyError::WriteConflict {
+                            rule: rule.name.clone(),
+                            embedding: b.embs[p.emb].name.clone(),
+                            dart: x,
+                        })
+                    }
+                    None => {
+                        written.insert((p.emb, slot), v);
+                    }
+                }
+            }
+        }
+    }
+    let mut by_emb: HashMap<usize, Vec<(usize, Val)>> = HashMap::new();
+    for ((emb, slot), v) in written {
+        by_emb.entry(emb).or_default().push((slot, v));
+    }
+    for (emb, writes) in by_emb {
+        let id = b.ids[emb];
+        let mut buf = Vec::new();
+        for (slot, v) in writes {
+            let value = match v {
+                Val::I(i) => Value::Int(i),
+                Val::B(x) => Value::Bool(x),
+                other => {
+                    buf.clear();
+                    other.to_reals(&mut buf);
+                    Value::Real(buf.clone())
+                }
+            };
+            g.set_slot_value(id, slot, &value)
+                .map_err(|e| ApplyError::Map(e.to_string()))?;
+        }
+    }
+    Ok(report)
+}
+
+/// Partition of the rows: rows joined through the orbit positions `uniform` share a class.
+fn row_classes(m: &Match, arity: usize, uniform: &[usize]) -> Vec<u32> {
+    let mut cls = vec![u32::MAX; m.rows];
+    let mut n = 0;
+    for r0 in 0..m.rows {
+        if cls[r0] != u32::MAX {
+            continue;
+        }
+        cls[r0] = n;
+        let mut stack = vec![r0];
+        while let Some(r) = stack.pop() {
+            for &t in uniform {
+                let s = m.next[r * arity + t] as usize;
+                if cls[s] == u32::MAX {
+                    cls[s] = n;
+                    stack.push(s);
+                }
+            }
+        }
+        n += 1;
+    }
+    cls
+}
+
+/// Evaluates expressions of one match on the map before the rule.
+struct Eval<'a> {
+    g: &'a GMap,
+    b: &'a Bound<'a>,
+    m: &'a Match,
+    locals: Vec<Option<Val>>,
+}
+
+impl<'a> Eval<'a> {
+    fn new(g: &'a GMap, b: &'a Bound<'a>, m: &'a Match) -> Self {
+        Eval {
+            g,
+            b,
+            m,
+            locals: vec![None; b.rule.n_locals],
+        }
+    }
+
+    fn clear_locals(&mut self) {
+        self.locals.iter_mut().for_each(|l| *l = None);
+    }
+
+    /// Evaluates the `let`s before statement `stop`, then `value`, at row `r`.
+    fn run_to(
+        &mut self,
+        value: &TExpr,
+        stop: &TStmt,
+        r: usize,
+    ) -> Result<Val, crate::value::EvalError> {
+        for s in &self.b.rule.program {
+            if std::ptr::eq(s, stop) {
+                break;
+            }
+            if let TStmt::Let(k, e) = s {
+                let v = self.eval(e, r)?;
+                self.locals[*k] = Some(v);
+            }
+        }
+        self.eval(value, r)
+    }
+
+    fn read(&self, emb: usize, d: Dart) -> Val {
+        let id = self.b.ids[emb];
+        let ty = self.b.embs[emb].ty;
+        match self.g.value(id, d) {
+            Ok(Value::Real(x)) => Val::from_reals(ty, &x),
+            Ok(Value::Int(i)) => Val::I(i),
+            Ok(Value::Bool(x)) => Val::B(x),
+            Err(_) => Val::zero(ty),
+        }
+    }
+
+    fn eval(&mut self, e: &TExpr, r: usize) -> Result<Val, crate::value::EvalError> {
+        Ok(match e {
+            TExpr::Const(v) => v.clone(),
+            TExpr::Param(k) => self.b.params[*k].clone(),
+            TExpr::Local(k) => self.locals[*k]
+                .clone()
+                .ok_or_else(|| crate::value::EvalError("variable used before it is set".into()))?,
+            TExpr::Read { node, emb } => self.read(*emb, self.m.darts[*node][r]),
+            TExpr::Agg {
+                kind,
+                orbit,
+                node,
+                emb,
+                ty,
+            } => self.aggregate(*kind, *orbit, self.m.darts[*node][r], *emb, *ty)?,
+            TExpr::Bin(op, a, bb) => {
+                if matches!(op, BinOp::And | BinOp::Or) {
+                    let x = self.eval(a, r)?;
+                    if (x == Val::B(false) && *op == BinOp::And)
+                        || (x == Val::B(true) && *op == BinOp::Or)
+                    {
+                        return Ok(x);
+                    }
+                    return self.eval(bb, r);
+                }
+                let x = self.eval(a, r)?;
+                let y = self.eval(bb, r)?;
+                binop(*op, &x, &y)?
+            }
+            TExpr::Un(op, a) => {
+                let x = self.eval(a, r)?;
+                unop(*op, &x)?
+            }
+            TExpr::Call(name, args) => {
+                let mut vs = Vec::with_capacity(args.len());
+                for a in args {
+                    vs.push(self.eval(a, r)?);
+                }
+                builtins::call(name, &vs)?
+            }
+            TExpr::If(c, a, bb) => {
+                if self.eval(c, r)? == Val::B(true) {
+                    self.eval(a, r)?
+                } else {
+                    self.eval(bb, r)?
+                }
+            }
+            TExpr::Block(lets, res) => {
+                for (k, v) in lets {
+                    let x = self.eval(v, r)?;
+                    self.locals[*k] = Some(x);
+                }
+                self.eval(res, r)?
+            }
+            TExpr::ToReal(a) => match self.eval(a, r)? {
+                Val::I(i) => Val::F(i as f64),
+                v => v,
+            },
+        })
+    }
+
+    fn aggregate(
+        &self,
+        kind: AggKind,
+        orbit: OrbitType,
+        d: Dart,
+        emb: Option<usize>,
+        ty: Ty,
+    ) -> Result<Val, crate::value::EvalError> {
+        let darts = self.g.orbit(d, orbit);
+        let Some(emb) = emb else {
+            return Ok(Val::I(darts.len() as i64));
+        };
+        let e = self.g.embedding(self.b.ids[emb]);
+        let mut slots: Vec<usize> = Vec::new();
+        let mut reps: Vec<Dart> = Vec::new();
+        for x in darts {
+            let s = e.slot(x);
+            if !slots.contains(&s) {
+                slots.push(s);
+                reps.push(x);
+            }
+        }
+        let mut acc: Option<Val> = None;
+        for &x in &reps {
+            let v = self.read(emb, x);
+            acc = Some(match acc {
+                None => v,
+                Some(a) => binop(BinOp::Add, &a, &v)?,
+            });
+        }
+        let total = acc.unwrap_or_else(|| Val::zero(ty));
+        Ok(match kind {
+            AggKind::Mean => {
+                let total = match total {
+                    Val::I(i) => Val::F(i as f64),
+                    v => v,
+                };
+                binop(BinOp::Div, &total, &Val::F(reps.len().max(1) as f64))?
+            }
+            _ => total,
+        })
+    }
+}
+
+impl fmt::Display for Match {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "match of {} rows", self.rows)
+    }
+}

@@ -1,0 +1,185 @@
+//! Tokens of the rule language.
+
+use crate::ast::Pos;
+
+/// A token.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Tok {
+    /// An identifier or keyword.
+    Ident(String),
+    /// An integer literal.
+    Int(i64),
+    /// A real literal (has a `.` or an exponent).
+    Real(f64),
+    /// Punctuation or operator: `{ } ( ) < > , : ; = - + * / % ! . _ == != <= >= && ||`.
+    Punct(&'static str),
+    /// End of input.
+    Eof,
+}
+
+impl Tok {
+    /// How the token reads in a message.
+    pub fn describe(&self) -> String {
+        match self {
+            Tok::Ident(s) => format!("'{s}'"),
+            Tok::Int(i) => format!("'{i}'"),
+            Tok::Real(x) => format!("'{x}'"),
+            Tok::Punct(p) => format!("'{p}'"),
+            Tok::Eof => "end of file".into(),
+        }
+    }
+}
+
+/// A lexing error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LexError {
+    /// Where.
+    pub pos: Pos,
+    /// What.
+    pub message: String,
+}
+
+const PUNCTS: [&str; 26] = [
+    "==", "!=", "<=", ">=", "&&", "||", "{", "}", "(", ")", "<", ">", ",", ":", ";", "=", "-", "+",
+    "*", "/", "%", "!", ".", "_", "[", "]",
+];
+
+/// Splits `src` into tokens with their positions; `#` starts a comment to the end of the line.
+pub fn lex(src: &str) -> Result<Vec<(Tok, Pos)>, LexError> {
+    let chars: Vec<char> = src.chars().collect();
+    let mut out = Vec::new();
+    let (mut i, mut line, mut col) = (0usize, 1u32, 1u32);
+    while i < chars.len() {
+        let c = chars[i];
+        let pos = Pos { line, col };
+        if c == '\n' {
+            i += 1;
+            line += 1;
+            col = 1;
+            continue;
+        }
+        if c.is_whitespace() {
+            i += 1;
+            col += 1;
+            continue;
+        }
+        if c == '#' {
+            while i < chars.len() && chars[i] != '\n' {
+                i += 1;
+            }
+            continue;
+        }
+        if c.is_ascii_alphabetic()
+            || (c == '_'
+                && chars
+                    .get(i + 1)
+                    .is_some_and(|n| n.is_ascii_alphanumeric() || *n == '_'))
+        {
+            let start = i;
+            while i < chars.len() && (chars[i].is_ascii_alphanumeric() || chars[i] == '_') {
+                i += 1;
+            }
+            let s: String = chars[start..i].iter().collect();
+            col += (i - start) as u32;
+            out.push((Tok::Ident(s), pos));
+            continue;
+        }
+        if c.is_ascii_digit() {
+            let start = i;
+            while i < chars.len() && chars[i].is_ascii_digit() {
+                i += 1;
+            }
+            let mut real = false;
+            if i + 1 < chars.len() && chars[i] == '.' && chars[i + 1].is_ascii_digit() {
+                real = true;
+                i += 1;
+                while i < chars.len() && chars[i].is_ascii_digit() {
+                    i += 1;
+                }
+            }
+            if i < chars.len() && (chars[i] == 'e' || chars[i] == 'E') {
+                let mut j = i + 1;
+                if j < chars.len() && (chars[j] == '+' || chars[j] == '-') {
+                    j += 1;
+                }
+                if j < chars.len() && chars[j].is_ascii_digit() {
+                    real = true;
+                    i = j;
+                    while i < chars.len() && chars[i].is_ascii_digit() {
+                        i += 1;
+                    }
+                }
+            }
+            let s: String = chars[start..i].iter().collect();
+            col += (i - start) as u32;
+            let tok = if real {
+                Tok::Real(s.parse().map_err(|_| LexError {
+                    pos,
+                    message: format!("bad number '{s}'"),
+                })?)
+            } else {
+                Tok::Int(s.parse().map_err(|_| LexError {
+                    pos,
+                    message: format!("integer '{s}' is too large"),
+                })?)
+            };
+            out.push((tok, pos));
+            continue;
+        }
+        let rest: String = chars[i..(i + 2).min(chars.len())].iter().collect();
+        if let Some(p) = PUNCTS.iter().find(|p| rest.starts_with(**p)) {
+            i += p.len();
+            col += p.len() as u32;
+            out.push((Tok::Punct(p), pos));
+            continue;
+        }
+        return Err(LexError {
+            pos,
+            message: format!("unexpected character {c:?}"),
+        });
+    }
+    out.push((Tok::Eof, Pos { line, col }));
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lexes_arcs_orbits_and_numbers() {
+        let t: Vec<Tok> = lex("a -2- b <0,_> 1.5e-3 2 x_1 # c\n>=")
+            .unwrap()
+            .into_iter()
+            .map(|x| x.0)
+            .collect();
+        assert_eq!(
+            t,
+            vec![
+                Tok::Ident("a".into()),
+                Tok::Punct("-"),
+                Tok::Int(2),
+                Tok::Punct("-"),
+                Tok::Ident("b".into()),
+                Tok::Punct("<"),
+                Tok::Int(0),
+                Tok::Punct(","),
+                Tok::Punct("_"),
+                Tok::Punct(">"),
+                Tok::Real(1.5e-3),
+                Tok::Int(2),
+                Tok::Ident("x_1".into()),
+                Tok::Punct(">="),
+                Tok::Eof
+            ]
+        );
+    }
+
+    #[test]
+    fn positions_are_line_and_column() {
+        let t = lex("a\n  bb $").unwrap_err();
+        assert_eq!(t.pos, Pos { line: 2, col: 6 });
+        let ok = lex("a\n  bb").unwrap();
+        assert_eq!(ok[1].1, Pos { line: 2, col: 3 });
+    }
+}

@@ -1,0 +1,675 @@
+//! The parser: tokens to a [`File`](crate::ast::File). Recursive descent; the first error
+//! stops it and names its line and column.
+
+use crate::ast::{
+    AggKind, ArcDecl, EmbeddingDecl, Expr, ExprKind, File, Graph, Label, NodeDecl, Param, Pos,
+    RuleDecl, Stmt,
+};
+use crate::lexer::{lex, Tok};
+use crate::value::{BinOp, UnOp};
+
+/// A syntax error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SyntaxError {
+    /// Where.
+    pub pos: Pos,
+    /// What.
+    pub message: String,
+}
+
+/// Parses a whole rule file.
+pub fn parse(src: &str) -> Result<File, SyntaxError> {
+    let toks = lex(src).map_err(|e| SyntaxError {
+        pos: e.pos,
+        message: e.message,
+    })?;
+    let mut p = Parser {
+        toks,
+        at: 0,
+        depth: 0,
+    };
+    p.file()
+}
+
+/// Deepest nesting of expressions accepted (deeper input is refused, never a stack overflow).
+const MAX_DEPTH: u32 = 200;
+
+struct Parser {
+    toks: Vec<(Tok, Pos)>,
+    at: usize,
+    depth: u32,
+}
+
+type R<T> = Result<T, SyntaxError>;
+
+impl Parser {
+    fn peek(&self) -> &Tok {
+        &self.toks[self.at].0
+    }
+
+    fn peek_at(&self, k: usize) -> &Tok {
+        &self.toks[(self.at + k).min(self.toks.len() - 1)].0
+    }
+
+    fn pos(&self) -> Pos {
+        self.toks[self.at].1
+    }
+
+    fn bump(&mut self) -> (Tok, Pos) {
+        let t = self.toks[self.at].clone();
+        if self.at + 1 < self.toks.len() {
+            self.at += 1;
+        }
+        t
+    }
+
+    fn err<T>(&self, message: impl Into<String>) -> R<T> {
+        Err(SyntaxError {
+            pos: self.pos(),
+            message: message.into(),
+        })
+    }
+
+    fn is_punct(&self, p: &str) -> bool {
+        matches!(self.peek(), Tok::Punct(q) if *q == p)
+    }
+
+    fn is_kw(&self, k: &str) -> bool {
+        matches!(self.peek(), Tok::Ident(s) if s == k)
+    }
+
+    fn eat_punct(&mut self, p: &str) -> bool {
+        if self.is_punct(p) {
+            self.bump();
+            true
+        } else {
+            false
+        }
+    }
+
+    fn expect_punct(&mut self, p: &str, what: &str) -> R<Pos> {
+        if self.is_punct(p) {
+            Ok(self.bump().1)
+        } else {
+            self.err(format!(
+                "expected '{p}' {what}, found {}",
+                self.peek().describe()
+            ))
+        }
+    }
+
+    fn ident(&mut self, what: &str) -> R<(String, Pos)> {
+        match self.peek().clone() {
+            Tok::Ident(s) => {
+                let p = self.bump().1;
+                Ok((s, p))
+            }
+            t => self.err(format!("expected {what}, found {}", t.describe())),
+        }
+    }
+
+    fn int(&mut self, what: &str) -> R<(i64, Pos)> {
+        match self.peek().clone() {
+            Tok::Int(i) => {
+                let p = self.bump().1;
+                Ok((i, p))
+            }
+            t => self.err(format!("expected {what}, found {}", t.describe())),
+        }
+    }
+
+    fn file(&mut self) -> R<File> {
+        let mut f = File::default();
+        loop {
+            match self.peek().clone() {
+                Tok::Eof => return Ok(f),
+                Tok::Ident(k) if k == "dimension" => {
+                    let p = self.bump().1;
+                    let (n, _) = self.int("a dimension (2 or 3)")?;
+                    if f.dimension.is_some() {
+                        return Err(SyntaxError {
+                            pos: p,
+                            message: "'dimension' given twice".into(),
+                        });
+                    }
+                    f.dimension = Some((u32::try_from(n).unwrap_or(u32::MAX), p));
+                    self.eat_punct(";");
+                }
+                Tok::Ident(k) if k == "embedding" => {
+                    let e = self.embedding()?;
+                    f.embeddings.push(e);
+                }
+                Tok::Ident(k) if k == "rule" => {
+                    let r = self.rule()?;
+                    f.rules.push(r);
+                }
+                t => {
+                    return self.err(format!(
+                        "expected 'dimension', 'embedding' or 'rule', found {}",
+                        t.describe()
+                    ))
+                }
+            }
+        }
+    }
+
+    fn orbit_dims(&mut self) -> R<Vec<u32>> {
+        self.expect_punct("<", "to open an orbit")?;
+        let mut v = Vec::new();
+        if self.eat_punct(">") {
+            return Ok(v);
+        }
+        loop {
+            let (i, _) = self.int("a dimension in the orbit")?;
+            v.push(u32::try_from(i).unwrap_or(u32::MAX));
+            if self.eat_punct(">") {
+                return Ok(v);
+            }
+            self.expect_punct(",", "between orbit dimensions")?;
+        }
+    }
+
+    fn type_name(&mut self) -> R<String> {
+        Ok(self
+            .ident("a type (f64, i64, bool, vec2, vec3, matN, matRxC)")?
+            .0)
+    }
+
+    /// `embedding name : type on <o> [policy p] [derived agg(source)]`
+    fn embedding(&mut self) -> R<EmbeddingDecl> {
+        let pos = self.bump().1;
+        let (name, _) = self.ident("an embedding name")?;
+        self.expect_punct(":", "after the embedding name")?;
+        let ty = self.type_name()?;
+        if !self.is_kw("on") {
+            return self.err(format!(
+                "expected 'on' and an orbit after the type, found {}",
+                self.peek().describe()
+            ));
+        }
+        self.bump();
+        let orbit = self.orbit_dims()?;
+        let mut decl = EmbeddingDecl {
+            name,
+            ty,
+            orbit,
+            policy: None,
+            derived: None,
+            pos,
+        };
+        loop {
+            if self.is_kw("policy") {
+                self.bump();
+                decl.policy = Some(self.ident("a policy (copy, sum, mean, error)")?.0);
+            } else if self.is_kw("derived") {
+                self.bump();
+                let (agg, _) = self.ident("an aggregate (sum, mean, count)")?;
+                self.expect_punct("(", "around the source embedding")?;
+                let (src, _) = self.ident("the source embedding")?;
+                self.expect_punct(")", "after the source embedding")?;
+                decl.derived = Some((agg, src));
+            } else {
+                break;
+            }
+        }
+        self.eat_punct(";");
+        Ok(decl)
+    }
+
+    fn rule(&mut self) -> R<RuleDecl> {
+        let pos = self.bump().1;
+        let (name, _) = self.ident("a rule name")?;
+        let mut params = Vec::new();
+        if self.eat_punct("(") {
+            if !self.eat_punct(")") {
+                loop {
+                    let (pname, ppos) = self.ident("a parameter name")?;
+                    self.expect_punct(":", "after the parameter name")?;
+                    let ty = self.type_name()?;
+                    params.push(Param {
+                        name: pname,
+                        ty,
+                        pos: ppos,
+                    });
+                    if self.eat_punct(")") {
+                        break;
+                    }
+                    self.expect_punct(",", "between parameters")?;
+                }
+            }
+        }
+        self.expect_punct("{", "to open the rule")?;
+        let mut r = RuleDecl {
+            name,
+            params,
+            left: None,
+            right: None,
+            compute: Vec::new(),
+            guard: None,
+            pos,
+        };
+        loop {
+            if self.eat_punct("}") {
+                return Ok(r);
+            }
+            let (kw, kpos) = self.ident("'left', 'right', 'compute', 'where' or '}'")?;
+            let dup = |what: &str| SyntaxError {
+                pos: kpos,
+                message: format!("'{what}' given twice in one rule"),
+            };
+            match kw.as_str() {
+                "left" => {
+                    if r.left.is_some() {
+                        return Err(dup("left"));
+                    }
+                    r.left = Some(self.graph(kpos)?);
+                }
+                "right" => {
+                    if r.right.is_some() {
+                        return Err(dup("right"));
+                    }
+                    r.right = Some(self.graph(kpos)?);
+                }
+                "compute" => {
+                    self.expect_punct("{", "to open the compute block")?;
+                    while !self.eat_punct("}") {
+                        let s = self.stmt()?;
+                        r.compute.push(s);
+                    }
+                }
+                "where" => {
+                    if r.guard.is_some() {
+                        return Err(dup("where"));
+                    }
+                    r.guard = Some(self.expr()?);
+                    self.eat_punct(";");
+                }
+                other => {
+                    return Err(SyntaxError {
+                        pos: kpos,
+                        message: format!(
+                            "expected 'left', 'right', 'compute', 'where' or '}}', found '{other}'"
+                        ),
+                    })
+                }
+            }
+        }
+    }
+
+    fn graph(&mut self, pos: Pos) -> R<Graph> {
+        self.expect_punct("{", "to open the graph")?;
+        let mut g = Graph {
+            pos,
+            ..Graph::default()
+        };
+        loop {
+            if self.eat_punct("}") {
+                return Ok(g);
+            }
+            let (a, apos) = self.ident("a node name or '}'")?;
+            if self.eat_punct(":") {
+                let orbit_pos = self.pos();
+                self.expect_punct("<", "to open the node's orbit type")?;
+                let mut orbit: Vec<Label> = Vec::new();
+                if !self.eat_punct(">") {
+                    loop {
+                        if self.eat_punct("_") {
+                            orbit.push(None);
+                        } else {
+                            let (i, _) = self.int("a dimension or '_'")?;
+                            orbit.push(Some(u8::try_from(i).unwrap_or(u8::MAX)));
+                        }
+                        if self.eat_punct(">") {
+                            break;
+                        }
+                        self.expect_punct(",", "between orbit labels")?;
+                    }
+                }
+                let hook = if self.is_kw("hook") {
+                    self.bump();
+                    true
+                } else {
+                    false
+                };
+                g.nodes.push(NodeDecl {
+                    name: a,
+                    orbit,
+                    hook,
+                    pos: apos,
+                    orbit_pos,
+                });
+            } else if self.eat_punct("-") {
+                let (d, _) = self.int("the arc's dimension, as in a -2- b")?;
+                self.expect_punct("-", "after the arc's dimension, as in a -2- b")?;
+                let (b, _) = self.ident("the arc's second node")?;
+                g.arcs.push(ArcDecl {
+                    a,
+                    dim: u32::try_from(d).unwrap_or(u32::MAX),
+                    b,
+                    pos: apos,
+                });
+            } else {
+                return self.err(format!(
+                    "expected ':' (a node) or '-' (an arc) after '{a}', found {}",
+                    self.peek().describe()
+                ));
+            }
+            self.eat_punct(";");
+            self.eat_punct(",");
+        }
+    }
+
+    fn stmt(&mut self) -> R<Stmt> {
+        let pos = self.pos();
+        if self.is_kw("let") {
+            self.bump();
+            let (name, _) = self.ident("a variable name")?;
+            self.expect_punct("=", "after the variable name")?;
+            let value = self.expr()?;
+            self.eat_punct(";");
+            return Ok(Stmt::Let { name, value, pos });
+        }
+        let (node, _) = self.ident("'let' or a write 'node.embedding = ...'")?;
+        self.expect_punct(".", "in a write 'node.embedding = ...'")?;
+        let (emb, _) = self.ident("an embedding name")?;
+        self.expect_punct("=", "in a write 'node.embedding = ...'")?;
+        let value = self.expr()?;
+        self.eat_punct(";");
+        Ok(Stmt::Write {
+            node,
+            emb,
+            value,
+            pos,
+        })
+    }
+
+    fn expr(&mut self) -> R<Expr> {
+        self.depth += 1;
+        if self.depth > MAX_DEPTH {
+            return self.err("expression nested too deeply");
+        }
+        let r = self.binary(0);
+        self.depth -= 1;
+        r
+    }
+
+    fn binary(&mut self, min_prec: u8) -> R<Expr> {
+        let mut lhs = self.unary()?;
+        loop {
+            let Some((op, prec)) = self.binop() else {
+                return Ok(lhs);
+            };
+            if prec < min_prec {
+                return Ok(lhs);
+            }
+            let pos = self.bump().1;
+            let rhs = self.binary(prec + 1)?;
+            lhs = Expr {
+                kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
+                pos,
+            };
+        }
+    }
+
+    fn binop(&self) -> Option<(BinOp, u8)> {
+        let Tok::Punct(p) = self.peek() else {
+            return None;
+        };
+        Some(match *p {
+            "||" => (BinOp::Or, 1),
+            "&&" => (BinOp::And, 2),
+            "==" => (BinOp::Eq, 3),
+            "!=" => (BinOp::Ne, 3),
+            "<" => (BinOp::Lt, 4),
+            "<=" => (BinOp::Le, 4),
+            ">" => (BinOp::Gt, 4),
+            ">=" => (BinOp::Ge, 4),
+            "+" => (BinOp::Add, 5),
+            "-" => (BinOp::Sub, 5),
+            "*" => (BinOp::Mul, 6),
+            "/" => (BinOp::Div, 6),
+            "%" => (BinOp::Rem, 6),
+            _ => return None,
+        })
+    }
+
+    fn unary(&mut self) -> R<Expr> {
+        let pos = self.pos();
+        if self.eat_punct("-") {
+            self.depth += 1;
+            if self.depth > MAX_DEPTH {
+                return self.err("expression nested too deeply");
+            }
+            let e = self.unary()?;
+            self.depth -= 1;
+            return Ok(Expr {
+                kind: ExprKind::Unary(UnOp::Neg, Box::new(e)),
+                pos,
+            });
+        }
+        if self.eat_punct("!") {
+            self.depth += 1;
+            if self.depth > MAX_DEPTH {
+                return self.err("expression nested too deeply");
+            }
+            let e = self.unary()?;
+            self.depth -= 1;
+            return Ok(Expr {
+                kind: ExprKind::Unary(UnOp::Not, Box::new(e)),
+                pos,
+            });
+        }
+        self.primary()
+    }
+
+    fn primary(&mut self) -> R<Expr> {
+        let pos = self.pos();
+        let (tok, _) = self.bump();
+        let kind = match tok {
+            Tok::Int(i) => ExprKind::Int(i),
+            Tok::Real(x) => ExprKind::Real(x),
+            Tok::Punct("(") => {
+                let e = self.expr()?;
+                self.expect_punct(")", "to close the parenthesis")?;
+                return Ok(e);
+            }
+            Tok::Punct("{") => return self.block(pos),
+            Tok::Ident(s) => match s.as_str() {
+                "true" => ExprKind::Bool(true),
+                "false" => ExprKind::Bool(false),
+                "if" => {
+                    let c = self.expr()?;
+                    let open = self.pos();
+                    self.expect_punct("{", "to open the 'if' branch")?;
+                    let a = self.block(open)?;
+                    if !self.is_kw("else") {
+                        return self.err("an 'if' expression needs an 'else' branch");
+                    }
+                    self.bump();
+                    let b = if self.is_kw("if") {
+                        self.primary()?
+                    } else {
+                        let open = self.pos();
+                        self.expect_punct("{", "to open the 'else' branch")?;
+                        self.block(open)?
+                    };
+                    ExprKind::If(Box::new(c), Box::new(a), Box::new(b))
+                }
+                "sum" | "mean" | "count" if self.is_punct("<") => {
+                    let kind = match s.as_str() {
+                        "sum" => AggKind::Sum,
+                        "mean" => AggKind::Mean,
+                        _ => AggKind::Count,
+                    };
+                    let orbit = self.orbit_dims()?;
+                    self.expect_punct("(", "around the aggregate's argument")?;
+                    let (node, _) = self.ident("a node name")?;
+                    let emb = if kind == AggKind::Count {
+                        None
+                    } else {
+                        self.expect_punct(".", "in 'node.embedding'")?;
+                        Some(self.ident("an embedding name")?.0)
+                    };
+                    self.expect_punct(")", "to close the aggregate")?;
+                    ExprKind::Aggregate {
+                        kind,
+                        orbit,
+                        node,
+                        emb,
+                    }
+                }
+                _ if self.is_punct("(") => {
+                    self.bump();
+                    let mut args = Vec::new();
+                    if !self.eat_punct(")") {
+                        loop {
+                            args.push(self.expr()?);
+                            if self.eat_punct(")") {
+                                break;
+                            }
+                            self.expect_punct(",", "between arguments")?;
+                        }
+                    }
+                    ExprKind::Call { name: s, args }
+                }
+                _ if self.is_punct(".") && matches!(self.peek_at(1), Tok::Ident(_)) => {
+                    self.bump();
+                    let (emb, _) = self.ident("an embedding name")?;
+                    ExprKind::Read { node: s, emb }
+                }
+                _ => ExprKind::Name(s),
+            },
+            t => {
+                return Err(SyntaxError {
+                    pos,
+                    message: format!("expected an expression, found {}", t.describe()),
+                })
+            }
+        };
+        Ok(Expr { kind, pos })
+    }
+
+    /// `{ let x = e; ...; result }` (the `{` is consumed).
+    fn block(&mut self, pos: Pos) -> R<Expr> {
+        let mut stmts = Vec::new();
+        while self.is_kw("let") {
+            let spos = self.pos();
+            self.bump();
+            let (name, _) = self.ident("a variable name")?;
+            self.expect_punct("=", "after the variable name")?;
+            let value = self.expr()?;
+            self.eat_punct(";");
+            stmts.push(Stmt::Let {
+                name,
+                value,
+                pos: spos,
+            });
+        }
+        let e = self.expr()?;
+        self.expect_punct("}", "to close the block")?;
+        if stmts.is_empty() {
+            Ok(e)
+        } else {
+            Ok(Expr {
+                kind: ExprKind::Block(stmts, Box::new(e)),
+                pos,
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const EXAMPLE: &str = "dimension 2
+embedding position : vec3 on <1,2>
+embedding weight   : f64  on <0,1>
+
+# a computation rule: the right side is the left side
+rule face_weight {
+  left { n0 : <0,1> hook }
+  compute { n0.weight = count<0,1>(n0) }
+}
+
+# triangulate a face of any degree (topology change, with relabelling)
+rule triangulate_face {
+  left  { n0 : <0,1> hook }
+  right {
+    n0 : <0,_>
+    n1 : <_,2>
+    n2 : <1,2>
+    n0 -1- n1
+    n1 -0- n2
+  }
+  compute { n2.position = mean<0,1>(n0.position) }
+}
+
+rule unsew_edge {
+  left  { a : <0> hook   b : <0>   a -2- b }
+  right { a : <0>        b : <0> }
+}
+";
+
+    #[test]
+    fn the_issue_example_parses() {
+        let f = parse(EXAMPLE).unwrap();
+        assert_eq!(f.dimension.map(|d| d.0), Some(2));
+        assert_eq!(f.embeddings.len(), 2);
+        assert_eq!(f.rules.len(), 3);
+        let t = &f.rules[1];
+        let right = t.right.as_ref().unwrap();
+        assert_eq!(right.nodes[0].orbit, vec![Some(0), None]);
+        assert_eq!(right.arcs.len(), 2);
+        assert_eq!(right.arcs[1].dim, 0);
+        assert!(f.rules[2].left.as_ref().unwrap().nodes[0].hook);
+    }
+
+    #[test]
+    fn params_guards_and_expressions() {
+        let f = parse(
+            "rule integrate(dt: f64, gravity: vec3) {
+               left { v : <1,2> hook }
+               where v.mass > 0.0 && !(dt <= 0)
+               compute {
+                 let a = gravity + v.force / v.mass
+                 v.velocity = v.velocity + dt * a;
+                 v.position = if dt > 1 { v.position } else { v.position + dt * v.velocity }
+               }
+             }",
+        )
+        .unwrap();
+        let r = &f.rules[0];
+        assert_eq!(r.params.len(), 2);
+        assert!(r.guard.is_some());
+        assert_eq!(r.compute.len(), 3);
+    }
+
+    #[test]
+    fn errors_name_line_and_column() {
+        let e = parse("dimension 2\nrule r {\n  left { a <0> }\n}").unwrap_err();
+        assert_eq!(e.pos, Pos { line: 3, col: 12 });
+        assert!(e.message.contains("expected ':'"), "{}", e.message);
+        let e = parse("rule r { left { a : <0> hook } compute { a.w = (1 + } }").unwrap_err();
+        assert!(
+            e.message.contains("expected an expression"),
+            "{}",
+            e.message
+        );
+    }
+
+    #[test]
+    fn deep_nesting_is_an_error_not_a_crash() {
+        let src = format!(
+            "rule r {{ left {{ a : <0> hook }} compute {{ a.w = {}1{} }} }}",
+            "(".repeat(5000),
+            ")".repeat(5000)
+        );
+        assert!(parse(&src).unwrap_err().message.contains("too deeply"));
+        let src = format!(
+            "rule r {{ left {{ a : <0> hook }} compute {{ a.w = {}1 }} }}",
+            "-".repeat(5000)
+        );
+        assert!(parse(&src).unwrap_err().message.contains("too deeply"));
+    }
+}
