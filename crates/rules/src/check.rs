@@ -1016,7 +1016,6 @@ fn components(
     orbit: OrbitType,
     present: impl Fn(usize) -> bool,
 ) -> Vec<usize> {
-    let mut comp: Vec<usize> = (0..n).collect();
     fn find(c: &mut [usize], x: usize) -> usize {
         let mut r = x;
         while c[r] != r {
@@ -1025,6 +1024,7 @@ fn components(
         c[x] = r;
         r
     }
+    let mut comp: Vec<usize> = (0..n).collect();
     for &(a, i, b) in arcs {
         if orbit.contains(i as usize) && present(a) && present(b) {
             let (ra, rb) = (find(&mut comp, a), find(&mut comp, b));
@@ -1149,6 +1149,7 @@ struct ExprCheck<'a, 'c> {
 }
 
 impl ExprCheck<'_, '_> {
+    #[allow(clippy::needless_pass_by_value)] // callers build the message with format!
     fn err(&mut self, pos: Pos, cond: &'static str, msg: String) {
         self.c
             .error(pos, cond, format!("rule '{}': {msg}", self.rn));
@@ -1242,7 +1243,7 @@ impl ExprCheck<'_, '_> {
                     (_, Some(em)) => {
                         let ei = self.emb(em, pos)?;
                         let t = self.embs[ei].ty;
-                        if !t.is_real() && !(t == Ty::I64 && *kind == AggKind::Sum) {
+                        if !(t.is_real() || t == Ty::I64 && *kind == AggKind::Sum) {
                             self.err(
                                 pos,
                                 "type",

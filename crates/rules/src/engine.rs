@@ -201,11 +201,13 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
     }
     // arcs and loops
     for &(a, i, b) in &rule.left_arcs {
-        for r in 0..rows {
-            let x = darts[a][r];
+        for (r, &x) in darts[a].iter().enumerate() {
             let y = g.alpha(i as usize, x);
             if a != b && y == x {
-                return Err(format!("arc {} -{i}- {}: dart {x} is {i}-free", rule.nodes[a].name, rule.nodes[b].name));
+                return Err(format!(
+                    "arc {} -{i}- {}: dart {x} is {i}-free",
+                    rule.nodes[a].name, rule.nodes[b].name
+                ));
             }
             if y != darts[b][r] {
                 let what = if a == b {
@@ -444,7 +446,7 @@ impl RuleSet {
                 });
             }
         }
-        apply_matches(g, &b, vec![m])
+        apply_matches(g, &b, &[m])
     }
 
     /// Every non-overlapping match of rule `name` (single-hook rules), in dart order, whose
@@ -468,7 +470,7 @@ impl RuleSet {
     ) -> Result<ApplyReport, ApplyError> {
         let b = self.bind(g, name, params)?;
         let ms = find_all(g, &b)?;
-        apply_matches(g, &b, ms)
+        apply_matches(g, &b, &ms)
     }
 
     /// The number of matches [`RuleSet::apply_everywhere`] would apply.
@@ -547,11 +549,11 @@ struct Pending {
     values: Vec<Val>,
 }
 
-fn apply_matches(g: &mut GMap, b: &Bound, ms: Vec<Match>) -> Result<ApplyReport, ApplyError> {
+fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, ApplyError> {
     let rule = b.rule;
     // 1. evaluate every write on the map as it is
     let mut pending: Vec<Vec<Pending>> = Vec::with_capacity(ms.len());
-    for m in &ms {
+    for m in ms {
         let mut ev = Eval::new(g, b, m);
         let mut ps = Vec::new();
         for s in &rule.program {
@@ -588,17 +590,17 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: Vec<Match>) -> Result<ApplyReport,
         }
         pending.push(ps);
     }
-    // 2. rewrite the topology
+    // 2. the new topology, planned but not applied yet
     let mut report = ApplyReport {
         matches: ms.len(),
         ..ApplyReport::default()
     };
     let mut node_darts: Vec<Vec<Vec<Dart>>> = Vec::with_capacity(ms.len());
+    let mut changes = Vec::new();
+    let mut fresh = Vec::new();
+    let mut remove = Vec::new();
     if rule.changes_topology {
-        let mut changes = Vec::new();
-        let mut fresh = Vec::new();
-        let mut remove = Vec::new();
-        for m in &ms {
+        for m in ms {
             let mut nd_darts = m.darts.clone();
             for (k, nd) in rule.nodes.iter().enumerate() {
                 if nd.left.is_none() {
@@ -636,39 +638,66 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: Vec<Match>) -> Result<ApplyReport,
             }
             node_darts.push(nd_darts);
         }
-        g.rewire(&changes, &fresh, &remove)
-            .map_err(|source| ApplyError::Rewire {
-                rule: rule.name.clone(),
-                source,
-            })?;
     } else {
         node_darts = ms.iter().map(|m| m.darts.clone()).collect();
     }
-    // 3. write, one value per orbit
-    let mut written: HashMap<(usize, usize), Val> = HashMap::new();
-    for (ps, nd_darts) in pending.into_iter().zip(&node_darts) {
+    // 3. one value per orbit of the result: checked on the planned topology, before any change
+    let overlay: HashMap<(usize, Dart), Dart> =
+        changes.iter().map(|&(i, a, b)| ((i, a), b)).collect();
+    let mut groups: HashMap<usize, HashMap<Dart, u32>> = HashMap::new();
+    let mut written: HashMap<(usize, u32), (Val, Dart)> = HashMap::new();
+    let mut conflict = None;
+    'outer: for (ps, nd_darts) in pending.iter().zip(&node_darts) {
         for p in ps {
-            let id = b.ids[p.emb];
-            let e = g.embedding(id);
-            for (r, v) in p.values.into_iter().enumerate() {
+            let orbit = b.embs[p.emb].orbit;
+            let group = groups.entry(p.emb).or_default();
+            for (r, v) in p.values.iter().enumerate() {
                 let x = nd_darts[p.node][r];
-                let slot = e.slot(x);
-                match written.get(&(p.emb, slot)) {
-                    Some(w) if *w == v => {}
+                let id = if rule.changes_topology {
+                    orbit_id(g, &overlay, group, x, orbit)
+                } else {
+                    g.embedding(b.ids[p.emb]).slot(x) as u32
+                };
+                match written.get(&(p.emb, id)) {
+                    Some((w, _)) if w == v => {}
                     Some(_) => {
-                        return Err(ApplyError::WriteConflict {
+                        conflict = Some(ApplyError::WriteConflict {
                             rule: rule.name.clone(),
                             embedding: b.embs[p.emb].name.clone(),
                             dart: x,
-                        })
+                        });
+                        break 'outer;
                     }
                     None => {
-                        written.insert((p.emb, slot), v);
+                        written.insert((p.emb, id), (v.clone(), x));
                     }
                 }
             }
         }
     }
+    let undo_fresh = |g: &mut GMap| {
+        for &d in &fresh {
+            let _ = g.remove_dart(d);
+        }
+    };
+    if let Some(c) = conflict {
+        undo_fresh(g);
+        return Err(c);
+    }
+    // 4. rewrite the topology, then write
+    if rule.changes_topology {
+        if let Err(source) = g.rewire(&changes, &fresh, &remove) {
+            undo_fresh(g);
+            return Err(ApplyError::Rewire {
+                rule: rule.name.clone(),
+                source,
+            });
+        }
+    }
+    let written: HashMap<(usize, usize), Val> = written
+        .into_iter()
+        .map(|((emb, _), (v, x))| ((emb, g.embedding(b.ids[emb]).slot(x)), v))
+        .collect();
     let mut by_emb: HashMap<usize, Vec<(usize, Val)>> = HashMap::new();
     for ((emb, slot), v) in written {
         by_emb.entry(emb).or_default().push((slot, v));
@@ -691,6 +720,39 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: Vec<Match>) -> Result<ApplyReport,
         }
     }
     Ok(report)
+}
+
+/// A number naming the orbit `o` of `x` in the map as it will be after `overlay` is applied
+/// (the same number for every dart of one orbit); `ids` caches what was walked.
+fn orbit_id(
+    g: &GMap,
+    overlay: &HashMap<(usize, Dart), Dart>,
+    ids: &mut HashMap<Dart, u32>,
+    x: Dart,
+    o: OrbitType,
+) -> u32 {
+    if let Some(&id) = ids.get(&x) {
+        return id;
+    }
+    let id = x.0;
+    ids.insert(x, id);
+    let mut stack = vec![x];
+    while let Some(y) = stack.pop() {
+        for i in o.dims() {
+            if i > g.dimension() {
+                continue;
+            }
+            let z = overlay
+                .get(&(i, y))
+                .copied()
+                .unwrap_or_else(|| g.alpha(i, y));
+            if let std::collections::hash_map::Entry::Vacant(e) = ids.entry(z) {
+                e.insert(id);
+                stack.push(z);
+            }
+        }
+    }
+    id
 }
 
 /// Partition of the rows: rows joined through the orbit positions `uniform` share a class.

@@ -220,8 +220,8 @@ impl Parser {
         let pos = self.bump().1;
         let (name, _) = self.ident("a rule name")?;
         let mut params = Vec::new();
-        if self.eat_punct("(") {
-            if !self.eat_punct(")") {
+        if self.eat_punct("(") && !self.eat_punct(")") {
+            {
                 loop {
                     let (pname, ppos) = self.ident("a parameter name")?;
                     self.expect_punct(":", "after the parameter name")?;

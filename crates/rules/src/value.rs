@@ -11,6 +11,17 @@
 //!
 //! Integer promotion: an `i64` operand mixed with a real operand (`f64`, vector, matrix) is
 //! converted to `f64`, so `2 * v`, `x + 1` and `m / 2` work; `i64` with `i64` stays integer.
+//!
+//! ```
+//! use topomech_rules::value::{binop, binop_type, BinOp, Ty, Val};
+//!
+//! assert_eq!(binop_type(BinOp::Mul, Ty::I64, Ty::Vec3), Ok(Ty::Vec3));
+//! assert_eq!(binop_type(BinOp::Mul, Ty::Mat(12, 3), Ty::Vec3), Ok(Ty::Mat(12, 1)));
+//! assert!(binop_type(BinOp::Mul, Ty::Vec3, Ty::Vec3).unwrap_err().contains("dot(a, b)"));
+//! let v = binop(BinOp::Mul, &Val::I(2), &Val::V3([1.0, 2.0, 3.0])).unwrap();
+//! assert_eq!(v, Val::V3([2.0, 4.0, 6.0]));
+//! assert!(binop(BinOp::Div, &Val::I(1), &Val::I(0)).is_err());
+//! ```
 
 use std::fmt;
 
@@ -77,12 +88,11 @@ impl Ty {
             _ => {}
         }
         let dims = s.strip_prefix("mat")?;
-        let (r, c) = match dims.split_once('x') {
-            Some((r, c)) => (parse_dim(r)?, parse_dim(c)?),
-            None => {
-                let n = parse_dim(dims)?;
-                (n, n)
-            }
+        let (r, c) = if let Some((r, c)) = dims.split_once('x') {
+            (parse_dim(r)?, parse_dim(c)?)
+        } else {
+            let n = parse_dim(dims)?;
+            (n, n)
         };
         Some(Ty::Mat(r, c))
     }
@@ -90,7 +100,7 @@ impl Ty {
     /// The type of a matrix of `rows x cols`, if both are in `1..=12`.
     pub fn mat(rows: usize, cols: usize) -> Option<Ty> {
         let ok = |n: usize| (1..=usize::from(MAX_MAT)).contains(&n);
-        (ok(rows) && ok(cols)).then(|| Ty::Mat(rows as u8, cols as u8))
+        (ok(rows) && ok(cols)).then_some(Ty::Mat(rows as u8, cols as u8))
     }
 }
 
@@ -171,6 +181,7 @@ impl Mat {
     ///
     /// # Panics
     /// If `self.cols != o.rows`.
+    #[must_use]
     pub fn mul(&self, o: &Mat) -> Mat {
         assert_eq!(
             self.cols, o.rows,
@@ -190,6 +201,7 @@ impl Mat {
     }
 
     /// The transpose.
+    #[must_use]
     pub fn transpose(&self) -> Mat {
         let mut t = Mat::zeros(self.cols, self.rows);
         for i in 0..self.rows {
@@ -682,6 +694,8 @@ pub fn unop(op: UnOp, a: &Val) -> Result<Val, EvalError> {
 }
 
 #[cfg(test)]
+// Exact comparisons are intended: the expected values are exactly representable results.
+#[allow(clippy::float_cmp)]
 mod tests {
     use super::*;
 
@@ -772,8 +786,8 @@ mod tests {
         assert_eq!(Ty::mat(0, 1), None);
     }
 
-    /// from_reals and to_reals are inverse, zero has its type, and the accessors only answer
-    /// for their kind (as_f64 also promotes an integer).
+    /// `from_reals` and `to_reals` are inverse, `zero` has its type, and the accessors only
+    /// answer for their kind (`as_f64` also promotes an integer).
     #[test]
     fn reals_round_trip_and_accessors() {
         for t in sample_types() {

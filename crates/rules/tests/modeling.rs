@@ -9,7 +9,13 @@ use topomech_rules::{library, load_sources, Params, RuleSet};
 
 fn rules(dim: usize) -> RuleSet {
     let (r, warnings) = load_sources(&[library(dim).unwrap()]).unwrap_or_else(|e| {
-        panic!("{}", e.iter().map(ToString::to_string).collect::<Vec<_>>().join("\n"))
+        panic!(
+            "{}",
+            e.iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join("\n")
+        )
     });
     assert!(warnings.is_empty(), "{warnings:?}");
     r
@@ -23,10 +29,16 @@ fn meshes2() -> Vec<Mesh> {
 }
 
 fn meshes3() -> Vec<Mesh> {
-    [BoxElement::Tetra, BoxElement::Hexa, BoxElement::Wedge, BoxElement::Pyramid, BoxElement::Mixed]
-        .into_iter()
-        .map(|e| cuboid([2, 2, 1], [2.0, 2.0, 1.0], e))
-        .collect()
+    [
+        BoxElement::Tetra,
+        BoxElement::Hexa,
+        BoxElement::Wedge,
+        BoxElement::Pyramid,
+        BoxElement::Mixed,
+    ]
+    .into_iter()
+    .map(|e| cuboid([2, 2, 1], [2.0, 2.0, 1.0], e))
+    .collect()
 }
 
 fn map(m: &Mesh) -> GMap {
@@ -42,10 +54,31 @@ fn sum_face_degrees(m: &Mesh) -> usize {
     let mut total = 0;
     for (k, c) in m.kinds.iter().zip(&m.cells) {
         let local: &[&[usize]] = match k {
-            topomech_gmap::mesh::CellKind::Tetra => &[&[0, 1, 2], &[0, 1, 3], &[1, 2, 3], &[0, 2, 3]],
-            topomech_gmap::mesh::CellKind::Hexa => &[&[0, 1, 2, 3], &[4, 5, 6, 7], &[0, 1, 5, 4], &[1, 2, 6, 5], &[2, 3, 7, 6], &[3, 0, 4, 7]],
-            topomech_gmap::mesh::CellKind::Wedge => &[&[0, 1, 2], &[3, 4, 5], &[0, 1, 4, 3], &[1, 2, 5, 4], &[2, 0, 3, 5]],
-            topomech_gmap::mesh::CellKind::Pyramid => &[&[0, 1, 2, 3], &[0, 1, 4], &[1, 2, 4], &[2, 3, 4], &[3, 0, 4]],
+            topomech_gmap::mesh::CellKind::Tetra => {
+                &[&[0, 1, 2], &[0, 1, 3], &[1, 2, 3], &[0, 2, 3]]
+            }
+            topomech_gmap::mesh::CellKind::Hexa => &[
+                &[0, 1, 2, 3],
+                &[4, 5, 6, 7],
+                &[0, 1, 5, 4],
+                &[1, 2, 6, 5],
+                &[2, 3, 7, 6],
+                &[3, 0, 4, 7],
+            ],
+            topomech_gmap::mesh::CellKind::Wedge => &[
+                &[0, 1, 2],
+                &[3, 4, 5],
+                &[0, 1, 4, 3],
+                &[1, 2, 5, 4],
+                &[2, 0, 3, 5],
+            ],
+            topomech_gmap::mesh::CellKind::Pyramid => &[
+                &[0, 1, 2, 3],
+                &[0, 1, 4],
+                &[1, 2, 4],
+                &[2, 3, 4],
+                &[3, 0, 4],
+            ],
             topomech_gmap::mesh::CellKind::Polygon => unreachable!(),
         };
         for f in local {
@@ -78,15 +111,24 @@ fn split_every_edge() {
             let c = g.cell_counts();
             assert_eq!(
                 (c.vertices, c.edges, c.faces, c.volumes, c.components),
-                (c0.vertices + c0.edges, 2 * c0.edges, c0.faces, c0.volumes, 1)
+                (
+                    c0.vertices + c0.edges,
+                    2 * c0.edges,
+                    c0.faces,
+                    c0.volumes,
+                    1
+                )
             );
             // the new vertices are the edge midpoints: the sum of all positions grows by the
             // sum of the midpoints, computed from the input points and the unique edges
             let pos = g.require("position").unwrap();
-            let total: [f64; 3] = g.orbit_representatives(OrbitType::vertex(dim)).iter().fold([0.0; 3], |a, &d| {
-                let p = g.real(pos, d);
-                [a[0] + p[0], a[1] + p[1], a[2] + p[2]]
-            });
+            let total: [f64; 3] =
+                g.orbit_representatives(OrbitType::vertex(dim))
+                    .iter()
+                    .fold([0.0; 3], |a, &d| {
+                        let p = g.real(pos, d);
+                        [a[0] + p[0], a[1] + p[1], a[2] + p[2]]
+                    });
             let g0 = map(&m);
             let mut expect = [0.0; 3];
             for p in &m.points {
@@ -95,22 +137,21 @@ fn split_every_edge() {
                 }
             }
             let mut seen = std::collections::HashSet::new();
-            for d in g0.darts() {
-                let e = g0.orbit_representatives(OrbitType::edge(dim));
-                let _ = e;
-                let _ = d;
-                break;
-            }
             for d in g0.orbit_representatives(OrbitType::edge(dim)) {
                 let p0 = g0.real(g0.require("position").unwrap(), d).to_vec();
-                let p1 = g0.real(g0.require("position").unwrap(), g0.alpha(0, d)).to_vec();
+                let p1 = g0
+                    .real(g0.require("position").unwrap(), g0.alpha(0, d))
+                    .to_vec();
                 assert!(seen.insert(d));
                 for a in 0..3 {
-                    expect[a] += (p0[a] + p1[a]) / 2.0;
+                    expect[a] += f64::midpoint(p0[a], p1[a]);
                 }
             }
             for a in 0..3 {
-                assert!((total[a] - expect[a]).abs() < 1e-9 * expect[a].abs().max(1.0), "{total:?} vs {expect:?}");
+                assert!(
+                    (total[a] - expect[a]).abs() < 1e-9 * expect[a].abs().max(1.0),
+                    "{total:?} vs {expect:?}"
+                );
             }
         }
     }
@@ -148,7 +189,12 @@ fn quad_subdivide_every_face() {
             let c = g.cell_counts();
             assert_eq!(
                 (c.vertices, c.edges, c.faces, c.volumes),
-                (c0.vertices + c0.edges + c0.faces, 2 * c0.edges + deg, deg, c0.volumes)
+                (
+                    c0.vertices + c0.edges + c0.faces,
+                    2 * c0.edges + deg,
+                    deg,
+                    c0.volumes
+                )
             );
             // every face is now a quad
             for d in g.orbit_representatives(OrbitType::parse("<0,1>").unwrap()) {
@@ -162,12 +208,20 @@ fn quad_subdivide_every_face() {
 fn cut_everything_apart_then_remove_cells() {
     for (dim, meshes) in [(2, meshes2()), (3, meshes3())] {
         let r = rules(dim);
-        let (unsew, remove) = if dim == 2 { ("unsew_edge", "remove_face") } else { ("unsew_face", "remove_volume") };
+        let (unsew, remove) = if dim == 2 {
+            ("unsew_edge", "remove_face")
+        } else {
+            ("unsew_face", "remove_volume")
+        };
         for m in meshes {
             let mut g = map(&m);
             let c0: CellCounts = g.cell_counts();
             let cells = m.cells.len();
-            let interior = if dim == 2 { c0.edges - c0.boundary } else { c0.faces - c0.boundary };
+            let interior = if dim == 2 {
+                c0.edges - c0.boundary
+            } else {
+                c0.faces - c0.boundary
+            };
             let n = apply(&r, &mut g, unsew);
             assert_eq!(n, interior);
             let c = g.cell_counts();
@@ -188,11 +242,15 @@ fn sew_undoes_unsew() {
     let before = g.cell_counts();
     let d = g.darts().find(|&d| !g.is_free(2, d)).unwrap();
     let p = g.alpha(2, d);
-    r.apply_at(&mut g, "unsew_edge", &[d], &Params::new()).unwrap();
+    r.apply_at(&mut g, "unsew_edge", &[d], &Params::new())
+        .unwrap();
     assert_eq!(g.cell_counts().components, 2);
-    let e = r.apply_at(&mut g, "unsew_edge", &[d], &Params::new()).unwrap_err();
+    let e = r
+        .apply_at(&mut g, "unsew_edge", &[d], &Params::new())
+        .unwrap_err();
     assert!(e.to_string().contains("arc a -2- b"), "{e}");
-    r.apply_at(&mut g, "sew_edge", &[d, p], &Params::new()).unwrap();
+    r.apply_at(&mut g, "sew_edge", &[d, p], &Params::new())
+        .unwrap();
     assert!(g.is_valid());
     assert_eq!(g.cell_counts(), before);
 }

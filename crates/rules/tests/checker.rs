@@ -1,0 +1,298 @@
+//! One test per checker condition: a rule that violates it (the diagnostic names the
+//! condition, the line and the node or label) and a close rule that passes.
+
+use topomech_rules::{load_sources, Diagnostic, Severity};
+
+fn check(src: &str) -> Result<Vec<Diagnostic>, Vec<Diagnostic>> {
+    load_sources(&[("t.tmr".into(), src.into())]).map(|(_, w)| w)
+}
+
+/// Asserts `src` is refused with `condition` at `line`, with `needle` in the message.
+fn refused(src: &str, condition: &str, line: u32, needle: &str) {
+    let errs = check(src).expect_err("the rule should be refused");
+    let hit = errs
+        .iter()
+        .find(|d| d.condition == condition && d.severity == Severity::Error)
+        .unwrap_or_else(|| panic!("no {condition} error in {errs:#?}"));
+    assert_eq!(hit.pos.line, line, "{hit}");
+    assert!(hit.message.contains(needle), "{hit}");
+    let text = hit.to_string();
+    assert!(text.starts_with(&format!("t.tmr:{line}:")), "{text}");
+    assert!(text.contains(&format!("error[{condition}]")), "{text}");
+}
+
+fn accepted(src: &str) {
+    if let Err(e) = check(src) {
+        panic!(
+            "{}",
+            e.iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join("\n")
+        );
+    }
+}
+
+const HEAD: &str =
+    "dimension 2\nembedding position : vec3 on <1,2>\nembedding weight : f64 on <0,1>\n";
+
+fn with_head(body: &str) -> String {
+    format!("{HEAD}{body}")
+}
+
+#[test]
+fn syntax() {
+    refused(
+        &with_head("rule r {\n  left { a <0> hook }\n}"),
+        "syntax",
+        5,
+        "expected ':'",
+    );
+    accepted(&with_head("rule r {\n  left { a : <0> hook }\n}"));
+}
+
+#[test]
+fn type_() {
+    refused(
+        &with_head("rule r {\n  left { a : <0,1> hook }\n  compute { a.weight = a.position }\n}"),
+        "type",
+        6,
+        "weight has type f64",
+    );
+    accepted(&with_head("rule r {\n  left { a : <0,1> hook }\n  compute { a.weight = norm(mean<0,1>(a.position)) }\n}"));
+    refused(
+        &with_head("rule r(dt: f64) {\n  left { a : <0,1> hook }\n  where dt\n}"),
+        "type",
+        6,
+        "guard has type f64",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <0,1> hook }\n  compute { a.weight = 1.0 + true }\n}"),
+        "type",
+        6,
+        "",
+    );
+}
+
+#[test]
+fn dimension() {
+    refused(
+        &with_head("rule r {\n  left { a : <0,3> hook }\n}"),
+        "dimension",
+        5,
+        "label 3",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook  b : <0>  a -4- b }\n}"),
+        "dimension",
+        5,
+        "label 4",
+    );
+    refused("dimension 4\n", "dimension", 1, "dimension 4");
+    refused("embedding x : f64 on <0>\n", "dimension", 1, "does not say");
+    accepted(&with_head("rule r {\n  left { a : <0,2> hook }\n}"));
+}
+
+#[test]
+fn name() {
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook  a : <0> }\n}"),
+        "name",
+        5,
+        "'a' is declared twice",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook }\n}\nrule r {\n  left { a : <0> hook }\n}"),
+        "name",
+        7,
+        "already defined",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook }\n  compute { a.mass = 1.0 }\n}"),
+        "name",
+        6,
+        "unknown embedding 'mass'",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook  a -2- z }\n}"),
+        "name",
+        5,
+        "'z'",
+    );
+    refused(
+        "dimension 2\nembedding w : f64 on <0>\nembedding w : f64 on <1>\n",
+        "name",
+        3,
+        "declared again differently",
+    );
+    accepted(&with_head("rule r {\n  left { a : <0> hook  b : <0>  a -2- b }\n}\nrule s {\n  left { a : <0> hook }\n}"));
+}
+
+#[test]
+fn hook() {
+    refused(
+        &with_head("rule r {\n  left { a : <0> }\n}"),
+        "hook",
+        5,
+        "no hook",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook  b : <0> hook  a -2- b }\n}"),
+        "hook",
+        5,
+        "2 hooks",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <0,_> hook }\n}"),
+        "hook",
+        5,
+        "'_'",
+    );
+    accepted(&with_head(
+        "rule r {\n  left { a : <0,1> hook  b : <0,_>  a -2- b }\n}",
+    ));
+}
+
+#[test]
+fn arity() {
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook\n  b : <0,1>  a -2- b }\n}"),
+        "arity",
+        6,
+        "every orbit type of a rule has the same length",
+    );
+    accepted(&with_head(
+        "rule r {\n  left { a : <0> hook\n  b : <1>  a -2- b }\n}",
+    ));
+}
+
+#[test]
+fn duplicate_label() {
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook  b : <0>  a -0- b }\n}"),
+        "duplicate-label",
+        5,
+        "label 0 twice",
+    );
+    refused(
+        &with_head("rule r {\n  left { a : <1,1> hook }\n}"),
+        "duplicate-label",
+        5,
+        "label 1 twice",
+    );
+    accepted(&with_head(
+        "rule r {\n  left { a : <0> hook  b : <0>  a -1- b }\n}",
+    ));
+}
+
+#[test]
+fn incident_arc() {
+    // a created node without label 1
+    refused(
+        &with_head("rule r {\n  left { a : <0> hook }\n  right { a : <0>  b : <0>\n  a -2- a }\n}"),
+        "incident-arc",
+        6,
+        "node 'b' is created but has no label 1",
+    );
+    // a deleted node whose label 2 leads outside the rule
+    refused(
+        &with_head("rule r {\n  left { a : <0,1> hook }\n  right { }\n}"),
+        "incident-arc",
+        5,
+        "label 2 is not matched",
+    );
+    accepted(&with_head(
+        "rule r {\n  left { a : <0,1> hook  a -2- a }\n  right { }\n}",
+    ));
+    // a kept node losing its orbit label 1 without giving it back
+    refused(
+        &with_head("rule r {\n  left { a : <0,1> hook }\n  right { a : <0,_> }\n}"),
+        "incident-arc",
+        5,
+        "loses label 1",
+    );
+    accepted(&with_head(
+        "rule r {\n  left { a : <0,1> hook }\n  right { a : <0,_>  a -1- a }\n}",
+    ));
+}
+
+#[test]
+fn cycle() {
+    // a new face glued by alpha2 whose alpha0 does not follow: alpha0 alpha2 breaks
+    refused(
+        &with_head("rule r {\n  left { a : <0,1> hook }\n  right { a : <0,1>  b : <1,_>  a -2- b  b -0- b }\n  compute { b.weight = 1.0 }\n}"),
+        "cycle",
+        5,
+        "alpha0 o alpha2",
+    );
+    // a label changed while the other label of the cycle is outside the rule
+    refused(
+        &with_head("rule r {\n  left { a : <1> hook }\n  right { a : <1>  b : <1>\n  a -0- b  b -2- b }\n  compute { b.position = a.position }\n}"),
+        "cycle",
+        5,
+        "node 'a' has no label 2",
+    );
+    accepted(&with_head("rule r {\n  left { a : <0> hook  b : <0> hook  a -2- a  b -2- b }\n  right { a : <0>  b : <0>  a -2- b }\n  compute { a.position = (a.position + b.position) / 2.0 }\n}"));
+}
+
+#[test]
+fn embedding_missing() {
+    let tri = "rule r {\n  left  { n0 : <0,1> hook }\n  right { n0 : <0,_>  n1 : <_,2>  n2 : <1,2>  n0 -1- n1  n1 -0- n2 }\n  compute { X }\n}";
+    refused(
+        &with_head(&tri.replace('X', "n0.weight = 1.0")),
+        "embedding-missing",
+        6,
+        "'n2' is created and gets no value of 'position'",
+    );
+    accepted(&with_head(
+        &tri.replace('X', "n2.position = mean<0,1>(n0.position)"),
+    ));
+}
+
+#[test]
+fn embedding_merge() {
+    let sew = "rule r {\n  left { a : <0> hook  b : <0> hook  a -2- a  b -2- b }\n  right { a : <0>  b : <0>  a -2- b }\n  compute { X }\n}";
+    refused(
+        &with_head(&sew.replace('X', "")),
+        "embedding-merge",
+        5,
+        "may merge",
+    );
+    accepted(&with_head(
+        &sew.replace('X', "a.position = (a.position + b.position) / 2.0"),
+    ));
+}
+
+#[test]
+fn embedding_write_conflict() {
+    let tri = "rule r {\n  left  { n0 : <0,1> hook }\n  right { n0 : <0,_>  n1 : <_,2>  n2 : <1,2>  n0 -1- n1  n1 -0- n2 }\n  compute { X }\n}";
+    // one value per new vertex, but n0.position differs from corner to corner
+    refused(
+        &with_head(&tri.replace('X', "n2.position = n0.position")),
+        "embedding-write-conflict",
+        7,
+        "may differ",
+    );
+    // two writes to the same orbit
+    let sew = "rule r {\n  left { a : <0> hook  b : <0> hook  a -2- a  b -2- b }\n  right { a : <0>  b : <0>  a -2- b }\n  compute {\n  a.position = a.position\n  b.position = b.position }\n}";
+    refused(
+        &with_head(sew),
+        "embedding-write-conflict",
+        9,
+        "written twice",
+    );
+    accepted(&with_head(
+        &tri.replace('X', "n2.position = mean<0,1>(n0.position)"),
+    ));
+}
+
+#[test]
+fn warnings_do_not_refuse() {
+    let w = check(&with_head(
+        "rule r(dt: f64) {\n  left { a : <0,1> hook }\n}",
+    ))
+    .unwrap();
+    assert_eq!(w.len(), 1);
+    assert_eq!(w[0].condition, "unused");
+    assert!(w[0].to_string().contains("warning[unused]"));
+}
