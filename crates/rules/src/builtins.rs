@@ -1100,7 +1100,8 @@ fn require_finite(name: &str, m: &Mat) -> Result<(), EvalError> {
     }
 }
 
-/// The closest rotation to a 2x2 matrix: the angle maximizing `tr(R^T m)`, in closed form.
+/// The closest rotation to a 2x2 matrix: the angle maximizing
+/// `tr(R^T m) = cos t (m00 + m11) + sin t (m10 - m01)`, in closed form.
 /// When no rotation is closer than another (`m = [[a, b], [b, -a]]`), the identity.
 fn polar2(m: &Mat) -> Result<Mat, EvalError> {
     require_finite("polar", m)?;
@@ -1114,8 +1115,12 @@ fn polar2(m: &Mat) -> Result<Mat, EvalError> {
         a[0] / s + a[3] / s, // tr(m) / s
         a[2] / s - a[1] / s, // (m10 - m01) / s
     );
-    let t = d.atan2(c);
-    let (sin, cos) = t.sin_cos();
+    // The maximizing angle is atan2(d, c); its cosine and sine directly, without the angle.
+    let h = c.hypot(d);
+    if h == 0.0 {
+        return Ok(Mat::identity(2));
+    }
+    let (cos, sin) = (c / h, d / h);
     Ok(mat_rows([[cos, -sin], [sin, cos]]))
 }
 
