@@ -598,7 +598,12 @@ impl GMap {
 
     /// Writes `v` into slot `slot` of embedding `id`: the value of the orbit that owns the slot
     /// (see [`Embedding::slot`]). For engines that group their writes by slot.
-    pub fn set_slot_value(&mut self, id: EmbeddingId, slot: usize, v: &Value) -> Result<(), EmbeddingError> {
+    pub fn set_slot_value(
+        &mut self,
+        id: EmbeddingId,
+        slot: usize,
+        v: &Value,
+    ) -> Result<(), EmbeddingError> {
         let e = &mut self.embeddings[id.0 as usize];
         if e.derived.is_some() {
             return Err(EmbeddingError::Derived(e.name.clone()));

@@ -113,6 +113,9 @@ pub struct ApplyReport {
     pub created: usize,
     /// Darts deleted.
     pub deleted: usize,
+    /// Expression evaluations for writes: one per distinct value written per match, not
+    /// one per dart.
+    pub evaluations: usize,
 }
 
 /// Rows of the orbit of `d` with the given labels, breadth-first; `next` as in [`Match`].
@@ -552,6 +555,7 @@ struct Pending {
 fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, ApplyError> {
     let rule = b.rule;
     // 1. evaluate every write on the map as it is
+    let mut evaluations = 0;
     let mut pending: Vec<Vec<Pending>> = Vec::with_capacity(ms.len());
     for m in ms {
         let mut ev = Eval::new(g, b, m);
@@ -574,6 +578,7 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
                     v.clone()
                 } else {
                     ev.clear_locals();
+                    evaluations += 1;
                     let v = ev
                         .run_to(value, s, r)
                         .map_err(|e| eval_err(&rule.name, m.darts[rule.hooks[0]][r], &e))?;
@@ -593,6 +598,7 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
     // 2. the new topology, planned but not applied yet
     let mut report = ApplyReport {
         matches: ms.len(),
+        evaluations,
         ..ApplyReport::default()
     };
     let mut node_darts: Vec<Vec<Vec<Dart>>> = Vec::with_capacity(ms.len());

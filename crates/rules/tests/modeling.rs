@@ -254,3 +254,75 @@ fn sew_undoes_unsew() {
     assert!(g.is_valid());
     assert_eq!(g.cell_counts(), before);
 }
+
+/// The example file of the language's specification is accepted as written, and its rules do
+/// what they say: `count<0,1>(n0)` counts the darts of the face, a triangulated face gets its
+/// centroid, and the centroid is evaluated once per face, not once per dart.
+#[test]
+fn the_specification_example_runs() {
+    let src = "dimension 2
+embedding position : vec3 on <1,2>
+embedding weight   : f64  on <0,1>
+
+# a computation rule: the right side is the left side
+rule face_weight {
+  left { n0 : <0,1> hook }
+  compute { n0.weight = count<0,1>(n0) }
+}
+
+# triangulate a face of any degree (topology change, with relabelling)
+rule triangulate_face {
+  left  { n0 : <0,1> hook }
+  right {
+    n0 : <0,_>
+    n1 : <_,2>
+    n2 : <1,2>
+    n0 -1- n1
+    n1 -0- n2
+  }
+  compute { n2.position = mean<0,1>(n0.position) }
+}
+
+rule unsew_edge {
+  left  { a : <0> hook   b : <0>   a -2- b }
+  right { a : <0>        b : <0> }
+}
+";
+    let (r, warnings) = load_sources(&[("spec.tmr".into(), src.into())]).unwrap();
+    assert!(warnings.is_empty());
+    let m = grid([2, 1], [2.0, 1.0], GridElement::Mixed); // one quad, two triangles
+    let mut g = map(&m);
+    let rep = r
+        .apply_everywhere(&mut g, "face_weight", &Params::new())
+        .unwrap();
+    assert_eq!((rep.matches, rep.evaluations), (3, 3));
+    let w = g.require("weight").unwrap();
+    let mut weights: Vec<f64> = g
+        .orbit_representatives(OrbitType::face(2))
+        .iter()
+        .map(|&d| g.real(w, d)[0])
+        .collect();
+    weights.sort_by(f64::total_cmp);
+    assert_eq!(weights, vec![6.0, 6.0, 8.0]);
+    let rep = r
+        .apply_everywhere(&mut g, "triangulate_face", &Params::new())
+        .unwrap();
+    assert_eq!(
+        (rep.matches, rep.evaluations, rep.created),
+        (3, 3, 2 * (6 + 6 + 8)),
+        "two new nodes of one dart per row"
+    );
+    assert!(g.is_valid());
+    // the quad [0,1]x[0,1] got its centre (0.5, 0.5)
+    let pos = g.require("position").unwrap();
+    let has = |p: [f64; 3]| g.darts().any(|d| g.real(pos, d) == p);
+    assert!(has([0.5, 0.5, 0.0]));
+    assert!(
+        has([(1.0 + 2.0 + 2.0) / 3.0, 1.0 / 3.0, 0.0]),
+        "the centroid of triangle (1,0),(2,0),(2,1)"
+    );
+    let inner = g.darts().find(|&d| !g.is_free(2, d)).unwrap();
+    r.apply_at(&mut g, "unsew_edge", &[inner], &Params::new())
+        .unwrap();
+    assert!(g.is_valid());
+}
