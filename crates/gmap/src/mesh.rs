@@ -129,7 +129,7 @@ pub enum MeshError {
         n_points: usize,
     },
     /// Wrong number of vertices for the kind.
-    #[error("cell {cell} is a {kind} with {got} vertices, expected {expected}")]
+    #[error("cell {cell} is a {kind} with {got} vertices, expected {}{expected}", if *kind == "polygon" { "at least " } else { "" })]
     VertexCount {
         /// The cell.
         cell: usize,
