@@ -326,3 +326,18 @@ rule unsew_edge {
         .unwrap();
     assert!(g.is_valid());
 }
+
+#[test]
+fn sew_face_undoes_unsew_face() {
+    let r = rules(3);
+    let mut g = map(&cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Hexa));
+    let before = g.cell_counts();
+    let d = g.darts().find(|&d| !g.is_free(3, d)).unwrap();
+    let p = g.alpha(3, d);
+    r.apply_at(&mut g, "unsew_face", &[d], &Params::new()).unwrap();
+    assert_eq!(g.cell_counts().components, 2);
+    assert!(g.is_valid());
+    r.apply_at(&mut g, "sew_face", &[d, p], &Params::new()).unwrap();
+    assert!(g.is_valid());
+    assert_eq!(g.cell_counts(), before);
+}
