@@ -87,7 +87,7 @@ pub enum ExprKind {
         /// Its arguments.
         args: Vec<Expr>,
     },
-    /// `sum<o>(n.e)`, `mean<o>(n.e)`, `count<o>(n)`.
+    /// `sum<o>(n.e)`, `mean<o>(n.e)`, `count<o>(n)` (darts), `count<o>(n.e)` (distinct orbits of e).
     Aggregate {
         /// `sum`, `mean` or `count`.
         kind: AggKind,

@@ -1239,7 +1239,8 @@ impl ExprCheck<'_, '_> {
                 };
                 let k = self.left_node(node, pos)?;
                 let (ei, ty) = match (kind, emb) {
-                    (AggKind::Count, _) => (None, Ty::I64),
+                    (AggKind::Count, None) => (None, Ty::I64),
+                    (AggKind::Count, Some(em)) => (Some(self.emb(em, pos)?), Ty::I64),
                     (_, Some(em)) => {
                         let ei = self.emb(em, pos)?;
                         let t = self.embs[ei].ty;

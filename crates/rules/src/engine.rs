@@ -577,7 +577,6 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
                 let v = if let Some(v) = by_class.get(&cls) {
                     v.clone()
                 } else {
-                    ev.clear_locals();
                     evaluations += 1;
                     let v = ev
                         .run_to(value, s, r)
@@ -791,6 +790,8 @@ struct Eval<'a> {
     b: &'a Bound<'a>,
     m: &'a Match,
     locals: Vec<Option<Val>>,
+    /// For each local of the compute block, the row its value was computed for.
+    let_row: Vec<Option<usize>>,
 }
 
 impl<'a> Eval<'a> {
@@ -800,11 +801,8 @@ impl<'a> Eval<'a> {
             b,
             m,
             locals: vec![None; b.rule.n_locals],
+            let_row: vec![None; b.rule.n_locals],
         }
-    }
-
-    fn clear_locals(&mut self) {
-        self.locals.iter_mut().for_each(|l| *l = None);
     }
 
     /// Evaluates the `let`s before statement `stop`, then `value`, at row `r`.
@@ -819,8 +817,12 @@ impl<'a> Eval<'a> {
                 break;
             }
             if let TStmt::Let(k, e) = s {
-                let v = self.eval(e, r)?;
-                self.locals[*k] = Some(v);
+                // a `let` of the compute block is evaluated once per row of a match
+                if self.let_row[*k] != Some(r) {
+                    let v = self.eval(e, r)?;
+                    self.locals[*k] = Some(v);
+                    self.let_row[*k] = Some(r);
+                }
             }
         }
         self.eval(value, r)
@@ -919,6 +921,9 @@ impl<'a> Eval<'a> {
                 slots.push(s);
                 reps.push(x);
             }
+        }
+        if kind == AggKind::Count {
+            return Ok(Val::I(reps.len() as i64));
         }
         let mut acc: Option<Val> = None;
         for &x in &reps {

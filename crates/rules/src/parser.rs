@@ -504,7 +504,7 @@ impl Parser {
                     let orbit = self.orbit_dims()?;
                     self.expect_punct("(", "around the aggregate's argument")?;
                     let (node, _) = self.ident("a node name")?;
-                    let emb = if kind == AggKind::Count {
+                    let emb = if kind == AggKind::Count && !self.is_punct(".") {
                         None
                     } else {
                         self.expect_punct(".", "in 'node.embedding'")?;

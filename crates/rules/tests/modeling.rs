@@ -334,10 +334,41 @@ fn sew_face_undoes_unsew_face() {
     let before = g.cell_counts();
     let d = g.darts().find(|&d| !g.is_free(3, d)).unwrap();
     let p = g.alpha(3, d);
-    r.apply_at(&mut g, "unsew_face", &[d], &Params::new()).unwrap();
+    r.apply_at(&mut g, "unsew_face", &[d], &Params::new())
+        .unwrap();
     assert_eq!(g.cell_counts().components, 2);
     assert!(g.is_valid());
-    r.apply_at(&mut g, "sew_face", &[d, p], &Params::new()).unwrap();
+    r.apply_at(&mut g, "sew_face", &[d, p], &Params::new())
+        .unwrap();
     assert!(g.is_valid());
     assert_eq!(g.cell_counts(), before);
+}
+
+/// `count<o>(n.e)` counts the distinct orbits of `e` inside the `<o>` orbit of `n` (here the
+/// vertices of each face), where `count<o>(n)` counts darts.
+#[test]
+fn count_of_an_embedding_counts_its_orbits() {
+    let src = "dimension 2
+embedding position : vec3 on <1,2>
+embedding corners : i64 on <0,1>
+rule corners { left { f : <0,1> hook } compute { f.corners = count<0,1>(f.position) } }";
+    let (r, _) = load_sources(&[("c.tmr".into(), src.into())]).unwrap();
+    let mut g = map(&grid([2, 1], [2.0, 1.0], GridElement::Mixed));
+    r.apply_everywhere(&mut g, "corners", &Params::new())
+        .unwrap();
+    let c = g.require("corners").unwrap();
+    let mut n: Vec<topomech_gmap::Value> = g
+        .orbit_representatives(OrbitType::face(2))
+        .iter()
+        .map(|&d| g.value(c, d).unwrap())
+        .collect();
+    n.sort_by_key(|v| format!("{v:?}"));
+    assert_eq!(
+        n,
+        vec![
+            topomech_gmap::Value::Int(3),
+            topomech_gmap::Value::Int(3),
+            topomech_gmap::Value::Int(4)
+        ]
+    );
 }
