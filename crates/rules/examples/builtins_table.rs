@@ -2,7 +2,7 @@
 fn main() {
     println!("| function | signature | what |");
     println!("|---|---|---|");
-    for (name, sig, doc) in topomech_rules::builtins::catalogue() {
+    for (name, sig, doc) in topomech_rules::builtins::full_catalogue() {
         println!("| `{name}` | `{sig}` | {doc} |");
     }
 }

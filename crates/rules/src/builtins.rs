@@ -345,8 +345,19 @@ pub fn catalogue() -> &'static [(&'static str, &'static str, &'static str)] {
 fn signature(name: &str) -> Option<&'static str> {
     CATALOGUE
         .iter()
+        .chain(crate::mechanics::CATALOGUE)
         .find(|(n, _, _)| *n == name)
         .map(|(_, sig, _)| *sig)
+}
+
+/// Every built-in of the language: [`catalogue`] and the element built-ins of
+/// [`crate::mechanics`].
+pub fn full_catalogue() -> Vec<(&'static str, &'static str, &'static str)> {
+    CATALOGUE
+        .iter()
+        .chain(crate::mechanics::CATALOGUE)
+        .copied()
+        .collect()
 }
 
 /// The number of arguments in a signature `name(a: t, b: t) -> r` (all overloads of a
@@ -457,6 +468,9 @@ pub fn call_type(name: &str, args: &[Ty]) -> Result<Ty, String> {
 #[allow(clippy::match_same_arms)]
 fn result_type(name: &str, args: &[Ty]) -> Option<Ty> {
     use Ty::{Bool, Mat, Vec2, Vec3, F64, I64};
+    if let Some(t) = crate::mechanics::result_type(name, args) {
+        return Some(t);
+    }
     let all_num = args.iter().all(|&t| is_num(t));
     let all_int = args.iter().all(|&t| t == I64);
     let r = match (name, args) {
@@ -585,6 +599,9 @@ pub fn call(name: &str, args: &[Val]) -> Result<Val, EvalError> {
 /// Evaluation: `Ok(None)` when the arguments do not fit.
 fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
     use Val::{B, F, I, M, V2, V3};
+    if let Some(v) = crate::mechanics::eval(name, args)? {
+        return Ok(Some(v));
+    }
     let nums: Option<Vec<f64>> = args.iter().map(real).collect();
     let v = match (name, args) {
         ("vec2", [_, _]) => nums.map(|x| V2([x[0], x[1]])),

@@ -27,6 +27,7 @@ pub mod builtins;
 pub mod check;
 pub mod engine;
 pub mod lexer;
+pub mod mechanics;
 pub mod parser;
 pub mod value;
 
