@@ -268,7 +268,7 @@ mod tests {
         }
     }
 
-    /// A uniaxial stretch u_x = e x of the unit tetrahedron: the strain energy u^T K u / 2 is
+    /// A uniaxial stretch `u_x = e x` of the unit tetrahedron: the strain energy `u^T K u / 2` is
     /// V (lambda + 2 mu) e^2 / 2, the energy density of a laterally constrained stretch.
     #[test]
     fn energy_of_a_uniform_stretch() {
