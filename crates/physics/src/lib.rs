@@ -1,0 +1,641 @@
+//! Physics through rules: the models of the paper as rule files, and the simulation loop.
+//!
+//! Every model is a `.tmr` file shipped in `models/` (see [`MODELS`]): an init rule that
+//! stores its parameters on the orbits the paper's Tables 1 and 2 give, and interaction rules
+//! that store forces on sub-orbits of the vertices. A step applies, in order, every model's
+//! interaction rules everywhere, one accumulation rule that sums every force embedding over
+//! each vertex's sub-orbits into `force`, and an integration rule. Nothing is stored beside
+//! the G-map: the simulation state is its embeddings.
+#![warn(missing_docs)]
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+
+use topomech_gmap::{Dart, EmbeddingId, GMap, OrbitType, Value};
+use topomech_rules::{load_sources, ApplyError, Diagnostic, Params, RuleSet, Val};
+
+/// A physical model: its rule file and rules.
+#[derive(Clone, Copy, Debug)]
+pub struct ModelDef {
+    /// The scene's name for it.
+    pub kind: &'static str,
+    /// Dimensions it exists in.
+    pub dims: &'static [usize],
+    /// Base name of its rule file in `models/` (`{file}{dim}d.tmr`).
+    pub file: &'static str,
+    /// Init rules, applied once, in order; a rule's parameters come from the model's
+    /// parameters of the same name.
+    pub init: &'static [&'static str],
+    /// Interaction rules, applied every step, in order.
+    pub rules: &'static [&'static str],
+    /// The force embeddings the accumulation sums.
+    pub forces: &'static [&'static str],
+    /// Parameters with their defaults.
+    pub params: &'static [(&'static str, f64)],
+    /// What the model needs of the mesh, said when it matches nothing.
+    pub needs: &'static str,
+}
+
+/// Every model topomech ships.
+pub const MODELS: &[ModelDef] = &[
+    ModelDef {
+        kind: "stretch_elementary",
+        dims: &[2, 3],
+        file: "stretch",
+        init: &["stretch_init"],
+        rules: &["stretch_elementary"],
+        forces: &["f_stretch"],
+        params: &[("stiffness", 1000.0), ("damping", 0.0)],
+        needs: "edges",
+    },
+    ModelDef {
+        kind: "stretch_cumulated",
+        dims: &[2, 3],
+        file: "stretch",
+        init: &["stretch_init"],
+        rules: &["stretch_cumulated"],
+        forces: &["f_stretch_cum"],
+        params: &[("stiffness", 1000.0), ("damping", 0.0)],
+        needs: "edges",
+    },
+    ModelDef {
+        kind: "linear_fem",
+        dims: &[3],
+        file: "fem",
+        init: &["fem_init"],
+        rules: &["linear_fem"],
+        forces: &["f_linear"],
+        params: &[],
+        needs: "tetrahedra",
+    },
+    ModelDef {
+        kind: "corotational",
+        dims: &[3],
+        file: "fem",
+        init: &["fem_init"],
+        rules: &["corotational"],
+        forces: &["f_corot"],
+        params: &[],
+        needs: "tetrahedra",
+    },
+    ModelDef {
+        kind: "mass_tensor",
+        dims: &[3],
+        file: "fem",
+        init: &["mass_tensor_init"],
+        rules: &["mass_tensor_edges", "mass_tensor_vertices"],
+        forces: &["f_tensor"],
+        params: &[],
+        needs: "tetrahedra",
+    },
+];
+
+fn model_source(file: &str, dim: usize) -> Option<&'static str> {
+    Some(match (file, dim) {
+        ("common", 2) => include_str!("../models/common2d.tmr"),
+        ("common", 3) => include_str!("../models/common3d.tmr"),
+        ("stretch", 2) => include_str!("../models/stretch2d.tmr"),
+        ("stretch", 3) => include_str!("../models/stretch3d.tmr"),
+        ("fem", 3) => include_str!("../models/fem3d.tmr"),
+        _ => return None,
+    })
+}
+
+/// Why a simulation could not be built or stepped.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PhysicsError {
+    /// Unknown model kind, or one that does not exist in this dimension.
+    #[error("{0}")]
+    Model(String),
+    /// A bad parameter, predicate or setting.
+    #[error("{0}")]
+    Config(String),
+    /// A rule file (shipped, or generated from the scene) was refused.
+    #[error("rules refused:\n{}", .0.iter().map(ToString::to_string).collect::<Vec<_>>().join("\n"))]
+    Rules(Vec<Diagnostic>),
+    /// A rule failed to apply.
+    #[error(transparent)]
+    Apply(#[from] ApplyError),
+    /// The simulation diverged; the last good state was kept.
+    #[error("diverged at step {step}: {why} at vertex {vertex} (the last good state is kept)")]
+    Diverged {
+        /// The step that failed.
+        step: u64,
+        /// The vertex (index in vertex order).
+        vertex: usize,
+        /// What happened.
+        why: String,
+    },
+}
+
+/// The time integrator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Integrator {
+    /// x += dt v; v += dt a (both from the old state).
+    ExplicitEuler,
+    /// v += dt a; x += dt v (the new velocity).
+    SymplecticEuler,
+}
+
+impl Integrator {
+    /// Parses `explicit_euler`, `symplectic_euler`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "explicit_euler" => Some(Integrator::ExplicitEuler),
+            "symplectic_euler" => Some(Integrator::SymplecticEuler),
+            _ => None,
+        }
+    }
+
+    fn rule(self) -> &'static str {
+        match self {
+            Integrator::ExplicitEuler => "explicit_euler",
+            Integrator::SymplecticEuler => "symplectic_euler",
+        }
+    }
+}
+
+/// A model in a scene: its kind and parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelSpec {
+    /// One of [`MODELS`]' kinds.
+    pub kind: String,
+    /// Parameters (missing ones take the model's defaults).
+    pub params: HashMap<String, f64>,
+}
+
+/// Everything a simulation needs beside the map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Config {
+    /// The models, summed.
+    pub models: Vec<ModelSpec>,
+    /// Mass density (per volume in 3D, per area in 2D).
+    pub density: f64,
+    /// Young's modulus for the continuous models.
+    pub young: f64,
+    /// Poisson ratio for the continuous models.
+    pub poisson: f64,
+    /// Viscous damping (1/s).
+    pub damping: f64,
+    /// Gravity acceleration.
+    pub gravity: [f64; 3],
+    /// Predicates on the rest position (`x`, `y`, `z`) selecting fixed vertices, in the rule
+    /// language's expression syntax (e.g. `x < 1e-9`).
+    pub fixed: Vec<String>,
+    /// The integrator.
+    pub integrator: Integrator,
+    /// Time step.
+    pub dt: f64,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            models: Vec::new(),
+            density: 1000.0,
+            young: 1e6,
+            poisson: 0.3,
+            damping: 0.0,
+            gravity: [0.0, -9.81, 0.0],
+            fixed: Vec::new(),
+            integrator: Integrator::SymplecticEuler,
+            dt: 1e-3,
+        }
+    }
+}
+
+/// A running simulation: a G-map with its embeddings, and the rules that move it.
+#[derive(Debug)]
+pub struct Simulation {
+    g: GMap,
+    rules: RuleSet,
+    cfg: Config,
+    defs: Vec<(ModelDef, HashMap<String, f64>)>,
+    step_params: Params,
+    time: f64,
+    steps: u64,
+    /// vertex index of each dart, and the number of vertices
+    labels: (Vec<u32>, usize),
+    labels_version: u64,
+}
+
+fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
+    let Some(def) = MODELS.iter().find(|m| m.kind == kind) else {
+        let known: Vec<&str> = MODELS.iter().map(|m| m.kind).collect();
+        return Err(PhysicsError::Model(format!(
+            "unknown model '{kind}' (known: {})",
+            known.join(", ")
+        )));
+    };
+    if !def.dims.contains(&dim) {
+        return Err(PhysicsError::Model(format!(
+            "model '{kind}' needs a mesh of dimension {:?}, this one has dimension {dim}",
+            def.dims
+        )));
+    }
+    Ok(*def)
+}
+
+/// The accumulation rule for the given force embeddings, and one rule per fixed predicate.
+fn generated_rules(dim: usize, forces: &[&str], fixed: &[String]) -> String {
+    let v = if dim == 3 { "<1,2,3>" } else { "<1,2>" };
+    let mut s = format!("dimension {dim}\n\nrule accumulate {{\n  left {{ v : {v} hook }}\n  compute {{ v.force = vec3(0, 0, 0)");
+    for f in forces {
+        let _ = write!(s, " + sum{v}(v.{f})");
+    }
+    s.push_str(" }\n}\n");
+    for (k, p) in fixed.iter().enumerate() {
+        let _ = write!(
+            s,
+            "\nrule fix_{k} {{\n  left {{ v : {v} hook }}\n  where {{ let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)  {p} }}\n  compute {{ v.fixed = true }}\n}}\n"
+        );
+    }
+    s
+}
+
+impl Simulation {
+    /// Builds a simulation on `g` (it must have a `position` embedding): loads the rules of
+    /// the models, computes rest state, masses and model parameters.
+    pub fn new(mut g: GMap, cfg: Config) -> Result<Self, PhysicsError> {
+        let dim = g.dimension();
+        if !(cfg.dt > 0.0 && cfg.dt.is_finite()) {
+            return Err(PhysicsError::Config(format!(
+                "dt must be positive, got {}",
+                cfg.dt
+            )));
+        }
+        if !(cfg.density > 0.0 && cfg.density.is_finite()) {
+            return Err(PhysicsError::Config(format!(
+                "density must be positive, got {}",
+                cfg.density
+            )));
+        }
+        if cfg.models.is_empty() {
+            return Err(PhysicsError::Model("no model given".into()));
+        }
+        let mut defs = Vec::new();
+        for m in &cfg.models {
+            let def = find_model(&m.kind, dim)?;
+            let mut params: HashMap<String, f64> = def
+                .params
+                .iter()
+                .map(|(k, v)| ((*k).to_string(), *v))
+                .collect();
+            for (k, v) in &m.params {
+                if !params.contains_key(k) {
+                    let known: Vec<&str> = def.params.iter().map(|p| p.0).collect();
+                    return Err(PhysicsError::Config(format!(
+                        "model '{}' has no parameter '{k}' (it has: {})",
+                        m.kind,
+                        if known.is_empty() {
+                            "none; it uses the material's young and poisson".into()
+                        } else {
+                            known.join(", ")
+                        }
+                    )));
+                }
+                params.insert(k.clone(), *v);
+            }
+            defs.push((def, params));
+        }
+        let mut sources = vec![(
+            format!("common{dim}d.tmr"),
+            model_source("common", dim).expect("shipped").to_string(),
+        )];
+        for (def, _) in &defs {
+            let name = format!("{}{dim}d.tmr", def.file);
+            if !sources.iter().any(|s| s.0 == name) {
+                sources.push((
+                    name,
+                    model_source(def.file, dim)
+                        .expect("listed in MODELS")
+                        .to_string(),
+                ));
+            }
+        }
+        let forces: Vec<&str> = defs
+            .iter()
+            .flat_map(|(d, _)| d.forces.iter().copied())
+            .collect();
+        sources.push((
+            "scene-generated.tmr".into(),
+            generated_rules(dim, &forces, &cfg.fixed),
+        ));
+        let (rules, _warnings) = load_sources(&sources).map_err(|diags| {
+            // a refused predicate is the scene's fault: say so
+            if diags.iter().any(|d| d.file == "scene-generated.tmr") {
+                let msgs: Vec<String> = diags.iter().map(|d| d.message.clone()).collect();
+                PhysicsError::Config(format!(
+                    "bad fixed-vertex predicate in {:?}: {}",
+                    cfg.fixed,
+                    msgs.join("; ")
+                ))
+            } else {
+                PhysicsError::Rules(diags)
+            }
+        })?;
+        if g.embedding_id("position").is_none() {
+            return Err(PhysicsError::Config(
+                "the map has no 'position' embedding".into(),
+            ));
+        }
+        rules.prepare(&mut g)?;
+        mark_vertex0(&mut g)?;
+        let none = Params::new();
+        rules.apply_everywhere(&mut g, "init_rest", &none)?;
+        let material: Params = [
+            ("density".to_string(), Val::F(cfg.density)),
+            ("young".to_string(), Val::F(cfg.young)),
+            ("poisson".to_string(), Val::F(cfg.poisson)),
+        ]
+        .into();
+        rules.apply_everywhere(&mut g, "set_material", &material)?;
+        let (he, elem) = if dim == 3 {
+            ("half_edge_volume", "element_volume")
+        } else {
+            ("half_edge_area", "element_area")
+        };
+        rules.apply_everywhere(&mut g, he, &none)?;
+        rules.apply_everywhere(&mut g, elem, &none)?;
+        rules.apply_everywhere(&mut g, "lump_mass", &none)?;
+        for k in 0..cfg.fixed.len() {
+            rules.apply_everywhere(&mut g, &format!("fix_{k}"), &none)?;
+        }
+        for (def, params) in &defs {
+            for init in def.init {
+                let rule = rules.rule(init)?;
+                let p: Params = rule
+                    .params
+                    .iter()
+                    .map(|(n, _)| (n.clone(), Val::F(params.get(n).copied().unwrap_or(0.0))))
+                    .collect();
+                let rep = rules.apply_everywhere(&mut g, init, &p)?;
+                if rep.matches == 0 {
+                    return Err(PhysicsError::Model(format!(
+                        "model '{}' matches nothing on this mesh: it needs {}",
+                        def.kind, def.needs
+                    )));
+                }
+            }
+        }
+        g.refresh_derived();
+        let step_params: Params = [
+            ("dt".to_string(), Val::F(cfg.dt)),
+            ("gravity".to_string(), Val::V3(cfg.gravity)),
+            ("damping".to_string(), Val::F(cfg.damping)),
+        ]
+        .into();
+        let labels = g.orbit_labels(OrbitType::vertex(dim));
+        let labels_version = g.version();
+        let sim = Simulation {
+            g,
+            rules,
+            cfg,
+            defs,
+            step_params,
+            time: 0.0,
+            steps: 0,
+            labels,
+            labels_version,
+        };
+        // every free vertex needs a mass
+        let masses = sim.vertex_scalar("mass")?;
+        let fixed = sim.vertex_bool("fixed")?;
+        if let Some(v) = (0..masses.len()).find(|&v| !fixed[v] && !(masses[v] > 0.0)) {
+            return Err(PhysicsError::Config(format!(
+                "vertex {v} has mass {} and is not fixed",
+                masses[v]
+            )));
+        }
+        Ok(sim)
+    }
+
+    /// One time step: forces, accumulation, integration. On divergence (a non-finite
+    /// position or velocity) the state before the step is restored and an error names the
+    /// step and the vertex.
+    pub fn step(&mut self) -> Result<(), PhysicsError> {
+        let pos = self
+            .g
+            .require("position")
+            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        let vel = self
+            .g
+            .require("velocity")
+            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        let saved: Vec<(Dart, Vec<f64>, Vec<f64>)> = self
+            .vertex_darts()
+            .into_iter()
+            .map(|d| {
+                (
+                    d,
+                    self.g.real(pos, d).to_vec(),
+                    self.g.real(vel, d).to_vec(),
+                )
+            })
+            .collect();
+        self.forces()?;
+        self.rules
+            .apply_everywhere(&mut self.g, self.cfg.integrator.rule(), &self.step_params)?;
+        self.steps += 1;
+        self.time += self.cfg.dt;
+        for (v, (d, _, _)) in saved.iter().enumerate() {
+            let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
+            if p.iter().chain(u).any(|x| !x.is_finite()) {
+                for (d, p, u) in &saved {
+                    self.g
+                        .set_real(pos, *d, p)
+                        .map_err(|e| PhysicsError::Config(e.to_string()))?;
+                    self.g
+                        .set_real(vel, *d, u)
+                        .map_err(|e| PhysicsError::Config(e.to_string()))?;
+                }
+                self.steps -= 1;
+                self.time -= self.cfg.dt;
+                return Err(PhysicsError::Diverged {
+                    step: self.steps + 1,
+                    vertex: v,
+                    why: "non-finite position or velocity".into(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Computes every model's forces and their sum `force` on each vertex.
+    pub fn forces(&mut self) -> Result<(), PhysicsError> {
+        let none = Params::new();
+        for (def, _) in &self.defs {
+            for r in def.rules {
+                self.rules.apply_everywhere(&mut self.g, r, &none)?;
+            }
+        }
+        self.rules
+            .apply_everywhere(&mut self.g, "accumulate", &none)?;
+        Ok(())
+    }
+
+    /// The map with all its embeddings.
+    pub fn gmap(&self) -> &GMap {
+        &self.g
+    }
+
+    /// The rules in use.
+    pub fn rules(&self) -> &RuleSet {
+        &self.rules
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+
+    /// Simulated time.
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// Steps done.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    fn refresh_labels(&mut self) {
+        if self.labels_version != self.g.version() {
+            self.labels = self.g.orbit_labels(OrbitType::vertex(self.g.dimension()));
+            self.labels_version = self.g.version();
+        }
+    }
+
+    /// One dart per vertex, in vertex order ([`GMap::orbit_labels`] of the vertex orbit).
+    pub fn vertex_darts(&self) -> Vec<Dart> {
+        let (labels, n) = &self.labels;
+        let mut out = vec![Dart(u32::MAX); *n];
+        for d in self.g.darts() {
+            let l = labels[d.index()] as usize;
+            if out[l].0 == u32::MAX {
+                out[l] = d;
+            }
+        }
+        out
+    }
+
+    fn id(&self, name: &str) -> Result<EmbeddingId, PhysicsError> {
+        self.g
+            .require(name)
+            .map_err(|e| PhysicsError::Config(e.to_string()))
+    }
+
+    /// A vec3 vertex embedding (`position`, `velocity`, `rest`, `force`) in vertex order.
+    pub fn vertex_vec3(&self, name: &str) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        let id = self.id(name)?;
+        Ok(self
+            .vertex_darts()
+            .into_iter()
+            .map(|d| {
+                let x = self.g.real(id, d);
+                [x[0], x[1], x[2]]
+            })
+            .collect())
+    }
+
+    /// A f64 vertex embedding (`mass`) in vertex order.
+    pub fn vertex_scalar(&self, name: &str) -> Result<Vec<f64>, PhysicsError> {
+        let id = self.id(name)?;
+        self.vertex_darts()
+            .into_iter()
+            .map(|d| match self.g.value(id, d) {
+                Ok(Value::Real(x)) => Ok(x[0]),
+                Ok(v) => Err(PhysicsError::Config(format!(
+                    "'{name}' is not a real: {v:?}"
+                ))),
+                Err(e) => Err(PhysicsError::Config(e.to_string())),
+            })
+            .collect()
+    }
+
+    /// A bool vertex embedding (`fixed`) in vertex order.
+    pub fn vertex_bool(&self, name: &str) -> Result<Vec<bool>, PhysicsError> {
+        let id = self.id(name)?;
+        self.vertex_darts()
+            .into_iter()
+            .map(|d| match self.g.value(id, d) {
+                Ok(Value::Bool(b)) => Ok(b),
+                Ok(v) => Err(PhysicsError::Config(format!(
+                    "'{name}' is not a bool: {v:?}"
+                ))),
+                Err(e) => Err(PhysicsError::Config(e.to_string())),
+            })
+            .collect()
+    }
+
+    /// Sets a vec3 vertex embedding from values in vertex order.
+    pub fn set_vertex_vec3(&mut self, name: &str, values: &[[f64; 3]]) -> Result<(), PhysicsError> {
+        self.refresh_labels();
+        let id = self.id(name)?;
+        let darts = self.vertex_darts();
+        if values.len() != darts.len() {
+            return Err(PhysicsError::Config(format!(
+                "{} values given for {} vertices",
+                values.len(),
+                darts.len()
+            )));
+        }
+        for (d, v) in darts.into_iter().zip(values) {
+            self.g
+                .set_real(id, d, v)
+                .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Total mass (sum of the vertex masses).
+    pub fn total_mass(&self) -> Result<f64, PhysicsError> {
+        Ok(self.vertex_scalar("mass")?.iter().sum())
+    }
+
+    /// Kinetic energy, sum of m |v|^2 / 2.
+    pub fn kinetic_energy(&self) -> Result<f64, PhysicsError> {
+        let m = self.vertex_scalar("mass")?;
+        let v = self.vertex_vec3("velocity")?;
+        Ok(m.iter()
+            .zip(&v)
+            .map(|(m, v)| 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]))
+            .sum())
+    }
+
+    /// Linear momentum, sum of m v.
+    pub fn momentum(&self) -> Result<[f64; 3], PhysicsError> {
+        let m = self.vertex_scalar("mass")?;
+        let v = self.vertex_vec3("velocity")?;
+        let mut p = [0.0; 3];
+        for (m, v) in m.iter().zip(&v) {
+            for a in 0..3 {
+                p[a] += m * v[a];
+            }
+        }
+        Ok(p)
+    }
+}
+
+/// Marks one dart per element (volume in 3D, face in 2D) as `vertex0`: the element's smallest
+/// dart. The FEM rules number an element's vertices from it.
+fn mark_vertex0(g: &mut GMap) -> Result<(), PhysicsError> {
+    let id = g
+        .require("vertex0")
+        .map_err(|e| PhysicsError::Config(e.to_string()))?;
+    let elem = if g.dimension() == 3 {
+        OrbitType::volume()
+    } else {
+        OrbitType::face(2)
+    };
+    let all: Vec<Dart> = g.darts().collect();
+    for d in all {
+        g.set_value(id, d, &Value::Bool(false))
+            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+    }
+    for d in g.orbit_representatives(elem) {
+        g.set_value(id, d, &Value::Bool(true))
+            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+    }
+    Ok(())
+}
