@@ -401,7 +401,9 @@ impl Simulation {
         // every free vertex needs a mass
         let masses = sim.vertex_scalar("mass")?;
         let fixed = sim.vertex_bool("fixed")?;
-        if let Some(v) = (0..masses.len()).find(|&v| !fixed[v] && !(masses[v] > 0.0)) {
+        if let Some(v) = (0..masses.len()).find(|&v| {
+            !fixed[v] && masses[v].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+        }) {
             return Err(PhysicsError::Config(format!(
                 "vertex {v} has mass {} and is not fixed",
                 masses[v]

@@ -5,6 +5,13 @@
 //! arithmetic up to the order of floating-point sums, so the only difference is rounding,
 //! amplified over 100 steps of a stable system: far below 1e-10.
 
+// Numeric reference code: index loops and formula-like doc comments mirror the math.
+#![allow(
+    clippy::needless_range_loop,
+    clippy::doc_markdown,
+    clippy::suboptimal_flops
+)]
+
 use std::collections::HashMap;
 
 use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
@@ -26,7 +33,11 @@ fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 fn norm(a: V3) -> f64 {
     dot(a, a).sqrt()
@@ -53,7 +64,10 @@ fn m_t(a: &M3) -> M3 {
     c
 }
 fn m_det(a: &M3) -> f64 {
-    dot([a[0][0], a[1][0], a[2][0]], cross([a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]))
+    dot(
+        [a[0][0], a[1][0], a[2][0]],
+        cross([a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]),
+    )
 }
 fn m_inv(a: &M3) -> M3 {
     let d = m_det(a);
@@ -98,7 +112,14 @@ fn polar(f: &M3) -> M3 {
 fn local_faces(kind: CellKind, n: usize) -> Vec<Vec<usize>> {
     match kind {
         CellKind::Tetra => vec![vec![0, 1, 2], vec![0, 1, 3], vec![1, 2, 3], vec![0, 2, 3]],
-        CellKind::Hexa => vec![vec![0, 1, 2, 3], vec![4, 5, 6, 7], vec![0, 1, 5, 4], vec![1, 2, 6, 5], vec![2, 3, 7, 6], vec![3, 0, 4, 7]],
+        CellKind::Hexa => vec![
+            vec![0, 1, 2, 3],
+            vec![4, 5, 6, 7],
+            vec![0, 1, 5, 4],
+            vec![1, 2, 6, 5],
+            vec![2, 3, 7, 6],
+            vec![3, 0, 4, 7],
+        ],
         CellKind::Polygon => vec![(0..n).collect()],
         _ => unimplemented!("not used in these tests"),
     }
@@ -131,7 +152,14 @@ impl Reference {
                 }
                 CellKind::Polygon => {
                     // fan from the first vertex (convex polygons)
-                    (1..c.len() - 1).map(|k| 0.5 * norm(cross(sub(mesh.points[c[k]], mesh.points[c[0]]), sub(mesh.points[c[k + 1]], mesh.points[c[0]])))).sum()
+                    (1..c.len() - 1)
+                        .map(|k| {
+                            0.5 * norm(cross(
+                                sub(mesh.points[c[k]], mesh.points[c[0]]),
+                                sub(mesh.points[c[k + 1]], mesh.points[c[0]]),
+                            ))
+                        })
+                        .sum()
                 }
                 CellKind::Hexa => {
                     // an axis-aligned box cell in these tests
@@ -164,7 +192,8 @@ impl Reference {
             for f in local_faces(*kind, cell.len()) {
                 for j in 0..f.len() {
                     let (a, b) = (cell[f[j]], cell[f[(j + 1) % f.len()]]);
-                    self.springs.push((a, b, k, c, norm(sub(self.rest[b], self.rest[a]))));
+                    self.springs
+                        .push((a, b, k, c, norm(sub(self.rest[b], self.rest[a]))));
                 }
             }
         }
@@ -180,9 +209,7 @@ impl Reference {
             let dmi = m_inv(&dm);
             let vol = m_det(&dm).abs() / 6.0;
             let mut g = [[0.0; 3]; 4];
-            for a in 0..3 {
-                g[a + 1] = dmi[a];
-            }
+            g[1..4].copy_from_slice(&dmi);
             g[0] = scale(-1.0, add(add(g[1], g[2]), g[3]));
             let mut k = [[[[0.0; 3]; 3]; 4]; 4];
             for a in 0..4 {
@@ -190,7 +217,10 @@ impl Reference {
                     for i in 0..3 {
                         for j in 0..3 {
                             let delta = if i == j { 1.0 } else { 0.0 };
-                            k[a][b][i][j] = vol * (lambda * g[a][i] * g[b][j] + mu * g[b][i] * g[a][j] + mu * dot(g[a], g[b]) * delta);
+                            k[a][b][i][j] = vol
+                                * (lambda * g[a][i] * g[b][j]
+                                    + mu * g[b][i] * g[a][j]
+                                    + mu * dot(g[a], g[b]) * delta);
                         }
                     }
                 }
@@ -213,14 +243,21 @@ impl Reference {
         }
         for (vs, dmi, k) in &self.tets {
             let r = if self.corot {
-                let ds = cols(sub(self.x[vs[1]], self.x[vs[0]]), sub(self.x[vs[2]], self.x[vs[0]]), sub(self.x[vs[3]], self.x[vs[0]]));
+                let ds = cols(
+                    sub(self.x[vs[1]], self.x[vs[0]]),
+                    sub(self.x[vs[2]], self.x[vs[0]]),
+                    sub(self.x[vs[3]], self.x[vs[0]]),
+                );
                 polar(&m_mul(&ds, dmi))
             } else {
                 [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
             };
             let rt = m_t(&r);
             // u_b = R^T x_b - X_b (R = I: the linear displacement)
-            let u: Vec<V3> = vs.iter().map(|&i| sub(m_v(&rt, self.x[i]), self.rest[i])).collect();
+            let u: Vec<V3> = vs
+                .iter()
+                .map(|&i| sub(m_v(&rt, self.x[i]), self.rest[i]))
+                .collect();
             for a in 0..4 {
                 let mut fa = [0.0; 3];
                 for b in 0..4 {
@@ -244,10 +281,20 @@ fn key(p: V3) -> [u64; 3] {
     p.map(f64::to_bits)
 }
 
-fn compare(kind: &str, params: &[(&str, f64)], mesh: &Mesh, mut reference: Reference, young: f64, nu: f64) {
+fn compare(
+    kind: &str,
+    params: &[(&str, f64)],
+    mesh: &Mesh,
+    mut reference: Reference,
+    young: f64,
+    nu: f64,
+) {
     let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
     let cfg = Config {
-        models: vec![ModelSpec { kind: kind.into(), params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect() }],
+        models: vec![ModelSpec {
+            kind: kind.into(),
+            params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
+        }],
         density: 1000.0,
         young,
         poisson: nu,
@@ -259,25 +306,44 @@ fn compare(kind: &str, params: &[(&str, f64)], mesh: &Mesh, mut reference: Refer
     };
     let mut sim = Simulation::new(g, cfg).unwrap();
     // vertex correspondence through the exact rest positions
-    let index: HashMap<[u64; 3], usize> = mesh.points.iter().enumerate().map(|(i, p)| (key(*p), i)).collect();
+    let index: HashMap<[u64; 3], usize> = mesh
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (key(*p), i))
+        .collect();
     let rest = sim.vertex_vec3("rest").unwrap();
     let map: Vec<usize> = rest.iter().map(|p| index[&key(*p)]).collect();
     let masses = sim.vertex_scalar("mass").unwrap();
     for (v, &i) in map.iter().enumerate() {
-        assert!((masses[v] - reference.m[i]).abs() <= 1e-12 * reference.m[i], "{kind}: mass of vertex {i}");
+        assert!(
+            (masses[v] - reference.m[i]).abs() <= 1e-12 * reference.m[i],
+            "{kind}: mass of vertex {i}"
+        );
     }
     for _ in 0..100 {
         sim.step().unwrap();
         reference.step();
     }
     let x = sim.vertex_vec3("position").unwrap();
-    let disp: f64 = reference.x.iter().zip(&reference.rest).map(|(a, b)| norm(sub(*a, *b))).fold(0.0, f64::max);
-    assert!(disp > 1e-4, "{kind}: the object must actually move (max displacement {disp})");
+    let disp: f64 = reference
+        .x
+        .iter()
+        .zip(&reference.rest)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .fold(0.0, f64::max);
+    assert!(
+        disp > 1e-4,
+        "{kind}: the object must actually move (max displacement {disp})"
+    );
     let mut worst: f64 = 0.0;
     for (v, &i) in map.iter().enumerate() {
         worst = worst.max(norm(sub(x[v], reference.x[i])) / disp);
     }
-    assert!(worst < 1e-10, "{kind}: relative difference {worst:e} after 100 steps");
+    assert!(
+        worst < 1e-10,
+        "{kind}: relative difference {worst:e} after 100 steps"
+    );
 }
 
 fn beam() -> Mesh {
@@ -286,13 +352,36 @@ fn beam() -> Mesh {
 
 #[test]
 fn stretch_elementary_matches_the_flat_reference() {
-    for (mesh, three) in [(beam(), true), (grid([4, 3], [2.0, 1.5], GridElement::Mixed), false)] {
-        let mut r = Reference::new(&mesh, 1000.0, 1e-9, [0.0, -9.81, if three { 0.0 } else { -3.0 }], 1e-3);
+    for (mesh, three) in [
+        (beam(), true),
+        (grid([4, 3], [2.0, 1.5], GridElement::Mixed), false),
+    ] {
+        let mut r = Reference::new(
+            &mesh,
+            1000.0,
+            1e-9,
+            [0.0, -9.81, if three { 0.0 } else { -3.0 }],
+            1e-3,
+        );
         r.add_springs(&mesh, 2e4, 5.0);
         let mut r2 = Reference::new(&mesh, 1000.0, 1e-9, r.gravity, 1e-3);
         r2.add_springs(&mesh, 2e4, 5.0);
-        compare("stretch_elementary", &[("stiffness", 2e4), ("damping", 5.0)], &mesh, r, 1e6, 0.3);
-        compare("stretch_cumulated", &[("stiffness", 2e4), ("damping", 5.0)], &mesh, r2, 1e6, 0.3);
+        compare(
+            "stretch_elementary",
+            &[("stiffness", 2e4), ("damping", 5.0)],
+            &mesh,
+            r,
+            1e6,
+            0.3,
+        );
+        compare(
+            "stretch_cumulated",
+            &[("stiffness", 2e4), ("damping", 5.0)],
+            &mesh,
+            r2,
+            1e6,
+            0.3,
+        );
     }
 }
 

@@ -664,7 +664,7 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
                     g.embedding(b.ids[p.emb]).slot(x) as u32
                 };
                 match written.get(&(p.emb, id)) {
-                    Some((w, _)) if w == v => {}
+                    Some((w, _)) if same_value(w, v) => {}
                     Some(_) => {
                         conflict = Some(ApplyError::WriteConflict {
                             rule: rule.name.clone(),
@@ -725,6 +725,19 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
         }
     }
     Ok(report)
+}
+
+/// Bitwise equality of values: a NaN written twice is the same value, and 0.0 and -0.0 are not.
+fn same_value(a: &Val, b: &Val) -> bool {
+    if let (Val::I(p), Val::I(q)) = (a, b) {
+        return p == q;
+    }
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    a.to_reals(&mut x);
+    b.to_reals(&mut y);
+    a.ty() == b.ty()
+        && x.len() == y.len()
+        && x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits())
 }
 
 /// A number naming the orbit `o` of `x` in the map as it will be after `overlay` is applied
