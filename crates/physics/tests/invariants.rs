@@ -272,17 +272,17 @@ fn bad_configurations_are_refused_with_a_reason() {
     .unwrap_err();
     assert!(e.to_string().contains("no parameter 'stiffnes'"), "{e}");
     let e = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
-        c.dt = -1.0
+        c.dt = -1.0;
     })
     .unwrap_err();
     assert!(e.to_string().contains("dt must be positive"), "{e}");
     let e = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
-        c.fixed = vec!["x <".into()]
+        c.fixed = vec!["x <".into()];
     })
     .unwrap_err();
     assert!(e.to_string().contains("predicate"), "{e}");
     let e = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
-        c.fixed = vec!["w < 1".into()]
+        c.fixed = vec!["w < 1".into()];
     })
     .unwrap_err();
     assert!(
