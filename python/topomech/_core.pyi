@@ -1,18 +1,22 @@
 """The native kernel of topomech (Rust, PyO3). See the ``topomech`` package for the friendly API."""
 
 import os
-from typing import Any, final
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol, final
 
 import numpy as np
 import numpy.typing as npt
 
 __all__ = [
+    "ApplyError",
     "EmbeddingError",
     "FileFormatError",
     "GMap",
     "InternalError",
     "MeshError",
     "MeshReadError",
+    "RuleError",
+    "RuleSet",
     "TopologyError",
     "TopomechError",
     "__version__",
@@ -43,6 +47,17 @@ class EmbeddingError(TopomechError):
 
 class FileFormatError(TopomechError):
     """A .tmg file that cannot be written or read back."""
+
+class RuleError(TopomechError):
+    """A rule file refused by the checker; the message has one line per error."""
+
+    #: The errors, one ``FILE:LINE:COL: error[CONDITION]: message`` line each.
+    diagnostics: list[str]
+    #: The warnings, one ``FILE:LINE:COL: warning[CONDITION]: message`` line each.
+    warnings: list[str]
+
+class ApplyError(TopomechError):
+    """A rule that does not apply (no match, wrong hooks or parameters); the map is unchanged."""
 
 class InternalError(TopomechError):
     """A bug in topomech (a Rust panic, caught at the boundary). Please report it."""
@@ -84,6 +99,41 @@ class GMap:
     def embedding_names(self) -> list[str]: ...
     def embedding_info(self, name: str) -> dict[str, Any]: ...
     def memory_bytes(self) -> int: ...
+
+class _HasCore(Protocol):
+    """A wrapper of a kernel map, such as ``topomech.GMap``."""
+
+    @property
+    def core(self) -> GMap: ...
+
+@final
+class RuleSet:
+    """Rules loaded from rule files (``.tmr``) and checked."""
+
+    @staticmethod
+    def load(paths: Sequence[_Path]) -> RuleSet: ...
+    @staticmethod
+    def from_source(text: str, name: str = "<string>") -> RuleSet: ...
+    @staticmethod
+    def from_sources(sources: Sequence[tuple[str, str]]) -> RuleSet: ...
+    @staticmethod
+    def library(dimension: int) -> RuleSet: ...
+    @property
+    def dimension(self) -> int: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    def rule_names(self) -> list[str]: ...
+    def rule_info(self, name: str) -> dict[str, Any]: ...
+    def apply(
+        self,
+        gmap: GMap | _HasCore,
+        name: str,
+        at: int | Sequence[int] | None = None,
+        params: Mapping[str, Any] | None = None,
+    ) -> dict[str, int]: ...
+    def count_matches(
+        self, gmap: GMap | _HasCore, name: str, params: Mapping[str, Any] | None = None
+    ) -> int: ...
 
 def grid(
     nx: int, ny: int, sx: float = 1.0, sy: float = 1.0, element: str = "quad"

@@ -2,8 +2,9 @@
 
 Each subcommand is a pair of functions: ``_add_NAME(subparsers)`` declares its arguments and
 ``_run_NAME(args) -> exit code`` does the work. Exit codes: 0 success, 1 the input was read but
-is not valid (an invalid G-map), 2 the input cannot be read or is refused (the reason goes to
-stderr, without a traceback).
+fails on its merits (an invalid G-map, a rule the checker refuses, a rule that does not apply),
+2 a file cannot be read or is refused, or the arguments are wrong (the reason goes to stderr,
+without a traceback).
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 from topomech import __version__
-from topomech._core import TopomechError
+from topomech._core import ApplyError, RuleError, TopomechError
 from topomech._gmap import GMap
-from topomech.io import DroppedBlock, read_gmap, write_vtu
+from topomech.io import DroppedBlock, read_gmap, write_format, write_gmap, write_vtu
+from topomech.rules import ParamValue, RuleSet
 
 __all__ = ["build_parser", "main"]
 
@@ -175,10 +177,260 @@ def _run_demo(args: argparse.Namespace) -> int:
     return code
 
 
+# ---------------------------------------------------------------------------------- rules
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def _read_rule_files(paths: Sequence[Path]) -> list[tuple[str, str]] | None:
+    """``(name, text)`` of each rule file, named as given; None (each reason on stderr) when
+    one cannot be read."""
+    sources: list[tuple[str, str]] = []
+    ok = True
+    for p in paths:
+        try:
+            sources.append((str(p), p.read_text(encoding="utf-8")))
+        except UnicodeDecodeError as e:
+            _error(f"{p}: cannot read the rule file: not UTF-8 text (byte {e.start})")
+            ok = False
+        except OSError as e:
+            _error(f"{p}: cannot read the rule file: {e.strerror or e}")
+            ok = False
+    return sources if ok else None
+
+
+def _add_check(sub: Any) -> None:
+    p = sub.add_parser(
+        "check",
+        help="check rule files (.tmr): one line per problem",
+        description=(
+            "Load the rule files together (they share their dimension and embeddings) and "
+            "check every rule. Diagnostics go to stdout, one per line, as "
+            "FILE:LINE:COL: error[CONDITION]: message (or warning[CONDITION]). Exit 0 when "
+            "every rule is accepted (warnings allowed), with a last line 'ok: N rules in M "
+            "files'; 1 when the checker refuses something; 2 when a file cannot be read (the "
+            "reason on stderr)."
+        ),
+    )
+    p.add_argument("rule_files", metavar="FILE.tmr", nargs="+", type=Path)
+    p.set_defaults(run=_run_check)
+
+
+def _run_check(args: argparse.Namespace) -> int:
+    sources = _read_rule_files(args.rule_files)
+    if sources is None:
+        return EXIT_REFUSED
+    try:
+        rules = RuleSet.from_sources(sources)
+    except RuleError as e:
+        for line in [*e.diagnostics, *e.warnings]:
+            print(line)
+        return EXIT_INVALID
+    for line in rules.warnings:
+        print(line)
+    n = len(rules.rule_names())
+    warned = f" ({_plural(len(rules.warnings), 'warning')})" if rules.warnings else ""
+    print(f"ok: {_plural(n, 'rule')} in {_plural(len(sources), 'file')}{warned}")
+    return EXIT_OK
+
+
+#: The value of ``RULES`` that names the rules shipped with topomech.
+LIBRARY = "@library"
+
+
+def _dart_list(text: str) -> list[int]:
+    """``--at 3,17``: darts, one per hook."""
+    try:
+        darts = [int(t) for t in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected darts separated by commas (e.g. 3,17), got {text!r}"
+        ) from None
+    if any(d < 0 for d in darts):
+        raise argparse.ArgumentTypeError(f"darts are non-negative, got {text!r}")
+    return darts
+
+
+def _number(text: str) -> float | int:
+    t = text.strip()
+    try:
+        return int(t)
+    except ValueError:
+        return float(t)
+
+
+def _param(text: str) -> tuple[str, ParamValue]:
+    """``--param NAME=VALUE``: a number, ``true``/``false``, numbers separated by commas (a
+    vector), or rows separated by semicolons (a matrix)."""
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    v = value.strip()
+    try:
+        if v in ("true", "false"):
+            return name, v == "true"
+        if ";" in v:
+            return name, [[_number(x) for x in row.split(",")] for row in v.split(";")]
+        if "," in v:
+            return name, [_number(x) for x in v.split(",")]
+        return name, _number(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"parameter {name!r}: expected a number, true/false, numbers separated by commas "
+            f"(a vector) or rows separated by semicolons (a matrix), got {value!r}"
+        ) from None
+
+
+def _add_apply(sub: Any) -> None:
+    p = sub.add_parser(
+        "apply",
+        help="apply a rule to a mesh or saved G-map and write the result",
+        description=(
+            "Read INPUT (a mesh file meshio reads, or a saved G-map .tmg), load RULES (a rule "
+            f"file, or {LIBRARY} for the rules shipped for the map's dimension), apply RULE at "
+            "every match (--everywhere) or once at the given hook darts (--at), and write "
+            "OUTPUT: a saved G-map for .tmg, else a mesh file in the format of its extension "
+            "(.vtu, .vtk, .msh, ...). Prints 'matches: N', 'created: N' and 'deleted: N' (darts) "
+            "on stdout. Exit 0 on success (zero matches with --everywhere included); 1 when "
+            "the rule does not match at --at or its application fails; 2 when a file cannot "
+            "be read, the rule file is refused (its diagnostics on stderr) or an argument is "
+            "wrong."
+        ),
+    )
+    p.add_argument("input", metavar="INPUT", type=Path, help="mesh file or saved G-map (.tmg)")
+    p.add_argument("rules", metavar="RULES", help=f"rule file (.tmr), or {LIBRARY}")
+    p.add_argument("rule", metavar="RULE", help="the rule's name")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument(
+        "--everywhere", action="store_true", help="apply at every match (one-hook rules)"
+    )
+    where.add_argument(
+        "--at",
+        metavar="DART[,DART...]",
+        type=_dart_list,
+        help="apply once, with the hooks at these darts (one per hook, e.g. --at 3,17)",
+    )
+    p.add_argument(
+        "--param",
+        metavar="NAME=VALUE",
+        action="append",
+        default=[],
+        type=_param,
+        help=(
+            "a parameter of the rule (repeat for each): a number, true/false, numbers "
+            "separated by commas for a vector (gravity=0,-9.81,0), rows separated by "
+            "semicolons for a matrix (m=1,0;0,1)"
+        ),
+    )
+    p.add_argument("--out", metavar="OUTPUT", type=Path, required=True, help=".tmg or a mesh file")
+    p.add_argument(
+        "--reorient",
+        action="store_true",
+        help="turn inverted cells of INPUT over instead of refusing them",
+    )
+    p.set_defaults(run=_run_apply)
+
+
+def _load_rules(spec: str, dimension: int) -> RuleSet | None:
+    """The rule set named by ``RULES``; None (the reason on stderr) when refused."""
+    if spec == LIBRARY:
+        return RuleSet.library(dimension)
+    sources = _read_rule_files([Path(spec)])
+    if sources is None:
+        return None
+    try:
+        rules = RuleSet.from_sources(sources)
+    except RuleError as e:
+        for line in [*e.diagnostics, *e.warnings]:
+            print(line, file=sys.stderr)
+        _error(f"{spec}: the rule file is refused ({_plural(len(e.diagnostics), 'error')})")
+        return None
+    for line in rules.warnings:
+        print(line, file=sys.stderr)
+    if rules.dimension != dimension:
+        _error(
+            f"{spec}: the rules are for dimension {rules.dimension}, "
+            f"the map has dimension {dimension}"
+        )
+        return None
+    return rules
+
+
+def _check_call(rules: RuleSet, args: argparse.Namespace, spec: str) -> str | None:
+    """Why the rule, hooks and parameters asked for do not fit the rule, or None."""
+    names = rules.rule_names()
+    if args.rule not in names:
+        return f"no rule named {args.rule!r} in {spec}; its rules: {', '.join(names)}"
+    info = rules.rule_info(args.rule)
+    hooks = _plural(info["hooks"], "hook")
+    if args.everywhere and info["hooks"] != 1:
+        return f"rule {args.rule!r} has {hooks}: give --at with one dart per hook"
+    if args.at is not None and len(args.at) != info["hooks"]:
+        return f"rule {args.rule!r} has {hooks}, --at gives {_plural(len(args.at), 'dart')}"
+    declared = dict(info["params"])
+    takes = ", ".join(f"{p}: {t}" for p, t in info["params"]) or "no parameters"
+    given = [n for n, _ in args.param]
+    for n in given:
+        if n not in declared:
+            return f"rule {args.rule!r} has no parameter {n!r} (it takes {takes})"
+        if given.count(n) > 1:
+            return f"parameter {n!r} is given more than once"
+    missing = [f"{p} ({t})" for p, t in info["params"] if p not in given]
+    if missing:
+        return f"rule {args.rule!r} needs --param for {', '.join(missing)}"
+    return None
+
+
+def _run_apply(args: argparse.Namespace) -> int:
+    try:
+        write_format(args.out)
+    except ValueError as e:
+        _error(str(e))
+        return EXIT_REFUSED
+    g, dropped = read_gmap(args.input, reorient=args.reorient)
+    if dropped:
+        what = ", ".join(map(str, dropped))
+        _note(f"dropped {what}: lower-dimensional than the {g.dimension}D cells")
+    rules = _load_rules(args.rules, g.dimension)
+    if rules is None:
+        return EXIT_REFUSED
+    why = _check_call(rules, args, args.rules)
+    if why is not None:
+        _error(why)
+        return EXIT_REFUSED
+    try:
+        report = rules.apply(g, args.rule, args.at, dict(args.param))
+    except ApplyError as e:
+        _error(str(e))
+        return EXIT_INVALID
+    except (IndexError, TypeError, ValueError) as e:  # a dart or a parameter value
+        _error(str(e))
+        return EXIT_REFUSED
+    violations = g.violations()
+    if violations:
+        for v in violations[:MAX_VIOLATIONS_SHOWN]:
+            print(f"topomech: violation: {v}", file=sys.stderr)
+        _error(f"rule {args.rule!r} left an invalid map; nothing written")
+        return EXIT_INVALID
+    try:
+        write_gmap(g, args.out)
+    except ValueError as e:
+        _error(str(e))
+        return EXIT_REFUSED
+    print(f"matches: {report['matches']}")
+    print(f"created: {report['created']}")
+    print(f"deleted: {report['deleted']}")
+    print(f"wrote: {args.out}")
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------------------- main
 
 #: The subcommands, in the order `--help` lists them.
-SUBCOMMANDS: list[Callable[[Any], None]] = [_add_info, _add_demo]
+SUBCOMMANDS: list[Callable[[Any], None]] = [_add_info, _add_check, _add_apply, _add_demo]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -22,7 +22,15 @@ from topomech._gmap import GMap, PathLike
 if TYPE_CHECKING:
     import meshio
 
-__all__ = ["DroppedBlock", "read_gmap", "read_mesh", "select_cells", "write_vtu"]
+__all__ = [
+    "DroppedBlock",
+    "read_gmap",
+    "read_mesh",
+    "select_cells",
+    "write_format",
+    "write_gmap",
+    "write_vtu",
+]
 
 #: The extension of a saved G-map (read by :func:`read_gmap` without meshio).
 GMAP_SUFFIX = ".tmg"
@@ -182,3 +190,50 @@ def write_vtu(gmap: GMap, path: PathLike) -> None:
     import meshio
 
     meshio.write(os.fspath(path), gmap.to_meshio(), file_format="vtu")
+
+
+def write_format(path: PathLike) -> str:
+    """The format :func:`write_gmap` writes ``path`` in, from its extension: ``"tmg"`` (a
+    saved G-map) or a meshio format name (``.msh`` is Gmsh's). Raises ``ValueError`` for an
+    extension that names no format."""
+    import meshio
+
+    p = Path(path)
+    if p.suffix.lower() == GMAP_SUFFIX:
+        return "tmg"
+    table: dict[str, list[str]] = meshio.extension_to_filetypes
+    suffixes = [s.lower() for s in p.suffixes]
+    for k in range(len(suffixes)):
+        formats = table.get("".join(suffixes[k:]))
+        if formats:
+            return sorted(formats, key=lambda f: f != "gmsh")[0]
+    known = ", ".join([GMAP_SUFFIX, *sorted(table)])
+    raise ValueError(f"{p}: unknown output extension {p.suffix or '(none)'}; known: {known}")
+
+
+def write_gmap(gmap: GMap, path: PathLike) -> None:
+    """Writes a map: a saved G-map (round-trip exact) for ``.tmg``, else its points and cells
+    as a mesh file in the format of the extension (``.vtu``, ``.vtk``, ``.msh``, ...).
+    Raises ``ValueError`` when the extension names no format or the format cannot hold the
+    map's cells (Gmsh has no polygons, say); nothing is left written then."""
+    fmt = write_format(path)
+    if fmt == "tmg":
+        gmap.save(path)
+    elif fmt == "vtu":
+        write_vtu(gmap, path)
+    else:
+        import meshio
+
+        mesh = gmap.to_meshio()
+        try:
+            meshio.write(os.fspath(path), mesh, file_format=fmt)
+        except (MemoryError, KeyboardInterrupt, OSError):
+            raise
+        except Exception as e:  # meshio's writers raise KeyError for cells they cannot hold
+            with contextlib.suppress(OSError):
+                Path(path).unlink()
+            kinds = ", ".join(sorted({b.type for b in mesh.cells}))
+            raise ValueError(
+                f"{path}: cannot write the map as {fmt} (cells: {kinds}): "
+                f"{type(e).__name__}: {e}; write .vtu or .tmg instead"
+            ) from e

@@ -24,7 +24,7 @@ pub(crate) type FlatMesh<'py> = (
 );
 
 /// A shape written as Python writes a tuple: `(5,)`, `(5, 4)`.
-fn shape_str(shape: &[usize]) -> String {
+pub(crate) fn shape_str(shape: &[usize]) -> String {
     match shape {
         [n] => format!("({n},)"),
         _ => format!(
@@ -39,7 +39,7 @@ fn shape_str(shape: &[usize]) -> String {
 }
 
 /// The Python type name of `obj`, for messages.
-fn type_name(obj: &Bound<'_, PyAny>) -> String {
+pub(crate) fn type_name(obj: &Bound<'_, PyAny>) -> String {
     obj.get_type()
         .name()
         .map_or_else(|_| "?".to_string(), |n| n.to_string())

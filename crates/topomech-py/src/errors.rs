@@ -8,6 +8,8 @@
 //!     ├── TopologyError          links, sews, orbits, invalid maps
 //!     ├── EmbeddingError         embeddings
 //!     ├── FileFormatError        the .tmg format (io::FormatError)
+//!     ├── RuleError              a rule file refused by the checker (its diagnostics)
+//!     ├── ApplyError             a rule that does not apply (topomech_rules::ApplyError)
 //!     └── InternalError          a bug: a Rust panic, caught before it reaches Python
 //! ```
 //!
@@ -30,6 +32,7 @@ use topomech_gmap::mesh::MeshError as KernelMeshError;
 use topomech_gmap::{
     EmbeddingError as KernelEmbeddingError, GMapError, LinkError, OrbitTypeError, SewError,
 };
+use topomech_rules::{ApplyError as KernelApplyError, Diagnostic, Severity};
 
 pyo3::create_exception!(
     topomech._core,
@@ -69,6 +72,22 @@ pyo3::create_exception!(
 );
 pyo3::create_exception!(
     topomech._core,
+    RuleError,
+    TopomechError,
+    "A rule file refused by the checker. The message has one line per error,\n\
+     `FILE:LINE:COL: error[CONDITION]: message`; `diagnostics` holds those lines as a list\n\
+     and `warnings` the warnings' lines."
+);
+pyo3::create_exception!(
+    topomech._core,
+    ApplyError,
+    TopomechError,
+    "A rule that does not apply: unknown rule, no match at the given darts (the message says\n\
+     which arc, orbit or dart failed), wrong hooks or parameters, a map that does not fit the\n\
+     rules, or a failed evaluation. The map is unchanged."
+);
+pyo3::create_exception!(
+    topomech._core,
     InternalError,
     TopomechError,
     "A bug in topomech (a Rust panic, caught at the boundary). Please report it."
@@ -83,6 +102,8 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("TopologyError", py.get_type::<TopologyError>())?;
     m.add("EmbeddingError", py.get_type::<EmbeddingError>())?;
     m.add("FileFormatError", py.get_type::<FileFormatError>())?;
+    m.add("RuleError", py.get_type::<RuleError>())?;
+    m.add("ApplyError", py.get_type::<ApplyError>())?;
     m.add("InternalError", py.get_type::<InternalError>())?;
     install_panic_hook();
     Ok(())
@@ -104,6 +125,10 @@ pub(crate) enum Error {
     EmbeddingInput(String),
     /// The `.tmg` format.
     Format(FormatError),
+    /// Rule files refused by the checker: every diagnostic, errors and warnings.
+    Rules(Vec<Diagnostic>),
+    /// A rule that does not apply.
+    Apply(KernelApplyError),
     /// An error that is already a Python exception (argument checks).
     Py(PyErr),
 }
@@ -150,6 +175,12 @@ impl From<FormatError> for Error {
     }
 }
 
+impl From<KernelApplyError> for Error {
+    fn from(e: KernelApplyError) -> Self {
+        Error::Apply(e)
+    }
+}
+
 impl From<PyErr> for Error {
     fn from(e: PyErr) -> Self {
         Error::Py(e)
@@ -165,9 +196,38 @@ impl From<Error> for PyErr {
             Error::Embedding(e) => EmbeddingError::new_err(e.to_string()),
             Error::EmbeddingInput(msg) => EmbeddingError::new_err(msg),
             Error::Format(e) => FileFormatError::new_err(e.to_string()),
+            Error::Rules(diags) => rule_error(&diags),
+            Error::Apply(e) => ApplyError::new_err(e.to_string()),
             Error::Py(e) => e,
         }
     }
+}
+
+/// The diagnostics of `severity`, one `FILE:LINE:COL: severity[CONDITION]: message` each.
+fn diagnostic_lines(diags: &[Diagnostic], severity: Severity) -> Vec<String> {
+    diags
+        .iter()
+        .filter(|d| d.severity == severity)
+        .map(ToString::to_string)
+        .collect()
+}
+
+/// A `RuleError` whose message is the error lines, with `diagnostics` (the error lines) and
+/// `warnings` (the warning lines) as attributes.
+fn rule_error(diags: &[Diagnostic]) -> PyErr {
+    let errors = diagnostic_lines(diags, Severity::Error);
+    let warnings = diagnostic_lines(diags, Severity::Warning);
+    let err = RuleError::new_err(errors.join("\n"));
+    Python::attach(|py| {
+        let value = err.value(py);
+        match value
+            .setattr("diagnostics", errors)
+            .and_then(|()| value.setattr("warnings", warnings))
+        {
+            Ok(()) => err,
+            Err(e) => e,
+        }
+    })
 }
 
 /// A `ValueError` (bad shape or value of an argument).

@@ -43,7 +43,11 @@ impl PyGMap {
     }
 
     /// Runs a changing operation; a panic poisons the map.
-    fn mutate<T>(&mut self, py: Python<'_>, f: impl FnOnce(&mut GMap) -> Result<T>) -> PyResult<T> {
+    pub(crate) fn mutate<T>(
+        &mut self,
+        py: Python<'_>,
+        f: impl FnOnce(&mut GMap) -> Result<T>,
+    ) -> PyResult<T> {
         self.map()?;
         let r = guard(|| f(&mut self.inner));
         if r.as_ref()

@@ -1,6 +1,7 @@
 //! `topomech._core`: the Python bindings of the topomech kernel.
 //!
 //! - [`gmap`]: the `GMap` class (numpy arrays in and out, every index checked).
+//! - [`rules`]: the `RuleSet` class, rule files loaded, checked and applied to maps.
 //! - [`generators`]: `grid` and `box`, generated meshes in the flat layout of [`convert`].
 //! - [`errors`]: the exception hierarchy, and the guard that keeps Rust panics out of Python.
 //!
@@ -11,6 +12,7 @@ mod convert;
 mod errors;
 mod generators;
 mod gmap;
+mod rules;
 
 use pyo3::prelude::*;
 
@@ -20,6 +22,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     m.add_class::<gmap::PyGMap>()?;
+    m.add_class::<rules::PyRuleSet>()?;
     m.add_function(wrap_pyfunction!(generators::grid, m)?)?;
     m.add_function(wrap_pyfunction!(generators::cuboid, m)?)?;
     m.add_function(wrap_pyfunction!(panic_for_tests, m)?)?;

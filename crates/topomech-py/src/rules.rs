@@ -1,0 +1,419 @@
+//! `topomech._core.RuleSet`: rule files loaded and checked, applied to maps.
+//!
+//! Loading refuses a file with `RuleError` carrying every diagnostic; applying refuses with
+//! `ApplyError` (the engine's [`topomech_rules::ApplyError`]) and leaves the map unchanged.
+//! Arguments are checked here first, like everywhere else at the boundary: a hook dart is a
+//! live dart of the map (`IndexError`, never wrapped), and a parameter value is converted to
+//! the type its rule declares (`TypeError` for a value of the wrong kind, `ValueError` for a
+//! wrong shape or a non-finite number). A missing or unknown parameter is the rule's business:
+//! `ApplyError`.
+
+use std::path::{Path, PathBuf};
+
+use numpy::{PyArrayDescrMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyTuple};
+use topomech_gmap::{Dart, GMap};
+use topomech_rules::check::Rule;
+use topomech_rules::{
+    library, load_files, load_sources, ApplyError as KernelApplyError, ApplyReport, Diagnostic,
+    Params, RuleSet, Ty, Val,
+};
+
+use crate::convert::{dart_arg, shape_str, type_name};
+use crate::errors::{guard, type_error, value_error, Error, Result};
+use crate::gmap::PyGMap;
+
+/// Rules loaded from rule files (`.tmr`) and checked: every rule accepted keeps any map of
+/// its dimension valid. Load with `RuleSet.load`, `RuleSet.from_source` or `RuleSet.library`.
+#[pyclass(name = "RuleSet", module = "topomech._core", frozen)]
+pub(crate) struct PyRuleSet {
+    inner: RuleSet,
+    /// The checker's warnings, one `FILE:LINE:COL: warning[CONDITION]: message` line each.
+    warnings: Vec<String>,
+}
+
+/// The rule set, or `RuleError` with every diagnostic.
+fn loaded(
+    r: std::result::Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>>,
+) -> Result<PyRuleSet> {
+    match r {
+        Ok((inner, diags)) => Ok(PyRuleSet {
+            inner,
+            warnings: diags.iter().map(ToString::to_string).collect(),
+        }),
+        Err(diags) => Err(Error::Rules(diags)),
+    }
+}
+
+/// The map behind `obj`: a `topomech._core.GMap`, or anything whose `core` attribute is one
+/// (the `topomech.GMap` wrapper), borrowed for writing.
+fn gmap_arg<'py>(obj: &Bound<'py, PyAny>) -> PyResult<PyRefMut<'py, PyGMap>> {
+    let core = match obj.cast::<PyGMap>() {
+        Ok(g) => g.clone(),
+        Err(_) => obj
+            .getattr("core")
+            .ok()
+            .and_then(|c| c.cast_into::<PyGMap>().ok())
+            .ok_or_else(|| {
+                PyErr::from(type_error(format!(
+                    "gmap must be a topomech.GMap or a topomech._core.GMap, got {}",
+                    type_name(obj)
+                )))
+            })?,
+    };
+    Ok(core.try_borrow_mut()?)
+}
+
+/// The hook darts: one int, or a sequence of ints (one per hook), each a live dart of `g`.
+fn hooks_arg(g: &GMap, at: &Bound<'_, PyAny>) -> Result<Vec<Dart>> {
+    if at.is_instance_of::<PyInt>() || at.extract::<i64>().is_ok() {
+        // one dart: a Python or numpy integer
+        return Ok(vec![dart_arg(g, at)?]);
+    }
+    if !(at.is_instance_of::<PyList>() || at.is_instance_of::<PyTuple>())
+        && at.cast::<PyUntypedArray>().is_err()
+    {
+        return Err(type_error(format!(
+            "at must be a dart or a list of darts (one per hook), got {}",
+            type_name(at)
+        )));
+    }
+    at.try_iter()?
+        .map(|d| dart_arg(g, &d?))
+        .collect::<Result<Vec<Dart>>>()
+}
+
+/// `name: type, ...` of a rule's parameters, for messages.
+fn signature(rule: &Rule) -> String {
+    if rule.params.is_empty() {
+        return "it takes no parameters".to_string();
+    }
+    let ps: Vec<String> = rule
+        .params
+        .iter()
+        .map(|(p, ty)| format!("{p}: {ty}"))
+        .collect();
+    format!("it takes {}", ps.join(", "))
+}
+
+/// The parameters of `rule` from a mapping `{name: value}`, each converted to its declared
+/// type. Missing parameters are left for the engine to name.
+fn params_arg(rule: &Rule, params: Option<&Bound<'_, PyAny>>) -> Result<Params> {
+    let mut out = Params::new();
+    let Some(obj) = params else {
+        return Ok(out);
+    };
+    let map = obj.cast::<PyMapping>().map_err(|_| {
+        type_error(format!(
+            "params must be a dict of parameter values by name, got {}",
+            type_name(obj)
+        ))
+    })?;
+    for item in map.items()?.iter() {
+        let (k, v): (Bound<'_, PyAny>, Bound<'_, PyAny>) = item.extract()?;
+        let name: String = k.extract().map_err(|_| {
+            type_error(format!(
+                "parameter names must be str, got {}",
+                type_name(&k)
+            ))
+        })?;
+        let Some((_, ty)) = rule.params.iter().find(|(p, _)| *p == name) else {
+            return Err(Error::Apply(KernelApplyError::Param {
+                rule: rule.name.clone(),
+                message: format!("unknown parameter '{name}' ({})", signature(rule)),
+            }));
+        };
+        let what = format!("parameter '{name}' of rule '{}' is {ty}", rule.name);
+        let val = value_arg(&v, *ty, &what)?;
+        out.insert(name, val);
+    }
+    Ok(out)
+}
+
+/// A real number: an int or a float (Python's or numpy's), not a bool.
+fn real_scalar(obj: &Bound<'_, PyAny>) -> Option<f64> {
+    if obj.extract::<bool>().is_ok() {
+        return None;
+    }
+    obj.extract::<f64>().ok()
+}
+
+/// A value of type `ty`; `what` starts the messages ("parameter 'f' of rule 'r' is f64").
+fn value_arg(obj: &Bound<'_, PyAny>, ty: Ty, what: &str) -> Result<Val> {
+    let val =
+        match ty {
+            Ty::Bool => Val::B(obj.extract::<bool>().map_err(|_| {
+                type_error(format!("{what}: expected a bool, got {}", type_name(obj)))
+            })?),
+            Ty::I64 => {
+                if obj.extract::<bool>().is_ok() {
+                    return Err(type_error(format!("{what}: expected an int, got bool")));
+                }
+                match obj.extract::<i64>() {
+                    Ok(i) => Val::I(i),
+                    Err(_) if obj.is_instance_of::<PyInt>() => {
+                        return Err(value_error(format!(
+                            "{what}: {obj} does not fit in 64 bits"
+                        )))
+                    }
+                    Err(_) => {
+                        return Err(type_error(format!(
+                            "{what}: expected an int, got {}",
+                            type_name(obj)
+                        )))
+                    }
+                }
+            }
+            Ty::F64 => Val::F(real_scalar(obj).ok_or_else(|| {
+                type_error(format!("{what}: expected a number, got {}", type_name(obj)))
+            })?),
+            Ty::Vec2 | Ty::Vec3 | Ty::Mat(..) => {
+                let (shape, data) = real_array(obj, what)?;
+                let expected = match ty {
+                    Ty::Vec2 => vec![2],
+                    Ty::Vec3 => vec![3],
+                    Ty::Mat(r, c) => vec![usize::from(r), usize::from(c)],
+                    _ => unreachable!("scalar types are handled above"),
+                };
+                if shape != expected {
+                    let want = match ty {
+                        Ty::Mat(r, c) => format!("a {r}x{c} matrix (shape ({r}, {c}))"),
+                        _ => format!("{} numbers", expected[0]),
+                    };
+                    return Err(value_error(format!(
+                        "{what}: expected {want}, got shape {}",
+                        shape_str(&shape)
+                    )));
+                }
+                Val::from_reals(ty, &data)
+            }
+        };
+    let mut reals = Vec::new();
+    val.to_reals(&mut reals);
+    if reals.iter().any(|x| !x.is_finite()) {
+        return Err(value_error(format!(
+            "{what}: got a value that is not finite"
+        )));
+    }
+    Ok(val)
+}
+
+/// The shape and row-major entries of a vector or matrix: a numpy array of ints or floats,
+/// or a list or tuple of numbers, or of rows of numbers.
+fn real_array(obj: &Bound<'_, PyAny>, what: &str) -> Result<(Vec<usize>, Vec<f64>)> {
+    if let Ok(a) = obj.cast::<PyUntypedArray>() {
+        let dtype = a.dtype();
+        if !matches!(dtype.kind(), b'i' | b'u' | b'f') {
+            return Err(type_error(format!(
+                "{what}: expected an array of numbers, got a {dtype} array"
+            )));
+        }
+        let f = obj.call_method1("astype", ("float64",))?;
+        let f = f.extract::<PyReadonlyArrayDyn<'_, f64>>()?;
+        return Ok((a.shape().to_vec(), f.as_array().iter().copied().collect()));
+    }
+    if !(obj.is_instance_of::<PyList>() || obj.is_instance_of::<PyTuple>()) {
+        return Err(type_error(format!(
+            "{what}: expected a list of numbers or a numpy array, got {}",
+            type_name(obj)
+        )));
+    }
+    let items: Vec<Bound<'_, PyAny>> = obj.try_iter()?.collect::<PyResult<_>>()?;
+    let scalars: Vec<Option<f64>> = items.iter().map(real_scalar).collect();
+    if scalars.iter().any(Option::is_some) {
+        // a vector: every item a number
+        if let Some(k) = scalars.iter().position(Option::is_none) {
+            return Err(type_error(format!(
+                "{what}: expected numbers, found {} at index {k}",
+                type_name(&items[k])
+            )));
+        }
+        let x: Vec<f64> = scalars.into_iter().flatten().collect();
+        return Ok((vec![x.len()], x));
+    }
+    let mut data = Vec::new();
+    let mut cols: Option<usize> = None;
+    for (k, it) in items.iter().enumerate() {
+        let is_row = it.is_instance_of::<PyList>()
+            || it.is_instance_of::<PyTuple>()
+            || it.cast::<PyUntypedArray>().is_ok();
+        if !is_row {
+            return Err(type_error(format!(
+                "{what}: expected numbers or rows of numbers, found {} at index {k}",
+                type_name(it)
+            )));
+        }
+        let (s, d) = real_array(it, what)?;
+        if s.len() != 1 {
+            return Err(value_error(format!(
+                "{what}: expected a vector or a matrix, got more than 2 dimensions"
+            )));
+        }
+        if cols.is_some_and(|c| c != s[0]) {
+            return Err(value_error(format!(
+                "{what}: its rows have different lengths"
+            )));
+        }
+        cols = Some(s[0]);
+        data.extend(d);
+    }
+    Ok((vec![items.len(), cols.unwrap_or(0)], data))
+}
+
+/// `{"matches", "created", "deleted"}` of an application.
+fn report_dict<'py>(py: Python<'py>, r: &ApplyReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("matches", r.matches)?;
+    d.set_item("created", r.created)?;
+    d.set_item("deleted", r.deleted)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl PyRuleSet {
+    /// Reads and checks rule files together (they share their dimension and embeddings).
+    /// Raises `RuleError` listing every error, an unreadable file included.
+    #[staticmethod]
+    fn load(py: Python<'_>, paths: Vec<PathBuf>) -> PyResult<PyRuleSet> {
+        if paths.is_empty() {
+            return Err(value_error("load needs at least one rule file").into());
+        }
+        py.detach(move || {
+            guard(|| {
+                let refs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
+                loaded(load_files(&refs))
+            })
+        })
+    }
+
+    /// Checks the text of one rule file; `name` is the file name diagnostics show.
+    #[staticmethod]
+    #[pyo3(signature = (text, name = "<string>"))]
+    fn from_source(py: Python<'_>, text: String, name: &str) -> PyResult<PyRuleSet> {
+        let source = (name.to_string(), text);
+        py.detach(move || guard(|| loaded(load_sources(&[source]))))
+    }
+
+    /// Checks the texts of several rule files together: `[(name, text), ...]`.
+    #[staticmethod]
+    fn from_sources(py: Python<'_>, sources: Vec<(String, String)>) -> PyResult<PyRuleSet> {
+        if sources.is_empty() {
+            return Err(value_error("from_sources needs at least one (name, text) pair").into());
+        }
+        py.detach(move || guard(|| loaded(load_sources(&sources))))
+    }
+
+    /// The modeling rules shipped with topomech for `dimension` 2 or 3: split an edge,
+    /// triangulate a face, quad subdivision, unsew and sew along the last link, remove a
+    /// detached face (2D) or volume (3D). `rule_names` lists them.
+    #[staticmethod]
+    fn library(py: Python<'_>, dimension: i64) -> PyResult<PyRuleSet> {
+        let source = usize::try_from(dimension)
+            .ok()
+            .and_then(library)
+            .ok_or_else(|| {
+                PyErr::from(value_error(format!(
+                    "there is no rule library for dimension {dimension}: use 2 or 3"
+                )))
+            })?;
+        py.detach(move || guard(|| loaded(load_sources(&[source]))))
+    }
+
+    /// The dimension of the maps the rules apply to (2 or 3).
+    #[getter]
+    fn dimension(&self) -> usize {
+        self.inner.dimension()
+    }
+
+    /// The checker's warnings, one `FILE:LINE:COL: warning[CONDITION]: message` line each.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
+    }
+
+    /// The rules' names, in file order.
+    fn rule_names(&self) -> Vec<String> {
+        self.inner.rules().iter().map(|r| r.name.clone()).collect()
+    }
+
+    /// `{"name", "file", "params": [[name, type], ...], "hooks": int, "changes_topology"}`;
+    /// `hooks` is the number of darts `apply(..., at=...)` needs.
+    fn rule_info<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
+        let r = guard(|| Ok(self.inner.rule(name)?))?;
+        let d = PyDict::new(py);
+        d.set_item("name", &r.name)?;
+        d.set_item("file", &r.file)?;
+        let params: Vec<(String, String)> = r
+            .params
+            .iter()
+            .map(|(p, ty)| (p.clone(), ty.name()))
+            .collect();
+        let params = PyList::new(
+            py,
+            params
+                .into_iter()
+                .map(|(p, ty)| PyList::new(py, [p, ty]))
+                .collect::<PyResult<Vec<_>>>()?,
+        )?;
+        d.set_item("params", params)?;
+        d.set_item("hooks", r.hooks.len())?;
+        d.set_item("changes_topology", r.changes_topology)?;
+        Ok(d)
+    }
+
+    /// Applies rule `name` to `gmap` (changed in place): at every match when `at` is None,
+    /// else once with its hooks at the darts `at` (one per hook). `params` maps each
+    /// parameter to a value: a number, a bool, a list or array of 2 or 3 numbers, or a 2-D
+    /// list or array for a matrix. Returns `{"matches", "created", "deleted"}` (darts).
+    /// Raises `ApplyError` (the map unchanged) when the rule does not apply.
+    #[pyo3(signature = (gmap, name, at = None, params = None))]
+    fn apply<'py>(
+        &self,
+        py: Python<'py>,
+        gmap: &Bound<'py, PyAny>,
+        name: &str,
+        at: Option<&Bound<'py, PyAny>>,
+        params: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let mut g = gmap_arg(gmap)?;
+        let rules = &self.inner;
+        let report = g.mutate(py, |map| {
+            let params = params_arg(rules.rule(name)?, params)?;
+            let hooks = at.map(|at| hooks_arg(map, at)).transpose()?;
+            py.detach(|| match hooks {
+                None => rules.apply_everywhere(map, name, &params),
+                Some(h) => rules.apply_at(map, name, &h, &params),
+            })
+            .map_err(Error::from)
+        })?;
+        report_dict(py, &report)
+    }
+
+    /// The number of matches `apply(gmap, name, params=params)` would apply. The map may get
+    /// the rules' embeddings it lacks (zero everywhere), as `apply` would add them.
+    #[pyo3(signature = (gmap, name, params = None))]
+    fn count_matches<'py>(
+        &self,
+        py: Python<'py>,
+        gmap: &Bound<'py, PyAny>,
+        name: &str,
+        params: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<usize> {
+        let mut g = gmap_arg(gmap)?;
+        let rules = &self.inner;
+        g.mutate(py, |map| {
+            let params = params_arg(rules.rule(name)?, params)?;
+            py.detach(|| rules.count_matches(map, name, &params))
+                .map_err(Error::from)
+        })
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<topomech._core.RuleSet dimension={} rules=[{}]>",
+            self.inner.dimension(),
+            self.rule_names().join(", ")
+        )
+    }
+}

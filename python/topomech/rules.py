@@ -1,0 +1,169 @@
+"""Rules: graph transformations of G-maps, written in rule files (``.tmr``).
+
+A rule file is checked when it loads: a rule the checker accepts keeps every map of its
+dimension valid, and a refused file raises :class:`RuleError` with one
+``FILE:LINE:COL: error[CONDITION]: message`` line per problem. Apply a rule at every match or
+at given hook darts::
+
+    >>> import topomech
+    >>> g = topomech.GMap.from_mesh([[0, 0], [1, 0], [1, 1], [0, 1]], [("quad", [[0, 1, 2, 3]])])
+    >>> rules = RuleSet.library(2)
+    >>> rules.apply(g, "split_edge")
+    {'matches': 4, 'created': 8, 'deleted': 0}
+    >>> g.cell_counts()["vertices"]
+    8
+
+A rule that does not apply raises :class:`ApplyError` naming why, and the map is unchanged.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any, TypedDict, Union
+
+from topomech import _core
+from topomech._core import ApplyError, RuleError
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from topomech._gmap import GMap, PathLike
+
+__all__ = ["ApplyError", "ApplyReport", "ParamValue", "RuleError", "RuleInfo", "RuleSet"]
+
+#: A parameter value: a number or a bool for ``f64``, ``i64`` and ``bool``; 2 or 3 numbers
+#: (a list, a tuple or a numpy array) for ``vec2`` and ``vec3``; a 2-D list or array for a
+#: matrix. An int is accepted where ``f64`` is declared.
+ParamValue = Union[float, bool, Sequence[float], Sequence[Sequence[float]], "npt.NDArray[Any]"]
+
+
+class ApplyReport(TypedDict):
+    """What :meth:`RuleSet.apply` did."""
+
+    #: Matches applied.
+    matches: int
+    #: Darts created.
+    created: int
+    #: Darts deleted.
+    deleted: int
+
+
+class RuleInfo(TypedDict):
+    """What :meth:`RuleSet.rule_info` returns."""
+
+    name: str
+    #: The rule file it comes from.
+    file: str
+    #: ``(name, type)`` of each parameter, in declaration order (types as written in the
+    #: language: ``f64``, ``i64``, ``bool``, ``vec2``, ``vec3``, ``mat3``, ``mat2x3``, ...).
+    params: list[tuple[str, str]]
+    #: The number of hook darts :meth:`RuleSet.apply` needs with ``at``.
+    hooks: int
+    #: Whether the rule changes the topology (else it only computes embeddings).
+    changes_topology: bool
+
+
+class RuleSet:
+    """Checked rules of one dimension, from one or several rule files sharing their
+    embeddings. The kernel object is :attr:`core`; this class adds typing."""
+
+    __slots__ = ("_core",)
+
+    def __init__(self, core: _core.RuleSet) -> None:
+        if not isinstance(core, _core.RuleSet):
+            raise TypeError(
+                "RuleSet wraps a topomech._core.RuleSet; load one with RuleSet.load, "
+                "RuleSet.from_source or RuleSet.library"
+            )
+        self._core = core
+
+    # ------------------------------------------------------------------ loading
+
+    @classmethod
+    def load(cls, paths: PathLike | Sequence[PathLike]) -> RuleSet:
+        """Reads and checks one rule file or several together. Raises :class:`RuleError`
+        with every error (an unreadable file included)."""
+        if isinstance(paths, (str, os.PathLike)):
+            paths = [paths]
+        return cls(_core.RuleSet.load([os.fspath(p) for p in paths]))
+
+    @classmethod
+    def from_source(cls, text: str, name: str = "<string>") -> RuleSet:
+        """Checks the text of a rule file; ``name`` is the file name diagnostics show."""
+        return cls(_core.RuleSet.from_source(text, name))
+
+    @classmethod
+    def from_sources(cls, sources: Sequence[tuple[str, str]]) -> RuleSet:
+        """Checks ``(name, text)`` rule files together."""
+        return cls(_core.RuleSet.from_sources(list(sources)))
+
+    @classmethod
+    def library(cls, dimension: int) -> RuleSet:
+        """The modeling rules shipped with topomech for surfaces (2) or volumes (3)."""
+        return cls(_core.RuleSet.library(dimension))
+
+    # ------------------------------------------------------------------ queries
+
+    @property
+    def core(self) -> _core.RuleSet:
+        """The kernel object."""
+        return self._core
+
+    @property
+    def dimension(self) -> int:
+        """The dimension of the maps the rules apply to."""
+        return self._core.dimension
+
+    @property
+    def warnings(self) -> list[str]:
+        """The checker's warnings, one ``FILE:LINE:COL: warning[CONDITION]: message`` each."""
+        return self._core.warnings
+
+    def rule_names(self) -> list[str]:
+        """The rules' names, in file order."""
+        return self._core.rule_names()
+
+    def rule_info(self, name: str) -> RuleInfo:
+        """Name, file, parameters, number of hooks of a rule, and whether it changes the
+        topology. An unknown name raises :class:`ApplyError`."""
+        d = self._core.rule_info(name)
+        return RuleInfo(
+            name=d["name"],
+            file=d["file"],
+            params=[(p, t) for p, t in d["params"]],
+            hooks=d["hooks"],
+            changes_topology=d["changes_topology"],
+        )
+
+    # ------------------------------------------------------------------ application
+
+    def apply(
+        self,
+        gmap: GMap | _core.GMap,
+        name: str,
+        at: int | Sequence[int] | None = None,
+        params: Mapping[str, ParamValue] | None = None,
+    ) -> ApplyReport:
+        """Applies rule ``name`` to ``gmap`` in place: at every match when ``at`` is None, else
+        once with its hooks at the darts ``at`` (one per hook).
+
+        Raises :class:`ApplyError` when the rule does not apply (the message says which arc,
+        orbit or dart failed; the map is unchanged), ``IndexError`` for a dart that is not in
+        the map, ``TypeError`` or ``ValueError`` for a parameter value of the wrong kind or
+        shape."""
+        r = self._core.apply(gmap, name, at, params)
+        return ApplyReport(matches=r["matches"], created=r["created"], deleted=r["deleted"])
+
+    def count_matches(
+        self,
+        gmap: GMap | _core.GMap,
+        name: str,
+        params: Mapping[str, ParamValue] | None = None,
+    ) -> int:
+        """The number of matches :meth:`apply` would apply at every match."""
+        return self._core.count_matches(gmap, name, params)
+
+    def __repr__(self) -> str:
+        names = ", ".join(self.rule_names())
+        return f"topomech.RuleSet(dimension={self.dimension}, rules=[{names}])"
