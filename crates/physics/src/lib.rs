@@ -30,6 +30,10 @@ pub struct ModelDef {
     pub rules: &'static [&'static str],
     /// The force embeddings the accumulation sums.
     pub forces: &'static [&'static str],
+    /// Rules computing the Jacobian-vector product `df = (df/dx) dx + (df/dv) dv`.
+    pub jvp_rules: &'static [&'static str],
+    /// The embeddings they write, summed per vertex into `df`.
+    pub jvp_forces: &'static [&'static str],
     /// Parameters with their defaults.
     pub params: &'static [(&'static str, f64)],
     /// What the model needs of the mesh, said when it matches nothing.
@@ -45,6 +49,8 @@ pub const MODELS: &[ModelDef] = &[
         init: &["stretch_init"],
         rules: &["stretch_elementary"],
         forces: &["f_stretch"],
+        jvp_rules: &["stretch_elementary_jvp"],
+        jvp_forces: &["df_stretch"],
         params: &[("stiffness", 1000.0), ("damping", 0.0)],
         needs: "edges",
     },
@@ -55,6 +61,8 @@ pub const MODELS: &[ModelDef] = &[
         init: &["stretch_init"],
         rules: &["stretch_cumulated"],
         forces: &["f_stretch_cum"],
+        jvp_rules: &["stretch_cumulated_jvp"],
+        jvp_forces: &["df_stretch_cum"],
         params: &[("stiffness", 1000.0), ("damping", 0.0)],
         needs: "edges",
     },
@@ -65,6 +73,8 @@ pub const MODELS: &[ModelDef] = &[
         init: &["fem_init"],
         rules: &["linear_fem"],
         forces: &["f_linear"],
+        jvp_rules: &["linear_fem_jvp"],
+        jvp_forces: &["df_linear"],
         params: &[],
         needs: "tetrahedra",
     },
@@ -75,6 +85,8 @@ pub const MODELS: &[ModelDef] = &[
         init: &["fem_init"],
         rules: &["corotational"],
         forces: &["f_corot"],
+        jvp_rules: &["corotational_jvp"],
+        jvp_forces: &["df_corot"],
         params: &[],
         needs: "tetrahedra",
     },
@@ -85,6 +97,8 @@ pub const MODELS: &[ModelDef] = &[
         init: &["mass_tensor_init"],
         rules: &["mass_tensor_edges", "mass_tensor_vertices"],
         forces: &["f_tensor"],
+        jvp_rules: &["mass_tensor_edges_jvp", "mass_tensor_vertices_jvp"],
+        jvp_forces: &["df_tensor"],
         params: &[],
         needs: "tetrahedra",
     },
@@ -135,22 +149,23 @@ pub enum Integrator {
     ExplicitEuler,
     /// v += dt a; x += dt v (the new velocity).
     SymplecticEuler,
+    /// Backward Euler, linearized once per step (Baraff & Witkin 1998):
+    /// (M - h df/dv - h^2 df/dx) dv = h (f + h (df/dx) v), solved by conjugate gradients on
+    /// Jacobian-vector products computed by the models' rules.
+    ImplicitEuler,
+    /// Newton iterations to the equilibrium f(x) + m g = 0; each step is one solve.
+    Static,
 }
 
 impl Integrator {
-    /// Parses `explicit_euler`, `symplectic_euler`.
+    /// Parses `explicit_euler`, `symplectic_euler`, `implicit_euler`, `static`.
     pub fn parse(s: &str) -> Option<Self> {
         match s {
             "explicit_euler" => Some(Integrator::ExplicitEuler),
             "symplectic_euler" => Some(Integrator::SymplecticEuler),
+            "implicit_euler" => Some(Integrator::ImplicitEuler),
+            "static" => Some(Integrator::Static),
             _ => None,
-        }
-    }
-
-    fn rule(self) -> &'static str {
-        match self {
-            Integrator::ExplicitEuler => "explicit_euler",
-            Integrator::SymplecticEuler => "symplectic_euler",
         }
     }
 }
@@ -236,14 +251,24 @@ fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
     Ok(*def)
 }
 
-/// The accumulation rule for the given force embeddings, and one rule per fixed predicate.
-fn generated_rules(dim: usize, forces: &[&str], fixed: &[String]) -> String {
+/// The accumulation rules for the given force and Jacobian-vector-product embeddings, and one
+/// rule per fixed predicate.
+fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], fixed: &[String]) -> String {
     let v = if dim == 3 { "<1,2,3>" } else { "<1,2>" };
-    let mut s = format!("dimension {dim}\n\nrule accumulate {{\n  left {{ v : {v} hook }}\n  compute {{ v.force = vec3(0, 0, 0)");
-    for f in forces {
-        let _ = write!(s, " + sum{v}(v.{f})");
+    let mut s = format!("dimension {dim}\n");
+    for (rule, target, parts) in [
+        ("accumulate", "force", forces),
+        ("accumulate_jvp", "df", jvp),
+    ] {
+        let _ = write!(
+            s,
+            "\nrule {rule} {{\n  left {{ v : {v} hook }}\n  compute {{ v.{target} = vec3(0, 0, 0)"
+        );
+        for f in parts {
+            let _ = write!(s, " + sum{v}(v.{f})");
+        }
+        s.push_str(" }\n}\n");
     }
-    s.push_str(" }\n}\n");
     for (k, p) in fixed.iter().enumerate() {
         let _ = write!(
             s,
@@ -317,9 +342,13 @@ impl Simulation {
             .iter()
             .flat_map(|(d, _)| d.forces.iter().copied())
             .collect();
+        let jvp: Vec<&str> = defs
+            .iter()
+            .flat_map(|(d, _)| d.jvp_forces.iter().copied())
+            .collect();
         sources.push((
             "scene-generated.tmr".into(),
-            generated_rules(dim, &forces, &cfg.fixed),
+            generated_rules(dim, &forces, &jvp, &cfg.fixed),
         ));
         let (rules, _warnings) = load_sources(&sources).map_err(|diags| {
             // a refused predicate is the scene's fault: say so
@@ -416,14 +445,8 @@ impl Simulation {
     /// position or velocity) the state before the step is restored and an error names the
     /// step and the vertex.
     pub fn step(&mut self) -> Result<(), PhysicsError> {
-        let pos = self
-            .g
-            .require("position")
-            .map_err(|e| PhysicsError::Config(e.to_string()))?;
-        let vel = self
-            .g
-            .require("velocity")
-            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        let pos = self.id("position")?;
+        let vel = self.id("velocity")?;
         let saved: Vec<(Dart, Vec<f64>, Vec<f64>)> = self
             .vertex_darts()
             .into_iter()
@@ -435,32 +458,218 @@ impl Simulation {
                 )
             })
             .collect();
-        self.forces()?;
-        self.rules
-            .apply_everywhere(&mut self.g, self.cfg.integrator.rule(), &self.step_params)?;
+        let result = match self.cfg.integrator {
+            Integrator::ExplicitEuler => self.explicit("explicit_euler"),
+            Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
+            Integrator::ImplicitEuler => self.implicit_euler(),
+            Integrator::Static => self.solve_static(),
+        };
+        let bad = match &result {
+            Err(e) => Some((0, e.to_string())),
+            Ok(()) => saved.iter().enumerate().find_map(|(v, (d, _, _))| {
+                let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
+                p.iter()
+                    .chain(u)
+                    .any(|x| !x.is_finite())
+                    .then(|| (v, "non-finite position or velocity".to_string()))
+            }),
+        };
+        if let Some((vertex, why)) = bad {
+            for (d, p, u) in &saved {
+                self.g
+                    .set_real(pos, *d, p)
+                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+                self.g
+                    .set_real(vel, *d, u)
+                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            }
+            return Err(match result {
+                Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
+                    step: self.steps + 1,
+                    vertex,
+                    why: e.to_string(),
+                },
+                Err(e) => e,
+                Ok(()) => PhysicsError::Diverged {
+                    step: self.steps + 1,
+                    vertex,
+                    why,
+                },
+            });
+        }
         self.steps += 1;
         self.time += self.cfg.dt;
-        for (v, (d, _, _)) in saved.iter().enumerate() {
-            let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
-            if p.iter().chain(u).any(|x| !x.is_finite()) {
-                for (d, p, u) in &saved {
-                    self.g
-                        .set_real(pos, *d, p)
-                        .map_err(|e| PhysicsError::Config(e.to_string()))?;
-                    self.g
-                        .set_real(vel, *d, u)
-                        .map_err(|e| PhysicsError::Config(e.to_string()))?;
-                }
-                self.steps -= 1;
-                self.time -= self.cfg.dt;
-                return Err(PhysicsError::Diverged {
-                    step: self.steps + 1,
-                    vertex: v,
-                    why: "non-finite position or velocity".into(),
-                });
+        Ok(())
+    }
+
+    fn explicit(&mut self, rule: &str) -> Result<(), PhysicsError> {
+        self.forces()?;
+        self.rules
+            .apply_everywhere(&mut self.g, rule, &self.step_params)?;
+        Ok(())
+    }
+
+    /// `(df/dx) dx + (df/dv) dv` for vertex vectors in vertex order.
+    pub fn jvp(&mut self, dx: &[[f64; 3]], dv: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        self.set_vertex_vec3("dx", dx)?;
+        self.set_vertex_vec3("dv", dv)?;
+        let none = Params::new();
+        for (def, _) in &self.defs {
+            for r in def.jvp_rules {
+                self.rules.apply_everywhere(&mut self.g, r, &none)?;
             }
         }
+        self.rules
+            .apply_everywhere(&mut self.g, "accumulate_jvp", &none)?;
+        self.vertex_vec3("df")
+    }
+
+    /// The total force on each vertex: the models' forces, gravity and viscous damping.
+    fn total_force(&mut self) -> Result<VertexForces, PhysicsError> {
+        self.forces()?;
+        let f = self.vertex_vec3("force")?;
+        let m = self.vertex_scalar("mass")?;
+        let v = self.vertex_vec3("velocity")?;
+        let fixed = self.vertex_bool("fixed")?;
+        let g = self.cfg.gravity;
+        let c = self.cfg.damping;
+        let total = f
+            .iter()
+            .zip(&m)
+            .zip(&v)
+            .map(|((f, m), v)| {
+                [
+                    f[0] + m * (g[0] - c * v[0]),
+                    f[1] + m * (g[1] - c * v[1]),
+                    f[2] + m * (g[2] - c * v[2]),
+                ]
+            })
+            .collect();
+        Ok((total, m, fixed))
+    }
+
+    fn implicit_euler(&mut self) -> Result<(), PhysicsError> {
+        let h = self.cfg.dt;
+        let c = self.cfg.damping;
+        let (f, m, fixed) = self.total_force()?;
+        let v = self.vertex_vec3("velocity")?;
+        let zero = vec![[0.0; 3]; v.len()];
+        let kv = self.jvp(&v, &zero)?;
+        let mut rhs: Vec<[f64; 3]> = f
+            .iter()
+            .zip(&kv)
+            .map(|(f, k)| std::array::from_fn(|a| h * (f[a] + h * k[a])))
+            .collect();
+        project(&mut rhs, &fixed);
+        // A z = (1 + h c) M z - h^2 (df/dx) z - h (df/dv) z
+        let dvel = self.cg(&rhs, &fixed, |sim, z| {
+            let dx: Vec<[f64; 3]> = z.iter().map(|z| z.map(|x| h * h * x)).collect();
+            let dv: Vec<[f64; 3]> = z.iter().map(|z| z.map(|x| h * x)).collect();
+            let df = sim.jvp(&dx, &dv)?;
+            Ok(z.iter()
+                .zip(&df)
+                .zip(&m)
+                .map(|((z, d), m)| std::array::from_fn(|a| (1.0 + h * c) * m * z[a] - d[a]))
+                .collect())
+        })?;
+        let x = self.vertex_vec3("position")?;
+        let newv: Vec<[f64; 3]> = v
+            .iter()
+            .zip(&dvel)
+            .map(|(v, d)| std::array::from_fn(|a| v[a] + d[a]))
+            .collect();
+        let newx: Vec<[f64; 3]> = x
+            .iter()
+            .zip(&newv)
+            .map(|(x, v)| std::array::from_fn(|a| x[a] + h * v[a]))
+            .collect();
+        self.set_vertex_vec3("velocity", &newv)?;
+        self.set_vertex_vec3("position", &newx)?;
         Ok(())
+    }
+
+    /// Newton iterations on f(x) + m g = 0 with conjugate gradients on -df/dx; the velocity
+    /// is set to zero. Stops when the residual is below 1e-10 of the load or after 30 solves.
+    pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
+        let v0 = vec![[0.0; 3]; self.vertex_darts().len()];
+        self.set_vertex_vec3("velocity", &v0)?;
+        let load: f64 = {
+            let m = self.vertex_scalar("mass")?;
+            m.iter().sum::<f64>() * norm3(self.cfg.gravity)
+        };
+        for _ in 0..30 {
+            let (mut r, _, fixed) = self.total_force()?;
+            project(&mut r, &fixed);
+            let res = r.iter().map(|x| norm3(*x).powi(2)).sum::<f64>().sqrt();
+            if res <= 1e-10 * load.max(f64::MIN_POSITIVE) {
+                return Ok(());
+            }
+            let zero = v0.clone();
+            let du = self.cg(&r, &fixed, |sim, z| {
+                Ok(sim.jvp(z, &zero)?.iter().map(|d| d.map(|x| -x)).collect())
+            })?;
+            let x = self.vertex_vec3("position")?;
+            let newx: Vec<[f64; 3]> = x
+                .iter()
+                .zip(&du)
+                .map(|(x, d)| std::array::from_fn(|a| x[a] + d[a]))
+                .collect();
+            self.set_vertex_vec3("position", &newx)?;
+        }
+        Ok(())
+    }
+
+    /// Conjugate gradients on `apply`, with fixed vertices' components held at zero; relative
+    /// residual 1e-12, at most 10 n iterations.
+    fn cg(
+        &mut self,
+        b: &[[f64; 3]],
+        fixed: &[bool],
+        mut apply: impl FnMut(&mut Self, &[[f64; 3]]) -> Result<Vec<[f64; 3]>, PhysicsError>,
+    ) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        let n = b.len();
+        let dot = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
+                .sum::<f64>()
+        };
+        let mut x = vec![[0.0; 3]; n];
+        let mut r = b.to_vec();
+        let mut p = r.clone();
+        let mut rr = dot(&r, &r);
+        let tol = 1e-24 * rr;
+        for _ in 0..(10 * 3 * n).max(50) {
+            if rr <= tol || rr == 0.0 {
+                break;
+            }
+            let mut ap = apply(self, &p)?;
+            project(&mut ap, fixed);
+            let pap = dot(&p, &ap);
+            if pap <= 0.0 || !pap.is_finite() {
+                return Err(PhysicsError::Diverged {
+                    step: self.steps + 1,
+                    vertex: 0,
+                    why: format!("the linear system is not positive definite (p^T A p = {pap:e})"),
+                });
+            }
+            let alpha = rr / pap;
+            for i in 0..n {
+                for a in 0..3 {
+                    x[i][a] += alpha * p[i][a];
+                    r[i][a] -= alpha * ap[i][a];
+                }
+            }
+            let rr_new = dot(&r, &r);
+            let beta = rr_new / rr;
+            rr = rr_new;
+            for i in 0..n {
+                for a in 0..3 {
+                    p[i][a] = r[i][a] + beta * p[i][a];
+                }
+            }
+        }
+        Ok(x)
     }
 
     /// Computes every model's forces and their sum `force` on each vertex.
@@ -616,6 +825,22 @@ impl Simulation {
             }
         }
         Ok(p)
+    }
+}
+
+/// Per vertex: total force, mass, fixed.
+type VertexForces = (Vec<[f64; 3]>, Vec<f64>, Vec<bool>);
+
+fn norm3(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+/// Zeroes the components of fixed vertices.
+fn project(v: &mut [[f64; 3]], fixed: &[bool]) {
+    for (x, &f) in v.iter_mut().zip(fixed) {
+        if f {
+            *x = [0.0; 3];
+        }
     }
 }
 
