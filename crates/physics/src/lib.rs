@@ -197,6 +197,15 @@ pub struct Config {
     /// Predicates on the rest position (`x`, `y`, `z`) selecting fixed vertices, in the rule
     /// language's expression syntax (e.g. `x < 1e-9`).
     pub fixed: Vec<String>,
+    /// Vertices held at a prescribed displacement from their rest position (they are fixed
+    /// there): (predicate on the rest position, displacement).
+    pub prescribed: Vec<(String, [f64; 3])>,
+    /// Elements whose material differs: predicates on the element's rest centroid (`x`, `y`,
+    /// `z`), applied in order after the defaults.
+    pub regions: Vec<MaterialRegion>,
+    /// A ground plane `y = ground` (normal +y): vertices below it are put back on it and lose
+    /// their downward velocity.
+    pub ground: Option<f64>,
     /// The integrator.
     pub integrator: Integrator,
     /// Time step.
@@ -213,10 +222,26 @@ impl Default for Config {
             damping: 0.0,
             gravity: [0.0, -9.81, 0.0],
             fixed: Vec::new(),
+            prescribed: Vec::new(),
+            regions: Vec::new(),
+            ground: None,
             integrator: Integrator::SymplecticEuler,
             dt: 1e-3,
         }
     }
+}
+
+/// A region of elements with their own material (unset values keep the defaults).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct MaterialRegion {
+    /// Predicate on the element's rest centroid `x`, `y`, `z`.
+    pub predicate: String,
+    /// Density.
+    pub density: Option<f64>,
+    /// Young's modulus.
+    pub young: Option<f64>,
+    /// Poisson ratio.
+    pub poisson: Option<f64>,
 }
 
 /// A running simulation: a G-map with its embeddings, and the rules that move it.
@@ -253,7 +278,8 @@ fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
 
 /// The accumulation rules for the given force and Jacobian-vector-product embeddings, and one
 /// rule per fixed predicate.
-fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], fixed: &[String]) -> String {
+fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], cfg: &Config) -> String {
+    let fixed = &cfg.fixed;
     let v = if dim == 3 { "<1,2,3>" } else { "<1,2>" };
     let mut s = format!("dimension {dim}\n");
     for (rule, target, parts) in [
@@ -275,6 +301,34 @@ fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], fixed: &[String]) 
             "\nrule fix_{k} {{\n  left {{ v : {v} hook }}\n  where {{ let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)  {p} }}\n  compute {{ v.fixed = true }}\n}}\n"
         );
     }
+    for (k, (p, _)) in cfg.prescribed.iter().enumerate() {
+        let _ = write!(
+            s,
+            "\nrule prescribe_{k}(d: vec3) {{\n  left {{ v : {v} hook }}\n  where {{ let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)  {p} }}\n  compute {{ v.fixed = true  v.position = v.rest + d }}\n}}\n"
+        );
+    }
+    let e = if dim == 3 { "<0,1,2>" } else { "<0,1>" };
+    for (k, r) in cfg.regions.iter().enumerate() {
+        let mut body = String::new();
+        for (name, val) in [
+            ("density", r.density),
+            ("young", r.young),
+            ("poisson", r.poisson),
+        ] {
+            if let Some(x) = val {
+                let _ = write!(body, " e.{name} = {x:?}");
+            }
+        }
+        let _ = write!(
+            s,
+            "\nrule region_{k} {{\n  left {{ e : {e} hook }}\n  where {{ let c = mean{e}(e.rest)  let x = x(c)  let y = y(c)  let z = z(c)  {} }}\n  compute {{{body} }}\n}}\n",
+            r.predicate
+        );
+    }
+    let _ = write!(
+        s,
+        "\nrule ground(h: f64) {{\n  left {{ v : {v} hook }}\n  where y(v.position) < h\n  compute {{\n    v.position = vec3(x(v.position), h, z(v.position))\n    v.velocity = vec3(x(v.velocity), max(y(v.velocity), 0.0), z(v.velocity))\n  }}\n}}\n"
+    );
     s
 }
 
@@ -348,7 +402,7 @@ impl Simulation {
             .collect();
         sources.push((
             "scene-generated.tmr".into(),
-            generated_rules(dim, &forces, &jvp, &cfg.fixed),
+            generated_rules(dim, &forces, &jvp, &cfg),
         ));
         let (rules, _warnings) = load_sources(&sources).map_err(|diags| {
             // a refused predicate is the scene's fault: say so
@@ -379,6 +433,15 @@ impl Simulation {
         ]
         .into();
         rules.apply_everywhere(&mut g, "set_material", &material)?;
+        for k in 0..cfg.regions.len() {
+            let rep = rules.apply_everywhere(&mut g, &format!("region_{k}"), &none)?;
+            if rep.matches == 0 {
+                return Err(PhysicsError::Config(format!(
+                    "material region '{}' contains no element",
+                    cfg.regions[k].predicate
+                )));
+            }
+        }
         let (he, elem) = if dim == 3 {
             ("half_edge_volume", "element_volume")
         } else {
@@ -388,7 +451,22 @@ impl Simulation {
         rules.apply_everywhere(&mut g, elem, &none)?;
         rules.apply_everywhere(&mut g, "lump_mass", &none)?;
         for k in 0..cfg.fixed.len() {
-            rules.apply_everywhere(&mut g, &format!("fix_{k}"), &none)?;
+            let rep = rules.apply_everywhere(&mut g, &format!("fix_{k}"), &none)?;
+            if rep.matches == 0 {
+                return Err(PhysicsError::Config(format!(
+                    "fix predicate '{}' selects no vertex",
+                    cfg.fixed[k]
+                )));
+            }
+        }
+        for (k, (p, d)) in cfg.prescribed.iter().enumerate() {
+            let params: Params = [("d".to_string(), Val::V3(*d))].into();
+            let rep = rules.apply_everywhere(&mut g, &format!("prescribe_{k}"), &params)?;
+            if rep.matches == 0 {
+                return Err(PhysicsError::Config(format!(
+                    "prescribed-displacement predicate '{p}' selects no vertex"
+                )));
+            }
         }
         for (def, params) in &defs {
             for init in def.init {
@@ -506,6 +584,15 @@ impl Simulation {
         self.forces()?;
         self.rules
             .apply_everywhere(&mut self.g, rule, &self.step_params)?;
+        self.contact()
+    }
+
+    /// The ground plane, if any.
+    fn contact(&mut self) -> Result<(), PhysicsError> {
+        if let Some(h) = self.cfg.ground {
+            let p: Params = [("h".to_string(), Val::F(h))].into();
+            self.rules.apply_everywhere(&mut self.g, "ground", &p)?;
+        }
         Ok(())
     }
 
@@ -585,7 +672,7 @@ impl Simulation {
             .collect();
         self.set_vertex_vec3("velocity", &newv)?;
         self.set_vertex_vec3("position", &newx)?;
-        Ok(())
+        self.contact()
     }
 
     /// Newton iterations on f(x) + m g = 0 with conjugate gradients on -df/dx; the velocity

@@ -321,3 +321,66 @@ fn divergence_is_reported_and_the_last_good_state_kept() {
         .iter()
         .all(|p| p.iter().all(|x| x.is_finite())));
 }
+
+/// Material regions change the element data where their predicate holds (mass doubles where
+/// the density does); prescribed displacements move and fix their vertices; the ground plane
+/// stops a falling box; predicates that select nothing are errors.
+#[test]
+fn regions_prescribed_displacements_and_ground() {
+    let mesh = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Hexa);
+    let region = topomech_physics::MaterialRegion {
+        predicate: "x > 1".into(),
+        density: Some(2000.0),
+        ..Default::default()
+    };
+    let s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.regions = vec![region.clone()];
+    })
+    .unwrap();
+    assert!((s.total_mass().unwrap() - 3000.0).abs() < 1e-9);
+    let s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.prescribed = vec![("x > 1.9".into(), [0.1, 0.0, 0.0])];
+    })
+    .unwrap();
+    let (x, r, fixed) = (
+        s.vertex_vec3("position").unwrap(),
+        s.vertex_vec3("rest").unwrap(),
+        s.vertex_bool("fixed").unwrap(),
+    );
+    for i in 0..x.len() {
+        let moved = r[i][0] > 1.9;
+        assert_eq!(fixed[i], moved);
+        assert!(((x[i][0] - r[i][0]) - if moved { 0.1 } else { 0.0 }).abs() < 1e-15);
+    }
+    let mut s = sim(
+        &mesh,
+        vec![model("stretch_elementary", &[("stiffness", 1e5)])],
+        |c| c.ground = Some(-0.05),
+    )
+    .unwrap();
+    for _ in 0..300 {
+        s.step().unwrap();
+    }
+    let lowest = s
+        .vertex_vec3("position")
+        .unwrap()
+        .iter()
+        .map(|p| p[1])
+        .fold(f64::INFINITY, f64::min);
+    assert!(lowest >= -0.05 - 1e-12, "{lowest}");
+    let e = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.fixed = vec!["x > 100".into()];
+    })
+    .unwrap_err();
+    assert!(e.to_string().contains("selects no vertex"), "{e}");
+    let bad = topomech_physics::MaterialRegion {
+        predicate: "x > 100".into(),
+        young: Some(1.0),
+        ..Default::default()
+    };
+    let e = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.regions = vec![bad];
+    })
+    .unwrap_err();
+    assert!(e.to_string().contains("contains no element"), "{e}");
+}

@@ -303,6 +303,7 @@ fn compare(
         fixed: vec!["x < 1e-9".into()],
         integrator: Integrator::SymplecticEuler,
         dt: reference.dt,
+        ..Config::default()
     };
     let mut sim = Simulation::new(g, cfg).unwrap();
     // vertex correspondence through the exact rest positions
