@@ -67,6 +67,42 @@ pub const MODELS: &[ModelDef] = &[
         needs: "edges",
     },
     ModelDef {
+        kind: "shear_isotropic",
+        dims: &[2, 3],
+        file: "shear",
+        init: &["shear_isotropic_init"],
+        rules: &["shear_isotropic"],
+        forces: &["f_shear_iso"],
+        jvp_rules: &[],
+        jvp_forces: &[],
+        params: &[("stiffness", 1000.0), ("damping", 0.0)],
+        needs: "quadrilateral faces",
+    },
+    ModelDef {
+        kind: "shear_anisotropic",
+        dims: &[2, 3],
+        file: "shear",
+        init: &["shear_anisotropic_init"],
+        rules: &["shear_anisotropic"],
+        forces: &["f_shear_aniso"],
+        jvp_rules: &[],
+        jvp_forces: &[],
+        params: &[("stiffness", 1000.0), ("damping", 0.0)],
+        needs: "faces",
+    },
+    ModelDef {
+        kind: "shear_volumic",
+        dims: &[3],
+        file: "shear",
+        init: &["shear_volumic_init"],
+        rules: &["shear_volumic"],
+        forces: &["f_shear_vol"],
+        jvp_rules: &[],
+        jvp_forces: &[],
+        params: &[("stiffness", 1000.0), ("damping", 0.0)],
+        needs: "hexahedra",
+    },
+    ModelDef {
         kind: "linear_fem",
         dims: &[3],
         file: "fem",
@@ -111,6 +147,8 @@ fn model_source(file: &str, dim: usize) -> Option<&'static str> {
         ("stretch", 2) => include_str!("../models/stretch2d.tmr"),
         ("stretch", 3) => include_str!("../models/stretch3d.tmr"),
         ("fem", 3) => include_str!("../models/fem3d.tmr"),
+        ("shear", 2) => include_str!("../models/shear2d.tmr"),
+        ("shear", 3) => include_str!("../models/shear3d.tmr"),
         _ => return None,
     })
 }
@@ -376,6 +414,17 @@ impl Simulation {
                 params.insert(k.clone(), *v);
             }
             defs.push((def, params));
+        }
+        if matches!(
+            cfg.integrator,
+            Integrator::ImplicitEuler | Integrator::Static
+        ) {
+            if let Some((def, _)) = defs.iter().find(|(d, _)| d.jvp_rules.is_empty()) {
+                return Err(PhysicsError::Model(format!(
+                    "model '{}' has no Jacobian rules yet: use explicit_euler or symplectic_euler with it",
+                    def.kind
+                )));
+            }
         }
         let mut sources = vec![(
             format!("common{dim}d.tmr"),
@@ -932,24 +981,32 @@ fn project(v: &mut [[f64; 3]], fixed: &[bool]) {
 }
 
 /// Marks one dart per element (volume in 3D, face in 2D) as `vertex0`: the element's smallest
-/// dart. The FEM rules number an element's vertices from it.
+/// dart; and, where a model declares `face0`, one dart per face `<0,1>` of an element. Rules
+/// number an element's or a face's vertices from them.
 fn mark_vertex0(g: &mut GMap) -> Result<(), PhysicsError> {
-    let id = g
-        .require("vertex0")
-        .map_err(|e| PhysicsError::Config(e.to_string()))?;
     let elem = if g.dimension() == 3 {
         OrbitType::volume()
     } else {
         OrbitType::face(2)
     };
+    mark_one_per_orbit(g, "vertex0", elem)?;
+    if g.embedding_id("face0").is_some() {
+        mark_one_per_orbit(g, "face0", OrbitType::parse("<0,1>").expect("static"))?;
+    }
+    Ok(())
+}
+
+/// Sets the bool embedding `name` (on `<>`) true on the smallest dart of each orbit `o`,
+/// false elsewhere.
+fn mark_one_per_orbit(g: &mut GMap, name: &str, o: OrbitType) -> Result<(), PhysicsError> {
+    let err = |e: topomech_gmap::EmbeddingError| PhysicsError::Config(e.to_string());
+    let id = g.require(name).map_err(err)?;
     let all: Vec<Dart> = g.darts().collect();
     for d in all {
-        g.set_value(id, d, &Value::Bool(false))
-            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        g.set_value(id, d, &Value::Bool(false)).map_err(err)?;
     }
-    for d in g.orbit_representatives(elem) {
-        g.set_value(id, d, &Value::Bool(true))
-            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+    for d in g.orbit_representatives(o) {
+        g.set_value(id, d, &Value::Bool(true)).map_err(err)?;
     }
     Ok(())
 }

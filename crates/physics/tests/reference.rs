@@ -199,6 +199,46 @@ impl Reference {
         }
     }
 
+    /// The two diagonals of every quad face of every cell.
+    fn add_quad_diagonals(&mut self, mesh: &Mesh, k: f64, c: f64) {
+        for (kind, cell) in mesh.kinds.iter().zip(&mesh.cells) {
+            for f in local_faces(*kind, cell.len()) {
+                if f.len() == 4 {
+                    for (i, j) in [(0, 2), (1, 3)] {
+                        let (a, b) = (cell[f[i]], cell[f[j]]);
+                        self.springs
+                            .push((a, b, k, c, norm(sub(self.rest[b], self.rest[a]))));
+                    }
+                }
+            }
+        }
+    }
+
+    /// One spring per corner of every face of every cell, between its neighbours.
+    fn add_corner_springs(&mut self, mesh: &Mesh, k: f64, c: f64) {
+        for (kind, cell) in mesh.kinds.iter().zip(&mesh.cells) {
+            for f in local_faces(*kind, cell.len()) {
+                let n = f.len();
+                for i in 0..n {
+                    let (a, b) = (cell[f[(i + n - 1) % n]], cell[f[(i + 1) % n]]);
+                    self.springs
+                        .push((a, b, k, c, norm(sub(self.rest[b], self.rest[a]))));
+                }
+            }
+        }
+    }
+
+    /// The four space diagonals of every hexahedron.
+    fn add_space_diagonals(&mut self, mesh: &Mesh, k: f64, c: f64) {
+        for cell in &mesh.cells {
+            for (i, j) in [(0, 6), (1, 7), (2, 4), (3, 5)] {
+                let (a, b) = (cell[i], cell[j]);
+                self.springs
+                    .push((a, b, k, c, norm(sub(self.rest[b], self.rest[a]))));
+            }
+        }
+    }
+
     /// Linear tetrahedra: K_ab = V (lambda g_a g_b^T + mu g_b g_a^T + mu (g_a . g_b) I).
     fn add_tets(&mut self, mesh: &Mesh, young: f64, nu: f64, corot: bool) {
         let lambda = young * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
@@ -285,16 +325,32 @@ fn compare(
     kind: &str,
     params: &[(&str, f64)],
     mesh: &Mesh,
+    reference: Reference,
+    young: f64,
+    nu: f64,
+) {
+    compare_models(&[(kind, params)], mesh, reference, young, nu);
+}
+
+/// Runs the models through the rules and the reference side by side (see the module docs).
+fn compare_models(
+    models: &[(&str, &[(&str, f64)])],
+    mesh: &Mesh,
     mut reference: Reference,
     young: f64,
     nu: f64,
 ) {
+    let kind = models.iter().map(|m| m.0).collect::<Vec<_>>().join("+");
+    let kind = kind.as_str();
     let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
     let cfg = Config {
-        models: vec![ModelSpec {
-            kind: kind.into(),
-            params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
-        }],
+        models: models
+            .iter()
+            .map(|(kind, params)| ModelSpec {
+                kind: (*kind).into(),
+                params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
+            })
+            .collect(),
         density: 1000.0,
         young,
         poisson: nu,
@@ -402,4 +458,53 @@ fn corotational_matches_the_flat_reference() {
     let mut r = Reference::new(&mesh, 1000.0, 1e-9, [0.0, -9.81, 0.0], 1e-3);
     r.add_tets(&mesh, 1e5, 0.3, true);
     compare("corotational", &[], &mesh, r, 1e5, 0.3);
+}
+
+#[test]
+fn shear_springs_match_the_flat_reference() {
+    let p: &[(&str, f64)] = &[("stiffness", 5e3), ("damping", 2.0)];
+    let s: &[(&str, f64)] = &[("stiffness", 2e4), ("damping", 1.0)];
+    let quads = grid([3, 2], [1.5, 1.0], GridElement::Quad);
+    let hexes = cuboid([3, 1, 1], [3.0, 1.0, 1.0], BoxElement::Hexa);
+    let tris = grid([3, 2], [1.5, 1.0], GridElement::Mixed);
+    let tets = beam();
+    let g2 = [0.0, -9.81, -2.0];
+    let g3 = [0.0, -9.81, 0.0];
+    // isotropic shear with stretch (quads alone have a shear mechanism), 2D and 3D
+    for (mesh, g) in [(&quads, g2), (&hexes, g3)] {
+        let mut r = Reference::new(mesh, 1000.0, 1e-9, g, 1e-3);
+        r.add_springs(mesh, 2e4, 1.0);
+        r.add_quad_diagonals(mesh, 5e3, 2.0);
+        compare_models(
+            &[("stretch_elementary", s), ("shear_isotropic", p)],
+            mesh,
+            r,
+            1e6,
+            0.3,
+        );
+    }
+    // anisotropic shear on any faces
+    for (mesh, g) in [(&tris, g2), (&tets, g3), (&hexes, g3)] {
+        let mut r = Reference::new(mesh, 1000.0, 1e-9, g, 1e-3);
+        r.add_springs(mesh, 2e4, 1.0);
+        r.add_corner_springs(mesh, 5e3, 2.0);
+        compare_models(
+            &[("stretch_elementary", s), ("shear_anisotropic", p)],
+            mesh,
+            r,
+            1e6,
+            0.3,
+        );
+    }
+    // volumic shear on hexahedra
+    let mut r = Reference::new(&hexes, 1000.0, 1e-9, g3, 1e-3);
+    r.add_springs(&hexes, 2e4, 1.0);
+    r.add_space_diagonals(&hexes, 5e3, 2.0);
+    compare_models(
+        &[("stretch_elementary", s), ("shear_volumic", p)],
+        &hexes,
+        r,
+        1e6,
+        0.3,
+    );
 }

@@ -5,8 +5,12 @@
 //! explicit arcs, and must show the node's orbit type (relabelled) and arcs on those darts.
 //! Application evaluates every expression on the map as it was before the rule (values
 //! are read before any write), then rewrites the topology in one batch
-//! ([`GMap::rewire`]), then writes the values. Global application finds every match first —
-//! matches never overlap: the whole footprint of a match is marked — then applies them all.
+//! ([`GMap::rewire`]), then writes the values. Global application finds every match first,
+//! then applies them all. The matches of a rule that changes the topology never overlap (the
+//! whole footprint of a match is marked); those of a computation rule may share darts, since a
+//! force pattern reads its neighbours (the paper's angular springs match two whole faces per
+//! edge), but no match is applied twice: a match found again from another hook dart — the
+//! same footprint — is skipped. Two matches writing different values to one orbit are refused.
 
 use std::collections::HashMap;
 use std::fmt;
@@ -517,7 +521,14 @@ fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
             ),
         });
     }
+    // A rule that changes the topology: matches never overlap (the whole footprint is
+    // marked). A computation rule: matches may share darts (a force pattern reads its
+    // neighbours, as the paper's angular springs do), but each match is applied once — the
+    // darts of its hook are marked, and a match found again from another hook (the same
+    // footprint) is skipped.
+    let overlap = !rule.changes_topology;
     let mut used = Marks::with_capacity(g.capacity());
+    let mut seen: std::collections::HashSet<Vec<u32>> = std::collections::HashSet::new();
     let mut out = Vec::new();
     for d in g.darts() {
         if used.is_marked(d) {
@@ -526,7 +537,7 @@ fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
         let Ok(m) = match_at(g, rule, &[d]) else {
             continue;
         };
-        if m.all_darts().any(|x| used.is_marked(x)) {
+        if !overlap && m.all_darts().any(|x| used.is_marked(x)) {
             continue;
         }
         if let Some(guard) = &rule.guard {
@@ -536,8 +547,19 @@ fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
                 continue;
             }
         }
-        for x in m.all_darts() {
-            used.mark(x);
+        if overlap {
+            let mut key: Vec<u32> = m.all_darts().map(|x| x.0).collect();
+            key.sort_unstable();
+            if !seen.insert(key) {
+                continue;
+            }
+            for &x in &m.darts[rule.hooks[0]] {
+                used.mark(x);
+            }
+        } else {
+            for x in m.all_darts() {
+                used.mark(x);
+            }
         }
         out.push(m);
     }
