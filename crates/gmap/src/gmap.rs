@@ -621,6 +621,21 @@ impl GMap {
         Ok(())
     }
 
+    /// Sets every value of the stored embedding `id` to zero (or false).
+    pub fn reset_values(&mut self, id: EmbeddingId) -> Result<(), EmbeddingError> {
+        let e = &mut self.embeddings[id.0 as usize];
+        if e.derived.is_some() {
+            return Err(EmbeddingError::Derived(e.name.clone()));
+        }
+        match &mut e.values {
+            Column::Real(v) => v.fill(0.0),
+            Column::Int(v) => v.fill(0),
+            Column::Bool(v) => v.fill(false),
+        }
+        e.writes += 1;
+        Ok(())
+    }
+
     /// Writes a real value (scalar, vector, matrix: `width` numbers) on the orbit of `d`.
     pub fn set_real(&mut self, id: EmbeddingId, d: Dart, v: &[f64]) -> Result<(), EmbeddingError> {
         self.set_value(id, d, &Value::Real(v.to_vec()))

@@ -103,6 +103,18 @@ pub const MODELS: &[ModelDef] = &[
         needs: "hexahedra",
     },
     ModelDef {
+        kind: "bending_angular",
+        dims: &[2],
+        file: "bending",
+        init: &["bending_angular_init", "face_rest_centroids"],
+        rules: &["face_centroids", "bending_angular"],
+        forces: &["f_bend", "f_bend_wing"],
+        jvp_rules: &[],
+        jvp_forces: &[],
+        params: &[("stiffness", 1.0), ("damping", 0.0)],
+        needs: "interior edges between two triangles or quads",
+    },
+    ModelDef {
         kind: "linear_fem",
         dims: &[3],
         file: "fem",
@@ -149,6 +161,7 @@ fn model_source(file: &str, dim: usize) -> Option<&'static str> {
         ("fem", 3) => include_str!("../models/fem3d.tmr"),
         ("shear", 2) => include_str!("../models/shear2d.tmr"),
         ("shear", 3) => include_str!("../models/shear3d.tmr"),
+        ("bending", 2) => include_str!("../models/bending2d.tmr"),
         _ => return None,
     })
 }
@@ -810,6 +823,17 @@ impl Simulation {
 
     /// Computes every model's forces and their sum `force` on each vertex.
     pub fn forces(&mut self) -> Result<(), PhysicsError> {
+        // force embeddings (named f_*) are rewritten every step; a pattern that no longer
+        // matches after a topology change must not leave a stale force behind
+        for k in 0..self.g.embeddings().len() {
+            let e = &self.g.embeddings()[k];
+            if e.name().starts_with("f_") && e.derived().is_none() {
+                let id = topomech_gmap::EmbeddingId(k as u32);
+                self.g
+                    .reset_values(id)
+                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            }
+        }
         let none = Params::new();
         for (def, _) in &self.defs {
             for r in def.rules {
