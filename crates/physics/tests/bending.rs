@@ -24,9 +24,6 @@ struct D {
 }
 
 impl D {
-    fn c(v: f64) -> D {
-        D { v, d: [0.0; 12] }
-    }
     fn var(v: f64, i: usize) -> D {
         let mut d = [0.0; 12];
         d[i] = 1.0;
