@@ -3,11 +3,13 @@
 //! and two wings): independent of the rule's closed-form gradients, and exact to rounding, so
 //! the two agree to 1e-10 over 100 steps.
 
-// Numeric reference code: index loops mirror the math.
+// Numeric reference code: index loops mirror the math; dual-number arithmetic is the product
+// and quotient rules, so the `+` and `-` inside Mul and Div are meant.
 #![allow(
     clippy::needless_range_loop,
     clippy::doc_markdown,
-    clippy::suboptimal_flops
+    clippy::suboptimal_flops,
+    clippy::suspicious_arithmetic_impl
 )]
 
 use std::collections::HashMap;
