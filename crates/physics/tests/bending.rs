@@ -9,7 +9,8 @@
     clippy::needless_range_loop,
     clippy::doc_markdown,
     clippy::suboptimal_flops,
-    clippy::suspicious_arithmetic_impl
+    clippy::suspicious_arithmetic_impl,
+    clippy::large_types_passed_by_value
 )]
 
 use std::collections::HashMap;
