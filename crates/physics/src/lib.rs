@@ -139,6 +139,18 @@ pub const MODELS: &[ModelDef] = &[
         needs: "tetrahedra",
     },
     ModelDef {
+        kind: "corotational",
+        dims: &[2],
+        file: "fem",
+        init: &["corotational_tri_init"],
+        rules: &["corotational_tri"],
+        forces: &["f_corot_tri"],
+        jvp_rules: &[],
+        jvp_forces: &[],
+        params: &[("thickness", 1.0)],
+        needs: "triangles",
+    },
+    ModelDef {
         kind: "mass_tensor",
         dims: &[3],
         file: "fem",
@@ -162,6 +174,7 @@ fn model_source(file: &str, dim: usize) -> Option<&'static str> {
         ("shear", 2) => include_str!("../models/shear2d.tmr"),
         ("shear", 3) => include_str!("../models/shear3d.tmr"),
         ("bending", 2) => include_str!("../models/bending2d.tmr"),
+        ("fem", 2) => include_str!("../models/fem2d.tmr"),
         _ => return None,
     })
 }
@@ -311,8 +324,15 @@ pub struct Simulation {
 }
 
 fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
+    if let Some(def) = MODELS
+        .iter()
+        .find(|m| m.kind == kind && m.dims.contains(&dim))
+    {
+        return Ok(*def);
+    }
     let Some(def) = MODELS.iter().find(|m| m.kind == kind) else {
-        let known: Vec<&str> = MODELS.iter().map(|m| m.kind).collect();
+        let mut known: Vec<&str> = MODELS.iter().map(|m| m.kind).collect();
+        known.dedup();
         return Err(PhysicsError::Model(format!(
             "unknown model '{kind}' (known: {})",
             known.join(", ")

@@ -28,6 +28,23 @@ pub const CATALOGUE: &[(&str, &str, &str)] = &[
          error if the tetrahedron is degenerate or the Poisson ratio is not in (-1, 0.5).",
     ),
     (
+        "tri_stiffness",
+        "tri_stiffness(p0: vec2, p1: vec2, p2: vec2, young: num, poisson: num, thickness: num) -> mat6",
+        "Plane-stress stiffness matrix t A B^T D B of a linear triangle with rest vertices p0..p2 \
+         (in its plane), node-major (x0, y0, x1, ...); error if degenerate or the Poisson ratio \
+         is not in (-1, 0.5).",
+    ),
+    (
+        "vec6",
+        "vec6(a: vec2, b: vec2, c: vec2) -> mat6x1",
+        "The 6-column (a, b, c): the nodal vector of a triangle in its plane.",
+    ),
+    (
+        "blockdiag3",
+        "blockdiag3(r: mat2) -> mat6",
+        "The 6x6 block-diagonal matrix with r on its three diagonal blocks.",
+    ),
+    (
         "vec12",
         "vec12(a: vec3, b: vec3, c: vec3, d: vec3) -> mat12x1",
         "The 12-column (a, b, c, d): the nodal vector of a tetrahedron.",
@@ -49,6 +66,13 @@ pub fn result_type(name: &str, args: &[Ty]) -> Option<Ty> {
             Some(Ty::Mat(12, 12))
         }
         ("vec12", [Ty::Vec3, Ty::Vec3, Ty::Vec3, Ty::Vec3]) => Some(Ty::Mat(12, 1)),
+        ("tri_stiffness", [Ty::Vec2, Ty::Vec2, Ty::Vec2, e, nu, t])
+            if num(e) && num(nu) && num(t) =>
+        {
+            Some(Ty::Mat(6, 6))
+        }
+        ("vec6", [Ty::Vec2, Ty::Vec2, Ty::Vec2]) => Some(Ty::Mat(6, 1)),
+        ("blockdiag3", [Ty::Mat(2, 2)]) => Some(Ty::Mat(6, 6)),
         ("blockdiag4", [Ty::Mat(3, 3)]) => Some(Ty::Mat(12, 12)),
         _ => None,
     }
@@ -96,6 +120,30 @@ pub fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
                 return Ok(None);
             };
             Some(Val::M(tet_stiffness([a, b, c, d], e, nu)?))
+        }
+        ("tri_stiffness", [a, b, c, e, nu, t]) => {
+            let (Val::V2(a), Val::V2(b), Val::V2(c), Some(e), Some(nu), Some(t)) =
+                (a, b, c, num(e), num(nu), num(t))
+            else {
+                return Ok(None);
+            };
+            Some(Val::M(tri_stiffness([*a, *b, *c], e, nu, t)?))
+        }
+        ("vec6", [Val::V2(a), Val::V2(b), Val::V2(c)]) => Some(Val::M(Mat {
+            rows: 6,
+            cols: 1,
+            data: vec![a[0], a[1], b[0], b[1], c[0], c[1]],
+        })),
+        ("blockdiag3", [Val::M(r)]) if r.rows == 2 && r.cols == 2 => {
+            let mut m = Mat::zeros(6, 6);
+            for k in 0..3 {
+                for i in 0..2 {
+                    for j in 0..2 {
+                        m.set(2 * k + i, 2 * k + j, r.get(i, j));
+                    }
+                }
+            }
+            Some(Val::M(m))
         }
         ("vec12", [a, b, c, d]) => {
             let (Some(a), Some(b), Some(c), Some(d)) = (v3(a), v3(b), v3(c), v3(d)) else {
@@ -204,6 +252,60 @@ pub fn tet_stiffness(x: [[f64; 3]; 4], young: f64, poisson: f64) -> Result<Mat, 
     Ok(k)
 }
 
+/// The plane-stress stiffness of a linear triangle (constant strain), thickness `t`.
+pub fn tri_stiffness(p: [[f64; 2]; 3], young: f64, poisson: f64, t: f64) -> Result<Mat, EvalError> {
+    if !(poisson > -1.0 && poisson < 0.5 && young.is_finite() && t.is_finite()) {
+        return Err(EvalError(format!(
+            "tri_stiffness: Poisson ratio {poisson} must be in (-1, 0.5), Young's modulus and thickness finite"
+        )));
+    }
+    let (a, b) = (
+        [p[1][0] - p[0][0], p[1][1] - p[0][1]],
+        [p[2][0] - p[0][0], p[2][1] - p[0][1]],
+    );
+    let det = a[0] * b[1] - a[1] * b[0];
+    let scale = a[0] * a[0] + a[1] * a[1] + b[0] * b[0] + b[1] * b[1];
+    if det.abs() <= 1e-14 * scale || !det.is_finite() {
+        return Err(EvalError(format!(
+            "tri_stiffness: degenerate triangle (2 A = {det:e})"
+        )));
+    }
+    // gradients of the barycentric coordinates: rows of the inverse edge matrix
+    let inv = [[b[1] / det, -b[0] / det], [-a[1] / det, a[0] / det]];
+    let g = [
+        [-(inv[0][0] + inv[1][0]), -(inv[0][1] + inv[1][1])],
+        inv[0],
+        inv[1],
+    ];
+    let area = det.abs() / 2.0;
+    let mut bm = [[0.0; 6]; 3];
+    for (k, gk) in g.iter().enumerate() {
+        bm[0][2 * k] = gk[0];
+        bm[1][2 * k + 1] = gk[1];
+        bm[2][2 * k] = gk[1];
+        bm[2][2 * k + 1] = gk[0];
+    }
+    let f = young / (1.0 - poisson * poisson);
+    let d = [
+        [f, f * poisson, 0.0],
+        [f * poisson, f, 0.0],
+        [0.0, 0.0, f * (1.0 - poisson) / 2.0],
+    ];
+    let mut k = Mat::zeros(6, 6);
+    for i in 0..6 {
+        for j in 0..6 {
+            let mut x = 0.0;
+            for r in 0..3 {
+                for c in 0..3 {
+                    x += bm[r][i] * d[r][c] * bm[c][j];
+                }
+            }
+            k.set(i, j, t * area * x);
+        }
+    }
+    Ok(k)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -282,6 +384,36 @@ mod tests {
         let expected = (1.0 / 6.0) * 0.5 * (lambda + 2.0 * mu) * e * e;
         assert!(
             (energy - expected).abs() < 1e-12 * expected.max(1.0),
+            "{energy} vs {expected}"
+        );
+    }
+
+    /// The triangle's stiffness has the three plane rigid motions in its null space, and a
+    /// uniaxial stretch stores the plane-stress energy t A E e^2 / (2 (1 - nu^2)).
+    #[test]
+    fn triangle_stiffness_rigid_modes_and_energy() {
+        let p = [[0.1, 0.0], [1.2, 0.3], [0.4, 0.9]];
+        let k = tri_stiffness(p, 1e3, 0.3, 0.01).unwrap();
+        let mul = |u: &[f64]| -> Vec<f64> {
+            (0..6)
+                .map(|i| (0..6).map(|j| k.get(i, j) * u[j]).sum())
+                .collect()
+        };
+        for u in [
+            [1.0, 0.0, 1.0, 0.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0, 1.0, 0.0, 1.0],
+        ] {
+            assert!(mul(&u).iter().all(|f| f.abs() < 1e-12 * 1e3));
+        }
+        let rot: Vec<f64> = p.iter().flat_map(|q| [-q[1], q[0]]).collect();
+        assert!(mul(&rot).iter().all(|f| f.abs() < 1e-12 * 1e3));
+        let e = 0.01;
+        let u: Vec<f64> = p.iter().flat_map(|q| [e * q[0], 0.0]).collect();
+        let energy: f64 = 0.5 * u.iter().zip(mul(&u)).map(|(a, b)| a * b).sum::<f64>();
+        let area = 0.5 * ((1.1f64) * 0.9 - 0.3 * 0.3);
+        let expected = 0.01 * area * 1e3 * e * e / (2.0 * (1.0 - 0.09));
+        assert!(
+            (energy - expected).abs() < 1e-12 * expected,
             "{energy} vs {expected}"
         );
     }
