@@ -38,6 +38,9 @@ pub struct ModelDef {
     pub params: &'static [(&'static str, f64)],
     /// What the model needs of the mesh, said when it matches nothing.
     pub needs: &'static str,
+    /// Whether every element must be matched by one of the init rules (the element models:
+    /// an element they cannot handle would silently get no force).
+    pub per_element: bool,
 }
 
 /// Every model topomech ships.
@@ -53,6 +56,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &["df_stretch"],
         params: &[("stiffness", 1000.0), ("damping", 0.0)],
         needs: "edges",
+        per_element: false,
     },
     ModelDef {
         kind: "stretch_cumulated",
@@ -65,6 +69,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &["df_stretch_cum"],
         params: &[("stiffness", 1000.0), ("damping", 0.0)],
         needs: "edges",
+        per_element: false,
     },
     ModelDef {
         kind: "shear_isotropic",
@@ -77,6 +82,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &[],
         params: &[("stiffness", 1000.0), ("damping", 0.0)],
         needs: "quadrilateral faces",
+        per_element: false,
     },
     ModelDef {
         kind: "shear_anisotropic",
@@ -89,6 +95,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &[],
         params: &[("stiffness", 1000.0), ("damping", 0.0)],
         needs: "faces",
+        per_element: false,
     },
     ModelDef {
         kind: "shear_volumic",
@@ -101,6 +108,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &[],
         params: &[("stiffness", 1000.0), ("damping", 0.0)],
         needs: "hexahedra",
+        per_element: false,
     },
     ModelDef {
         kind: "bending_angular",
@@ -113,6 +121,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &[],
         params: &[("stiffness", 1.0), ("damping", 0.0)],
         needs: "interior edges between two triangles or quads",
+        per_element: false,
     },
     ModelDef {
         kind: "linear_fem",
@@ -125,18 +134,20 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &["df_linear"],
         params: &[],
         needs: "tetrahedra",
+        per_element: true,
     },
     ModelDef {
         kind: "corotational",
         dims: &[3],
         file: "fem",
-        init: &["fem_init"],
-        rules: &["corotational"],
-        forces: &["f_corot"],
-        jvp_rules: &["corotational_jvp"],
-        jvp_forces: &["df_corot"],
+        init: &["fem_init", "corotational_hex_init"],
+        rules: &["corotational", "corotational_hex"],
+        forces: &["f_corot", "f_corot_hex"],
+        jvp_rules: &["corotational_jvp", "corotational_hex_jvp"],
+        jvp_forces: &["df_corot", "df_corot_hex"],
         params: &[],
-        needs: "tetrahedra",
+        needs: "tetrahedra or hexahedra",
+        per_element: true,
     },
     ModelDef {
         kind: "corotational",
@@ -149,6 +160,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &[],
         params: &[("thickness", 1.0)],
         needs: "triangles",
+        per_element: true,
     },
     ModelDef {
         kind: "mass_tensor",
@@ -161,6 +173,7 @@ pub const MODELS: &[ModelDef] = &[
         jvp_forces: &["df_tensor"],
         params: &[],
         needs: "tetrahedra",
+        per_element: true,
     },
 ];
 
@@ -488,8 +501,14 @@ impl Simulation {
         ));
         let (rules, _warnings) = load_sources(&sources).map_err(|diags| {
             // a refused predicate is the scene's fault: say so
-            if diags.iter().any(|d| d.file == "scene-generated.tmr") {
-                let msgs: Vec<String> = diags.iter().map(|d| d.message.clone()).collect();
+            if diags.iter().any(|d| {
+                d.file == "scene-generated.tmr" && d.severity == topomech_rules::Severity::Error
+            }) {
+                let msgs: Vec<String> = diags
+                    .iter()
+                    .filter(|d| d.severity == topomech_rules::Severity::Error)
+                    .map(|d| d.message.clone())
+                    .collect();
                 PhysicsError::Config(format!(
                     "bad fixed-vertex predicate in {:?}: {}",
                     cfg.fixed,
@@ -550,7 +569,13 @@ impl Simulation {
                 )));
             }
         }
+        let elements = g.count_orbits(if dim == 3 {
+            OrbitType::volume()
+        } else {
+            OrbitType::face(2)
+        });
         for (def, params) in &defs {
+            let mut matched = 0;
             for init in def.init {
                 let rule = rules.rule(init)?;
                 let p: Params = rule
@@ -558,13 +583,19 @@ impl Simulation {
                     .iter()
                     .map(|(n, _)| (n.clone(), Val::F(params.get(n).copied().unwrap_or(0.0))))
                     .collect();
-                let rep = rules.apply_everywhere(&mut g, init, &p)?;
-                if rep.matches == 0 {
-                    return Err(PhysicsError::Model(format!(
-                        "model '{}' matches nothing on this mesh: it needs {}",
-                        def.kind, def.needs
-                    )));
-                }
+                matched += rules.apply_everywhere(&mut g, init, &p)?.matches;
+            }
+            if matched == 0 {
+                return Err(PhysicsError::Model(format!(
+                    "model '{}' matches nothing on this mesh: it needs {}",
+                    def.kind, def.needs
+                )));
+            }
+            if def.per_element && matched < elements {
+                return Err(PhysicsError::Model(format!(
+                    "model '{}' handles {} elements of {elements}: it needs {}, and the others would get no force",
+                    def.kind, matched, def.needs
+                )));
             }
         }
         g.refresh_derived();

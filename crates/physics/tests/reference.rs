@@ -125,6 +125,9 @@ fn local_faces(kind: CellKind, n: usize) -> Vec<Vec<usize>> {
     }
 }
 
+/// A hexahedron of the reference: vertices (VTK order), 24x24 stiffness, centre gradients.
+type Hex = ([usize; 8], Vec<Vec<f64>>, [V3; 8]);
+
 /// The flat-array simulation: arrays of points, per-vertex masses, springs, tetrahedra.
 struct Reference {
     x: Vec<V3>,
@@ -136,6 +139,8 @@ struct Reference {
     /// tets: vertices, rest edge-matrix inverse, element stiffness in Lame form per block
     tets: Vec<([usize; 4], M3, [[M3; 4]; 4])>,
     corot: bool,
+    /// hexahedra: vertices (VTK order), 24x24 stiffness, shape gradients at the centre
+    hexes: Vec<Hex>,
     gravity: V3,
     dt: f64,
 }
@@ -181,6 +186,7 @@ impl Reference {
             springs: Vec::new(),
             tets: Vec::new(),
             corot: false,
+            hexes: Vec::new(),
             gravity,
             dt,
         }
@@ -270,6 +276,92 @@ impl Reference {
         self.corot = corot;
     }
 
+    /// Trilinear hexahedra, K = sum over 2x2x2 Gauss points of B^T D B det J (B 6x24), and
+    /// the shape gradients at the centre for the co-rotational frame.
+    fn add_hexes(&mut self, mesh: &Mesh, young: f64, nu: f64) {
+        let nat: [[f64; 3]; 8] = [
+            [-1., -1., -1.],
+            [1., -1., -1.],
+            [1., 1., -1.],
+            [-1., 1., -1.],
+            [-1., -1., 1.],
+            [1., -1., 1.],
+            [1., 1., 1.],
+            [-1., 1., 1.],
+        ];
+        let grads = |x: &[V3; 8], xi: V3| -> ([V3; 8], f64) {
+            let mut dn = [[0.0; 3]; 8];
+            for i in 0..8 {
+                let f = |k: usize| 1.0 + xi[k] * nat[i][k];
+                dn[i] = [
+                    nat[i][0] * f(1) * f(2) / 8.0,
+                    nat[i][1] * f(0) * f(2) / 8.0,
+                    nat[i][2] * f(0) * f(1) / 8.0,
+                ];
+            }
+            let mut j = [[0.0; 3]; 3];
+            for i in 0..8 {
+                for r in 0..3 {
+                    for c in 0..3 {
+                        j[r][c] += x[i][r] * dn[i][c];
+                    }
+                }
+            }
+            let ji = m_inv(&j);
+            let mut g = [[0.0; 3]; 8];
+            for i in 0..8 {
+                for a in 0..3 {
+                    g[i][a] = (0..3).map(|c| ji[c][a] * dn[i][c]).sum();
+                }
+            }
+            (g, m_det(&j).abs())
+        };
+        let f = young / ((1.0 + nu) * (1.0 - 2.0 * nu));
+        let d = [
+            [f * (1.0 - nu), f * nu, f * nu, 0.0, 0.0, 0.0],
+            [f * nu, f * (1.0 - nu), f * nu, 0.0, 0.0, 0.0],
+            [f * nu, f * nu, f * (1.0 - nu), 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, f * (1.0 - 2.0 * nu) / 2.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, f * (1.0 - 2.0 * nu) / 2.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0, 0.0, f * (1.0 - 2.0 * nu) / 2.0],
+        ];
+        let q = 1.0 / 3.0f64.sqrt();
+        for c in &mesh.cells {
+            let vs: [usize; 8] = std::array::from_fn(|i| c[i]);
+            let x: [V3; 8] = vs.map(|i| self.rest[i]);
+            let mut k = vec![vec![0.0; 24]; 24];
+            for gp in nat {
+                let (g, det) = grads(&x, [q * gp[0], q * gp[1], q * gp[2]]);
+                let mut b = vec![[0.0; 24]; 6];
+                for i in 0..8 {
+                    let (gx, gy, gz) = (g[i][0], g[i][1], g[i][2]);
+                    b[0][3 * i] = gx;
+                    b[1][3 * i + 1] = gy;
+                    b[2][3 * i + 2] = gz;
+                    b[3][3 * i] = gy;
+                    b[3][3 * i + 1] = gx;
+                    b[4][3 * i + 1] = gz;
+                    b[4][3 * i + 2] = gy;
+                    b[5][3 * i] = gz;
+                    b[5][3 * i + 2] = gx;
+                }
+                for r in 0..24 {
+                    for s2 in 0..24 {
+                        let mut acc = 0.0;
+                        for a in 0..6 {
+                            for bb in 0..6 {
+                                acc += b[a][r] * d[a][bb] * b[bb][s2];
+                            }
+                        }
+                        k[r][s2] += det * acc;
+                    }
+                }
+            }
+            let (g0, _) = grads(&x, [0.0; 3]);
+            self.hexes.push((vs, k, g0));
+        }
+    }
+
     fn step(&mut self) {
         let n = self.x.len();
         let mut f = vec![[0.0; 3]; n];
@@ -303,6 +395,27 @@ impl Reference {
                 for b in 0..4 {
                     fa = add(fa, m_v(&k[a][b], u[b]));
                 }
+                f[vs[a]] = sub(f[vs[a]], m_v(&r, fa));
+            }
+        }
+        for (vs, k, g0) in &self.hexes {
+            // deformation gradient at the centre, its rotation, then -R K (R^T x - X)
+            let mut fg = [[0.0; 3]; 3];
+            for i in 0..8 {
+                for r in 0..3 {
+                    for c in 0..3 {
+                        fg[r][c] += self.x[vs[i]][r] * g0[i][c];
+                    }
+                }
+            }
+            let r = polar(&fg);
+            let rt = m_t(&r);
+            let u: Vec<f64> = vs
+                .iter()
+                .flat_map(|&i| sub(m_v(&rt, self.x[i]), self.rest[i]))
+                .collect();
+            for a in 0..8 {
+                let fa: V3 = std::array::from_fn(|c| (0..24).map(|j| k[3 * a + c][j] * u[j]).sum());
                 f[vs[a]] = sub(f[vs[a]], m_v(&r, fa));
             }
         }
@@ -507,4 +620,27 @@ fn shear_springs_match_the_flat_reference() {
         1e6,
         0.3,
     );
+}
+
+#[test]
+fn corotational_hexahedra_match_the_flat_reference() {
+    let mesh = cuboid([3, 1, 1], [3.0, 1.0, 1.0], BoxElement::Hexa);
+    let mut r = Reference::new(&mesh, 1000.0, 1e-9, [0.0, -9.81, 0.0], 1e-3);
+    r.add_hexes(&mesh, 1e5, 0.3);
+    compare("corotational", &[], &mesh, r, 1e5, 0.3);
+}
+
+#[test]
+fn element_models_refuse_elements_they_cannot_handle() {
+    let mesh = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Mixed);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![ModelSpec {
+            kind: "linear_fem".into(),
+            params: HashMap::new(),
+        }],
+        ..Config::default()
+    };
+    let e = Simulation::new(g, cfg).unwrap_err().to_string();
+    assert!(e.contains("would get no force"), "{e}");
 }

@@ -45,6 +45,26 @@ pub const CATALOGUE: &[(&str, &str, &str)] = &[
         "The 6x6 block-diagonal matrix with r on its three diagonal blocks.",
     ),
     (
+        "hex_stiffness_block",
+        "hex_stiffness_block(x0: vec3, x1: vec3, x2: vec3, x3: vec3, x4: vec3, x5: vec3, x6: vec3, x7: vec3, young: num, poisson: num, bi: i64, bj: i64) -> mat12",
+        "Block (bi, bj) (each 0 or 1: nodes 0-3 or 4-7) of the 24x24 stiffness of a trilinear \
+         hexahedron with rest vertices x0..x7 (bottom cycle, then the top vertex above each; \
+         either orientation), isotropic linear elasticity, 2x2x2 Gauss quadrature; error if \
+         the element is degenerate or twisted.",
+    ),
+    (
+        "hex_center_gradients",
+        "hex_center_gradients(x0: vec3, x1: vec3, x2: vec3, x3: vec3, x4: vec3, x5: vec3, x6: vec3, x7: vec3, half: i64) -> mat3x4",
+        "Gradients (columns) of the shape functions of nodes 4 half .. 4 half + 3 at the centre \
+         of a hexahedron with rest vertices x0..x7: F = sum_i x_i g_i^T is its deformation \
+         gradient there.",
+    ),
+    (
+        "mat_from_cols4",
+        "mat_from_cols4(a: vec3, b: vec3, c: vec3, d: vec3) -> mat3x4",
+        "The 3x4 matrix with columns a, b, c, d.",
+    ),
+    (
         "vec12",
         "vec12(a: vec3, b: vec3, c: vec3, d: vec3) -> mat12x1",
         "The 12-column (a, b, c, d): the nodal vector of a tetrahedron.",
@@ -72,6 +92,22 @@ pub fn result_type(name: &str, args: &[Ty]) -> Option<Ty> {
             Some(Ty::Mat(6, 6))
         }
         ("vec6", [Ty::Vec2, Ty::Vec2, Ty::Vec2]) => Some(Ty::Mat(6, 1)),
+        ("hex_stiffness_block", a)
+            if a.len() == 12
+                && a[..8].iter().all(|t| *t == Ty::Vec3)
+                && num(&a[8])
+                && num(&a[9])
+                && a[10] == Ty::I64
+                && a[11] == Ty::I64 =>
+        {
+            Some(Ty::Mat(12, 12))
+        }
+        ("hex_center_gradients", a)
+            if a.len() == 9 && a[..8].iter().all(|t| *t == Ty::Vec3) && a[8] == Ty::I64 =>
+        {
+            Some(Ty::Mat(3, 4))
+        }
+        ("mat_from_cols4", [Ty::Vec3, Ty::Vec3, Ty::Vec3, Ty::Vec3]) => Some(Ty::Mat(3, 4)),
         ("blockdiag3", [Ty::Mat(2, 2)]) => Some(Ty::Mat(6, 6)),
         ("blockdiag4", [Ty::Mat(3, 3)]) => Some(Ty::Mat(12, 12)),
         _ => None,
@@ -128,6 +164,60 @@ pub fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
                 return Ok(None);
             };
             Some(Val::M(tri_stiffness([*a, *b, *c], e, nu, t)?))
+        }
+        ("hex_stiffness_block", a) if a.len() == 12 => {
+            let Some(x) = hex_points(&a[..8]) else {
+                return Ok(None);
+            };
+            let (Some(e), Some(nu), Val::I(bi), Val::I(bj)) =
+                (num(&a[8]), num(&a[9]), &a[10], &a[11])
+            else {
+                return Ok(None);
+            };
+            if !(0..2).contains(bi) || !(0..2).contains(bj) {
+                return Err(EvalError(format!(
+                    "hex_stiffness_block: block ({bi}, {bj}) is not in 0..2"
+                )));
+            }
+            let k = hex_stiffness(&x, e, nu)?;
+            let mut m = Mat::zeros(12, 12);
+            for i in 0..12 {
+                for j in 0..12 {
+                    m.set(i, j, k[12 * *bi as usize + i][12 * *bj as usize + j]);
+                }
+            }
+            Some(Val::M(m))
+        }
+        ("hex_center_gradients", a) if a.len() == 9 => {
+            let Some(x) = hex_points(&a[..8]) else {
+                return Ok(None);
+            };
+            let Val::I(half) = a[8] else { return Ok(None) };
+            if !(0..2).contains(&half) {
+                return Err(EvalError(format!(
+                    "hex_center_gradients: half {half} is not 0 or 1"
+                )));
+            }
+            let (g, _) = hex_gradients(&x, [0.0; 3])?;
+            let mut m = Mat::zeros(3, 4);
+            for c in 0..4 {
+                for r in 0..3 {
+                    m.set(r, c, g[4 * half as usize + c][r]);
+                }
+            }
+            Some(Val::M(m))
+        }
+        ("mat_from_cols4", [a, b, c, d]) => {
+            let (Some(a), Some(b), Some(c), Some(d)) = (v3(a), v3(b), v3(c), v3(d)) else {
+                return Ok(None);
+            };
+            let mut m = Mat::zeros(3, 4);
+            for (j, col) in [a, b, c, d].iter().enumerate() {
+                for r in 0..3 {
+                    m.set(r, j, col[r]);
+                }
+            }
+            Some(Val::M(m))
         }
         ("vec6", [Val::V2(a), Val::V2(b), Val::V2(c)]) => Some(Val::M(Mat {
             rows: 6,
@@ -247,6 +337,116 @@ pub fn tet_stiffness(x: [[f64; 3]; 4], young: f64, poisson: f64) -> Result<Mat, 
     for i in 0..12 {
         for j in 0..12 {
             k.set(i, j, vol * (0..6).map(|s| bm[s][i] * db[s][j]).sum::<f64>());
+        }
+    }
+    Ok(k)
+}
+
+fn hex_points(a: &[Val]) -> Option<[[f64; 3]; 8]> {
+    let mut x = [[0.0; 3]; 8];
+    for (k, v) in a.iter().enumerate() {
+        x[k] = v3(v)?;
+    }
+    Some(x)
+}
+
+/// Natural coordinates of the nodes of a hexahedron, VTK order.
+const HEX_NODES: [[f64; 3]; 8] = [
+    [-1.0, -1.0, -1.0],
+    [1.0, -1.0, -1.0],
+    [1.0, 1.0, -1.0],
+    [-1.0, 1.0, -1.0],
+    [-1.0, -1.0, 1.0],
+    [1.0, -1.0, 1.0],
+    [1.0, 1.0, 1.0],
+    [-1.0, 1.0, 1.0],
+];
+
+/// Gradients of the 8 trilinear shape functions at natural point `xi`, and det J.
+fn hex_gradients(x: &[[f64; 3]; 8], xi: [f64; 3]) -> Result<([[f64; 3]; 8], f64), EvalError> {
+    let mut dn = [[0.0; 3]; 8]; // dN/dxi
+    for (i, n) in HEX_NODES.iter().enumerate() {
+        let f = |k: usize| 1.0 + xi[k] * n[k];
+        dn[i] = [
+            n[0] * f(1) * f(2) / 8.0,
+            n[1] * f(0) * f(2) / 8.0,
+            n[2] * f(0) * f(1) / 8.0,
+        ];
+    }
+    // J[r][c] = d x_r / d xi_c
+    let mut j = [[0.0; 3]; 3];
+    for i in 0..8 {
+        for r in 0..3 {
+            for c in 0..3 {
+                j[r][c] += x[i][r] * dn[i][c];
+            }
+        }
+    }
+    let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
+        - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
+        + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
+    if det == 0.0 || !det.is_finite() {
+        return Err(EvalError(format!(
+            "hexahedron: the Jacobian determinant is {det:e} (degenerate element)"
+        )));
+    }
+    // inverse of J
+    let mut ji = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            let (r0, r1, c0, c1) = ((c + 1) % 3, (c + 2) % 3, (r + 1) % 3, (r + 2) % 3);
+            ji[r][c] = (j[r0][c0] * j[r1][c1] - j[r0][c1] * j[r1][c0]) / det;
+        }
+    }
+    // dN/dx = J^-T dN/dxi
+    let mut g = [[0.0; 3]; 8];
+    for i in 0..8 {
+        for a in 0..3 {
+            g[i][a] = (0..3).map(|c| ji[c][a] * dn[i][c]).sum();
+        }
+    }
+    Ok((g, det))
+}
+
+/// The 24x24 linear-elastic stiffness of a trilinear hexahedron (2x2x2 Gauss).
+pub fn hex_stiffness(
+    x: &[[f64; 3]; 8],
+    young: f64,
+    poisson: f64,
+) -> Result<Vec<Vec<f64>>, EvalError> {
+    if !(poisson > -1.0 && poisson < 0.5 && young.is_finite()) {
+        return Err(EvalError(format!(
+            "hex stiffness: Poisson ratio {poisson} must be in (-1, 0.5)"
+        )));
+    }
+    let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
+    let mu = young / (2.0 * (1.0 + poisson));
+    let q = 1.0 / 3.0f64.sqrt();
+    let mut k = vec![vec![0.0; 24]; 24];
+    // either orientation of the node numbering: integrate |det J|, but one sign throughout
+    let (_, sign) = hex_gradients(x, [0.0; 3])?;
+    for gp in HEX_NODES {
+        let (g, det) = hex_gradients(x, [q * gp[0], q * gp[1], q * gp[2]])?;
+        if det * sign <= 0.0 {
+            return Err(EvalError(
+                "hexahedron: the Jacobian changes sign inside the element (a twisted element)"
+                    .into(),
+            ));
+        }
+        let det = det.abs();
+        for a in 0..8 {
+            for b in 0..8 {
+                let gab: f64 = (0..3).map(|t| g[a][t] * g[b][t]).sum();
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let delta = if i == j { 1.0 } else { 0.0 };
+                        k[3 * a + i][3 * b + j] += det
+                            * (lambda * g[a][i] * g[b][j]
+                                + mu * g[a][j] * g[b][i]
+                                + mu * gab * delta);
+                    }
+                }
+            }
         }
     }
     Ok(k)
