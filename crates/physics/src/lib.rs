@@ -347,6 +347,8 @@ pub struct Simulation {
     /// vertex index of each dart, and the number of vertices
     labels: (Vec<u32>, usize),
     labels_version: u64,
+    /// The diagonal of the rest bounding box: no vertex moves that far in one step.
+    size: f64,
 }
 
 fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
@@ -620,6 +622,21 @@ impl Simulation {
         .into();
         let labels = g.orbit_labels(OrbitType::vertex(dim));
         let labels_version = g.version();
+        let size = {
+            let pos = g
+                .require("rest")
+                .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            let mut lo = [f64::INFINITY; 3];
+            let mut hi = [f64::NEG_INFINITY; 3];
+            for d in g.darts() {
+                let p = g.real(pos, d);
+                for a in 0..3 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                }
+            }
+            norm3([hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]).max(f64::MIN_POSITIVE)
+        };
         let sim = Simulation {
             g,
             rules,
@@ -630,6 +647,7 @@ impl Simulation {
             steps: 0,
             labels,
             labels_version,
+            size,
         };
         // every free vertex needs a mass
         let masses = sim.vertex_scalar("mass")?;
@@ -672,10 +690,14 @@ impl Simulation {
             Err(e) => Some((0, e.to_string())),
             Ok(()) => saved.iter().enumerate().find_map(|(v, (d, _, _))| {
                 let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
-                p.iter()
-                    .chain(u)
-                    .any(|x| !x.is_finite())
-                    .then(|| (v, "non-finite position or velocity".to_string()))
+                if p.iter().chain(u).any(|x| !x.is_finite()) {
+                    return Some((v, "non-finite position or velocity".to_string()));
+                }
+                // runaway: a vertex crossing more than the whole object in one step
+                let step = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * self.cfg.dt;
+                (step > self.size).then(|| {
+                    (v, format!("runaway motion: the vertex moved {step:.3e} in one step, more than the object's size {:.3e}", self.size))
+                })
             }),
         };
         if let Some((vertex, why)) = bad {
