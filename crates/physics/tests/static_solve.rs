@@ -33,24 +33,32 @@ fn sim(mesh: &Mesh, kind: &str, params: &[(&str, f64)], f: impl FnOnce(&mut Conf
 /// The Jacobian-vector products of every model agree with central differences of the forces
 /// (step 1e-6 of the size: truncation error ~1e-12 relative, rounding ~1e-10): to 1e-6
 /// relative. Co-rotational's product is the usual warped stiffness -R K R^T, which omits
-/// dR/dx: it is checked at a rigidly rotated state, where it is exact.
+/// dR/dx: it is checked at a rigidly rotated state, where it is exact. Shear and linear
+/// bending springs share the stretch spring's exact product.
 #[test]
 fn jvp_matches_central_differences() {
-    let mesh = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Tetra);
-    for (kind, params) in [
-        (
-            "stretch_elementary",
-            vec![("stiffness", 1e3), ("damping", 3.0)],
-        ),
-        (
-            "stretch_cumulated",
-            vec![("stiffness", 1e3), ("damping", 3.0)],
-        ),
-        ("linear_fem", vec![]),
-        ("mass_tensor", vec![]),
-        ("corotational", vec![]),
+    let tets = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let hexes = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Hexa);
+    let quads = topomech_gmap::generators::grid(
+        [3, 2],
+        [1.5, 1.0],
+        topomech_gmap::generators::GridElement::Quad,
+    );
+    let springs = vec![("stiffness", 1e3), ("damping", 3.0)];
+    for (mesh, kind, params) in [
+        (&tets, "stretch_elementary", springs.clone()),
+        (&tets, "stretch_cumulated", springs.clone()),
+        (&tets, "linear_fem", vec![]),
+        (&tets, "mass_tensor", vec![]),
+        (&tets, "corotational", vec![]),
+        (&hexes, "corotational", vec![]),
+        (&hexes, "shear_isotropic", springs.clone()),
+        (&hexes, "shear_anisotropic", springs.clone()),
+        (&hexes, "shear_volumic", springs.clone()),
+        (&quads, "bending_linear", springs.clone()),
+        (&quads, "shear_isotropic", springs.clone()),
     ] {
-        let mut s = sim(&mesh, kind, &params, |c| c.young = 1e4);
+        let mut s = sim(mesh, kind, &params, |c| c.young = 1e4);
         let rest = s.vertex_vec3("rest").unwrap();
         let rigid = kind == "corotational";
         let x: Vec<[f64; 3]> = rest

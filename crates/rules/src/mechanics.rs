@@ -65,6 +65,18 @@ pub const CATALOGUE: &[(&str, &str, &str)] = &[
         "The 3x4 matrix with columns a, b, c, d.",
     ),
     (
+        "spring_force",
+        "spring_force(xa: vec3, xb: vec3, va: vec3, vb: vec3, k: num, c: num, l0: num) -> vec3",
+        "The force on a of a spring a-b with stiffness k, rest length l0 and damping c (Provot \
+         1995): (k (l - l0) + c (vb - va) . u) u, u the unit vector from a to b.",
+    ),
+    (
+        "spring_jvp",
+        "spring_jvp(xa: vec3, xb: vec3, va: vec3, vb: vec3, dxa: vec3, dxb: vec3, dva: vec3, dvb: vec3, k: num, c: num, l0: num) -> vec3",
+        "The derivative of spring_force in the direction (dxa, dxb, dva, dvb): exact, damping \
+         included.",
+    ),
+    (
         "vec12",
         "vec12(a: vec3, b: vec3, c: vec3, d: vec3) -> mat12x1",
         "The 12-column (a, b, c, d): the nodal vector of a tetrahedron.",
@@ -86,6 +98,16 @@ pub fn result_type(name: &str, args: &[Ty]) -> Option<Ty> {
             Some(Ty::Mat(12, 12))
         }
         ("vec12", [Ty::Vec3, Ty::Vec3, Ty::Vec3, Ty::Vec3]) => Some(Ty::Mat(12, 1)),
+        ("spring_force", a)
+            if a.len() == 7 && a[..4].iter().all(|t| *t == Ty::Vec3) && a[4..].iter().all(num) =>
+        {
+            Some(Ty::Vec3)
+        }
+        ("spring_jvp", a)
+            if a.len() == 11 && a[..8].iter().all(|t| *t == Ty::Vec3) && a[8..].iter().all(num) =>
+        {
+            Some(Ty::Vec3)
+        }
         ("tri_stiffness", [Ty::Vec2, Ty::Vec2, Ty::Vec2, e, nu, t])
             if num(e) && num(nu) && num(t) =>
         {
@@ -164,6 +186,36 @@ pub fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
                 return Ok(None);
             };
             Some(Val::M(tri_stiffness([*a, *b, *c], e, nu, t)?))
+        }
+        ("spring_force", a) if a.len() == 7 => {
+            let (Some(xa), Some(xb), Some(va), Some(vb), Some(k), Some(c), Some(l0)) = (
+                v3(&a[0]),
+                v3(&a[1]),
+                v3(&a[2]),
+                v3(&a[3]),
+                num(&a[4]),
+                num(&a[5]),
+                num(&a[6]),
+            ) else {
+                return Ok(None);
+            };
+            let d = sub(xb, xa);
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let u = [d[0] / l, d[1] / l, d[2] / l];
+            let dv = sub(vb, va);
+            let s = k * (l - l0) + c * (dv[0] * u[0] + dv[1] * u[1] + dv[2] * u[2]);
+            Some(Val::V3([s * u[0], s * u[1], s * u[2]]))
+        }
+        ("spring_jvp", a) if a.len() == 11 => {
+            let mut v = [[0.0; 3]; 8];
+            for (k, x) in a[..8].iter().enumerate() {
+                let Some(x) = v3(x) else { return Ok(None) };
+                v[k] = x;
+            }
+            let (Some(k), Some(c), Some(l0)) = (num(&a[8]), num(&a[9]), num(&a[10])) else {
+                return Ok(None);
+            };
+            Some(Val::V3(spring_jvp(&v, k, c, l0)))
         }
         ("hex_stiffness_block", a) if a.len() == 12 => {
             let Some(x) = hex_points(&a[..8]) else {
@@ -340,6 +392,27 @@ pub fn tet_stiffness(x: [[f64; 3]; 4], young: f64, poisson: f64) -> Result<Mat, 
         }
     }
     Ok(k)
+}
+
+/// d/ds of the spring force at (xa + s dxa, xb + s dxb, va + s dva, vb + s dvb): with
+/// d = xb - xa, u = d / l, P w = w - (u.w) u, w = dxb - dxa, z = dvb - dva, dv = vb - va:
+/// k [(1 - l0/l) P w + (u.w) u] + (c / l) [(dv.P w) u + (dv.u) P w] + c (u.z) u.
+fn spring_jvp(v: &[[f64; 3]; 8], k: f64, c: f64, l0: f64) -> [f64; 3] {
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let d = sub(v[1], v[0]);
+    let l = dot(d, d).sqrt();
+    let u = d.map(|x| x / l);
+    let w = sub(v[5], v[4]);
+    let z = sub(v[7], v[6]);
+    let dv = sub(v[3], v[2]);
+    let uw = dot(u, w);
+    let pw: [f64; 3] = std::array::from_fn(|i| w[i] - uw * u[i]);
+    let (dvpw, dvu, uz) = (dot(dv, pw), dot(dv, u), dot(u, z));
+    std::array::from_fn(|i| {
+        k * ((1.0 - l0 / l) * pw[i] + uw * u[i])
+            + (c / l) * (dvpw * u[i] + dvu * pw[i])
+            + c * uz * u[i]
+    })
 }
 
 fn hex_points(a: &[Val]) -> Option<[[f64; 3]; 8]> {

@@ -63,11 +63,17 @@ fn array_arg<'py, T: numpy::Element>(
 
 /// `points`: float64 `(N, 3)`, as rows.
 pub(crate) fn points_arg(obj: &Bound<'_, PyAny>) -> Result<Vec<[f64; 3]>> {
-    let a = array_arg::<f64>(obj, "points", "float64")?;
+    rows3_arg(obj, "points", "N")
+}
+
+/// A float64 `(rows, 3)` array named `name` (`rows` is how messages name the row count), as
+/// rows.
+pub(crate) fn rows3_arg(obj: &Bound<'_, PyAny>, name: &str, rows: &str) -> Result<Vec<[f64; 3]>> {
+    let a = array_arg::<f64>(obj, name, "float64")?;
     let shape = a.shape();
     if shape.len() != 2 || shape[1] != 3 {
         return Err(value_error(format!(
-            "points must have shape (N, 3), got {}",
+            "{name} must have shape ({rows}, 3), got {}",
             shape_str(shape)
         )));
     }

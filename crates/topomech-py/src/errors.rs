@@ -10,6 +10,9 @@
 //!     ├── FileFormatError        the .tmg format (io::FormatError)
 //!     ├── RuleError              a rule file refused by the checker (its diagnostics)
 //!     ├── ApplyError             a rule that does not apply (topomech_rules::ApplyError)
+//!     ├── SimulationError        a simulation that cannot be built or stepped (PhysicsError)
+//!     │   └── DivergenceError    a step that produced non-finite values (step, vertex, why)
+//!     ├── SceneError             a scene file that is refused (raised by topomech.scene)
 //!     └── InternalError          a bug: a Rust panic, caught before it reaches Python
 //! ```
 //!
@@ -32,6 +35,7 @@ use topomech_gmap::mesh::MeshError as KernelMeshError;
 use topomech_gmap::{
     EmbeddingError as KernelEmbeddingError, GMapError, LinkError, OrbitTypeError, SewError,
 };
+use topomech_physics::PhysicsError;
 use topomech_rules::{ApplyError as KernelApplyError, Diagnostic, Severity};
 
 pyo3::create_exception!(
@@ -88,6 +92,29 @@ pyo3::create_exception!(
 );
 pyo3::create_exception!(
     topomech._core,
+    SimulationError,
+    TopomechError,
+    "A simulation that cannot be built (unknown model, a model or predicate that matches\n\
+     nothing, a bad setting) or a step that fails."
+);
+pyo3::create_exception!(
+    topomech._core,
+    DivergenceError,
+    SimulationError,
+    "A step that produced a non-finite position or velocity, or a linear system that is not\n\
+     positive definite. The simulation keeps the state before the step; `step` is the step\n\
+     that failed (1-based), `vertex` the vertex (index in vertex order) and `why` what happened."
+);
+pyo3::create_exception!(
+    topomech._core,
+    SceneError,
+    TopomechError,
+    "A scene file that is refused: bad TOML, an unknown or mistyped key (the message names its\n\
+     path, e.g. `integrator.dtt: unknown key`), a missing mesh, or a simulation that cannot be\n\
+     built from it."
+);
+pyo3::create_exception!(
+    topomech._core,
     InternalError,
     TopomechError,
     "A bug in topomech (a Rust panic, caught at the boundary). Please report it."
@@ -104,6 +131,9 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FileFormatError", py.get_type::<FileFormatError>())?;
     m.add("RuleError", py.get_type::<RuleError>())?;
     m.add("ApplyError", py.get_type::<ApplyError>())?;
+    m.add("SimulationError", py.get_type::<SimulationError>())?;
+    m.add("DivergenceError", py.get_type::<DivergenceError>())?;
+    m.add("SceneError", py.get_type::<SceneError>())?;
     m.add("InternalError", py.get_type::<InternalError>())?;
     install_panic_hook();
     Ok(())
@@ -129,6 +159,8 @@ pub(crate) enum Error {
     Rules(Vec<Diagnostic>),
     /// A rule that does not apply.
     Apply(KernelApplyError),
+    /// A simulation that cannot be built or stepped.
+    Physics(PhysicsError),
     /// An error that is already a Python exception (argument checks).
     Py(PyErr),
 }
@@ -181,6 +213,12 @@ impl From<KernelApplyError> for Error {
     }
 }
 
+impl From<PhysicsError> for Error {
+    fn from(e: PhysicsError) -> Self {
+        Error::Physics(e)
+    }
+}
+
 impl From<PyErr> for Error {
     fn from(e: PyErr) -> Self {
         Error::Py(e)
@@ -198,6 +236,7 @@ impl From<Error> for PyErr {
             Error::Format(e) => FileFormatError::new_err(e.to_string()),
             Error::Rules(diags) => rule_error(&diags),
             Error::Apply(e) => ApplyError::new_err(e.to_string()),
+            Error::Physics(e) => physics_error(&e),
             Error::Py(e) => e,
         }
     }
@@ -223,6 +262,26 @@ fn rule_error(diags: &[Diagnostic]) -> PyErr {
         match value
             .setattr("diagnostics", errors)
             .and_then(|()| value.setattr("warnings", warnings))
+        {
+            Ok(()) => err,
+            Err(e) => e,
+        }
+    })
+}
+
+/// A `DivergenceError` with `step`, `vertex` and `why` for a divergence, else a
+/// `SimulationError` with the kernel's message.
+fn physics_error(e: &PhysicsError) -> PyErr {
+    let PhysicsError::Diverged { step, vertex, why } = e else {
+        return SimulationError::new_err(e.to_string());
+    };
+    let err = DivergenceError::new_err(e.to_string());
+    Python::attach(|py| {
+        let value = err.value(py);
+        match value
+            .setattr("step", *step)
+            .and_then(|()| value.setattr("vertex", *vertex))
+            .and_then(|()| value.setattr("why", why.as_str()))
         {
             Ok(()) => err,
             Err(e) => e,

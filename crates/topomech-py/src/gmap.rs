@@ -24,7 +24,7 @@ pub(crate) struct PyGMap {
 }
 
 impl PyGMap {
-    fn new(inner: GMap) -> Self {
+    pub(crate) fn new(inner: GMap) -> Self {
         PyGMap {
             inner,
             poisoned: false,
@@ -32,7 +32,7 @@ impl PyGMap {
     }
 
     /// The map, unless a panic left it in an unknown state.
-    fn map(&self) -> PyResult<&GMap> {
+    pub(crate) fn map(&self) -> PyResult<&GMap> {
         if self.poisoned {
             Err(InternalError::new_err(
                 "this map was left in an unknown state by an earlier internal error and cannot be used",

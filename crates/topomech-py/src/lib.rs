@@ -2,6 +2,8 @@
 //!
 //! - [`gmap`]: the `GMap` class (numpy arrays in and out, every index checked).
 //! - [`rules`]: the `RuleSet` class, rule files loaded, checked and applied to maps.
+//! - [`sim`]: the `Simulation` class, the physical models of a configuration stepped on a copy
+//!   of a map, and `models`, the catalogue of model kinds.
 //! - [`generators`]: `grid` and `box`, generated meshes in the flat layout of [`convert`].
 //! - [`errors`]: the exception hierarchy, and the guard that keeps Rust panics out of Python.
 //!
@@ -13,16 +15,20 @@ mod errors;
 mod generators;
 mod gmap;
 mod rules;
+mod sim;
 
 use pyo3::prelude::*;
 
-/// The topomech kernel: generalized maps and the meshes they are built from.
+/// The topomech kernel: generalized maps, the meshes they are built from, rules and
+/// simulations.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     m.add_class::<gmap::PyGMap>()?;
     m.add_class::<rules::PyRuleSet>()?;
+    m.add_class::<sim::PySimulation>()?;
+    m.add_function(wrap_pyfunction!(sim::models, m)?)?;
     m.add_function(wrap_pyfunction!(generators::grid, m)?)?;
     m.add_function(wrap_pyfunction!(generators::cuboid, m)?)?;
     m.add_function(wrap_pyfunction!(panic_for_tests, m)?)?;

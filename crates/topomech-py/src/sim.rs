@@ -1,0 +1,676 @@
+//! `topomech._core.Simulation`: a physical simulation on a copy of a map, stepped from Python.
+//!
+//! The configuration arrives as a dict (or keyword arguments) mirroring
+//! [`topomech_physics::Config`]; each key is checked here, by name, before the kernel sees it:
+//! an unknown key or a value of the wrong kind is a `TypeError`, a value of the right kind
+//! but out of range (a non-finite number, a vector of the wrong length, an unknown
+//! integrator) a `ValueError`. What only the kernel can judge (an unknown model, a predicate
+//! that selects nothing, a model that matches nothing on the mesh) is a `SimulationError`, and
+//! a diverging step a `DivergenceError` naming the step and the vertex.
+//!
+//! Per-vertex arrays are in vertex order: row k is the vertex orbit labelled k by
+//! `GMap.vertex_labels`, the order of `GMap.positions` and of the points of `GMap.to_flat`.
+
+use std::collections::HashMap;
+
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
+use topomech_gmap::{EmbeddingType, OrbitType, Value};
+use topomech_physics::{Config, Integrator, MaterialRegion, ModelSpec, Simulation, MODELS};
+
+use crate::convert::{rows3_arg, rows_to_array, type_name};
+use crate::errors::{guard, type_error, value_error, Error, InternalError, Result};
+use crate::gmap::PyGMap;
+
+/// The keys of a configuration, in the order of [`Config`]'s fields.
+const CONFIG_KEYS: &[&str] = &[
+    "models",
+    "density",
+    "young",
+    "poisson",
+    "damping",
+    "gravity",
+    "fixed",
+    "prescribed",
+    "regions",
+    "ground",
+    "integrator",
+    "dt",
+];
+
+/// The integrators' names, as [`Integrator::parse`] reads them.
+const INTEGRATORS: &[&str] = &[
+    "explicit_euler",
+    "symplectic_euler",
+    "implicit_euler",
+    "static",
+];
+
+fn integrator_name(i: Integrator) -> &'static str {
+    match i {
+        Integrator::ExplicitEuler => "explicit_euler",
+        Integrator::SymplecticEuler => "symplectic_euler",
+        Integrator::ImplicitEuler => "implicit_euler",
+        Integrator::Static => "static",
+    }
+}
+
+/// A finite real: a Python int or float (or a numpy scalar), not a bool.
+fn real_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<f64> {
+    if obj.is_instance_of::<PyBool>() || obj.is_instance_of::<PyString>() {
+        return Err(type_error(format!(
+            "{what} must be a number, got {}",
+            type_name(obj)
+        )));
+    }
+    let x: f64 = obj
+        .extract()
+        .map_err(|_| type_error(format!("{what} must be a number, got {}", type_name(obj))))?;
+    if x.is_finite() {
+        Ok(x)
+    } else {
+        Err(value_error(format!("{what} must be finite, got {x}")))
+    }
+}
+
+/// A str.
+fn str_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<String> {
+    obj.cast::<PyString>()
+        .map(ToString::to_string)
+        .map_err(|_| type_error(format!("{what} must be a str, got {}", type_name(obj))))
+}
+
+/// The items of a list or tuple.
+fn list_arg<'py>(obj: &Bound<'py, PyAny>, what: &str) -> Result<Vec<Bound<'py, PyAny>>> {
+    if let Ok(l) = obj.cast::<PyList>() {
+        return Ok(l.iter().collect());
+    }
+    if let Ok(t) = obj.cast::<PyTuple>() {
+        return Ok(t.iter().collect());
+    }
+    Err(type_error(format!(
+        "{what} must be a list, got {}",
+        type_name(obj)
+    )))
+}
+
+/// Three finite reals (a list, a tuple or a numpy array).
+fn vec3_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<[f64; 3]> {
+    if obj.is_instance_of::<PyString>() {
+        return Err(type_error(format!(
+            "{what} must be 3 numbers, got {}",
+            type_name(obj)
+        )));
+    }
+    let items: Vec<Bound<'_, PyAny>> = obj
+        .try_iter()
+        .map_err(|_| type_error(format!("{what} must be 3 numbers, got {}", type_name(obj))))?
+        .collect::<PyResult<_>>()?;
+    if items.len() != 3 {
+        return Err(value_error(format!(
+            "{what} must be 3 numbers, got {}",
+            items.len()
+        )));
+    }
+    let mut out = [0.0; 3];
+    for (k, x) in items.iter().enumerate() {
+        out[k] = real_arg(x, &format!("{what}[{k}]"))?;
+    }
+    Ok(out)
+}
+
+/// The entries of a dict with str keys.
+fn dict_items<'py>(
+    obj: &Bound<'py, PyAny>,
+    what: &str,
+) -> Result<Vec<(String, Bound<'py, PyAny>)>> {
+    let d = obj
+        .cast::<PyDict>()
+        .map_err(|_| type_error(format!("{what} must be a dict, got {}", type_name(obj))))?;
+    d.iter()
+        .map(|(k, v)| {
+            let k: String = k.extract().map_err(|_| {
+                type_error(format!(
+                    "{what} has a key that is not a str: {}",
+                    type_name(&k)
+                ))
+            })?;
+            Ok((k, v))
+        })
+        .collect()
+}
+
+/// A model: its kind alone (`"corotational"`), or a dict `{"kind": ..., param: value, ...}`.
+fn model_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<ModelSpec> {
+    let what = format!("models[{k}]");
+    if obj.is_instance_of::<PyString>() {
+        return Ok(ModelSpec {
+            kind: str_arg(obj, &what)?,
+            params: HashMap::new(),
+        });
+    }
+    if !obj.is_instance_of::<PyDict>() {
+        return Err(type_error(format!(
+            "{what} must be a model kind (str) or a dict with 'kind' and parameters, got {}",
+            type_name(obj)
+        )));
+    }
+    let mut kind = None;
+    let mut params = HashMap::new();
+    for (key, v) in dict_items(obj, &what)? {
+        if key == "kind" {
+            kind = Some(str_arg(&v, &format!("{what}['kind']"))?);
+        } else {
+            let x = real_arg(&v, &format!("{what}[{key:?}]"))?;
+            params.insert(key, x);
+        }
+    }
+    let kind = kind.ok_or_else(|| value_error(format!("{what} has no 'kind'")))?;
+    Ok(ModelSpec { kind, params })
+}
+
+/// A prescribed displacement: `(predicate, [dx, dy, dz])` or `{"where": ..., "displacement": ...}`.
+fn prescribed_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<(String, [f64; 3])> {
+    let what = format!("prescribed[{k}]");
+    if obj.is_instance_of::<PyDict>() {
+        let mut pred = None;
+        let mut disp = None;
+        for (key, v) in dict_items(obj, &what)? {
+            match key.as_str() {
+                "where" => pred = Some(str_arg(&v, &format!("{what}['where']"))?),
+                "displacement" => disp = Some(vec3_arg(&v, &format!("{what}['displacement']"))?),
+                _ => {
+                    return Err(type_error(format!(
+                        "{what} has an unknown key {key:?} (known: where, displacement)"
+                    )))
+                }
+            }
+        }
+        return match (pred, disp) {
+            (Some(p), Some(d)) => Ok((p, d)),
+            _ => Err(value_error(format!(
+                "{what} needs both 'where' and 'displacement'"
+            ))),
+        };
+    }
+    let items = list_arg(obj, &what).map_err(|_| {
+        type_error(format!(
+            "{what} must be (predicate, [dx, dy, dz]) or a dict with 'where' and 'displacement', got {}",
+            type_name(obj)
+        ))
+    })?;
+    if items.len() != 2 {
+        return Err(value_error(format!(
+            "{what} must be (predicate, [dx, dy, dz]), got {} items",
+            items.len()
+        )));
+    }
+    Ok((
+        str_arg(&items[0], &format!("{what}[0]"))?,
+        vec3_arg(&items[1], &format!("{what}[1]"))?,
+    ))
+}
+
+/// A material region: `{"where": ..., "density": ..., "young": ..., "poisson": ...}`.
+fn region_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<MaterialRegion> {
+    let what = format!("regions[{k}]");
+    let mut r = MaterialRegion::default();
+    let mut pred = None;
+    for (key, v) in dict_items(obj, &what)? {
+        let w = format!("{what}[{key:?}]");
+        match key.as_str() {
+            "where" => pred = Some(str_arg(&v, &w)?),
+            "density" => r.density = Some(real_arg(&v, &w)?),
+            "young" => r.young = Some(real_arg(&v, &w)?),
+            "poisson" => r.poisson = Some(real_arg(&v, &w)?),
+            _ => {
+                return Err(type_error(format!(
+                    "{what} has an unknown key {key:?} (known: where, density, young, poisson)"
+                )))
+            }
+        }
+    }
+    r.predicate = pred.ok_or_else(|| value_error(format!("{what} has no 'where'")))?;
+    Ok(r)
+}
+
+/// A [`Config`] from `{key: value}` entries (unset keys keep [`Config::default`]).
+fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
+    let mut cfg = Config::default();
+    for (key, v) in entries {
+        let k = key.as_str();
+        match k {
+            "models" => {
+                cfg.models = list_arg(v, k)?
+                    .iter()
+                    .enumerate()
+                    .map(|(i, m)| model_arg(m, i))
+                    .collect::<Result<_>>()?;
+            }
+            "density" => cfg.density = real_arg(v, k)?,
+            "young" => cfg.young = real_arg(v, k)?,
+            "poisson" => cfg.poisson = real_arg(v, k)?,
+            "damping" => cfg.damping = real_arg(v, k)?,
+            "dt" => cfg.dt = real_arg(v, k)?,
+            "gravity" => cfg.gravity = vec3_arg(v, k)?,
+            "ground" => {
+                cfg.ground = if v.is_none() {
+                    None
+                } else {
+                    Some(real_arg(v, k)?)
+                }
+            }
+            "fixed" => {
+                cfg.fixed = if v.is_instance_of::<PyString>() {
+                    vec![str_arg(v, k)?]
+                } else {
+                    list_arg(v, k)?
+                        .iter()
+                        .enumerate()
+                        .map(|(i, p)| str_arg(p, &format!("fixed[{i}]")))
+                        .collect::<Result<_>>()?
+                };
+            }
+            "prescribed" => {
+                cfg.prescribed = list_arg(v, k)?
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| prescribed_arg(p, i))
+                    .collect::<Result<_>>()?;
+            }
+            "regions" => {
+                cfg.regions = list_arg(v, k)?
+                    .iter()
+                    .enumerate()
+                    .map(|(i, r)| region_arg(r, i))
+                    .collect::<Result<_>>()?;
+            }
+            "integrator" => {
+                let name = str_arg(v, k)?;
+                cfg.integrator = Integrator::parse(&name).ok_or_else(|| {
+                    value_error(format!(
+                        "unknown integrator {name:?}: expected one of {}",
+                        INTEGRATORS.join(", ")
+                    ))
+                })?;
+            }
+            _ => {
+                return Err(type_error(format!(
+                    "unknown configuration key {k:?} (known: {})",
+                    CONFIG_KEYS.join(", ")
+                )))
+            }
+        }
+    }
+    Ok(cfg)
+}
+
+/// The map behind `obj`: a `topomech._core.GMap`, or anything whose `core` attribute is one
+/// (the `topomech.GMap` wrapper), copied.
+fn gmap_copy_arg(obj: &Bound<'_, PyAny>) -> PyResult<topomech_gmap::GMap> {
+    let core = match obj.cast::<PyGMap>() {
+        Ok(g) => g.clone(),
+        Err(_) => obj
+            .getattr("core")
+            .ok()
+            .and_then(|c| c.cast_into::<PyGMap>().ok())
+            .ok_or_else(|| {
+                PyErr::from(type_error(format!(
+                    "gmap must be a topomech.GMap or a topomech._core.GMap, got {}",
+                    type_name(obj)
+                )))
+            })?,
+    };
+    let g = core.try_borrow()?;
+    Ok(g.map()?.clone())
+}
+
+/// A physical simulation of a map: the models of the configuration, summed, stepped by its
+/// integrator. The simulation owns a copy of the map; read it back with `gmap()`.
+///
+/// `config` (or keyword arguments, not both for one key): `models` (a list of kinds or of
+/// dicts `{"kind": ..., param: value}`), `density`, `young`, `poisson`, `damping`, `dt`
+/// (numbers), `gravity` (3 numbers), `fixed` (predicates on the rest position `x`, `y`, `z`),
+/// `prescribed` (`(predicate, [dx, dy, dz])` pairs), `regions` (dicts with `where` and any of
+/// `density`, `young`, `poisson`), `ground` (a height, or None), `integrator`
+/// (`explicit_euler`, `symplectic_euler`, `implicit_euler` or `static`).
+#[pyclass(name = "Simulation", module = "topomech._core")]
+pub(crate) struct PySimulation {
+    inner: Simulation,
+    /// Set when a panic interrupted a step: the state is then unknown, and every later call
+    /// refuses with `InternalError`.
+    poisoned: bool,
+}
+
+impl PySimulation {
+    fn sim(&self) -> PyResult<&Simulation> {
+        if self.poisoned {
+            Err(InternalError::new_err(
+                "this simulation was left in an unknown state by an earlier internal error and cannot be used",
+            ))
+        } else {
+            Ok(&self.inner)
+        }
+    }
+
+    /// Runs `f` on the simulation without the GIL; a panic poisons the simulation.
+    fn run<T: Send>(
+        &mut self,
+        py: Python<'_>,
+        f: impl FnOnce(&mut Simulation) -> Result<T> + Send,
+    ) -> PyResult<T> {
+        self.sim()?;
+        let inner = &mut self.inner;
+        let r = py.detach(|| guard(|| f(inner)));
+        if r.as_ref()
+            .is_err_and(|e| e.is_instance_of::<InternalError>(py))
+        {
+            self.poisoned = true;
+        }
+        r
+    }
+
+    /// Reads the simulation through `f`, a panic becoming `InternalError`.
+    fn read<T>(&self, f: impl FnOnce(&Simulation) -> Result<T>) -> PyResult<T> {
+        let sim = self.sim()?;
+        guard(|| f(sim))
+    }
+
+    /// Sets a vec3 vertex embedding from a float64 `(V, 3)` array of finite values.
+    fn set_vec3(
+        &mut self,
+        py: Python<'_>,
+        name: &'static str,
+        what: &str,
+        values: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let n = self.sim()?.vertex_darts().len();
+        let rows = guard(|| {
+            let rows = rows3_arg(values, what, "V")?;
+            if rows.len() != n {
+                return Err(value_error(format!(
+                    "{what} must have shape (V, 3) = ({n}, 3), got ({}, 3)",
+                    rows.len()
+                )));
+            }
+            if let Some(k) = rows.iter().position(|r| r.iter().any(|x| !x.is_finite())) {
+                return Err(value_error(format!(
+                    "{what} must be finite: row {k} is {:?}",
+                    rows[k]
+                )));
+            }
+            Ok(rows)
+        })?;
+        self.run(py, |sim| Ok(sim.set_vertex_vec3(name, &rows)?))
+    }
+}
+
+#[pymethods]
+impl PySimulation {
+    #[new]
+    #[pyo3(signature = (gmap, config = None, **kwargs))]
+    fn new(
+        py: Python<'_>,
+        gmap: &Bound<'_, PyAny>,
+        config: Option<&Bound<'_, PyAny>>,
+        kwargs: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let g = gmap_copy_arg(gmap)?;
+        let cfg = guard(|| {
+            let mut entries = match config {
+                None => Vec::new(),
+                Some(c) if c.is_none() => Vec::new(),
+                Some(c) => dict_items(c, "config")?,
+            };
+            if let Some(kw) = kwargs {
+                for (k, v) in dict_items(kw.as_any(), "keyword arguments")? {
+                    if entries.iter().any(|(e, _)| *e == k) {
+                        return Err(type_error(format!(
+                            "{k:?} is given both in config and as a keyword argument"
+                        )));
+                    }
+                    entries.push((k, v));
+                }
+            }
+            config_arg(&entries)
+        })?;
+        let inner = py.detach(move || guard(|| Ok(Simulation::new(g, cfg)?)))?;
+        Ok(PySimulation {
+            inner,
+            poisoned: false,
+        })
+    }
+
+    /// Runs `n` time steps. On divergence raises `DivergenceError` (with `step`, `vertex` and
+    /// `why`); the state is then the one before the failed step. Ctrl-C stops between steps.
+    #[pyo3(signature = (n = 1))]
+    fn step(&mut self, py: Python<'_>, n: i64) -> PyResult<()> {
+        let n = u64::try_from(n)
+            .map_err(|_| PyErr::from(value_error(format!("n must be >= 0, got {n}"))))?;
+        for _ in 0..n {
+            self.run(py, |sim| Ok(sim.step()?))?;
+            py.check_signals()?;
+        }
+        Ok(())
+    }
+
+    /// Current positions, float64 (V, 3).
+    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let rows = self.read(|s| Ok(s.vertex_vec3("position")?))?;
+        guard(|| rows_to_array(py, &rows))
+    }
+
+    /// Current velocities, float64 (V, 3).
+    fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let rows = self.read(|s| Ok(s.vertex_vec3("velocity")?))?;
+        guard(|| rows_to_array(py, &rows))
+    }
+
+    /// Rest positions (the positions when the simulation was built), float64 (V, 3).
+    fn rest_positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let rows = self.read(|s| Ok(s.vertex_vec3("rest")?))?;
+        guard(|| rows_to_array(py, &rows))
+    }
+
+    /// The models' forces on each vertex at the current state (without gravity and viscous
+    /// damping), float64 (V, 3). Computes them now.
+    fn forces<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let rows = self.run(py, |s| {
+            s.forces()?;
+            Ok(s.vertex_vec3("force")?)
+        })?;
+        guard(|| rows_to_array(py, &rows))
+    }
+
+    /// Lumped vertex masses, float64 (V,).
+    fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self
+            .read(|s| Ok(s.vertex_scalar("mass")?))?
+            .into_pyarray(py))
+    }
+
+    /// Whether each vertex is fixed (held in place or at a prescribed displacement), bool (V,).
+    fn fixed<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        Ok(self.read(|s| Ok(s.vertex_bool("fixed")?))?.into_pyarray(py))
+    }
+
+    /// Sets the positions, float64 (V, 3) of finite values (fixed vertices included: they stay
+    /// where they are put).
+    fn set_positions(&mut self, py: Python<'_>, positions: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.set_vec3(py, "position", "positions", positions)
+    }
+
+    /// Sets the velocities, float64 (V, 3) of finite values.
+    fn set_velocities(&mut self, py: Python<'_>, velocities: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.set_vec3(py, "velocity", "velocities", velocities)
+    }
+
+    /// Sum of the vertex masses.
+    fn total_mass(&self) -> PyResult<f64> {
+        self.read(|s| Ok(s.total_mass()?))
+    }
+
+    /// Kinetic energy, sum of m |v|^2 / 2.
+    fn kinetic_energy(&self) -> PyResult<f64> {
+        self.read(|s| Ok(s.kinetic_energy()?))
+    }
+
+    /// Linear momentum, sum of m v, float64 (3,).
+    fn momentum<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.read(|s| Ok(s.momentum()?))?.to_vec().into_pyarray(py))
+    }
+
+    /// The values of a vertex embedding, one row per vertex: shape (V,) for `f64` (float64),
+    /// `i64` (int64) and `bool`; (V, 2) and (V, 3) for `vec2` and `vec3`; (V, R, C) for a
+    /// matrix. An embedding on another orbit raises `EmbeddingError`.
+    fn embedding<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        enum Column {
+            Real(Vec<usize>, Vec<f64>),
+            Int(Vec<i64>),
+            Bool(Vec<bool>),
+        }
+        let col = self.read(|s| {
+            let g = s.gmap();
+            let id = g.require(name)?;
+            let e = g.embedding(id);
+            let vertex = OrbitType::vertex(g.dimension());
+            if e.orbit() != vertex {
+                return Err(Error::EmbeddingInput(format!(
+                    "embedding '{name}' is on the orbit {}, not on the vertex orbit {vertex}: \
+                     only vertex embeddings can be read per vertex (read the map with gmap())",
+                    e.orbit()
+                )));
+            }
+            let darts = s.vertex_darts();
+            let n = darts.len();
+            let ty = e.ty();
+            Ok(match ty {
+                EmbeddingType::I64 => Column::Int(
+                    darts
+                        .iter()
+                        .map(|&d| match g.value(id, d)? {
+                            Value::Int(x) => Ok(x),
+                            v => Err(Error::EmbeddingInput(format!("'{name}': {v:?}"))),
+                        })
+                        .collect::<Result<_>>()?,
+                ),
+                EmbeddingType::Bool => Column::Bool(
+                    darts
+                        .iter()
+                        .map(|&d| match g.value(id, d)? {
+                            Value::Bool(x) => Ok(x),
+                            v => Err(Error::EmbeddingInput(format!("'{name}': {v:?}"))),
+                        })
+                        .collect::<Result<_>>()?,
+                ),
+                _ => {
+                    let shape = match ty {
+                        EmbeddingType::F64 => vec![n],
+                        EmbeddingType::Vec2 => vec![n, 2],
+                        EmbeddingType::Vec3 => vec![n, 3],
+                        EmbeddingType::Mat { rows, cols } => {
+                            vec![n, usize::from(rows), usize::from(cols)]
+                        }
+                        EmbeddingType::I64 | EmbeddingType::Bool => unreachable!("matched above"),
+                    };
+                    let mut flat = Vec::with_capacity(n * ty.width());
+                    for &d in &darts {
+                        match g.value(id, d)? {
+                            Value::Real(x) => flat.extend_from_slice(&x),
+                            v => return Err(Error::EmbeddingInput(format!("'{name}': {v:?}"))),
+                        }
+                    }
+                    Column::Real(shape, flat)
+                }
+            })
+        })?;
+        Ok(match col {
+            Column::Int(v) => v.into_pyarray(py).into_any(),
+            Column::Bool(v) => v.into_pyarray(py).into_any(),
+            Column::Real(shape, flat) => {
+                let a = guard(|| {
+                    ArrayD::from_shape_vec(IxDyn(&shape), flat)
+                        .map_err(|e| value_error(format!("cannot shape '{name}': {e}")))
+                })?;
+                let arr: Bound<'py, PyArrayDyn<f64>> = a.into_pyarray(py);
+                arr.into_any()
+            }
+        })
+    }
+
+    /// A copy of the simulated map, with every embedding (positions as they are now).
+    fn gmap(&self) -> PyResult<PyGMap> {
+        Ok(PyGMap::new(self.read(|s| Ok(s.gmap().clone()))?))
+    }
+
+    /// Simulated time.
+    #[getter]
+    fn time(&self) -> PyResult<f64> {
+        Ok(self.sim()?.time())
+    }
+
+    /// Steps done.
+    #[getter]
+    fn steps(&self) -> PyResult<u64> {
+        Ok(self.sim()?.steps())
+    }
+
+    /// The number of vertices (V, the rows of the per-vertex arrays).
+    #[getter]
+    fn n_vertices(&self) -> PyResult<usize> {
+        Ok(self.sim()?.vertex_darts().len())
+    }
+
+    /// The dimension of the map: 2 (surface) or 3 (volume).
+    #[getter]
+    fn dimension(&self) -> PyResult<usize> {
+        Ok(self.sim()?.gmap().dimension())
+    }
+
+    /// The time step.
+    #[getter]
+    fn dt(&self) -> PyResult<f64> {
+        Ok(self.sim()?.config().dt)
+    }
+
+    /// The integrator's name.
+    #[getter]
+    fn integrator(&self) -> PyResult<&'static str> {
+        Ok(integrator_name(self.sim()?.config().integrator))
+    }
+
+    fn __repr__(&self) -> String {
+        if self.poisoned {
+            return "<topomech._core.Simulation (unusable after an internal error)>".to_string();
+        }
+        format!(
+            "<topomech._core.Simulation dimension={} vertices={} steps={} time={}>",
+            self.inner.gmap().dimension(),
+            self.inner.vertex_darts().len(),
+            self.inner.steps(),
+            self.inner.time()
+        )
+    }
+}
+
+/// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "needs"}]`.
+#[pyfunction]
+pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+    MODELS
+        .iter()
+        .map(|m| {
+            let d = PyDict::new(py);
+            d.set_item("kind", m.kind)?;
+            d.set_item("dims", m.dims.to_vec())?;
+            let p = PyDict::new(py);
+            for (k, v) in m.params {
+                p.set_item(*k, *v)?;
+            }
+            d.set_item("params", p)?;
+            d.set_item("needs", m.needs)?;
+            Ok(d)
+        })
+        .collect()
+}
