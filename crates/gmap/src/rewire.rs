@@ -62,6 +62,9 @@ impl GMap {
         fresh: &[Dart],
         remove: &[Dart],
     ) -> Result<(), RewireError> {
+        if changes.is_empty() && fresh.is_empty() && remove.is_empty() {
+            return Ok(()); // nothing changes: the version stays, caches stay valid
+        }
         let mut new: HashMap<(usize, u32), u32> = HashMap::with_capacity(changes.len());
         for &(i, a, b) in changes {
             self.check_dim(i)?;

@@ -201,6 +201,8 @@ fn model_source(file: &str, dim: usize) -> Option<&'static str> {
         ("shear", 3) => include_str!("../models/shear3d.tmr"),
         ("bending", 2) => include_str!("../models/bending2d.tmr"),
         ("fem", 2) => include_str!("../models/fem2d.tmr"),
+        ("topology", 2) => include_str!("../models/topology2d.tmr"),
+        ("topology", 3) => include_str!("../models/topology3d.tmr"),
         _ => return None,
     })
 }
@@ -296,6 +298,10 @@ pub struct Config {
     /// A ground plane `y = ground` (normal +y): vertices below it are put back on it and lose
     /// their downward velocity.
     pub ground: Option<f64>,
+    /// Topology changes at given times.
+    pub events: Vec<TimedEvent>,
+    /// Fracture (or tearing), tested after every step.
+    pub fracture: Option<Fracture>,
     /// The integrator.
     pub integrator: Integrator,
     /// Time step.
@@ -315,10 +321,68 @@ impl Default for Config {
             prescribed: Vec::new(),
             regions: Vec::new(),
             ground: None,
+            events: Vec::new(),
+            fracture: None,
             integrator: Integrator::SymplecticEuler,
             dt: 1e-3,
         }
     }
+}
+
+/// Where a cut goes: along element boundaries, the faces (3D) or edges (2D) between two elements
+/// that the geometry separates.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cut {
+    /// The plane `normal . x = offset`: elements whose centroids (at the time of the cut) lie
+    /// on opposite sides are separated.
+    Plane {
+        /// Normal of the plane.
+        normal: [f64; 3],
+        /// Its offset.
+        offset: f64,
+    },
+    /// A predicate on the centroid `x`, `y`, `z` of the shared face (3D) or edge (2D).
+    Where(String),
+}
+
+/// A topology change at a time.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimedEvent {
+    /// When (s).
+    pub time: f64,
+    /// The cut.
+    pub cut: Cut,
+}
+
+/// What opens a face (3D) or an edge (2D) during the run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Criterion {
+    /// The mean of the largest principal stresses of the two elements (tetrahedra).
+    Stress,
+    /// The strain of springs: the mean over the face's edges (3D), the edge's (2D; tearing).
+    Strain,
+}
+
+/// Fracture settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fracture {
+    /// The criterion.
+    pub criterion: Criterion,
+    /// Its threshold (a stress in Pa, or a strain).
+    pub threshold: f64,
+}
+
+/// A topology change that happened.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TopologyChange {
+    /// The step after which it happened.
+    pub step: u64,
+    /// The time.
+    pub time: f64,
+    /// `cut` or `fracture`.
+    pub kind: &'static str,
+    /// Faces (3D) or edges (2D) unsewn.
+    pub unsewn: usize,
 }
 
 /// A region of elements with their own material (unset values keep the defaults).
@@ -349,6 +413,10 @@ pub struct Simulation {
     labels_version: u64,
     /// The diagonal of the rest bounding box: no vertex moves that far in one step.
     size: f64,
+    /// Which events have happened.
+    events_done: Vec<bool>,
+    /// The topology changes so far.
+    changes: Vec<TopologyChange>,
 }
 
 fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
@@ -405,6 +473,19 @@ fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], cfg: &Config) -> S
             s,
             "\nrule prescribe_{k}(d: vec3) {{\n  left {{ v : {v} hook }}\n  where {{ let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)  {p} }}\n  compute {{ v.fixed = true  v.position = v.rest + d }}\n}}\n"
         );
+    }
+    let (side, arc, centre) = if dim == 3 {
+        ("<0,1>", 3, "mean<0,1>")
+    } else {
+        ("<0>", 2, "mean<0>")
+    };
+    for (k, e) in cfg.events.iter().enumerate() {
+        if let Cut::Where(p) = &e.cut {
+            let _ = write!(
+                s,
+                "\nrule cut_where_{k} {{\n  left  {{ a : {side} hook   b : {side}   a -{arc}- b }}\n  right {{ a : {side}        b : {side} }}\n  where {{ let c = {centre}(a.position)  let x = x(c)  let y = y(c)  let z = z(c)  {p} }}\n}}\n"
+            );
+        }
     }
     let e = if dim == 3 { "<0,1,2>" } else { "<0,1>" };
     for (k, r) in cfg.regions.iter().enumerate() {
@@ -487,10 +568,41 @@ impl Simulation {
                 )));
             }
         }
-        let mut sources = vec![(
-            format!("common{dim}d.tmr"),
-            model_source("common", dim).expect("shipped").to_string(),
-        )];
+        let mut sources = vec![
+            (
+                format!("common{dim}d.tmr"),
+                model_source("common", dim).expect("shipped").to_string(),
+            ),
+            (
+                format!("topology{dim}d.tmr"),
+                model_source("topology", dim).expect("shipped").to_string(),
+            ),
+        ];
+        if let Some(f) = cfg.fracture {
+            if !(f.threshold.is_finite()) {
+                return Err(PhysicsError::Config(format!(
+                    "fracture threshold must be finite, got {}",
+                    f.threshold
+                )));
+            }
+            if f.criterion == Criterion::Stress {
+                if dim != 3 {
+                    return Err(PhysicsError::Config("the stress criterion of fracture needs tetrahedra (3D); surfaces tear by strain".into()));
+                }
+                sources.push((
+                    "fem3d.tmr".into(),
+                    model_source("fem", 3).expect("shipped").to_string(),
+                ));
+            }
+        }
+        for e in &cfg.events {
+            if !(e.time >= 0.0 && e.time.is_finite()) {
+                return Err(PhysicsError::Config(format!(
+                    "event time must be a finite time >= 0, got {}",
+                    e.time
+                )));
+            }
+        }
         for (def, _) in &defs {
             let name = format!("{}{dim}d.tmr", def.file);
             if !sources.iter().any(|s| s.0 == name) {
@@ -637,6 +749,7 @@ impl Simulation {
             }
             norm3([hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]).max(f64::MIN_POSITIVE)
         };
+        let cfg_events = cfg.events.len();
         let sim = Simulation {
             g,
             rules,
@@ -648,6 +761,8 @@ impl Simulation {
             labels,
             labels_version,
             size,
+            events_done: vec![false; cfg_events],
+            changes: Vec::new(),
         };
         // every free vertex needs a mass
         let masses = sim.vertex_scalar("mass")?;
@@ -725,7 +840,115 @@ impl Simulation {
         }
         self.steps += 1;
         self.time += self.cfg.dt;
+        self.topology_events()
+    }
+
+    /// Applies the events whose time has come and the fracture criterion.
+    fn topology_events(&mut self) -> Result<(), PhysicsError> {
+        for k in 0..self.cfg.events.len() {
+            if !self.events_done[k] && self.cfg.events[k].time <= self.time + 1e-9 * self.cfg.dt {
+                self.events_done[k] = true;
+                let cut = self.cfg.events[k].cut.clone();
+                let n = self.apply_cut(&cut, Some(k))?;
+                if n == 0 {
+                    return Err(PhysicsError::Config(format!(
+                        "the cut {cut:?} at t = {} separates nothing: it misses the object",
+                        self.cfg.events[k].time
+                    )));
+                }
+            }
+        }
+        if let Some(f) = self.cfg.fracture {
+            let none = Params::new();
+            let measure = match f.criterion {
+                Criterion::Stress => "element_stress",
+                Criterion::Strain => "spring_strains",
+            };
+            self.rules.apply_everywhere(&mut self.g, measure, &none)?;
+            let p: Params = [("threshold".to_string(), Val::F(f.threshold))].into();
+            let rule = if f.criterion == Criterion::Stress {
+                "fracture_stress"
+            } else {
+                "fracture_strain"
+            };
+            let n = self.rules.apply_everywhere(&mut self.g, rule, &p)?.matches;
+            if n > 0 {
+                self.changes.push(TopologyChange {
+                    step: self.steps,
+                    time: self.time,
+                    kind: "fracture",
+                    unsewn: n,
+                });
+                self.after_topology_change();
+            }
+        }
         Ok(())
+    }
+
+    /// Cuts now; returns the number of faces (3D) or edges (2D) unsewn.
+    pub fn cut(&mut self, cut: &Cut) -> Result<usize, PhysicsError> {
+        if let Cut::Where(_) = cut {
+            return Err(PhysicsError::Config(
+                "a predicate cut must be declared in the configuration's events".into(),
+            ));
+        }
+        self.apply_cut(cut, None)
+    }
+
+    fn apply_cut(&mut self, cut: &Cut, event: Option<usize>) -> Result<usize, PhysicsError> {
+        let n = match cut {
+            Cut::Plane { normal, offset } => {
+                let p: Params = [
+                    ("normal".to_string(), Val::V3(*normal)),
+                    ("offset".to_string(), Val::F(*offset)),
+                ]
+                .into();
+                self.rules
+                    .apply_everywhere(&mut self.g, "cut_plane", &p)?
+                    .matches
+            }
+            Cut::Where(_) => {
+                let k = event.expect("predicate cuts are events");
+                self.rules
+                    .apply_everywhere(&mut self.g, &format!("cut_where_{k}"), &Params::new())?
+                    .matches
+            }
+        };
+        if n > 0 {
+            self.changes.push(TopologyChange {
+                step: self.steps,
+                time: self.time,
+                kind: "cut",
+                unsewn: n,
+            });
+            self.after_topology_change();
+        }
+        Ok(n)
+    }
+
+    /// After a change: vertex numbering anew (derived embeddings are refreshed by the next
+    /// rule application).
+    fn after_topology_change(&mut self) {
+        self.g.refresh_derived();
+        self.refresh_labels();
+    }
+
+    /// Refuses events that a run ending at `end_time` would never reach.
+    pub fn check_events(&self, end_time: f64) -> Result<(), PhysicsError> {
+        for e in &self.cfg.events {
+            if e.time > end_time + 1e-9 * self.cfg.dt {
+                return Err(PhysicsError::Config(format!(
+                    "the event at t = {} comes after the end of the run (t = {end_time}): it would never happen",
+                    e.time
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The topology changes so far.
+    pub fn topology_changes(&self) -> &[TopologyChange] {
+        &self.changes
     }
 
     fn explicit(&mut self, rule: &str) -> Result<(), PhysicsError> {
@@ -824,7 +1047,8 @@ impl Simulation {
     }
 
     /// Newton iterations on f(x) + m g = 0 with conjugate gradients on -df/dx; the velocity
-    /// is set to zero. Stops when the residual is below 1e-10 of the load or after 30 solves.
+    /// is set to zero. Stops when the residual is below 1e-10 of the load (gravity, or the
+    /// first residual when prescribed displacements drive it) or after 30 solves.
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
         let v0 = vec![[0.0; 3]; self.vertex_darts().len()];
         self.set_vertex_vec3("velocity", &v0)?;
@@ -832,11 +1056,14 @@ impl Simulation {
             let m = self.vertex_scalar("mass")?;
             m.iter().sum::<f64>() * norm3(self.cfg.gravity)
         };
+        let mut scale = load;
         for _ in 0..30 {
             let (mut r, _, fixed) = self.total_force()?;
             project(&mut r, &fixed);
             let res = r.iter().map(|x| norm3(*x).powi(2)).sum::<f64>().sqrt();
-            if res <= 1e-10 * load.max(f64::MIN_POSITIVE) {
+            // the load scale: gravity, or the first residual (prescribed displacements)
+            scale = scale.max(res);
+            if res <= 1e-10 * scale.max(f64::MIN_POSITIVE) {
                 return Ok(());
             }
             let zero = v0.clone();

@@ -712,7 +712,7 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
         return Err(c);
     }
     // 4. rewrite the topology, then write
-    if rule.changes_topology {
+    if rule.changes_topology && !ms.is_empty() {
         if let Err(source) = g.rewire(&changes, &fresh, &remove) {
             undo_fresh(g);
             return Err(ApplyError::Rewire {

@@ -163,7 +163,7 @@ fn model_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<ModelSpec> {
         if key == "kind" {
             kind = Some(str_arg(&v, &format!("{what}['kind']"))?);
         } else {
-            let x = real_arg(&v, &format!("{what}[{key:?}]"))?;
+            let x = real_arg(&v, &format!("{what}['{key}']"))?;
             params.insert(key, x);
         }
     }
@@ -183,7 +183,7 @@ fn prescribed_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<(String, [f64; 3])
                 "displacement" => disp = Some(vec3_arg(&v, &format!("{what}['displacement']"))?),
                 _ => {
                     return Err(type_error(format!(
-                        "{what} has an unknown key {key:?} (known: where, displacement)"
+                        "{what} has an unknown key '{key}' (known: where, displacement)"
                     )))
                 }
             }
@@ -219,7 +219,7 @@ fn region_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<MaterialRegion> {
     let mut r = MaterialRegion::default();
     let mut pred = None;
     for (key, v) in dict_items(obj, &what)? {
-        let w = format!("{what}[{key:?}]");
+        let w = format!("{what}['{key}']");
         match key.as_str() {
             "where" => pred = Some(str_arg(&v, &w)?),
             "density" => r.density = Some(real_arg(&v, &w)?),
@@ -227,7 +227,7 @@ fn region_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<MaterialRegion> {
             "poisson" => r.poisson = Some(real_arg(&v, &w)?),
             _ => {
                 return Err(type_error(format!(
-                    "{what} has an unknown key {key:?} (known: where, density, young, poisson)"
+                    "{what} has an unknown key '{key}' (known: where, density, young, poisson)"
                 )))
             }
         }
@@ -291,14 +291,14 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
                 let name = str_arg(v, k)?;
                 cfg.integrator = Integrator::parse(&name).ok_or_else(|| {
                     value_error(format!(
-                        "unknown integrator {name:?}: expected one of {}",
+                        "unknown integrator '{name}': expected one of {}",
                         INTEGRATORS.join(", ")
                     ))
                 })?;
             }
             _ => {
                 return Err(type_error(format!(
-                    "unknown configuration key {k:?} (known: {})",
+                    "unknown configuration key '{k}' (known: {})",
                     CONFIG_KEYS.join(", ")
                 )))
             }
@@ -428,7 +428,7 @@ impl PySimulation {
                 for (k, v) in dict_items(kw.as_any(), "keyword arguments")? {
                     if entries.iter().any(|(e, _)| *e == k) {
                         return Err(type_error(format!(
-                            "{k:?} is given both in config and as a keyword argument"
+                            "'{k}' is given both in config and as a keyword argument"
                         )));
                     }
                     entries.push((k, v));

@@ -1,0 +1,434 @@
+//! Topology changes during a run: cuts and fracture as rules. After every change: the map is
+//! valid, the total mass and the linear momentum are unchanged, duplicated vertices sit where
+//! the original was, every cumulated embedding equals the sum of its elementary ones, and the
+//! run goes on without NaN. A cut mesh behaves like a mesh built cut; a notched bar breaks at
+//! its notch and nothing breaks below the threshold.
+
+// Numeric test code: index loops mirror the math.
+#![allow(
+    clippy::needless_range_loop,
+    clippy::doc_markdown,
+    clippy::suboptimal_flops
+)]
+
+use std::collections::HashMap;
+
+use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
+use topomech_gmap::mesh::{build, BuildOptions, Mesh};
+use topomech_gmap::{GMap, OrbitType, Value};
+use topomech_physics::{
+    Config, Criterion, Cut, Fracture, Integrator, ModelSpec, Simulation, TimedEvent,
+};
+
+fn model(kind: &str, params: &[(&str, f64)]) -> ModelSpec {
+    ModelSpec {
+        kind: kind.into(),
+        params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
+    }
+}
+
+fn sim(mesh: &Mesh, models: Vec<ModelSpec>, f: impl FnOnce(&mut Config)) -> Simulation {
+    let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
+    let mut cfg = Config {
+        models,
+        ..Config::default()
+    };
+    f(&mut cfg);
+    Simulation::new(g, cfg).unwrap()
+}
+
+fn real(g: &GMap, name: &str, d: topomech_gmap::Dart) -> f64 {
+    match g.value(g.require(name).unwrap(), d).unwrap() {
+        Value::Real(x) => x[0],
+        v => panic!("{v:?}"),
+    }
+}
+
+/// Every cumulated spring (edge) equals the sum of its elementary springs (half-edges),
+/// checked by walking the map here.
+fn check_cumulated(g: &GMap) {
+    let dim = g.dimension();
+    let k = g.require("spring_k").unwrap();
+    for d in g.orbit_representatives(OrbitType::edge(dim)) {
+        let mut slots = Vec::new();
+        let mut sum = 0.0;
+        for x in g.orbit(d, OrbitType::edge(dim)) {
+            let s = g.embedding(k).slot(x);
+            if !slots.contains(&s) {
+                slots.push(s);
+                sum += g.real(k, x)[0];
+            }
+        }
+        let cum = real(g, "spring_k_edge", d);
+        assert!(
+            (cum - sum).abs() <= 1e-12 * sum.abs(),
+            "edge at {d}: cumulated {cum} vs {sum}"
+        );
+    }
+}
+
+fn state(s: &Simulation) -> (f64, [f64; 3], Vec<[f64; 3]>) {
+    (
+        s.total_mass().unwrap(),
+        s.momentum().unwrap(),
+        s.vertex_vec3("position").unwrap(),
+    )
+}
+
+fn check_change(before: &(f64, [f64; 3], Vec<[f64; 3]>), s: &Simulation) {
+    let (m0, p0, x0) = before;
+    let (m1, p1, x1) = state(s);
+    assert!(s.gmap().is_valid());
+    assert!((m1 - m0).abs() <= 1e-12 * m0, "mass {m0} -> {m1}");
+    let scale = m0 * 1.0;
+    for a in 0..3 {
+        assert!(
+            (p1[a] - p0[a]).abs() <= 1e-12 * scale.max(1.0),
+            "momentum {p0:?} -> {p1:?}"
+        );
+    }
+    assert!(x1.len() > x0.len(), "vertices were duplicated");
+    // every vertex, old or new, sits exactly where a vertex was at the instant of the cut
+    let old: std::collections::HashSet<[u64; 3]> = x0.iter().map(|p| p.map(f64::to_bits)).collect();
+    assert!(x1.iter().all(|p| old.contains(&p.map(f64::to_bits))));
+    check_cumulated(s.gmap());
+}
+
+#[test]
+fn a_cut_keeps_mass_momentum_positions_and_cumulated_springs() {
+    for (mesh, normal, three) in [
+        (
+            cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra),
+            [1.0, 0.0, 0.0],
+            true,
+        ),
+        (
+            cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Hexa),
+            [1.0, 0.0, 0.0],
+            true,
+        ),
+        (
+            grid([4, 3], [2.0, 1.5], GridElement::Mixed),
+            [1.0, 0.0, 0.0],
+            false,
+        ),
+    ] {
+        let models = if three {
+            vec![
+                model("stretch_cumulated", &[("stiffness", 1e4)]),
+                model("corotational", &[]),
+            ]
+        } else {
+            vec![
+                model("stretch_cumulated", &[("stiffness", 1e4)]),
+                model("stretch_elementary", &[("stiffness", 1e3)]),
+            ]
+        };
+        let mut s = sim(&mesh, models, |c| {
+            c.gravity = [0.0, -9.81, if three { 0.0 } else { -3.0 }];
+            c.young = 1e5;
+        });
+        let v: Vec<[f64; 3]> = s
+            .vertex_vec3("rest")
+            .unwrap()
+            .iter()
+            .map(|p| [0.1 * p[1], -0.2 * p[0], 0.3])
+            .collect();
+        s.set_vertex_vec3("velocity", &v).unwrap();
+        for _ in 0..10 {
+            s.step().unwrap();
+        }
+        let before = state(&s);
+        let n = s
+            .cut(&Cut::Plane {
+                normal,
+                offset: 1.0,
+            })
+            .unwrap();
+        assert!(n > 0);
+        check_change(&before, &s);
+        assert_eq!(s.gmap().cell_counts().components, 2);
+        for _ in 0..50 {
+            s.step().unwrap();
+        }
+        assert!(s
+            .vertex_vec3("position")
+            .unwrap()
+            .iter()
+            .all(|p| p.iter().all(|x| x.is_finite())));
+        assert!(s.topology_changes().len() == 1 && s.topology_changes()[0].kind == "cut");
+    }
+}
+
+/// Cutting a box in two gives what building the two halves directly gives: the same cell
+/// counts and the same force on every vertex at the next step (compared as sorted lists of
+/// (rest position, force), duplicated vertices included; the forces agree to 1e-12 of their
+/// scale, rounding only).
+#[test]
+fn a_cut_mesh_matches_a_mesh_built_cut() {
+    let whole = cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let half = cuboid([2, 2, 2], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let mut two = half.clone();
+    let offset = two.points.len();
+    two.points
+        .extend(half.points.iter().map(|p| [p[0] + 1.0, p[1], p[2]]));
+    two.kinds.extend(half.kinds.iter().copied());
+    two.cells.extend(
+        half.cells
+            .iter()
+            .map(|c| c.iter().map(|i| i + offset).collect::<Vec<_>>()),
+    );
+    let models = || {
+        vec![
+            model("stretch_cumulated", &[("stiffness", 1e4)]),
+            model("corotational", &[]),
+        ]
+    };
+    let mut a = sim(&whole, models(), |c| c.young = 1e5);
+    let mut b = sim(&two, models(), |c| c.young = 1e5);
+    a.cut(&Cut::Plane {
+        normal: [1.0, 0.0, 0.0],
+        offset: 1.0,
+    })
+    .unwrap();
+    assert_eq!(a.gmap().cell_counts(), b.gmap().cell_counts());
+    let deform = |s: &mut Simulation| {
+        let x: Vec<[f64; 3]> = s
+            .vertex_vec3("rest")
+            .unwrap()
+            .iter()
+            .map(|p| {
+                [
+                    p[0] + 0.02 * (3.0 * p[1]).sin(),
+                    p[1] + 0.03 * p[0] * p[2],
+                    p[2] - 0.01 * p[0] * p[0],
+                ]
+            })
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        s.forces().unwrap();
+        let mut out: Vec<([f64; 3], [f64; 3])> = s
+            .vertex_vec3("rest")
+            .unwrap()
+            .into_iter()
+            .zip(s.vertex_vec3("force").unwrap())
+            .collect();
+        out.sort_by(|p, q| {
+            p.0.partial_cmp(&q.0)
+                .unwrap()
+                .then(p.1.partial_cmp(&q.1).unwrap())
+        });
+        out
+    };
+    let (fa, fb) = (deform(&mut a), deform(&mut b));
+    let scale = fb
+        .iter()
+        .flat_map(|v| v.1)
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(scale > 1.0);
+    for (p, q) in fa.iter().zip(&fb) {
+        assert_eq!(p.0, q.0);
+        for k in 0..3 {
+            assert!(
+                (p.1[k] - q.1[k]).abs() <= 1e-12 * scale,
+                "at {:?}: {:?} vs {:?}",
+                p.0,
+                p.1,
+                q.1
+            );
+        }
+    }
+}
+
+/// A bar with a notch on top at x = 3, pulled by a prescribed displacement of its end and
+/// solved statically: below the threshold nothing opens; above it, the faces that open are all
+/// at the notch, where the stress concentrates.
+#[test]
+fn a_notched_bar_breaks_at_the_notch() {
+    let bar = cuboid([12, 2, 2], [6.0, 1.0, 1.0], BoxElement::Tetra);
+    // the notch: the two top cubes around x = 3 (each cube is 6 consecutive tetrahedra)
+    let mut notched = bar.clone();
+    let keep: Vec<bool> = bar
+        .cells
+        .chunks(6)
+        .flat_map(|cube| {
+            let n = cube.len() as f64 * 4.0;
+            let cx: f64 = cube
+                .iter()
+                .flatten()
+                .map(|&i| bar.points[i][0])
+                .sum::<f64>()
+                / n;
+            let cy: f64 = cube
+                .iter()
+                .flatten()
+                .map(|&i| bar.points[i][1])
+                .sum::<f64>()
+                / n;
+            let inside = (cx - 3.0).abs() < 0.5 && cy > 0.5;
+            std::iter::repeat_n(!inside, cube.len())
+        })
+        .collect();
+    notched.cells = bar
+        .cells
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(c, _)| c.clone())
+        .collect();
+    notched.kinds = bar
+        .kinds
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(c, _)| *c)
+        .collect();
+    assert_eq!(
+        notched.cells.len(),
+        bar.cells.len() - 24,
+        "two cubes in x by two in z"
+    );
+    let run = |pull: f64, threshold: f64| -> Simulation {
+        let (g, _) = build(&notched, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![model("linear_fem", &[])],
+            young: 1e6,
+            poisson: 0.3,
+            gravity: [0.0; 3],
+            fixed: vec!["x < 1e-9".into()],
+            prescribed: vec![("x > 6.0 - 1e-9".into(), [pull, 0.0, 0.0])],
+            fracture: Some(Fracture {
+                criterion: Criterion::Stress,
+                threshold,
+            }),
+            integrator: Integrator::Static,
+            ..Config::default()
+        };
+        let mut s = Simulation::new(g, cfg).unwrap();
+        s.step().unwrap();
+        s
+    };
+    let threshold = 2e4;
+    // below: the load is small, nothing opens
+    let s = run(0.02, threshold);
+    assert!(
+        s.topology_changes().is_empty(),
+        "{:?}",
+        s.topology_changes()
+    );
+    // increasing the load until something breaks
+    let mut broke = None;
+    for k in 1..=10 {
+        let s = run(0.02 * f64::from(k + 1), threshold);
+        if !s.topology_changes().is_empty() {
+            broke = Some(s);
+            break;
+        }
+    }
+    let s = broke.expect("the bar breaks under a large enough pull");
+    assert!(s.gmap().is_valid());
+    // the faces that opened: 3-free faces inside the bar (not on its outer or notch surfaces)
+    let g = s.gmap();
+    let rest = g.require("rest").unwrap();
+    let on_surface = |c: [f64; 3]| {
+        let eps = 1e-9;
+        c[0] < eps
+            || c[0] > 6.0 - eps
+            || c[1] < eps
+            || c[1] > 1.0 - eps
+            || c[2] < eps
+            || c[2] > 1.0 - eps
+            || ((c[0] - 2.5).abs() < eps || (c[0] - 3.5).abs() < eps) && c[1] > 0.5 - eps
+            || (c[1] - 0.5).abs() < eps && (c[0] - 3.0).abs() < 0.5 + eps
+    };
+    let mut opened = 0;
+    for d in g.orbit_representatives(OrbitType::parse("<0,1>").unwrap()) {
+        if !g.is_free(3, d) {
+            continue;
+        }
+        let face = g.orbit(d, OrbitType::parse("<0,1>").unwrap());
+        let mut c = [0.0; 3];
+        for &x in &face {
+            for a in 0..3 {
+                c[a] += g.real(rest, x)[a] / face.len() as f64;
+            }
+        }
+        if !on_surface(c) {
+            opened += 1;
+            assert!(
+                (c[0] - 3.0).abs() < 1.0,
+                "a face opened away from the notch, at {c:?}"
+            );
+        }
+    }
+    assert!(opened > 0);
+}
+
+#[test]
+fn bad_events_are_reported() {
+    let mesh = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let mut s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.events = vec![TimedEvent {
+            time: 0.002,
+            cut: Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: 100.0,
+            },
+        }];
+    });
+    s.step().unwrap();
+    let e = s.step().unwrap_err().to_string();
+    assert!(e.contains("misses the object"), "{e}");
+    let s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.events = vec![TimedEvent {
+            time: 5.0,
+            cut: Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: 1.0,
+            },
+        }];
+    });
+    let e = s.check_events(1.0).unwrap_err().to_string();
+    assert!(e.contains("after the end of the run"), "{e}");
+    // a predicate cut at a time happens in the run and separates the halves
+    let mut s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.events = vec![TimedEvent {
+            time: 0.001,
+            cut: Cut::Where("x > 0.99 && x < 1.01".into()),
+        }];
+        c.gravity = [0.0; 3];
+    });
+    s.step().unwrap();
+    assert_eq!(s.gmap().cell_counts().components, 2);
+}
+
+/// Tearing: a cloth pulled apart at two corners tears where the springs stretch past the limit.
+#[test]
+fn cloth_tears_under_stretch() {
+    let mesh = grid([6, 4], [3.0, 2.0], GridElement::Triangle);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("stretch_elementary", &[("stiffness", 1e3)])],
+        density: 1.0,
+        gravity: [0.0; 3],
+        prescribed: vec![
+            ("x < 1e-9 && y < 1e-9".into(), [-0.6, 0.0, 0.0]),
+            ("x > 3.0 - 1e-9 && y < 1e-9".into(), [0.6, 0.0, 0.0]),
+        ],
+        fracture: Some(Fracture {
+            criterion: Criterion::Strain,
+            threshold: 0.2,
+        }),
+        damping: 2.0,
+        ..Config::default()
+    };
+    let mut s = Simulation::new(g, cfg).unwrap();
+    let m0 = s.total_mass().unwrap();
+    for _ in 0..400 {
+        s.step().unwrap();
+    }
+    assert!(!s.topology_changes().is_empty(), "the cloth tore");
+    assert!(s.gmap().is_valid());
+    assert!((s.total_mass().unwrap() - m0).abs() <= 1e-12 * m0);
+    let _ = HashMap::<u8, u8>::new();
+}
