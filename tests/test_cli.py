@@ -289,24 +289,6 @@ def test_version() -> None:
     assert r.stdout.strip() == f"topomech {topomech.__version__}"
 
 
-def test_demo(tmp_path: Path) -> None:
-    r = run("demo", "--out", str(tmp_path / "demo"), "-n", "2")
-    assert r.returncode == 0, r.stderr
-    vtu = tmp_path / "demo" / "box_tetra.vtu"
-    assert vtu.exists()
-    assert (tmp_path / "demo" / "box_tetra.tmg").exists()
-    assert str(vtu) in r.stdout
-    assert "valid       yes" in r.stdout
-    mesh, _ = topomech.read_mesh(vtu)
-    assert len(mesh.cells[0].data) == 6 * 8
-
-
-def test_demo_default_output_dir(tmp_path: Path) -> None:
-    r = run("demo", "-n", "1", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
-    assert (tmp_path / "out" / "demo" / "box_tetra.vtu").exists()
-
-
 def test_console_script_is_installed() -> None:
     script = Path(sys.executable).parent / "topomech"
     if not script.exists():

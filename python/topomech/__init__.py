@@ -8,18 +8,24 @@ Build a G-map from a mesh, inspect it, save it::
     g.save("body.tmg")
 
 Mesh files go through :mod:`topomech.io` (meshio); rule files (``.tmr``) through
-:class:`RuleSet` (:mod:`topomech.rules`); the command line is ``topomech``.
+:class:`RuleSet` (:mod:`topomech.rules`); simulations through :class:`Simulation`
+(:mod:`topomech.simulation`), built from a map and a model list or from a scene file
+(:func:`load_scene`, :mod:`topomech.scene`) and run to files by :func:`run_scene`
+(:mod:`topomech.run`); the command line is ``topomech``.
 Every error topomech raises is a :class:`TopomechError`.
 """
 
 from topomech._core import (
     ApplyError,
+    DivergenceError,
     EmbeddingError,
     FileFormatError,
     InternalError,
     MeshError,
     MeshReadError,
     RuleError,
+    SceneError,
+    SimulationError,
     TopologyError,
     TopomechError,
     __version__,
@@ -27,25 +33,38 @@ from topomech._core import (
 from topomech._gmap import BuildReport, CellCounts, GMap
 from topomech.io import read_gmap, read_mesh, write_vtu
 from topomech.rules import ApplyReport, RuleInfo, RuleSet
+from topomech.run import run_scene
+from topomech.scene import Scene, load_scene, shipped_scenes
+from topomech.simulation import ModelInfo, Simulation, available_models
 
 __all__ = [
     "ApplyError",
     "ApplyReport",
     "BuildReport",
     "CellCounts",
+    "DivergenceError",
     "EmbeddingError",
     "FileFormatError",
     "GMap",
     "InternalError",
     "MeshError",
     "MeshReadError",
+    "ModelInfo",
     "RuleError",
     "RuleInfo",
     "RuleSet",
+    "Scene",
+    "SceneError",
+    "Simulation",
+    "SimulationError",
     "TopologyError",
     "TopomechError",
     "__version__",
+    "available_models",
+    "load_scene",
     "read_gmap",
     "read_mesh",
+    "run_scene",
+    "shipped_scenes",
     "write_vtu",
 ]

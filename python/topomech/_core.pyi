@@ -9,6 +9,7 @@ import numpy.typing as npt
 
 __all__ = [
     "ApplyError",
+    "DivergenceError",
     "EmbeddingError",
     "FileFormatError",
     "GMap",
@@ -17,12 +18,16 @@ __all__ = [
     "MeshReadError",
     "RuleError",
     "RuleSet",
+    "SceneError",
+    "Simulation",
+    "SimulationError",
     "TopologyError",
     "TopomechError",
     "__version__",
     "_panic_for_tests",
     "box",
     "grid",
+    "models",
 ]
 
 __version__: str
@@ -58,6 +63,28 @@ class RuleError(TopomechError):
 
 class ApplyError(TopomechError):
     """A rule that does not apply (no match, wrong hooks or parameters); the map is unchanged."""
+
+class SimulationError(TopomechError):
+    """A simulation that cannot be built (unknown model, a model or predicate that matches
+    nothing, a bad setting) or a step that fails."""
+
+class DivergenceError(SimulationError):
+    """A step that produced non-finite values; the state before the step is kept."""
+
+    #: The step that failed (1-based).
+    step: int
+    #: The vertex (index in vertex order) where it was found.
+    vertex: int
+    #: What happened.
+    why: str
+
+class SceneError(TopomechError):
+    """A scene file that is refused; the message names the key (e.g. ``integrator.dt``)."""
+
+    #: The key's path (``integrator.dtt``, ``model[1].kind``), or None for the whole scene.
+    key: str | None
+    #: The scene file (or ``<scene>`` for a scene parsed from text).
+    source: str
 
 class InternalError(TopomechError):
     """A bug in topomech (a Rust panic, caught at the boundary). Please report it."""
@@ -134,6 +161,43 @@ class RuleSet:
     def count_matches(
         self, gmap: GMap | _HasCore, name: str, params: Mapping[str, Any] | None = None
     ) -> int: ...
+
+@final
+class Simulation:
+    """Physical models on a copy of a G-map, stepped in time."""
+
+    def __new__(
+        cls, gmap: GMap | _HasCore, config: Mapping[str, Any] | None = None, **kwargs: Any
+    ) -> Simulation: ...
+    def step(self, n: int = 1) -> None: ...
+    def positions(self) -> npt.NDArray[np.float64]: ...
+    def velocities(self) -> npt.NDArray[np.float64]: ...
+    def rest_positions(self) -> npt.NDArray[np.float64]: ...
+    def forces(self) -> npt.NDArray[np.float64]: ...
+    def masses(self) -> npt.NDArray[np.float64]: ...
+    def fixed(self) -> npt.NDArray[np.bool_]: ...
+    def set_positions(self, positions: npt.NDArray[np.float64]) -> None: ...
+    def set_velocities(self, velocities: npt.NDArray[np.float64]) -> None: ...
+    def total_mass(self) -> float: ...
+    def kinetic_energy(self) -> float: ...
+    def momentum(self) -> npt.NDArray[np.float64]: ...
+    def embedding(self, name: str) -> npt.NDArray[Any]: ...
+    def gmap(self) -> GMap: ...
+    @property
+    def time(self) -> float: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def n_vertices(self) -> int: ...
+    @property
+    def dimension(self) -> int: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def integrator(self) -> str: ...
+
+def models() -> list[dict[str, Any]]:
+    """The models topomech ships: ``kind``, ``dims``, ``params`` (with defaults), ``needs``."""
 
 def grid(
     nx: int, ny: int, sx: float = 1.0, sy: float = 1.0, element: str = "quad"

@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from topomech import __version__
-from topomech._core import ApplyError, RuleError, TopomechError
+from topomech._core import ApplyError, RuleError, SceneError, TopomechError
 from topomech._gmap import GMap
-from topomech.io import DroppedBlock, read_gmap, write_format, write_gmap, write_vtu
+from topomech.io import DroppedBlock, read_gmap, write_format, write_gmap
 from topomech.rules import ParamValue, RuleSet
 
 __all__ = ["build_parser", "main"]
@@ -136,44 +136,158 @@ def _run_info(args: argparse.Namespace) -> int:
     return EXIT_OK if s["valid"] else EXIT_INVALID
 
 
+# ---------------------------------------------------------------------------------- run
+
+
+def _add_run(sub: Any) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run a scene (a TOML file, or the name of a shipped scene) and write its frames",
+        description=(
+            "Run the simulation a scene file describes (or a shipped scene by name: see "
+            "--list) and write DIR/summary.json, DIR/final.vtu and, every output.every steps, "
+            "DIR/frames/frame_NNNNN.vtu with DIR/animation.pvd (open it in ParaView). Exit 0 "
+            "when every step ran; 1 when the simulation diverged or a step failed (what was "
+            "written stays, summary.json has an 'error' entry); 2 when the scene is refused "
+            "(the reason names the key)."
+        ),
+    )
+    p.add_argument("scene", metavar="SCENE", nargs="?", help="scene file (.toml) or shipped name")
+    p.add_argument("--out", metavar="DIR", type=Path, help="output directory (default out/NAME)")
+    p.add_argument("--steps", metavar="N", type=_count, help="steps to run (default: the scene's)")
+    p.add_argument(
+        "--every",
+        metavar="N",
+        type=_count,
+        help="a frame every N steps, 0 for none (default: the scene's output.every)",
+    )
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar and no report")
+    p.add_argument("--list", action="store_true", help="list the shipped scenes and exit")
+    p.set_defaults(run=_run_run)
+
+
+def _count(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
+    return n
+
+
+def _list_scenes() -> int:
+    from topomech.scene import load_scene, shipped_scenes
+
+    for name, path in shipped_scenes().items():
+        sc = load_scene(path)
+        first = sc.description.strip().splitlines()[0] if sc.description.strip() else ""
+        print(f"{name:<20} {first}")
+    return EXIT_OK
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.4g}"
+
+
+def _report(s: dict[str, Any], out: Path) -> None:
+    cells = "volumes" if s["dimension"] == 3 else "faces"
+    rate = s["steps_per_second"]
+    rows = [
+        ("scene", f"{s['name']} ({s['scene']})"),
+        (
+            "mesh",
+            f"{s['dimension']}D, {s['vertices']} vertices, {s[cells]} {cells}, {s['darts']} darts",
+        ),
+        ("models", ", ".join(m["kind"] for m in s["models"])),
+        (
+            "integrator",
+            f"{s['integrator']}, dt {_fmt(s['dt'])}, {s['steps']} steps, t = {_fmt(s['time'])}",
+        ),
+        ("mass", _fmt(s["total_mass"])),
+        ("max disp.", _fmt(s["max_displacement"])),
+        ("kinetic", _fmt(s["kinetic_energy"])),
+        (
+            "took",
+            f"{s['wall_seconds']:.2f} s" + (f" ({rate:.0f} steps/s)" if rate is not None else ""),
+        ),
+    ]
+    for k, v in rows:
+        print(f"{k:<11} {v}")
+    wrote = [out / "summary.json", out / "final.vtu"]
+    if s["outputs"]["animation"]:
+        wrote.append(out / "animation.pvd")
+    frames = f" ({s['frames']} frames in {out / 'frames'})" if s["frames"] else ""
+    print(f"{'wrote':<11} {', '.join(map(str, wrote))}{frames}")
+
+
+def _run_scene_cli(
+    scene: str, out: Path | None, steps: int | None, every: int | None, quiet: bool
+) -> tuple[int, Path | None]:
+    """Runs a scene for ``run`` and ``demo``: the exit code and the output directory."""
+    from topomech.run import run_scene
+    from topomech.scene import load_scene
+
+    try:
+        sc = load_scene(scene)
+        if steps is not None or every is not None:
+            sc = sc.with_steps(steps, every)
+        out_dir = out if out is not None else Path("out") / sc.name
+        show = not quiet and sys.stderr.isatty()
+        summary = run_scene(sc, out_dir, progress=show)
+    except SceneError as e:
+        _error(str(e))
+        return EXIT_REFUSED, None
+    err = summary.get("error")
+    if err is not None:
+        _error(f"{sc.name}: {err['message']}")
+        _note(
+            f"stopped after {summary['steps']} of {summary['steps_requested']} steps; "
+            f"what was written is in {out_dir} (summary.json has the error)"
+        )
+        return EXIT_INVALID, out_dir
+    if not quiet:
+        _report(summary, out_dir)
+    return EXIT_OK, out_dir
+
+
+def _run_run(args: argparse.Namespace) -> int:
+    if args.list:
+        return _list_scenes()
+    if args.scene is None:
+        _error("give a SCENE (a .toml file or a shipped scene's name; --list lists them)")
+        return EXIT_REFUSED
+    code, _ = _run_scene_cli(args.scene, args.out, args.steps, args.every, args.quiet)
+    return code
+
+
 # ---------------------------------------------------------------------------------- demo
+
+#: The shipped scene `topomech demo` runs.
+DEMO_SCENE = "corotational"
 
 
 def _add_demo(sub: Any) -> None:
     p = sub.add_parser(
         "demo",
-        help="build a demo mesh, write it as VTU and print its info",
+        help=f"run the default scene (the shipped '{DEMO_SCENE}' beam) and write its frames",
         description=(
-            "Generate a box of tetrahedra, build its G-map, write it as VTU (and as a saved "
-            "G-map .tmg) under the output directory, and print its info."
+            f"Run the shipped scene '{DEMO_SCENE}' (a cantilever beam of tetrahedra, "
+            "co-rotational FEM, bending under gravity, fixed at x = 0) end to end and write "
+            "its frames, final state and summary under the output directory, as "
+            f"`topomech run {DEMO_SCENE}` does."
         ),
     )
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory")
-    p.add_argument("-n", type=int, default=4, help="cubes along each side (default 4)")
-    p.add_argument(
-        "--element",
-        default="tetra",
-        choices=["tetra", "hexahedron", "wedge", "pyramid", "mixed"],
-        help="volume element (default tetra)",
-    )
+    p.add_argument("--steps", metavar="N", type=_count, help="steps to run (default: the scene's)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar and no report")
     p.set_defaults(run=_run_demo)
 
 
 def _run_demo(args: argparse.Namespace) -> int:
-    from topomech import _core
-
-    if args.n < 1:
-        _error(f"-n must be at least 1, got {args.n}")
-        return EXIT_REFUSED
-    flat = _core.box(args.n, args.n, args.n, 1.0, 1.0, 1.0, args.element)
-    g = GMap.from_flat(*flat)
-    args.out.mkdir(parents=True, exist_ok=True)
-    vtu = args.out / f"box_{args.element}.vtu"
-    tmg = args.out / f"box_{args.element}.tmg"
-    write_vtu(g, vtu)
-    g.save(tmg)
-    code = _run_info(argparse.Namespace(mesh_file=vtu, json=False, reorient=False))
-    print(f"\nwrote {vtu} (open it in ParaView) and {tmg} (the saved G-map)")
+    code, out = _run_scene_cli(DEMO_SCENE, args.out, args.steps, None, args.quiet)
+    if code == EXIT_OK and out is not None and not args.quiet:
+        print(f"\nopen {out / 'animation.pvd'} in ParaView to watch the beam bend")
     return code
 
 
@@ -430,7 +544,7 @@ def _run_apply(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------- main
 
 #: The subcommands, in the order `--help` lists them.
-SUBCOMMANDS: list[Callable[[Any], None]] = [_add_info, _add_check, _add_apply, _add_demo]
+SUBCOMMANDS: list[Callable[[Any], None]] = [_add_info, _add_check, _add_apply, _add_run, _add_demo]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,302 @@
+"""Running a scene to files: frames, the final state and a summary.
+
+:func:`run_scene` writes, under the output directory:
+
+- ``summary.json``: what ran and how it ended (see :func:`run_scene` for the keys);
+- ``final.vtu``: the last state, points at the current positions, point data
+  ``displacement``, ``velocity`` and ``fixed`` (1 for held vertices), cells from the map;
+- ``frames/frame_NNNNN.vtu``: a frame every ``every`` steps, frame 0 being the initial state
+  (and the last state as a last frame when the step count is not a multiple of ``every``),
+  with ``animation.pvd``, the ParaView collection of the frames and their times.
+
+A divergence stops the run: what was written stays, ``final.vtu`` holds the last good state,
+and ``summary.json`` has an ``error`` entry naming the step and the vertex.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+import numpy.typing as npt
+
+from topomech import __version__
+from topomech._cells import flat_to_blocks
+from topomech._core import DivergenceError, SimulationError
+from topomech.scene import Scene, load_scene
+
+if TYPE_CHECKING:
+    import meshio
+
+    from topomech._gmap import PathLike
+    from topomech.simulation import Simulation
+
+__all__ = ["Progress", "run_scene", "write_pvd"]
+
+#: The keys every summary has (an ``error`` entry is added when the run fails).
+SUMMARY_KEYS = (
+    "scene",
+    "name",
+    "dimension",
+    "models",
+    "integrator",
+    "dt",
+    "steps",
+    "steps_requested",
+    "time",
+    "darts",
+    "vertices",
+    "edges",
+    "faces",
+    "volumes",
+    "total_mass",
+    "kinetic_energy",
+    "momentum",
+    "max_displacement",
+    "frames",
+    "wall_seconds",
+    "step_seconds",
+    "steps_per_second",
+    "outputs",
+    "topomech_version",
+)
+
+
+class Progress:
+    """A one-line progress bar on a stream (``\\r`` updates, at most 10 a second)."""
+
+    def __init__(self, label: str, total: int, stream: TextIO | None = None) -> None:
+        self.label = label
+        self.total = total
+        self.stream = stream if stream is not None else sys.stderr
+        self.start = time.perf_counter()
+        self.last = 0.0
+        self.width = 0
+
+    def update(self, done: int, *, force: bool = False) -> None:
+        now = time.perf_counter()
+        if not force and now - self.last < 0.1:
+            return
+        self.last = now
+        frac = done / self.total if self.total else 1.0
+        bar = "#" * int(30 * frac)
+        elapsed = now - self.start
+        rate = done / elapsed if elapsed > 0 else 0.0
+        eta = f" eta {(self.total - done) / rate:.0f}s" if rate > 0 and done < self.total else ""
+        line = (
+            f"{self.label} [{bar:<30}] {100 * frac:3.0f}% step {done}/{self.total} "
+            f"{rate:.0f} steps/s{eta}"
+        )
+        pad = " " * max(0, self.width - len(line))
+        self.width = len(line)
+        self.stream.write(f"\r{line}{pad}")
+        self.stream.flush()
+
+    def close(self, done: int) -> None:
+        self.update(done, force=True)
+        self.stream.write("\n")
+        self.stream.flush()
+
+
+@dataclass
+class _Writer:
+    """Writes VTU files of the simulation's current state on the cells of its map."""
+
+    sim: Simulation
+    cells: list[tuple[str, npt.NDArray[np.int64]]]
+
+    @classmethod
+    def of(cls, sim: Simulation) -> _Writer:
+        _, kinds, offsets, connectivity = sim.core.gmap().to_flat()
+        blocks = flat_to_blocks(kinds, offsets, connectivity)
+        return cls(sim, [(b.type, np.asarray(b.data, dtype=np.int64)) for b in blocks])
+
+    def mesh(self) -> meshio.Mesh:
+        import meshio
+
+        x = self.sim.positions()
+        return meshio.Mesh(
+            x,
+            self.cells,
+            point_data={
+                "displacement": x - self.sim.rest_positions(),
+                "velocity": self.sim.velocities(),
+                "fixed": self.sim.fixed().astype(np.uint8),
+            },
+        )
+
+    def write(self, path: Path) -> None:
+        import meshio
+
+        meshio.write(os.fspath(path), self.mesh(), file_format="vtu")
+
+
+def write_pvd(path: Path, frames: list[tuple[float, str]]) -> None:
+    """A ParaView collection (``.pvd``) of ``(time, file)`` frames, files relative to it."""
+    lines = [
+        '<?xml version="1.0"?>',
+        '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+        "  <Collection>",
+        *(
+            f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>'
+            for t, f in frames
+        ),
+        "  </Collection>",
+        "</VTKFile>",
+    ]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _max_displacement(sim: Simulation) -> float:
+    """The largest displacement norm, scaled so that huge (diverging) values do not
+    overflow."""
+    d = sim.displacements()
+    if len(d) == 0:
+        return 0.0
+    m = np.abs(d).max(axis=1)
+    safe = np.where(m > 0, m, 1.0)
+    return float((m * np.sqrt(((d / safe[:, None]) ** 2).sum(axis=1))).max())
+
+
+def _json_safe(x: Any) -> Any:
+    """``x`` with non-finite floats as None: JSON has no infinities or NaN."""
+    if isinstance(x, float):
+        return x if np.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_json_safe(v) for v in x]
+    return x
+
+
+def run_scene(
+    scene: Scene | PathLike,
+    out: PathLike | None = None,
+    *,
+    steps: int | None = None,
+    every: int | None = None,
+    progress: bool | Callable[[int, int], None] = False,
+) -> dict[str, Any]:
+    """Runs a scene (a :class:`Scene` or a scene file) and writes its outputs under ``out``
+    (default ``out/<scene name>``); ``steps`` and ``every`` override the scene's. Returns the
+    summary written to ``summary.json``: ``scene``, ``name``, ``dimension``, ``models``,
+    ``integrator``, ``dt``, ``steps`` (done), ``steps_requested``, ``time``, ``darts``,
+    ``vertices``, ``edges``, ``faces``, ``volumes``, ``total_mass``, ``kinetic_energy``,
+    ``momentum``, ``max_displacement``, ``frames``, ``wall_seconds`` (the whole run),
+    ``step_seconds`` (in steps only), ``steps_per_second``, ``outputs`` and
+    ``topomech_version`` (a number that is not finite, after a divergence, is null); plus
+    ``error`` (``type``, ``message``, and ``step``, ``vertex`` for
+    a divergence) when a step failed.
+
+    ``progress``: True for a progress bar on stderr, or a callable ``(done, total)``.
+    Raises :class:`SceneError` for a scene that is refused (nothing is written then).
+    """
+    t0 = time.perf_counter()
+    sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    if steps is not None or every is not None:
+        sc = sc.with_steps(steps, every)
+    out_dir = Path(out) if out is not None else Path("out") / sc.name
+    gmap = sc.load_gmap()
+    counts = gmap.cell_counts()
+    sim = sc.build(gmap)
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    frames_dir = out_dir / "frames"
+    for old in frames_dir.glob("frame_*.vtu") if frames_dir.is_dir() else ():
+        old.unlink()
+    for stale in ("animation.pvd", "final.vtu", "summary.json"):
+        (out_dir / stale).unlink(missing_ok=True)
+    writer = _Writer.of(sim)
+    frames: list[tuple[float, str]] = []
+
+    def frame() -> None:
+        frames_dir.mkdir(exist_ok=True)
+        name = f"frame_{len(frames):05d}.vtu"
+        writer.write(frames_dir / name)
+        frames.append((sim.time, f"frames/{name}"))
+
+    if sc.every > 0:
+        frame()
+    bar: Progress | None = None
+    report: Callable[[int, int], None] | None = None
+    if progress is True:
+        bar = Progress(sc.name, sc.steps)
+    elif callable(progress):
+        report = progress
+    error: dict[str, Any] | None = None
+    step_seconds = 0.0
+    try:
+        for k in range(1, sc.steps + 1):
+            ts = time.perf_counter()
+            sim.step()
+            step_seconds += time.perf_counter() - ts
+            if sc.every > 0 and (k % sc.every == 0 or k == sc.steps):
+                frame()
+            if bar is not None:
+                bar.update(k)
+            if report is not None:
+                report(k, sc.steps)
+    except DivergenceError as e:
+        error = {
+            "type": "divergence",
+            "message": str(e),
+            "step": int(e.step),
+            "vertex": int(e.vertex),
+        }
+    except SimulationError as e:
+        error = {"type": "simulation", "message": str(e), "step": sim.steps + 1}
+    except KeyboardInterrupt:
+        error = {"type": "interrupted", "message": "interrupted", "step": sim.steps + 1}
+    finally:
+        if bar is not None:
+            bar.close(sim.steps)
+    writer.write(out_dir / "final.vtu")
+    if frames:
+        write_pvd(out_dir / "animation.pvd", frames)
+    summary: dict[str, Any] = {
+        "scene": str(sc.path) if sc.path is not None else None,
+        "name": sc.name,
+        "dimension": sim.dimension,
+        "models": sc.config["models"],
+        "integrator": sc.integrator,
+        "dt": sc.dt,
+        "steps": sim.steps,
+        "steps_requested": sc.steps,
+        "time": sim.time,
+        "darts": counts["darts"],
+        "vertices": counts["vertices"],
+        "edges": counts["edges"],
+        "faces": counts["faces"],
+        "volumes": counts["volumes"],
+        "total_mass": sim.total_mass(),
+        "kinetic_energy": sim.kinetic_energy(),
+        "momentum": [float(x) for x in sim.momentum()],
+        "max_displacement": _max_displacement(sim),
+        "frames": len(frames),
+        "wall_seconds": time.perf_counter() - t0,
+        "step_seconds": step_seconds,
+        "steps_per_second": sim.steps / step_seconds if step_seconds > 0 else None,
+        "outputs": {
+            "summary": "summary.json",
+            "final": "final.vtu",
+            "animation": "animation.pvd" if frames else None,
+            "frames": [f for _, f in frames],
+        },
+        "topomech_version": __version__,
+    }
+    if error is not None:
+        summary["error"] = error
+    summary = _json_safe(summary)
+    text = json.dumps(summary, indent=2, allow_nan=False)
+    (out_dir / "summary.json").write_text(text + "\n", encoding="utf-8")
+    if error is not None and error["type"] == "interrupted":
+        raise KeyboardInterrupt
+    return summary

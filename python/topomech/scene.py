@@ -1,0 +1,789 @@
+"""Scenes: a simulation described in a TOML file.
+
+A scene names a mesh (a file, or a generated box or rectangle), the models, the material,
+the fixed vertices, gravity, the integrator and how often to write frames::
+
+    name = "beam"                      # optional (default: the file name)
+    description = "..."                # optional
+
+    [mesh]
+    file = "beam.msh"                  # relative to the scene file; or:
+    # generator = "box", element = "tet", size = [1.0, 0.2, 0.2], cells = [10, 2, 2]
+
+    [[model]]                          # one table per model, summed
+    kind = "corotational"
+    young = 1e6                        # young/poisson set the material's
+    poisson = 0.3
+
+    [material]
+    density = 1000.0                   # per volume in 3D, per area in 2D
+    damping = 0.0                      # viscous, 1/s
+    [[material.region]]                # elements whose rest centroid satisfies `where`
+    where = "x > 0.5"
+    young = 2e6
+
+    [[fix]]
+    where = "x < 1e-9"                 # predicate on the rest position x, y, z
+    # displacement = [0.0, 0.1, 0.0]   # held at this displacement instead of in place
+
+    [world]
+    gravity = [0.0, -9.81, 0.0]
+    # ground = -0.5                    # a ground plane y = ground
+
+    [integrator]
+    kind = "symplectic_euler"          # explicit_euler | symplectic_euler | implicit_euler | static
+    dt = 1e-3
+    steps = 1000
+
+    [output]
+    every = 10                         # a frame every N steps (0: none); default steps / 50
+
+Generators: ``box`` (``element`` ``tet``, ``hex``, ``wedge``, ``pyramid`` or ``mixed``; ``size``
+and ``cells`` of 3) and ``grid`` or ``rectangle`` (``element`` ``tri``, ``quad`` or ``mixed``;
+``size`` and ``cells`` of 2, in the plane z = 0); the box has a corner at the origin.
+Predicates are expressions of the rule language over ``x``, ``y``, ``z``
+(``x < 1e-9 && y > 0.1``, ``abs(z - 0.5) < 0.01``).
+
+Every problem raises :class:`SceneError` naming the key by its path: ``integrator.dtt:
+unknown key``, ``material.density: expected a number, got "abc"``, ``model[1].kind: ...``
+(arrays of tables are numbered from 0).
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import math
+import re
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, overload
+
+from topomech import _core
+from topomech._core import MeshError, MeshReadError, RuleError, SceneError, SimulationError
+from topomech._gmap import GMap
+from topomech.simulation import ModelInfo, Simulation, available_models
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.9 and 3.10 only
+    import tomli as tomllib
+
+if TYPE_CHECKING:
+    from topomech._gmap import PathLike
+
+__all__ = [
+    "INTEGRATORS",
+    "PLANNED_MODELS",
+    "MeshSpec",
+    "Scene",
+    "SceneError",
+    "find_scene",
+    "load_scene",
+    "parse_scene",
+    "shipped_scenes",
+]
+
+#: The integrators a scene can name.
+INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler", "static")
+
+#: Models of the paper that scenes may name but this build does not ship yet.
+PLANNED_MODELS = (
+    "shear_isotropic",
+    "shear_anisotropic",
+    "shear_volumic",
+    "bending_linear",
+    "bending_angular",
+)
+
+#: The box generator's elements: scene name -> kernel name.
+BOX_ELEMENTS = {
+    "tet": "tetra",
+    "tetra": "tetra",
+    "hex": "hexahedron",
+    "hexahedron": "hexahedron",
+    "wedge": "wedge",
+    "pyramid": "pyramid",
+    "mixed": "mixed",
+}
+#: The grid generator's elements: scene name -> kernel name.
+GRID_ELEMENTS = {
+    "tri": "triangle",
+    "triangle": "triangle",
+    "quad": "quad",
+    "mixed": "mixed",
+}
+GENERATORS = ("box", "grid", "rectangle")
+
+#: Keys of a model table that set the material rather than the model.
+MATERIAL_KEYS_IN_MODEL = ("young", "poisson")
+
+
+def _show(value: Any) -> str:
+    """A TOML value as a message shows it: strings quoted, booleans lowercase."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, (str, list)):
+        try:
+            return json.dumps(value)
+        except (TypeError, ValueError):
+            return repr(value)
+    return str(value)
+
+
+class _Table:
+    """A TOML table being read: each getter checks a key's type and range and names the key
+    by its full path; :meth:`done` refuses the keys nobody asked for."""
+
+    def __init__(self, data: Mapping[str, Any], path: str, fail: _Fail) -> None:
+        self.data = data
+        self.path = path
+        self.fail = fail
+        self.known: list[str] = []
+
+    def key(self, k: str) -> str:
+        return f"{self.path}.{k}" if self.path else k
+
+    def has(self, k: str) -> bool:
+        return k in self.data
+
+    def _get(self, k: str) -> Any:
+        self.known.append(k)
+        return self.data.get(k)
+
+    @overload
+    def number(
+        self, k: str, default: float, *, positive: bool = ..., nonneg: bool = ...
+    ) -> float: ...
+    @overload
+    def number(
+        self, k: str, default: None = None, *, positive: bool = ..., nonneg: bool = ...
+    ) -> float | None: ...
+    def number(
+        self,
+        k: str,
+        default: float | None = None,
+        *,
+        positive: bool = False,
+        nonneg: bool = False,
+    ) -> float | None:
+        v = self._get(k)
+        if v is None:
+            return default
+        return _number(v, self.key(k), self.fail, positive=positive, nonneg=nonneg)
+
+    @overload
+    def integer(self, k: str, default: int, *, minimum: int = ...) -> int: ...
+    @overload
+    def integer(self, k: str, default: None = None, *, minimum: int = ...) -> int | None: ...
+    def integer(self, k: str, default: int | None = None, *, minimum: int = 0) -> int | None:
+        v = self._get(k)
+        if v is None:
+            return default
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(self.key(k), f"expected an integer, got {_show(v)}")
+        if v < minimum:
+            raise self.fail(self.key(k), f"must be >= {minimum}, got {v}")
+        return v
+
+    @overload
+    def string(self, k: str, default: str) -> str: ...
+    @overload
+    def string(self, k: str, default: None = None) -> str | None: ...
+    def string(self, k: str, default: str | None = None) -> str | None:
+        v = self._get(k)
+        if v is None:
+            return default
+        if not isinstance(v, str):
+            raise self.fail(self.key(k), f"expected a string, got {_show(v)}")
+        return v
+
+    def choice(self, k: str, choices: Sequence[str], default: str) -> str:
+        v = self.string(k, default)
+        if v not in choices:
+            raise self.fail(self.key(k), f"unknown value {_show(v)} (expected {_or(choices)})")
+        return v
+
+    @overload
+    def vector(
+        self, k: str, n: int, default: tuple[float, ...], *, positive: bool = ...
+    ) -> tuple[float, ...]: ...
+    @overload
+    def vector(
+        self, k: str, n: int, default: None = None, *, positive: bool = ...
+    ) -> tuple[float, ...] | None: ...
+    def vector(
+        self, k: str, n: int, default: tuple[float, ...] | None = None, *, positive: bool = False
+    ) -> tuple[float, ...] | None:
+        v = self._get(k)
+        if v is None:
+            return default
+        if not isinstance(v, list) or len(v) != n:
+            raise self.fail(self.key(k), f"expected an array of {n} numbers, got {_show(v)}")
+        return tuple(
+            _number(x, f"{self.key(k)}[{i}]", self.fail, positive=positive) for i, x in enumerate(v)
+        )
+
+    def int_vector(self, k: str, n: int, default: tuple[int, ...]) -> tuple[int, ...]:
+        v = self._get(k)
+        if v is None:
+            return default
+        if not isinstance(v, list) or len(v) != n:
+            raise self.fail(self.key(k), f"expected an array of {n} integers, got {_show(v)}")
+        out = []
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, int):
+                raise self.fail(f"{self.key(k)}[{i}]", f"expected an integer, got {_show(x)}")
+            if x < 1:
+                raise self.fail(f"{self.key(k)}[{i}]", f"must be >= 1, got {x}")
+            out.append(x)
+        return tuple(out)
+
+    def table(self, k: str) -> _Table:
+        v = self._get(k)
+        if v is None:
+            v = {}
+        if not isinstance(v, dict):
+            raise self.fail(self.key(k), f"expected a table, got {_show(v)}")
+        return _Table(v, self.key(k), self.fail)
+
+    def tables(self, k: str) -> list[_Table]:
+        """An array of tables (``[[k]]``); a single table ``[k]`` is refused, naming the
+        double brackets."""
+        v = self._get(k)
+        if v is None:
+            return []
+        if isinstance(v, dict):
+            raise self.fail(self.key(k), f"expected an array of tables: write [[{self.key(k)}]]")
+        if not isinstance(v, list) or not all(isinstance(t, dict) for t in v):
+            raise self.fail(self.key(k), f"expected an array of tables, got {_show(v)}")
+        return [_Table(t, f"{self.key(k)}[{i}]", self.fail) for i, t in enumerate(v)]
+
+    def done(self, extra: Sequence[str] = ()) -> None:
+        """Refuses every key not read (nor in ``extra``), suggesting the closest known one."""
+        known = [*self.known, *extra]
+        for k in self.data:
+            if k not in known:
+                close = difflib.get_close_matches(k, known, n=1)
+                hint = f"; did you mean '{close[0]}'?" if close else ""
+                expected = f" (known: {', '.join(sorted(set(known)))})" if known else ""
+                raise self.fail(self.key(k), f"unknown key{hint}{expected}")
+
+
+class _Fail:
+    """Makes the :class:`SceneError` of a scene: ``FILE: KEY: problem``."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def __call__(self, key: str | None, problem: str) -> SceneError:
+        where = f"{key}: " if key else ""
+        err = SceneError(f"{self.source}: {where}{problem}")
+        err.key = key
+        err.source = self.source
+        return err
+
+
+def _number(
+    v: Any, key: str, fail: _Fail, *, positive: bool = False, nonneg: bool = False
+) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise fail(key, f"expected a number, got {_show(v)}")
+    x = float(v)
+    if not math.isfinite(x):
+        raise fail(key, f"must be finite, got {_show(v)}")
+    if positive and x <= 0:
+        raise fail(key, f"must be positive, got {_show(v)}")
+    if nonneg and x < 0:
+        raise fail(key, f"must be >= 0, got {_show(v)}")
+    return x
+
+
+def _or(items: Sequence[str]) -> str:
+    items = [f"'{i}'" for i in items]
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} or {items[-1]}"
+
+
+_DIAGNOSTIC = re.compile(r"^.*?:(\d+):(\d+): error\[([\w-]+)\]: (?:rule 'p': )?(.*)$")
+
+
+def _check_predicate(pred: str, key: str, fail: _Fail) -> str:
+    """Checks a predicate the way the kernel will compile it (a rule's ``where`` guard over
+    ``x``, ``y``, ``z``), so that a bad one is named by its key."""
+    if not pred.strip():
+        raise fail(key, "the predicate is empty")
+    src = (
+        "dimension 3\n"
+        "embedding rest : vec3 on <1,2,3>\n"
+        "embedding fixed : bool on <1,2,3>\n"
+        "rule p {\n"
+        "  left { v : <1,2,3> hook }\n"
+        "  where { let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)\n"
+        f"{pred}\n"
+        "  }\n"
+        "  compute { v.fixed = true }\n"
+        "}\n"
+    )
+    try:
+        _core.RuleSet.from_source(src, "predicate")
+    except RuleError as e:
+        problems = []
+        for line in e.diagnostics:
+            m = _DIAGNOSTIC.match(line)
+            problems.append(m.group(4) if m else line)
+        raise fail(key, f"bad predicate {_show(pred)}: {'; '.join(problems)}") from None
+    return pred
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    """The ``[mesh]`` table: a file, or a generator with its element, size and cells."""
+
+    #: The mesh file (absolute, or relative to the working directory).
+    file: Path | None = None
+    #: ``box``, ``grid`` or ``rectangle``.
+    generator: str | None = None
+    #: The generator's element, as the kernel names it (``tetra``, ``triangle``, ...).
+    element: str | None = None
+    size: tuple[float, ...] = ()
+    cells: tuple[int, ...] = ()
+    #: Turn inverted cells of a mesh file over instead of refusing them.
+    reorient: bool = False
+
+    @property
+    def dimension(self) -> int | None:
+        """3 for a box, 2 for a grid, None for a file (known once read)."""
+        if self.generator is None:
+            return None
+        return 3 if self.generator == "box" else 2
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A scene read from TOML: the mesh, the simulation's configuration and the run."""
+
+    #: Its name (``name`` in the file, else the file's stem).
+    name: str
+    #: The scene file (None for a scene parsed from text).
+    path: Path | None
+    mesh: MeshSpec
+    #: The configuration :class:`Simulation` takes (models, material, fixed, ...).
+    config: dict[str, Any]
+    #: Steps to run.
+    steps: int
+    #: A frame every this many steps; 0 for none.
+    every: int
+    description: str = ""
+    #: Whether the file gives ``output.every`` (else it follows the step count).
+    every_given: bool = False
+    #: ``(what, value, key)`` for each predicate and model kind (``what``: ``fix``,
+    #: ``prescribed``, ``region`` or ``model``), to name the key of a kernel refusal.
+    origins: tuple[tuple[str, str, str], ...] = ()
+
+    @property
+    def integrator(self) -> str:
+        """The integrator's name."""
+        return str(self.config["integrator"])
+
+    @property
+    def dt(self) -> float:
+        """The time step."""
+        return float(self.config["dt"])
+
+    @property
+    def models(self) -> list[str]:
+        """The model kinds, in order."""
+        return [str(m["kind"]) for m in self.config["models"]]
+
+    def _fail(self) -> _Fail:
+        return _Fail(str(self.path) if self.path is not None else "<scene>")
+
+    def with_steps(self, steps: int | None = None, every: int | None = None) -> Scene:
+        """The scene with another step count or frame interval. The frame interval stays
+        the file's ``output.every`` if it gives one, else it follows the steps (steps / 50)."""
+        steps = self.steps if steps is None else steps
+        if every is not None:
+            return replace(self, steps=steps, every=every, every_given=True)
+        every = self.every if self.every_given else _default_every(steps)
+        return replace(self, steps=steps, every=every)
+
+    def load_gmap(self) -> GMap:
+        """The scene's G-map: the mesh file read, or the generated mesh."""
+        fail = self._fail()
+        m = self.mesh
+        if m.file is not None:
+            from topomech.io import read_gmap
+
+            if not m.file.exists():
+                raise fail("mesh.file", f"no such file: {m.file}")
+            try:
+                g, _ = read_gmap(m.file, reorient=m.reorient)
+            except (MeshReadError, MeshError) as e:
+                raise fail("mesh.file", str(e)) from e
+            return g
+        try:
+            if m.generator == "box":
+                (nx, ny, nz), (sx, sy, sz) = m.cells, m.size
+                flat = _core.box(nx, ny, nz, sx, sy, sz, m.element or "tetra")
+            else:
+                (nx, ny), (sx, sy) = m.cells, m.size
+                flat = _core.grid(nx, ny, sx, sy, m.element or "quad")
+            return GMap.from_flat(*flat)
+        except (ValueError, MeshError) as e:
+            raise fail("mesh", str(e)) from e
+
+    def build(self, gmap: GMap | None = None) -> Simulation:
+        """The simulation (on ``gmap``, by default :meth:`load_gmap`'s). Raises
+        :class:`SceneError` when the kernel refuses it (a model that does not exist in the
+        mesh's dimension or matches nothing, a predicate that selects nothing, ...), with
+        the :class:`SimulationError` as its cause."""
+        fail = self._fail()
+        g = self.load_gmap() if gmap is None else gmap
+        _check_models(self.config["models"], g.dimension, fail)
+        try:
+            return Simulation(g, self.config)
+        except SimulationError as e:
+            raise fail(self._key_of(str(e)), f"cannot build the simulation: {e}") from e
+
+    def _key_of(self, message: str) -> str | None:
+        """The key a kernel refusal is about: the first predicate or model kind it quotes."""
+        m = _KERNEL_SUBJECT.search(message)
+        if m is None:
+            return None
+        what = _KERNEL_WHAT[m.group(1)]
+        for w, value, key in self.origins:
+            if w == what and value == m.group(2):
+                return key
+        return None
+
+
+#: What kernel messages quote: a predicate or a model kind.
+_KERNEL_SUBJECT = re.compile(
+    r"(fix predicate|prescribed-displacement predicate|material region|model) '([^']*)'"
+)
+_KERNEL_WHAT = {
+    "fix predicate": "fix",
+    "prescribed-displacement predicate": "prescribed",
+    "material region": "region",
+    "model": "model",
+}
+
+
+def _default_every(steps: int) -> int:
+    return max(1, steps // 50)
+
+
+def _mesh(t: _Table, base: Path | None, fail: _Fail) -> MeshSpec:
+    file = t.string("file")
+    generator = t.string("generator")
+    if file is not None and generator is not None:
+        raise fail(t.key("generator"), "give either mesh.file or mesh.generator, not both")
+    if file is None and generator is None:
+        raise fail("mesh", "give mesh.file (a mesh file) or mesh.generator (box, grid)")
+    reorient_v = t._get("reorient")
+    if reorient_v is not None and not isinstance(reorient_v, bool):
+        raise fail(t.key("reorient"), f"expected true or false, got {_show(reorient_v)}")
+    reorient = bool(reorient_v)
+    if file is not None:
+        t.done()
+        p = Path(file).expanduser()
+        if not p.is_absolute() and base is not None:
+            p = base / p
+        return MeshSpec(file=p, reorient=reorient)
+    if reorient_v is not None:
+        raise fail(t.key("reorient"), "only for a mesh file")
+    if generator not in GENERATORS:
+        raise fail(
+            t.key("generator"), f"unknown generator {_show(generator)} (expected {_or(GENERATORS)})"
+        )
+    if generator == "box":
+        elements, n, default_element = BOX_ELEMENTS, 3, "tet"
+    else:
+        elements, n, default_element = GRID_ELEMENTS, 2, "quad"
+    element = t.choice("element", list(elements), default_element)
+    size = t.vector("size", n, (1.0,) * n, positive=True)
+    cells = t.int_vector("cells", n, (1,) * n)
+    t.done()
+    return MeshSpec(generator=generator, element=elements[element], size=size, cells=cells)
+
+
+def _model_entries(kind: str, dim: int | None) -> list[ModelInfo]:
+    """The catalogue's entries for ``kind`` (one per set of dimensions), those of dimension
+    ``dim`` only when it is known."""
+    return [
+        m for m in available_models() if m["kind"] == kind and (dim is None or dim in m["dims"])
+    ]
+
+
+def _takes(kind: str, dim: int | None) -> list[str]:
+    """The keys a ``[[model]]`` table of ``kind`` may have beside ``kind``."""
+    params: list[str] = []
+    for m in _model_entries(kind, dim):
+        params += [p for p in m["params"] if p not in params]
+    return [*params, *MATERIAL_KEYS_IN_MODEL]
+
+
+def _check_models(models: list[dict[str, Any]], dim: int, fail: _Fail) -> None:
+    """Refuses a model that does not exist in dimension ``dim``, or a parameter it does not
+    take there, naming the key."""
+    for i, spec in enumerate(models):
+        kind = spec["kind"]
+        if not _model_entries(kind, dim):
+            entries = _model_entries(kind, None)
+            dims = sorted({d for m in entries for d in m["dims"]})
+            needs = " or ".join(m["needs"] for m in entries)
+            want = " or ".join(f"{d}D" for d in dims)
+            raise fail(
+                f"model[{i}].kind",
+                f"model '{kind}' needs a {want} mesh ({needs}), the mesh is {dim}D",
+            )
+        takes = _takes(kind, dim)
+        for p in spec:
+            if p != "kind" and p not in takes:
+                raise fail(
+                    f"model[{i}].{p}",
+                    f"model '{kind}' takes no parameter '{p}' on a {dim}D mesh "
+                    f"(it takes {', '.join(takes)})",
+                )
+
+
+def _models(
+    tables: list[_Table], dim: int | None, fail: _Fail
+) -> tuple[list[dict[str, Any]], dict[str, tuple[str, float]]]:
+    """The models for :class:`Simulation`, and the material values they set (young,
+    poisson), each with the key that set it first. ``dim`` is the mesh's dimension when the
+    scene says it (a generator), else None: the models are checked again once it is known."""
+    if not tables:
+        raise fail("model", "no model: add a [[model]] table with a kind")
+    kinds = list(dict.fromkeys(m["kind"] for m in available_models()))
+    models: list[dict[str, Any]] = []
+    set_by: dict[str, tuple[str, float]] = {}
+    for i, t in enumerate(tables):
+        kind = t.string("kind")
+        if kind is None:
+            raise fail(t.key("kind"), f"missing: the model's kind ({_or(kinds)})")
+        if kind not in kinds:
+            if kind in PLANNED_MODELS:
+                raise fail(
+                    t.key("kind"),
+                    f"model '{kind}' is not available yet (available: {', '.join(kinds)})",
+                )
+            raise fail(t.key("kind"), f"unknown model '{kind}' (known: {', '.join(kinds)})")
+        if dim is not None:
+            _check_models([{"kind": kind}], dim, _Renumber(fail, i))
+        takes = _takes(kind, dim)
+        for k in t.data:
+            if k not in ("kind", *takes):
+                close = difflib.get_close_matches(k, takes, n=1)
+                hint = f"; did you mean '{close[0]}'?" if close else ""
+                raise fail(
+                    t.key(k),
+                    f"unknown key{hint} (model '{kind}' takes {', '.join(takes)})",
+                )
+        spec: dict[str, Any] = {"kind": kind}
+        for p in takes:
+            if p in MATERIAL_KEYS_IN_MODEL:
+                continue
+            v = t.number(p, nonneg=True)
+            if v is not None:
+                spec[p] = v
+        for p in MATERIAL_KEYS_IN_MODEL:
+            v = t.number(p)
+            if v is None:
+                continue
+            if p in set_by and set_by[p][1] != v:
+                other, was = set_by[p]
+                raise fail(
+                    t.key(p),
+                    f"{v:g} differs from {other} = {was:g} (the material has one {p})",
+                )
+            set_by.setdefault(p, (t.key(p), v))
+        models.append(spec)
+    return models, set_by
+
+
+class _Renumber(_Fail):
+    """A :class:`_Fail` that reads ``model[0]`` as ``model[i]`` (checking one model alone)."""
+
+    def __init__(self, fail: _Fail, i: int) -> None:
+        super().__init__(fail.source)
+        self.i = i
+
+    def __call__(self, key: str | None, problem: str) -> SceneError:
+        if key is not None and key.startswith("model[0]"):
+            key = f"model[{self.i}]" + key[len("model[0]") :]
+        return super().__call__(key, problem)
+
+
+def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | None = None) -> Scene:
+    """A scene from TOML text. ``path`` names the scene in messages (and is its location:
+    mesh files are relative to its directory, or to ``base``, or to the working directory)."""
+    p = Path(path) if path is not None else None
+    fail = _Fail(str(p) if p is not None else "<scene>")
+    base_dir = Path(base) if base is not None else (p.parent if p is not None else None)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise fail(None, f"invalid TOML: {e}") from None
+    top = _Table(data, "", fail)
+    name = top.string("name", p.stem if p is not None else "scene")
+    description = top.string("description", "")
+
+    if not top.has("mesh"):
+        raise fail("mesh", "missing table [mesh] (give mesh.file or mesh.generator)")
+    mesh = _mesh(top.table("mesh"), base_dir, fail)
+
+    mat = top.table("material")
+    density = mat.number("density", 1000.0, positive=True)
+    damping = mat.number("damping", 0.0, nonneg=True)
+    young = mat.number("young", positive=True)
+    poisson = mat.number("poisson")
+    regions = []
+    origins: list[tuple[str, str, str]] = []
+    for r in mat.tables("region"):
+        region: dict[str, Any] = {
+            "where": _check_predicate(_required_str(r, "where", fail), r.key("where"), fail)
+        }
+        for k, pos in (("density", True), ("young", True), ("poisson", False)):
+            v = r.number(k, positive=pos)
+            if v is not None:
+                if k == "poisson":
+                    _check_poisson(v, r.key(k), fail)
+                region[k] = v
+        r.done()
+        if len(region) == 1:
+            raise fail(r.path, "a region needs density, young or poisson")
+        regions.append(region)
+        origins.append(("region", region["where"], r.key("where")))
+    mat.done()
+
+    if poisson is not None:
+        _check_poisson(poisson, "material.poisson", fail)
+    models, set_by = _models(top.tables("model"), mesh.dimension, fail)
+    origins += [("model", m["kind"], f"model[{i}].kind") for i, m in enumerate(models)]
+    for what, v in (("young", young), ("poisson", poisson)):
+        if what in set_by and v is not None and set_by[what][1] != v:
+            key, from_model = set_by[what]
+            raise fail(
+                key,
+                f"{from_model:g} differs from material.{what} = {v:g} "
+                f"(the material has one {what})",
+            )
+    if "young" in set_by:
+        key, young = set_by["young"]
+        if young <= 0:
+            raise fail(key, f"must be positive, got {young:g}")
+    if "poisson" in set_by:
+        key, poisson = set_by["poisson"]
+        _check_poisson(poisson, key, fail)
+    young = 1e6 if young is None else young
+    poisson = 0.3 if poisson is None else poisson
+
+    fixed: list[str] = []
+    prescribed: list[tuple[str, tuple[float, ...]]] = []
+    for f in top.tables("fix"):
+        pred = _check_predicate(_required_str(f, "where", fail), f.key("where"), fail)
+        disp = f.vector("displacement", 3)
+        f.done()
+        if disp is None:
+            fixed.append(pred)
+            origins.append(("fix", pred, f.key("where")))
+        else:
+            prescribed.append((pred, disp))
+            origins.append(("prescribed", pred, f.key("where")))
+
+    world = top.table("world")
+    gravity = world.vector("gravity", 3, (0.0, -9.81, 0.0))
+    ground = world.number("ground")
+    world.done()
+
+    integ = top.table("integrator")
+    kind = integ.choice("kind", INTEGRATORS, "symplectic_euler")
+    dt = integ.number("dt", 1e-3, positive=True)
+    steps = integ.integer("steps", 100, minimum=0)
+    integ.done()
+
+    out = top.table("output")
+    every_v = out.integer("every", None, minimum=0)
+    out.done()
+    top.done()
+
+    config: dict[str, Any] = {
+        "models": models,
+        "density": density,
+        "young": young,
+        "poisson": poisson,
+        "damping": damping,
+        "gravity": list(gravity),
+        "fixed": fixed,
+        "prescribed": [(w, list(d)) for w, d in prescribed],
+        "regions": regions,
+        "ground": ground,
+        "integrator": kind,
+        "dt": dt,
+    }
+    scene = Scene(
+        name=name,
+        path=p,
+        mesh=mesh,
+        config=config,
+        steps=steps,
+        every=every_v if every_v is not None else _default_every(steps),
+        description=description,
+        every_given=every_v is not None,
+        origins=tuple(origins),
+    )
+    return scene
+
+
+def _required_str(t: _Table, k: str, fail: _Fail) -> str:
+    v = t.string(k)
+    if v is None:
+        raise fail(t.key(k), "missing")
+    return v
+
+
+def _check_poisson(v: float, key: str, fail: _Fail) -> None:
+    if not -1.0 < v < 0.5:
+        raise fail(key, f"must be in (-1, 0.5), got {v:g}")
+
+
+def load_scene(path: PathLike) -> Scene:
+    """Reads a scene file (TOML); ``path`` may also name a shipped scene (see
+    :func:`shipped_scenes`). Raises :class:`SceneError` naming the key of any problem."""
+    p = find_scene(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise _Fail(str(p))(None, f"not UTF-8 text (byte {e.start})") from None
+    except OSError as e:
+        raise _Fail(str(p))(None, f"cannot read the scene file: {e.strerror or e}") from None
+    return parse_scene(text, p)
+
+
+def shipped_scenes() -> dict[str, Path]:
+    """The scenes shipped with topomech, by name (``topomech run NAME`` runs one)."""
+    d = Path(__file__).with_name("scenes")
+    return {p.stem: p for p in sorted(d.glob("*.toml"))}
+
+
+def find_scene(spec: PathLike) -> Path:
+    """The scene file ``spec`` names: an existing file, else a shipped scene of that name
+    (with or without ``.toml``). Raises :class:`SceneError` when neither exists."""
+    p = Path(spec)
+    if p.exists():
+        if p.is_dir():
+            raise _Fail(str(p))(None, "is a directory, not a scene file")
+        return p
+    shipped = shipped_scenes()
+    name = p.name[: -len(".toml")] if p.name.endswith(".toml") else p.name
+    if p.parent == Path() and name in shipped:
+        return shipped[name]
+    raise _Fail(str(p))(
+        None,
+        f"no such scene file, and no shipped scene of that name (shipped: {', '.join(shipped)})",
+    )

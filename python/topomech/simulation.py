@@ -1,0 +1,235 @@
+"""``topomech.Simulation``: physical models stepped on a copy of a G-map.
+
+Every model is a rule file (see ``crates/physics/models``); a step applies the models' force
+rules, sums the forces on each vertex and integrates. The state is the map's embeddings;
+per-vertex arrays come out in vertex order (row k is the vertex labelled k by
+:meth:`GMap.vertex_labels`, the order of :meth:`GMap.positions`)::
+
+    >>> import topomech
+    >>> g = topomech.GMap.from_mesh(
+    ...     [[0, 0], [1, 0], [1, 1], [0, 1]], [("triangle", [[0, 1, 2], [0, 2, 3]])]
+    ... )
+    >>> sim = topomech.Simulation(
+    ...     g,
+    ...     models=[{"kind": "stretch_elementary", "stiffness": 1e3}],
+    ...     density=1.0,
+    ...     fixed=["x < 1e-9"],
+    ...     integrator="symplectic_euler",
+    ...     dt=1e-3,
+    ... )
+    >>> round(sim.total_mass(), 12)  # density x area
+    1.0
+    >>> sim.step(10)
+    >>> sim.positions().shape, sim.steps
+    ((4, 3), 10)
+
+A simulation that cannot be built raises :class:`SimulationError`; a step that diverges
+raises :class:`DivergenceError` (with ``step`` and ``vertex``) and leaves the state as it was
+before that step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, TypedDict, Union
+
+import numpy as np
+import numpy.typing as npt
+
+from topomech import _core
+from topomech._core import DivergenceError, SimulationError
+from topomech._gmap import GMap
+
+if TYPE_CHECKING:
+    from topomech._gmap import PathLike
+
+__all__ = ["DivergenceError", "ModelInfo", "Simulation", "SimulationError", "available_models"]
+
+#: A model as :class:`Simulation` takes it: its kind alone, or ``{"kind": ..., param: value}``.
+ModelArg = Union[str, Mapping[str, Union[str, float]]]
+
+
+class ModelInfo(TypedDict):
+    """A model topomech ships (:func:`available_models`)."""
+
+    #: The name scenes and :class:`Simulation` use.
+    kind: str
+    #: The mesh dimensions it exists in (2: surfaces, 3: volumes).
+    dims: list[int]
+    #: Its parameters with their defaults (the continuous models have none: they use the
+    #: material's ``young`` and ``poisson``).
+    params: dict[str, float]
+    #: What it needs of the mesh (``edges``, ``tetrahedra``).
+    needs: str
+
+
+def available_models() -> list[ModelInfo]:
+    """The models this build of topomech ships, with their parameters' defaults.
+
+    >>> [m["kind"] for m in available_models()][:2]
+    ['stretch_elementary', 'stretch_cumulated']
+    """
+    return [
+        ModelInfo(kind=m["kind"], dims=list(m["dims"]), params=dict(m["params"]), needs=m["needs"])
+        for m in _core.models()
+    ]
+
+
+class Simulation:
+    """Physical models on a copy of a G-map, stepped in time.
+
+    ``config`` (a dict) or keyword arguments, mirroring the kernel's configuration:
+
+    - ``models``: a list of model kinds or dicts ``{"kind": ..., param: value}``
+      (:func:`available_models` lists them with their parameters);
+    - ``density`` (per volume in 3D, per area in 2D), ``young``, ``poisson`` (the material of
+      the continuous models), ``damping`` (viscous, 1/s), ``gravity`` (3 numbers);
+    - ``fixed``: predicates on the rest position ``x``, ``y``, ``z`` in the rule language
+      (``"x < 1e-9"``, ``"y > 0.99 && x < 0.01"``) selecting vertices held in place;
+    - ``prescribed``: ``(predicate, [dx, dy, dz])`` pairs holding vertices at a displacement
+      from their rest position;
+    - ``regions``: dicts ``{"where": predicate on the element's rest centroid, "density":
+      ..., "young": ..., "poisson": ...}`` giving some elements another material;
+    - ``ground``: the height of a ground plane ``y = ground``, or None;
+    - ``integrator``: ``explicit_euler``, ``symplectic_euler``, ``implicit_euler`` or
+      ``static`` (each step solves for the equilibrium); ``dt``: the time step.
+
+    The kernel object is :attr:`core`.
+    """
+
+    __slots__ = ("_core",)
+
+    def __init__(
+        self,
+        gmap: GMap | _core.GMap,
+        config: Mapping[str, Any] | None = None,
+        **kwargs: Any,
+    ) -> None:
+        cfg = dict(config) if config is not None else None
+        self._core = _core.Simulation(gmap, cfg, **kwargs)
+
+    @classmethod
+    def from_core(cls, core: _core.Simulation) -> Simulation:
+        """Wraps a kernel simulation."""
+        if not isinstance(core, _core.Simulation):
+            raise TypeError(f"expected a topomech._core.Simulation, got {type(core).__name__}")
+        sim = cls.__new__(cls)
+        sim._core = core
+        return sim
+
+    @classmethod
+    def from_scene(cls, path: PathLike) -> Simulation:
+        """The simulation a scene file (TOML) describes: ``load_scene(path).build()``.
+        Raises :class:`SceneError` for a refused scene."""
+        from topomech.scene import load_scene
+
+        return load_scene(path).build()
+
+    # ------------------------------------------------------------------ stepping
+
+    def step(self, n: int = 1) -> None:
+        """Runs ``n`` time steps; raises :class:`DivergenceError` on divergence (the state is
+        then the one before the failed step)."""
+        self._core.step(n)
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def core(self) -> _core.Simulation:
+        """The kernel object."""
+        return self._core
+
+    def positions(self) -> npt.NDArray[np.float64]:
+        """Current positions ``(V, 3)``."""
+        return self._core.positions()
+
+    def velocities(self) -> npt.NDArray[np.float64]:
+        """Current velocities ``(V, 3)``."""
+        return self._core.velocities()
+
+    def rest_positions(self) -> npt.NDArray[np.float64]:
+        """Rest positions ``(V, 3)``: the positions when the simulation was built."""
+        return self._core.rest_positions()
+
+    def displacements(self) -> npt.NDArray[np.float64]:
+        """Positions minus rest positions ``(V, 3)``."""
+        return self._core.positions() - self._core.rest_positions()
+
+    def forces(self) -> npt.NDArray[np.float64]:
+        """The models' forces on each vertex at the current state ``(V, 3)``, computed now
+        (without gravity and viscous damping)."""
+        return self._core.forces()
+
+    def masses(self) -> npt.NDArray[np.float64]:
+        """Lumped vertex masses ``(V,)``."""
+        return self._core.masses()
+
+    def fixed(self) -> npt.NDArray[np.bool_]:
+        """Whether each vertex is held (fixed or at a prescribed displacement) ``(V,)``."""
+        return self._core.fixed()
+
+    def set_positions(self, positions: Any) -> None:
+        """Sets the positions from an array-like ``(V, 3)`` of finite numbers."""
+        self._core.set_positions(np.ascontiguousarray(positions, dtype=np.float64))
+
+    def set_velocities(self, velocities: Any) -> None:
+        """Sets the velocities from an array-like ``(V, 3)`` of finite numbers."""
+        self._core.set_velocities(np.ascontiguousarray(velocities, dtype=np.float64))
+
+    def embedding(self, name: str) -> npt.NDArray[Any]:
+        """The values of a vertex embedding, one row per vertex (``(V,)`` for scalars,
+        ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices). An embedding on another orbit
+        raises :class:`EmbeddingError`; ``gmap().embedding_names()`` lists them all."""
+        return self._core.embedding(name)
+
+    def total_mass(self) -> float:
+        """Sum of the vertex masses."""
+        return self._core.total_mass()
+
+    def kinetic_energy(self) -> float:
+        """Sum of m |v|^2 / 2."""
+        return self._core.kinetic_energy()
+
+    def momentum(self) -> npt.NDArray[np.float64]:
+        """Sum of m v ``(3,)``."""
+        return self._core.momentum()
+
+    def gmap(self) -> GMap:
+        """A copy of the simulated map with every embedding (positions as they are now)."""
+        return GMap(self._core.gmap())
+
+    @property
+    def time(self) -> float:
+        """Simulated time."""
+        return self._core.time
+
+    @property
+    def steps(self) -> int:
+        """Steps done."""
+        return self._core.steps
+
+    @property
+    def n_vertices(self) -> int:
+        """The number of vertices V."""
+        return self._core.n_vertices
+
+    @property
+    def dimension(self) -> int:
+        """2 (surface) or 3 (volume)."""
+        return self._core.dimension
+
+    @property
+    def dt(self) -> float:
+        """The time step."""
+        return self._core.dt
+
+    @property
+    def integrator(self) -> str:
+        """The integrator's name."""
+        return self._core.integrator
+
+    def __repr__(self) -> str:
+        return (
+            f"topomech.Simulation(dimension={self.dimension}, vertices={self.n_vertices}, "
+            f"integrator={self.integrator!r}, steps={self.steps}, time={self.time:g})"
+        )
