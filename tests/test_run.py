@@ -1,12 +1,14 @@
 """`topomech run` and `topomech demo`: every shipped scene runs, its outputs parse, and the
-exit codes say what happened (0 ran, 1 diverged, 2 refused)."""
+exit codes say what happened (0 ran, 1 diverged, 2 refused, 130 interrupted)."""
 
 from __future__ import annotations
 
 import io
 import json
+import signal
 import subprocess
 import sys
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -292,3 +294,25 @@ def test_demo_runs_end_to_end(tmp_path: Path) -> None:
     assert [m["kind"] for m in summary["models"]] == ["corotational"]
     assert summary["dimension"] == 3
     assert r.stderr == ""  # no progress bar when stderr is not a terminal
+
+
+def test_ctrl_c_exits_130_and_keeps_what_was_written(tmp_path: Path) -> None:
+    out = tmp_path / "o"
+    p = subprocess.Popen(
+        [sys.executable, "-m", "topomech", "run", "corotational", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    second = out / "frames" / "frame_00001.vtu"
+    deadline = time.monotonic() + 60
+    while not second.exists() and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    assert f"interrupted; what was written is in {out}" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error"]["type"] == "interrupted"
+    assert 0 < summary["steps"] < summary["steps_requested"]
+    assert len(meshio.read(out / "final.vtu").points) == summary["vertices"]

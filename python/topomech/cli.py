@@ -2,9 +2,10 @@
 
 Each subcommand is a pair of functions: ``_add_NAME(subparsers)`` declares its arguments and
 ``_run_NAME(args) -> exit code`` does the work. Exit codes: 0 success, 1 the input was read but
-fails on its merits (an invalid G-map, a rule the checker refuses, a rule that does not apply),
-2 a file cannot be read or is refused, or the arguments are wrong (the reason goes to stderr,
-without a traceback).
+fails on its merits (an invalid G-map, a rule the checker refuses, a rule that does not apply,
+a simulation that diverges), 2 a file cannot be read or is refused (a scene included), or the
+arguments are wrong (the reason goes to stderr, without a traceback); 130 a run interrupted by
+Ctrl-C (what was written stays).
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ __all__ = ["build_parser", "main"]
 EXIT_OK = 0
 EXIT_INVALID = 1
 EXIT_REFUSED = 2
+#: Ctrl-C during `run` or `demo` (the shell's code for SIGINT).
+EXIT_INTERRUPTED = 130
 
 #: Violations listed by `info` before "... and N more".
 MAX_VIOLATIONS_SHOWN = 20
@@ -228,6 +231,7 @@ def _run_scene_cli(
     from topomech.run import run_scene
     from topomech.scene import load_scene
 
+    out_dir = out
     try:
         sc = load_scene(scene)
         if steps is not None or every is not None:
@@ -238,6 +242,10 @@ def _run_scene_cli(
     except SceneError as e:
         _error(str(e))
         return EXIT_REFUSED, None
+    except KeyboardInterrupt:
+        where = f"; what was written is in {out_dir} (see summary.json)" if out_dir else ""
+        _error(f"interrupted{where}")
+        return EXIT_INTERRUPTED, out_dir
     err = summary.get("error")
     if err is not None:
         _error(f"{sc.name}: {err['message']}")
@@ -248,6 +256,7 @@ def _run_scene_cli(
         return EXIT_INVALID, out_dir
     if not quiet:
         _report(summary, out_dir)
+    assert out_dir is not None
     return EXIT_OK, out_dir
 
 
