@@ -57,7 +57,9 @@ def test_round_trip_arrays() -> None:
 
 def test_step_moves_free_vertices_only() -> None:
     sim = springs()
+    version = sim.topology_version
     sim.step(3)
+    assert sim.topology_version == version  # no topology change
     assert sim.steps == 3
     assert sim.time == pytest.approx(3e-3)
     d = sim.displacements()

@@ -108,20 +108,31 @@ class Progress:
 
 @dataclass
 class _Writer:
-    """Writes VTU files of the simulation's current state on the cells of its map."""
+    """Writes VTU files of the simulation's current state on the cells of its map (extracted
+    again when a topology change relinked the map)."""
 
     sim: Simulation
     cells: list[tuple[str, npt.NDArray[np.int64]]]
+    version: int
 
     @classmethod
     def of(cls, sim: Simulation) -> _Writer:
-        _, kinds, offsets, connectivity = sim.core.gmap().to_flat()
+        w = cls(sim, [], -1)
+        w.refresh()
+        return w
+
+    def refresh(self) -> None:
+        if self.version == self.sim.topology_version:
+            return
+        _, kinds, offsets, connectivity = self.sim.core.gmap().to_flat()
         blocks = flat_to_blocks(kinds, offsets, connectivity)
-        return cls(sim, [(b.type, np.asarray(b.data, dtype=np.int64)) for b in blocks])
+        self.cells = [(b.type, np.asarray(b.data, dtype=np.int64)) for b in blocks]
+        self.version = self.sim.topology_version
 
     def mesh(self) -> meshio.Mesh:
         import meshio
 
+        self.refresh()
         x = self.sim.positions()
         return meshio.Mesh(
             x,
@@ -204,9 +215,7 @@ def run_scene(
     if steps is not None or every is not None:
         sc = sc.with_steps(steps, every)
     out_dir = Path(out) if out is not None else Path("out") / sc.name
-    gmap = sc.load_gmap()
-    counts = gmap.cell_counts()
-    sim = sc.build(gmap)
+    sim = sc.build()
 
     out_dir.mkdir(parents=True, exist_ok=True)
     frames_dir = out_dir / "frames"
@@ -259,6 +268,7 @@ def run_scene(
         if bar is not None:
             bar.close(sim.steps)
     writer.write(out_dir / "final.vtu")
+    counts = sim.gmap().cell_counts()  # of the final map: a topology change changes them
     if frames:
         write_pvd(out_dir / "animation.pvd", frames)
     summary: dict[str, Any] = {

@@ -224,6 +224,11 @@ class Simulation:
         return self._core.dt
 
     @property
+    def topology_version(self) -> int:
+        """Changes whenever a topology change (a cut, a fracture) relinks the map's darts."""
+        return self._core.topology_version
+
+    @property
     def integrator(self) -> str:
         """The integrator's name."""
         return self._core.integrator

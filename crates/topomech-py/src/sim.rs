@@ -635,6 +635,13 @@ impl PySimulation {
         Ok(self.sim()?.config().dt)
     }
 
+    /// The map's topology version: it changes when a topology change (a cut, a fracture)
+    /// relinks darts, and with it the vertices and cells.
+    #[getter]
+    fn topology_version(&self) -> PyResult<u64> {
+        Ok(self.sim()?.gmap().version())
+    }
+
     /// The integrator's name.
     #[getter]
     fn integrator(&self) -> PyResult<&'static str> {
