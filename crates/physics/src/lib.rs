@@ -859,30 +859,43 @@ impl Simulation {
             }
         }
         if let Some(f) = self.cfg.fracture {
-            let none = Params::new();
-            let measure = match f.criterion {
-                Criterion::Stress => "element_stress",
-                Criterion::Strain => "spring_strains",
-            };
-            self.rules.apply_everywhere(&mut self.g, measure, &none)?;
-            let p: Params = [("threshold".to_string(), Val::F(f.threshold))].into();
-            let rule = if f.criterion == Criterion::Stress {
-                "fracture_stress"
-            } else {
-                "fracture_strain"
-            };
-            let n = self.rules.apply_everywhere(&mut self.g, rule, &p)?.matches;
-            if n > 0 {
-                self.changes.push(TopologyChange {
-                    step: self.steps,
-                    time: self.time,
-                    kind: "fracture",
-                    unsewn: n,
-                });
-                self.after_topology_change();
-            }
+            self.fracture(f)?;
         }
         Ok(())
+    }
+
+    /// Opens now every face (3D) or edge (2D) where the criterion passes the threshold; returns
+    /// how many.
+    pub fn fracture(&mut self, f: Fracture) -> Result<usize, PhysicsError> {
+        let none = Params::new();
+        let measure = match f.criterion {
+            Criterion::Stress => "element_stress",
+            Criterion::Strain => "spring_strains",
+        };
+        if self.rules.rule(measure).is_err() {
+            return Err(PhysicsError::Config(
+                "the stress criterion needs the fracture configured when the simulation is built"
+                    .into(),
+            ));
+        }
+        self.rules.apply_everywhere(&mut self.g, measure, &none)?;
+        let p: Params = [("threshold".to_string(), Val::F(f.threshold))].into();
+        let rule = if f.criterion == Criterion::Stress {
+            "fracture_stress"
+        } else {
+            "fracture_strain"
+        };
+        let n = self.rules.apply_everywhere(&mut self.g, rule, &p)?.matches;
+        if n > 0 {
+            self.changes.push(TopologyChange {
+                step: self.steps,
+                time: self.time,
+                kind: "fracture",
+                unsewn: n,
+            });
+            self.after_topology_change();
+        }
+        Ok(n)
     }
 
     /// Cuts now; returns the number of faces (3D) or edges (2D) unsewn.

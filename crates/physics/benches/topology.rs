@@ -1,0 +1,98 @@
+//! Cost of topology changes against the cost of a step, on a box of ~100k tetrahedra:
+//! one plane cut through the middle, and a fracture burst opening the faces of a slab.
+//! Prints the median of repeated runs (`cargo bench -p topomech-physics`).
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use topomech_gmap::generators::{cuboid, BoxElement};
+use topomech_gmap::mesh::{build, BuildOptions};
+use topomech_physics::{Config, Criterion, Cut, Fracture, ModelSpec, Simulation};
+
+fn simulation(n: [usize; 3]) -> Simulation {
+    let (g, _) = build(
+        &cuboid(n, [2.0, 1.0, 1.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .expect("valid");
+    let cfg = Config {
+        models: vec![ModelSpec {
+            kind: "stretch_cumulated".into(),
+            params: [("stiffness".to_string(), 1e4)].into(),
+        }],
+        fixed: vec!["x < 1e-9".into()],
+        ..Config::default()
+    };
+    Simulation::new(g, cfg).expect("builds")
+}
+
+fn seconds(f: impl FnOnce()) -> f64 {
+    let t = Instant::now();
+    f();
+    t.elapsed().as_secs_f64()
+}
+
+fn main() {
+    let n = [26, 26, 25];
+    let tets = 6 * n[0] * n[1] * n[2];
+    let mut steps = Vec::new();
+    let mut cuts = Vec::new();
+    let mut bursts = Vec::new();
+    let mut cut_faces = 0;
+    let mut burst_faces = 0;
+    for _ in 0..3 {
+        let mut s = simulation(n);
+        steps.push(seconds(|| black_box(s.step()).expect("steps")));
+        cuts.push(seconds(|| {
+            cut_faces = s
+                .cut(&Cut::Plane {
+                    normal: [1.0, 0.0, 0.0],
+                    offset: 1.0,
+                })
+                .expect("cuts")
+        }));
+        // a burst: stretch a slab x in [0.5, 0.6] by 50% along y, then open what passes 20%
+        let mut s = simulation(n);
+        let x: Vec<[f64; 3]> = s
+            .vertex_vec3("rest")
+            .expect("rest")
+            .iter()
+            .map(|p| {
+                if p[0] > 0.5 && p[0] < 0.6 {
+                    [p[0], 1.5 * p[1], p[2]]
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        s.set_vertex_vec3("position", &x).expect("set");
+        bursts.push(seconds(|| {
+            burst_faces = s
+                .fracture(Fracture {
+                    criterion: Criterion::Strain,
+                    threshold: 0.2,
+                })
+                .expect("fractures")
+        }));
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (st, ct, bt) = (median(&mut steps), median(&mut cuts), median(&mut bursts));
+    println!("topology changes on a box of {tets} tetrahedra, stretch_cumulated (median of 3):");
+    println!(
+        "  one step (forces, accumulation, symplectic Euler)   {:8.1} ms",
+        st * 1e3
+    );
+    println!(
+        "  one plane cut ({cut_faces} faces unsewn)                    {:8.1} ms  = {:.2} steps",
+        ct * 1e3,
+        ct / st
+    );
+    println!(
+        "  one fracture burst ({burst_faces} faces opened)             {:8.1} ms  = {:.2} steps",
+        bt * 1e3,
+        bt / st
+    );
+}
