@@ -49,7 +49,7 @@ fn main() {
                     normal: [1.0, 0.0, 0.0],
                     offset: 1.0,
                 })
-                .expect("cuts")
+                .expect("cuts");
         }));
         // a burst: stretch a slab x in [0.5, 0.6] by 50% along y, then open what passes 20%
         let mut s = simulation(n);
@@ -72,7 +72,7 @@ fn main() {
                     criterion: Criterion::Strain,
                     threshold: 0.2,
                 })
-                .expect("fractures")
+                .expect("fractures");
         }));
     }
     let median = |v: &mut Vec<f64>| {
