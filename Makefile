@@ -4,7 +4,7 @@
 #   make develop  build the extension (release) and install the package into .venv
 #   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest
 #   make demo     run `topomech demo` (writes out/demo)
-#   make bench    kernel benchmarks
+#   make bench    kernel benchmarks and the cost of topology changes
 #   make clean    remove build outputs and the venv
 #
 # Stamp files under .venv make the targets idempotent: `make test` twice rebuilds nothing
@@ -60,6 +60,7 @@ demo: $(DEVELOP_STAMP)
 
 bench:
 	$(CARGO) bench -p topomech-gmap
+	$(CARGO) bench -p topomech-physics --bench topology
 
 clean:
 	$(CARGO) clean
