@@ -380,6 +380,12 @@ impl Embedding {
         self.policy
     }
 
+    /// How many times its values were written (or, for a derived embedding, recomputed): a
+    /// cache of anything computed from its values is valid while this count stays.
+    pub fn writes(&self) -> u64 {
+        self.writes
+    }
+
     /// The source and aggregate, if derived.
     pub fn derived(&self) -> Option<Derived> {
         self.derived

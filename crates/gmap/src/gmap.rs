@@ -36,6 +36,25 @@ pub struct GMap {
     pub(crate) n_alive: usize,
     pub(crate) version: u64,
     pub(crate) embeddings: Vec<Embedding>,
+    pub(crate) id: MapId,
+}
+
+/// A number naming one map object: every map, and every clone of one, gets its own, so a cache
+/// keyed by (`id`, `version`) can never be applied to another map.
+#[derive(Debug)]
+pub(crate) struct MapId(pub(crate) u64);
+
+impl MapId {
+    pub(crate) fn fresh() -> Self {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        MapId(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+    }
+}
+
+impl Clone for MapId {
+    fn clone(&self) -> Self {
+        MapId::fresh()
+    }
 }
 
 /// Counts of the cells of a map.
@@ -72,6 +91,7 @@ impl GMap {
             n_alive: 0,
             version: 0,
             embeddings: Vec::new(),
+            id: MapId::fresh(),
         })
     }
 
@@ -98,6 +118,13 @@ impl GMap {
     #[inline]
     pub fn version(&self) -> u64 {
         self.version
+    }
+
+    /// The identity of this map object (unique per map and per clone) and its topology
+    /// version: a cache keyed by both is never applied to another map or topology.
+    #[inline]
+    pub fn identity(&self) -> (u64, u64) {
+        (self.id.0, self.version)
     }
 
     /// Whether `d` is a live dart of this map.
@@ -706,6 +733,7 @@ impl GMap {
             }
         }
         e.refreshed_at = Some((self.version, src.writes));
+        e.writes += 1;
         self.embeddings[id.0 as usize] = e;
     }
 }

@@ -218,6 +218,9 @@ pub struct Rule {
     pub n_locals: usize,
     /// The `where` guard.
     pub guard: Option<TExpr>,
+    /// The embeddings the guard reads (directly or in aggregates): the matches a guard
+    /// accepts change only when the topology or one of these does.
+    pub guard_reads: Vec<usize>,
 }
 
 /// The result of checking files: their shared dimension and embeddings, and their rules.
@@ -899,6 +902,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         changes_topology,
         program,
         n_locals: env.n_locals,
+        guard_reads: guard.as_ref().map(reads_of).unwrap_or_default(),
         guard,
     })
 }
@@ -1417,6 +1421,39 @@ impl ExprCheck<'_, '_> {
             }
         }
     }
+}
+
+/// The embeddings an expression reads, sorted, without repeats.
+fn reads_of(e: &TExpr) -> Vec<usize> {
+    fn walk(e: &TExpr, out: &mut Vec<usize>) {
+        match e {
+            TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
+            TExpr::Read { emb, .. } => out.push(*emb),
+            TExpr::Agg { emb, .. } => out.extend(emb.iter().copied()),
+            TExpr::Bin(_, a, b) => {
+                walk(a, out);
+                walk(b, out);
+            }
+            TExpr::Un(_, a) | TExpr::ToReal(a) => walk(a, out),
+            TExpr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
+            TExpr::If(c, a, b) => {
+                walk(c, out);
+                walk(a, out);
+                walk(b, out);
+            }
+            TExpr::Block(lets, r) => {
+                for (_, v) in lets {
+                    walk(v, out);
+                }
+                walk(r, out);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(e, &mut out);
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// Makes two branch types agree (promoting an integer to a real).

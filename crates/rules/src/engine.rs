@@ -277,9 +277,31 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
 }
 
 /// A rule file loaded and checked, ready to apply on maps of its dimension.
-#[derive(Clone, Debug)]
+///
+/// It keeps, per computation rule, the matches its last global application found (a *plan*):
+/// a cache derived from the map, keyed by the topology version and by the write counts of the
+/// embeddings the rule's guard reads, so it is rebuilt exactly when what it was computed from
+/// changed, and never a second source of truth.
+#[derive(Debug)]
 pub struct RuleSet {
     checked: Checked,
+    plans: std::sync::Mutex<HashMap<usize, Plan>>,
+}
+
+impl Clone for RuleSet {
+    fn clone(&self) -> Self {
+        RuleSet::new(self.checked.clone())
+    }
+}
+
+/// The matches of a computation rule, and what they were computed from.
+#[derive(Debug)]
+struct Plan {
+    /// The map's identity and topology version ([`GMap::identity`]).
+    identity: (u64, u64),
+    /// Write counts of the embeddings the guard reads.
+    reads: Vec<u64>,
+    matches: Vec<Match>,
 }
 
 struct Bound<'a> {
@@ -292,7 +314,10 @@ struct Bound<'a> {
 impl RuleSet {
     /// Wraps checked rules.
     pub fn new(checked: Checked) -> Self {
-        RuleSet { checked }
+        RuleSet {
+            checked,
+            plans: std::sync::Mutex::new(HashMap::new()),
+        }
     }
 
     /// The dimension of the rules.
@@ -476,8 +501,42 @@ impl RuleSet {
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
         let b = self.bind(g, name, params)?;
-        let ms = find_all(g, &b)?;
-        apply_matches(g, &b, &ms)
+        if b.rule.changes_topology {
+            let ms = find_all(g, &b)?;
+            return apply_matches(g, &b, &ms);
+        }
+        // a computation rule: reuse its plan while the topology and the guard's inputs stay
+        let index = self
+            .checked
+            .rules
+            .iter()
+            .position(|r| std::ptr::eq(r, b.rule))
+            .expect("bound rule is ours");
+        let reads: Vec<u64> = b
+            .rule
+            .guard_reads
+            .iter()
+            .map(|&e| g.embedding(b.ids[e]).writes())
+            .collect();
+        let mut plans = self
+            .plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let fresh = plans
+            .get(&index)
+            .is_some_and(|p| p.identity == g.identity() && p.reads == reads);
+        if !fresh {
+            let matches = find_all(g, &b)?;
+            plans.insert(
+                index,
+                Plan {
+                    identity: g.identity(),
+                    reads,
+                    matches,
+                },
+            );
+        }
+        apply_matches(g, &b, &plans[&index].matches)
     }
 
     /// The number of matches [`RuleSet::apply_everywhere`] would apply.

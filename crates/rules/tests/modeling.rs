@@ -372,3 +372,61 @@ rule corners { left { f : <0,1> hook } compute { f.corners = count<0,1>(f.positi
         ]
     );
 }
+
+/// A rule set keeps the matches of its computation rules between applications (a plan). It is
+/// keyed by the map's identity and topology version: two maps whose topologies differ after
+/// the same number of changes, used in turns, each get their own matches; a change of the
+/// topology rebuilds them.
+#[test]
+fn plans_never_cross_maps_or_topologies() {
+    let src = "dimension 2
+embedding position : vec3 on <1,2>
+embedding darts : i64 on <0,2>
+rule edge_darts { left { e : <0,2> hook } compute { e.darts = count<0,2>(e) } }
+rule unsew_edge { left { a : <0> hook   b : <0>   a -2- b } right { a : <0>   b : <0> } }";
+    let (r, _) = load_sources(&[("p.tmr".into(), src.into())]).unwrap();
+    let mesh = grid([3, 1], [3.0, 1.0], GridElement::Quad);
+    let (mut g1, mut g2) = (map(&mesh), map(&mesh));
+    let inner: Vec<topomech_gmap::Dart> = g1.darts().filter(|&d| !g1.is_free(2, d)).collect();
+    let a = inner[0];
+    let b = *inner
+        .iter()
+        .find(|&&d| !g1.orbit(a, OrbitType::edge(2)).contains(&d))
+        .unwrap();
+    r.apply_at(&mut g1, "unsew_edge", &[a], &Params::new())
+        .unwrap();
+    r.apply_at(&mut g2, "unsew_edge", &[b], &Params::new())
+        .unwrap();
+    assert_eq!(g1.version(), g2.version());
+    let values = |g: &GMap| -> Vec<topomech_gmap::Value> {
+        let id = g.require("darts").unwrap();
+        g.darts().map(|d| g.value(id, d).unwrap()).collect()
+    };
+    for _ in 0..2 {
+        r.apply_everywhere(&mut g1, "edge_darts", &Params::new())
+            .unwrap();
+        r.apply_everywhere(&mut g2, "edge_darts", &Params::new())
+            .unwrap();
+    }
+    let (fresh, _) = load_sources(&[("p.tmr".into(), src.into())]).unwrap();
+    let (mut h1, mut h2) = (g1.clone(), g2.clone());
+    fresh
+        .apply_everywhere(&mut h1, "edge_darts", &Params::new())
+        .unwrap();
+    fresh
+        .apply_everywhere(&mut h2, "edge_darts", &Params::new())
+        .unwrap();
+    assert_eq!(values(&g1), values(&h1));
+    assert_eq!(values(&g2), values(&h2));
+    assert_ne!(values(&g1), values(&g2), "the two maps differ");
+    // a topology change on g1: the plan is rebuilt
+    r.apply_at(&mut g1, "unsew_edge", &[b], &Params::new())
+        .unwrap();
+    r.apply_everywhere(&mut g1, "edge_darts", &Params::new())
+        .unwrap();
+    let mut h = g1.clone();
+    fresh
+        .apply_everywhere(&mut h, "edge_darts", &Params::new())
+        .unwrap();
+    assert_eq!(values(&g1), values(&h));
+}
