@@ -8,16 +8,12 @@
     clippy::suboptimal_flops
 )]
 
+mod common;
+
+use common::model;
 use topomech_gmap::generators::{cuboid, BoxElement};
 use topomech_gmap::mesh::{build, BuildOptions, CellKind, Mesh};
 use topomech_physics::{Config, Integrator, ModelSpec, PhysicsError, Simulation};
-
-fn model(kind: &str, params: &[(&str, f64)]) -> ModelSpec {
-    ModelSpec {
-        kind: kind.into(),
-        params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
-    }
-}
 
 fn sim(
     mesh: &Mesh,

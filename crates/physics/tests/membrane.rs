@@ -8,26 +8,16 @@
     clippy::suboptimal_flops
 )]
 
+mod common;
+
+use common::{cross, dot, sub};
 use std::collections::HashMap;
 
 use topomech_gmap::generators::{grid, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions};
 use topomech_physics::{Config, Integrator, ModelSpec, Simulation};
 
-type V = [f64; 3];
-fn sub(a: V, b: V) -> V {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: V, b: V) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: V, b: V) -> V {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
+type V = common::V3;
 fn unit(a: V) -> V {
     let n = dot(a, a).sqrt();
     [a[0] / n, a[1] / n, a[2] / n]

@@ -12,36 +12,14 @@
     clippy::suboptimal_flops
 )]
 
+mod common;
+
+use common::{add, cross, dot, norm, scale, sub, V3};
 use std::collections::HashMap;
 
 use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions, CellKind, Mesh};
 use topomech_physics::{Config, Integrator, ModelSpec, Simulation};
-
-type V3 = [f64; 3];
-
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn scale(s: f64, a: V3) -> V3 {
-    [s * a[0], s * a[1], s * a[2]]
-}
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
-}
 
 type M3 = [[f64; 3]; 3];
 

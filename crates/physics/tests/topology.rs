@@ -11,19 +11,15 @@
     clippy::suboptimal_flops
 )]
 
+mod common;
+
+use common::model;
 use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions, Mesh};
 use topomech_gmap::{GMap, OrbitType, Value};
 use topomech_physics::{
     Config, Criterion, Cut, Fracture, Integrator, ModelSpec, Simulation, TimedEvent,
 };
-
-fn model(kind: &str, params: &[(&str, f64)]) -> ModelSpec {
-    ModelSpec {
-        kind: kind.into(),
-        params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
-    }
-}
 
 fn sim(mesh: &Mesh, models: Vec<ModelSpec>, f: impl FnOnce(&mut Config)) -> Simulation {
     let (g, _) = build(mesh, &BuildOptions::default()).unwrap();

@@ -582,34 +582,8 @@ impl Parser {
 mod tests {
     use super::*;
 
-    const EXAMPLE: &str = "dimension 2
-embedding position : vec3 on <1,2>
-embedding weight   : f64  on <0,1>
-
-# a computation rule: the right side is the left side
-rule face_weight {
-  left { n0 : <0,1> hook }
-  compute { n0.weight = count<0,1>(n0) }
-}
-
-# triangulate a face of any degree (topology change, with relabelling)
-rule triangulate_face {
-  left  { n0 : <0,1> hook }
-  right {
-    n0 : <0,_>
-    n1 : <_,2>
-    n2 : <1,2>
-    n0 -1- n1
-    n1 -0- n2
-  }
-  compute { n2.position = mean<0,1>(n0.position) }
-}
-
-rule unsew_edge {
-  left  { a : <0> hook   b : <0>   a -2- b }
-  right { a : <0>        b : <0> }
-}
-";
+    /// The example of the language's specification, as written there.
+    const EXAMPLE: &str = include_str!("../tests/spec_example.tmr");
 
     #[test]
     fn the_issue_example_parses() {

@@ -260,34 +260,7 @@ fn sew_undoes_unsew() {
 /// centroid, and the centroid is evaluated once per face, not once per dart.
 #[test]
 fn the_specification_example_runs() {
-    let src = "dimension 2
-embedding position : vec3 on <1,2>
-embedding weight   : f64  on <0,1>
-
-# a computation rule: the right side is the left side
-rule face_weight {
-  left { n0 : <0,1> hook }
-  compute { n0.weight = count<0,1>(n0) }
-}
-
-# triangulate a face of any degree (topology change, with relabelling)
-rule triangulate_face {
-  left  { n0 : <0,1> hook }
-  right {
-    n0 : <0,_>
-    n1 : <_,2>
-    n2 : <1,2>
-    n0 -1- n1
-    n1 -0- n2
-  }
-  compute { n2.position = mean<0,1>(n0.position) }
-}
-
-rule unsew_edge {
-  left  { a : <0> hook   b : <0>   a -2- b }
-  right { a : <0>        b : <0> }
-}
-";
+    let src = include_str!("spec_example.tmr");
     let (r, warnings) = load_sources(&[("spec.tmr".into(), src.into())]).unwrap();
     assert!(warnings.is_empty());
     let m = grid([2, 1], [2.0, 1.0], GridElement::Mixed); // one quad, two triangles

@@ -18,7 +18,10 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
 use topomech_gmap::{EmbeddingType, OrbitType, Value};
-use topomech_physics::{Config, Integrator, MaterialRegion, ModelSpec, Simulation, MODELS};
+use topomech_physics::{
+    Config, Criterion, Cut, Fracture, Integrator, MaterialRegion, ModelSpec, Simulation,
+    TimedEvent, TopologyChange, MODELS,
+};
 
 use crate::convert::{rows3_arg, rows_to_array, type_name};
 use crate::errors::{guard, type_error, value_error, Error, InternalError, Result};
@@ -36,9 +39,25 @@ const CONFIG_KEYS: &[&str] = &[
     "prescribed",
     "regions",
     "ground",
+    "events",
+    "fracture",
     "integrator",
     "dt",
 ];
+
+/// The fracture criteria, as `fracture`'s `criterion` names them.
+const CRITERIA: &[&str] = &["stress", "strain"];
+
+fn criterion_arg(name: &str, what: &str) -> Result<Criterion> {
+    match name {
+        "stress" => Ok(Criterion::Stress),
+        "strain" => Ok(Criterion::Strain),
+        _ => Err(value_error(format!(
+            "{what}: unknown criterion '{name}' (expected one of {})",
+            CRITERIA.join(", ")
+        ))),
+    }
+}
 
 /// The integrators' names, as [`Integrator::parse`] reads them.
 const INTEGRATORS: &[&str] = &[
@@ -236,6 +255,134 @@ fn region_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<MaterialRegion> {
     Ok(r)
 }
 
+/// A cut plane: `{"normal": [nx, ny, nz], "offset": o}` (a non-zero normal).
+fn plane_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<Cut> {
+    let mut normal = None;
+    let mut offset = None;
+    for (key, v) in dict_items(obj, what)? {
+        let w = format!("{what}['{key}']");
+        match key.as_str() {
+            "normal" => normal = Some(vec3_arg(&v, &w)?),
+            "offset" => offset = Some(real_arg(&v, &w)?),
+            _ => {
+                return Err(type_error(format!(
+                    "{what} has an unknown key '{key}' (known: normal, offset)"
+                )))
+            }
+        }
+    }
+    let (Some(normal), Some(offset)) = (normal, offset) else {
+        return Err(value_error(format!(
+            "{what} needs both 'normal' and 'offset'"
+        )));
+    };
+    plane_cut(normal, offset, what)
+}
+
+/// The plane `normal . x = offset`, refusing a zero normal.
+fn plane_cut(normal: [f64; 3], offset: f64, what: &str) -> Result<Cut> {
+    if normal.iter().all(|x| *x == 0.0) {
+        return Err(value_error(format!("{what}: the normal must not be zero")));
+    }
+    Ok(Cut::Plane { normal, offset })
+}
+
+/// A timed event: `{"time": t, "kind": "cut", "plane": {"normal": [..], "offset": o}}` or
+/// `{"time": t, "kind": "cut", "where": predicate}`.
+fn event_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<TimedEvent> {
+    let what = format!("events[{k}]");
+    let mut time = None;
+    let mut kind = None;
+    let mut plane = None;
+    let mut pred = None;
+    for (key, v) in dict_items(obj, &what)? {
+        let w = format!("{what}['{key}']");
+        match key.as_str() {
+            "time" => time = Some(real_arg(&v, &w)?),
+            "kind" => kind = Some(str_arg(&v, &w)?),
+            "plane" => plane = Some(plane_arg(&v, &w)?),
+            "where" => pred = Some(str_arg(&v, &w)?),
+            _ => {
+                return Err(type_error(format!(
+                    "{what} has an unknown key '{key}' (known: time, kind, plane, where)"
+                )))
+            }
+        }
+    }
+    let time = time.ok_or_else(|| value_error(format!("{what} has no 'time'")))?;
+    if time < 0.0 {
+        return Err(value_error(format!(
+            "{what}['time'] must be >= 0, got {time}"
+        )));
+    }
+    match kind.as_deref() {
+        Some("cut") => {}
+        Some(other) => {
+            return Err(value_error(format!(
+                "{what}['kind']: unknown event kind '{other}' (expected 'cut')"
+            )))
+        }
+        None => {
+            return Err(value_error(format!(
+                "{what} has no 'kind' (expected 'cut')"
+            )))
+        }
+    }
+    let cut = match (plane, pred) {
+        (Some(p), None) => p,
+        (None, Some(p)) => Cut::Where(p),
+        (Some(_), Some(_)) => {
+            return Err(value_error(format!(
+                "{what} has both 'plane' and 'where': give one"
+            )))
+        }
+        (None, None) => {
+            return Err(value_error(format!(
+                "{what} has no geometry: give 'plane' ({{\"normal\": [..], \"offset\": ..}}) or 'where' (a predicate)"
+            )))
+        }
+    };
+    Ok(TimedEvent { time, cut })
+}
+
+/// Fracture settings: `{"criterion": "stress" | "strain", "threshold": x}`.
+fn fracture_arg(obj: &Bound<'_, PyAny>) -> Result<Fracture> {
+    let what = "fracture";
+    let mut criterion = None;
+    let mut threshold = None;
+    for (key, v) in dict_items(obj, what)? {
+        let w = format!("{what}['{key}']");
+        match key.as_str() {
+            "criterion" => criterion = Some(criterion_arg(&str_arg(&v, &w)?, &w)?),
+            "threshold" => threshold = Some(real_arg(&v, &w)?),
+            _ => {
+                return Err(type_error(format!(
+                    "{what} has an unknown key '{key}' (known: criterion, threshold)"
+                )))
+            }
+        }
+    }
+    let (Some(criterion), Some(threshold)) = (criterion, threshold) else {
+        return Err(value_error(format!(
+            "{what} needs both 'criterion' and 'threshold'"
+        )));
+    };
+    Ok(Fracture {
+        criterion,
+        threshold,
+    })
+}
+
+/// A topology change as a dict `{"step", "time", "kind", "unsewn"}`.
+fn change_dict<'py>(py: Python<'py>, c: &TopologyChange) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("step", c.step)?;
+    d.set_item("time", c.time)?;
+    d.set_item("kind", c.kind)?;
+    d.set_item("unsewn", c.unsewn)?;
+    Ok(d)
+}
+
 /// A [`Config`] from `{key: value}` entries (unset keys keep [`Config::default`]).
 fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
     let mut cfg = Config::default();
@@ -287,6 +434,20 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
                     .map(|(i, r)| region_arg(r, i))
                     .collect::<Result<_>>()?;
             }
+            "events" => {
+                cfg.events = list_arg(v, k)?
+                    .iter()
+                    .enumerate()
+                    .map(|(i, e)| event_arg(e, i))
+                    .collect::<Result<_>>()?;
+            }
+            "fracture" => {
+                cfg.fracture = if v.is_none() {
+                    None
+                } else {
+                    Some(fracture_arg(v)?)
+                };
+            }
             "integrator" => {
                 let name = str_arg(v, k)?;
                 cfg.integrator = Integrator::parse(&name).ok_or_else(|| {
@@ -335,7 +496,10 @@ fn gmap_copy_arg(obj: &Bound<'_, PyAny>) -> PyResult<topomech_gmap::GMap> {
 /// (numbers), `gravity` (3 numbers), `fixed` (predicates on the rest position `x`, `y`, `z`),
 /// `prescribed` (`(predicate, [dx, dy, dz])` pairs), `regions` (dicts with `where` and any of
 /// `density`, `young`, `poisson`), `ground` (a height, or None), `integrator`
-/// (`explicit_euler`, `symplectic_euler`, `implicit_euler` or `static`).
+/// (`explicit_euler`, `symplectic_euler`, `implicit_euler` or `static`), `events` (timed
+/// topology changes: dicts `{"time": t, "kind": "cut", "plane": {"normal": [..], "offset":
+/// o}}` or `{"time": t, "kind": "cut", "where": predicate on the centroid of the shared face
+/// or edge}`), `fracture` (`{"criterion": "stress" | "strain", "threshold": x}`, or None).
 #[pyclass(name = "Simulation", module = "topomech._core")]
 pub(crate) struct PySimulation {
     inner: Simulation,
@@ -454,6 +618,52 @@ impl PySimulation {
             py.check_signals()?;
         }
         Ok(())
+    }
+
+    /// Cuts now along the plane `normal . x = offset`: every face (3D) or edge (2D) between
+    /// two elements whose centroids lie on opposite sides is unsewn, and the vertices on it
+    /// split. Returns how many faces or edges were unsewn (0 when the plane misses the object:
+    /// nothing changes then).
+    fn cut(
+        &mut self,
+        py: Python<'_>,
+        normal: &Bound<'_, PyAny>,
+        offset: &Bound<'_, PyAny>,
+    ) -> PyResult<usize> {
+        let cut = guard(|| {
+            let normal = vec3_arg(normal, "normal")?;
+            let offset = real_arg(offset, "offset")?;
+            plane_cut(normal, offset, "normal")
+        })?;
+        self.run(py, move |sim| Ok(sim.cut(&cut)?))
+    }
+
+    /// Opens now every face (3D) or edge (2D) where the criterion exceeds the threshold:
+    /// `stress` (the mean largest principal stress of the two tetrahedra, Pa; 3D, and only
+    /// when the simulation was built with a stress `fracture`) or `strain` (spring strain
+    /// l / l0 - 1). Returns how many faces or edges were opened.
+    fn fracture(
+        &mut self,
+        py: Python<'_>,
+        criterion: &Bound<'_, PyAny>,
+        threshold: &Bound<'_, PyAny>,
+    ) -> PyResult<usize> {
+        let f = guard(|| {
+            let criterion = criterion_arg(&str_arg(criterion, "criterion")?, "criterion")?;
+            let threshold = real_arg(threshold, "threshold")?;
+            Ok(Fracture {
+                criterion,
+                threshold,
+            })
+        })?;
+        self.run(py, move |sim| Ok(sim.fracture(f)?))
+    }
+
+    /// The topology changes so far, in order: dicts `{"step": after which step, "time",
+    /// "kind": "cut" | "fracture", "unsewn": faces (3D) or edges (2D) unsewn}`.
+    fn topology_changes<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let changes = self.read(|s| Ok(s.topology_changes().to_vec()))?;
+        changes.iter().map(|c| change_dict(py, c)).collect()
     }
 
     /// Current positions, float64 (V, 3).
