@@ -428,3 +428,50 @@ fn cloth_tears_under_stretch() {
     assert!(s.gmap().is_valid());
     assert!((s.total_mass().unwrap() - m0).abs() <= 1e-12 * m0);
 }
+
+/// Fracture and tearing, called at an instant: the same invariants as a cut (valid map, mass,
+/// momentum, positions copied, cumulated springs), then the run goes on without NaN.
+#[test]
+fn fracture_and_tearing_keep_the_invariants() {
+    for (mesh, three) in [
+        (cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra), true),
+        (grid([6, 4], [3.0, 2.0], GridElement::Triangle), false),
+    ] {
+        let models = vec![model("stretch_cumulated", &[("stiffness", 1e4)])];
+        let mut s = sim(&mesh, models, |c| c.gravity = [0.0; 3]);
+        // stretch a slab along y and give everything a velocity
+        let x: Vec<[f64; 3]> = s
+            .vertex_vec3("rest")
+            .unwrap()
+            .iter()
+            .map(|p| {
+                if p[0] > 0.9 && p[0] < 1.6 {
+                    [p[0], 1.5 * p[1], p[2]]
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        let v: Vec<[f64; 3]> = x.iter().map(|p| [0.2, -0.1 * p[0], 0.05 * p[1]]).collect();
+        s.set_vertex_vec3("velocity", &v).unwrap();
+        let before = state(&s);
+        let n = s
+            .fracture(Fracture {
+                criterion: Criterion::Strain,
+                threshold: 0.2,
+            })
+            .unwrap();
+        assert!(n > 0, "something opens");
+        check_change(&before, &s);
+        assert!(s.gmap().cell_counts().components >= 2 || !three);
+        for _ in 0..20 {
+            s.step().unwrap();
+        }
+        assert!(s
+            .vertex_vec3("position")
+            .unwrap()
+            .iter()
+            .all(|p| p.iter().all(|x| x.is_finite())));
+    }
+}
