@@ -11,7 +11,9 @@ Mesh files go through :mod:`topomech.io` (meshio); rule files (``.tmr``) through
 :class:`RuleSet` (:mod:`topomech.rules`); simulations through :class:`Simulation`
 (:mod:`topomech.simulation`), built from a map and a model list or from a scene file
 (:func:`load_scene`, :mod:`topomech.scene`) and run to files by :func:`run_scene`
-(:mod:`topomech.run`); the command line is ``topomech``.
+(:mod:`topomech.run`); topology changes during a run (timed cuts, fracture, tearing) are
+part of the configuration, and :meth:`Simulation.topology_changes` lists them; the command
+line is ``topomech``.
 Every error topomech raises is a :class:`TopomechError`.
 """
 
@@ -35,7 +37,7 @@ from topomech.io import read_gmap, read_mesh, write_vtu
 from topomech.rules import ApplyReport, RuleInfo, RuleSet
 from topomech.run import run_scene
 from topomech.scene import Scene, load_scene, shipped_scenes
-from topomech.simulation import ModelInfo, Simulation, available_models
+from topomech.simulation import ModelInfo, Simulation, TopologyChange, available_models
 
 __all__ = [
     "ApplyError",
@@ -57,6 +59,7 @@ __all__ = [
     "SceneError",
     "Simulation",
     "SimulationError",
+    "TopologyChange",
     "TopologyError",
     "TopomechError",
     "__version__",

@@ -3,9 +3,10 @@
 Each subcommand is a pair of functions: ``_add_NAME(subparsers)`` declares its arguments and
 ``_run_NAME(args) -> exit code`` does the work. Exit codes: 0 success, 1 the input was read but
 fails on its merits (an invalid G-map, a rule the checker refuses, a rule that does not apply,
-a simulation that diverges), 2 a file cannot be read or is refused (a scene included), or the
-arguments are wrong (the reason goes to stderr, without a traceback); 130 a run interrupted by
-Ctrl-C (what was written stays).
+a simulation that diverges, a timed cut that misses the object when its time comes), 2 a file
+cannot be read or is refused (a scene included, with an event after the end of the run), or
+the arguments are wrong (the reason goes to stderr, without a traceback); 130 a run
+interrupted by Ctrl-C (what was written stays).
 """
 
 from __future__ import annotations
@@ -150,9 +151,11 @@ def _add_run(sub: Any) -> None:
             "Run the simulation a scene file describes (or a shipped scene by name: see "
             "--list) and write DIR/summary.json, DIR/final.vtu and, every output.every steps, "
             "DIR/frames/frame_NNNNN.vtu with DIR/animation.pvd (open it in ParaView). Exit 0 "
-            "when every step ran; 1 when the simulation diverged or a step failed (what was "
-            "written stays, summary.json has an 'error' entry); 2 when the scene is refused "
-            "(the reason names the key)."
+            "when every step ran; 1 when the simulation diverged or a step failed, a timed "
+            "cut that separates nothing (misses the object) included (what was written "
+            "stays, summary.json has an 'error' entry naming the step, or the event); 2 when "
+            "the scene is refused (the reason names the key), an event after the end of the "
+            "run included (also when --steps shortens it)."
         ),
     )
     p.add_argument("scene", metavar="SCENE", nargs="?", help="scene file (.toml) or shipped name")
@@ -193,6 +196,27 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
+def _topology_rows(s: dict[str, Any]) -> list[tuple[str, str]]:
+    """The report's line on topology changes, when there were some."""
+    changes = s.get("topology_changes") or []
+    if not changes:
+        return []
+    kinds: dict[str, int] = {}
+    for c in changes:
+        kinds[c["kind"]] = kinds.get(c["kind"], 0) + 1
+    what = ", ".join(_plural(n, k) for k, n in kinds.items())
+    opened = sum(int(c["unsewn"]) for c in changes)
+    cells = "faces" if s["dimension"] == 3 else "edges"
+    first = changes[0]
+    return [
+        (
+            "topology",
+            f"{what}: {opened} {cells} opened from step {first['step']} "
+            f"(t = {_fmt(first['time'])}); {_plural(s['components'], 'component')}",
+        )
+    ]
+
+
 def _report(s: dict[str, Any], out: Path) -> None:
     cells = "volumes" if s["dimension"] == 3 else "faces"
     rate = s["steps_per_second"]
@@ -208,6 +232,7 @@ def _report(s: dict[str, Any], out: Path) -> None:
             f"{s['integrator']}, dt {_fmt(s['dt'])}, {s['steps']} steps, t = {_fmt(s['time'])}",
         ),
         ("mass", _fmt(s["total_mass"])),
+        *_topology_rows(s),
         ("max disp.", _fmt(s["max_displacement"])),
         ("kinetic", _fmt(s["kinetic_energy"])),
         (

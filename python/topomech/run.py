@@ -11,12 +11,22 @@
 
 A divergence stops the run: what was written stays, ``final.vtu`` holds the last good state,
 and ``summary.json`` has an ``error`` entry naming the step and the vertex.
+
+Topology changes (the scene's ``[[event]]`` cuts, ``[fracture]``) split vertices: the files
+written after one have more points (the copies of the split vertices, at the same place at
+first) and cells that reference them, so the pieces come apart in the frames. The summary
+lists the changes (``topology_changes``) and counts the final map's connected ``components``.
+A cut that separates nothing when its time comes (it misses the object) stops the run after
+that step, like a divergence: the summary's ``error`` has ``type`` ``"event"``, the ``event``
+index and a message naming ``event[i]``.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -57,6 +67,8 @@ SUMMARY_KEYS = (
     "edges",
     "faces",
     "volumes",
+    "components",
+    "topology_changes",
     "total_mass",
     "kinetic_energy",
     "momentum",
@@ -188,6 +200,42 @@ def _json_safe(x: Any) -> Any:
     return x
 
 
+#: The kernel's message for a timed cut that separates nothing.
+_MISSED = re.compile(r"at t = (\S+) separates nothing: it misses the object")
+
+
+def _describe_event(e: dict[str, Any]) -> str:
+    """An event as a message shows it: ``a cut at t = 0.5 along the plane ...``."""
+    if "plane" in e:
+        n = ", ".join(f"{float(x):g}" for x in e["plane"]["normal"])
+        geometry = f"along the plane normal [{n}], offset {float(e['plane']['offset']):g}"
+    else:
+        geometry = f"where {json.dumps(e.get('where'))}"
+    return f"a {e['kind']} at t = {float(e['time']):g} {geometry}"
+
+
+def _missed_event(sc: Scene, sim: Simulation, message: str) -> int | None:
+    """The index of the event whose cut separated nothing in the step just done, from the
+    kernel's message: events due at this step run in order, and each one that cut something
+    is recorded as a change at this step, so the one that failed comes after those."""
+    m = _MISSED.search(message)
+    if m is None:
+        return None
+    try:
+        t_msg = float(m.group(1))
+    except ValueError:
+        return None
+    tol = 1e-9 * sim.dt
+    # due now and not at the step before (the first step takes every event up to its time)
+    lower = -math.inf if sim.steps <= 1 else sim.time - sim.dt + tol
+    due = [i for i, e in enumerate(sc.events) if lower < float(e["time"]) <= sim.time + tol]
+    done = sum(1 for c in sim.topology_changes() if c["kind"] == "cut" and c["step"] == sim.steps)
+    if done < len(due) and float(sc.events[due[done]]["time"]) == t_msg:
+        return due[done]
+    same = [i for i, e in enumerate(sc.events) if float(e["time"]) == t_msg]
+    return same[0] if same else None
+
+
 def run_scene(
     scene: Scene | PathLike,
     out: PathLike | None = None,
@@ -200,15 +248,19 @@ def run_scene(
     (default ``out/<scene name>``); ``steps`` and ``every`` override the scene's. Returns the
     summary written to ``summary.json``: ``scene``, ``name``, ``dimension``, ``models``,
     ``integrator``, ``dt``, ``steps`` (done), ``steps_requested``, ``time``, ``darts``,
-    ``vertices``, ``edges``, ``faces``, ``volumes``, ``total_mass``, ``kinetic_energy``,
+    ``vertices``, ``edges``, ``faces``, ``volumes``, ``components`` (connected components of
+    the final map: 2 or more once a cut or a fracture split the object), ``topology_changes``
+    (a list of ``{"step", "time", "kind": "cut" | "fracture", "unsewn"}``, ``unsewn`` counting
+    the faces, in 3D, or edges, in 2D, opened), ``total_mass``, ``kinetic_energy``,
     ``momentum``, ``max_displacement``, ``frames``, ``wall_seconds`` (the whole run),
     ``step_seconds`` (in steps only), ``steps_per_second``, ``outputs`` and
     ``topomech_version`` (a number that is not finite, after a divergence, is null); plus
-    ``error`` (``type``, ``message``, and ``step``, ``vertex`` for
-    a divergence) when a step failed.
+    ``error`` (``type``, ``message``, and ``step``, ``vertex`` for a divergence, ``event`` for
+    a timed cut that separated nothing) when a step failed.
 
     ``progress``: True for a progress bar on stderr, or a callable ``(done, total)``.
-    Raises :class:`SceneError` for a scene that is refused (nothing is written then).
+    Raises :class:`SceneError` for a scene that is refused (nothing is written then), an
+    event after the end of the run included (with ``steps`` too).
     """
     t0 = time.perf_counter()
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
@@ -261,7 +313,19 @@ def run_scene(
             "vertex": int(e.vertex),
         }
     except SimulationError as e:
-        error = {"type": "simulation", "message": str(e), "step": sim.steps + 1}
+        missed = _missed_event(sc, sim, str(e))
+        if missed is None:
+            error = {"type": "simulation", "message": str(e), "step": sim.steps + 1}
+        else:
+            error = {
+                "type": "event",
+                "message": (
+                    f"event[{missed}] ({_describe_event(sc.events[missed])}) separates "
+                    f"nothing at step {sim.steps} (t = {sim.time:g}): it misses the object"
+                ),
+                "step": sim.steps,
+                "event": missed,
+            }
     except KeyboardInterrupt:
         error = {"type": "interrupted", "message": "interrupted", "step": sim.steps + 1}
     finally:
@@ -286,6 +350,8 @@ def run_scene(
         "edges": counts["edges"],
         "faces": counts["faces"],
         "volumes": counts["volumes"],
+        "components": counts["components"],
+        "topology_changes": [dict(c) for c in sim.topology_changes()],
         "total_mass": sim.total_mass(),
         "kinetic_energy": sim.kinetic_energy(),
         "momentum": [float(x) for x in sim.momentum()],

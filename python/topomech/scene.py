@@ -38,6 +38,21 @@ the fixed vertices, gravity, the integrator and how often to write frames::
     [output]
     every = 10                         # a frame every N steps (0: none); default steps / 50
 
+    [[event]]                          # a topology change at a time (one table per event)
+    time = 0.5                         # s, >= 0, at most the end of the run (steps x dt)
+    kind = "cut"
+    plane = { normal = [1.0, 0.0, 0.0], offset = 0.5 }   # separates the elements whose
+                                       # centroids lie on opposite sides of normal . x = offset
+    # where = "abs(x - 0.5) < 0.01"    # or: opens the faces (3D) or edges (2D) between two
+                                       # elements whose centroid x, y, z satisfies it
+
+    [fracture]                         # tested after every step
+    criterion = "stress"               # stress: mean largest principal stress of the two
+                                       # tetrahedra of a face (Pa, tetrahedra only); strain:
+                                       # spring strain l / l0 - 1 (the mean over a face's
+                                       # edges in 3D, an edge's in 2D: tearing)
+    threshold = 1e6                    # a face (3D) or edge (2D) opens above it
+
 Generators: ``box`` (``element`` ``tet``, ``hex``, ``wedge``, ``pyramid`` or ``mixed``; ``size``
 and ``cells`` of 3) and ``grid`` or ``rectangle`` (``element`` ``tri``, ``quad`` or ``mixed``;
 ``size`` and ``cells`` of 2, in the plane z = 0); the box has a corner at the origin.
@@ -46,7 +61,11 @@ Predicates are expressions of the rule language over ``x``, ``y``, ``z``
 
 Every problem raises :class:`SceneError` naming the key by its path: ``integrator.dtt:
 unknown key``, ``material.density: expected a number, got "abc"``, ``model[1].kind: ...``
-(arrays of tables are numbered from 0).
+(arrays of tables are numbered from 0). An event after the end of the run (``time`` past
+``steps x dt``, also when a shorter step count is asked for) is refused as
+``event[i].time: ... after the end of the run``. A cut that separates nothing when its time
+comes (a plane or predicate that misses the object) cannot be known before the run: that
+step fails (see :func:`topomech.run.run_scene`).
 """
 
 from __future__ import annotations
@@ -75,6 +94,8 @@ if TYPE_CHECKING:
     from topomech._gmap import PathLike
 
 __all__ = [
+    "EVENT_KINDS",
+    "FRACTURE_CRITERIA",
     "INTEGRATORS",
     "PLANNED_MODELS",
     "MeshSpec",
@@ -116,6 +137,12 @@ GRID_ELEMENTS = {
     "mixed": "mixed",
 }
 GENERATORS = ("box", "grid", "rectangle")
+
+#: The kinds of ``[[event]]`` tables.
+EVENT_KINDS = ("cut",)
+
+#: The fracture criteria.
+FRACTURE_CRITERIA = ("stress", "strain")
 
 #: Keys of a model table that set the material rather than the model.
 MATERIAL_KEYS_IN_MODEL = ("young", "poisson")
@@ -399,17 +426,45 @@ class Scene:
         """The model kinds, in order."""
         return [str(m["kind"]) for m in self.config["models"]]
 
+    @property
+    def end_time(self) -> float:
+        """The time at the end of the run: ``steps x dt``."""
+        return self.steps * self.dt
+
+    @property
+    def events(self) -> list[dict[str, Any]]:
+        """The timed events, as :class:`Simulation` takes them (``time``, ``kind`` and
+        ``plane`` or ``where``)."""
+        return list(self.config.get("events", []))
+
     def _fail(self) -> _Fail:
         return _Fail(str(self.path) if self.path is not None else "<scene>")
 
+    def check_events(self) -> None:
+        """Refuses an event that the run would never reach (its time after ``steps x dt``),
+        naming ``event[i].time``."""
+        end = self.end_time
+        for i, e in enumerate(self.events):
+            t = float(e["time"])
+            if t > end + 1e-9 * self.dt:
+                raise self._fail()(
+                    f"event[{i}].time",
+                    f"t = {t:g} is after the end of the run (t = {end:g}: {self.steps} steps "
+                    f"of dt {self.dt:g}): the event would never happen",
+                )
+
     def with_steps(self, steps: int | None = None, every: int | None = None) -> Scene:
         """The scene with another step count or frame interval. The frame interval stays
-        the file's ``output.every`` if it gives one, else it follows the steps (steps / 50)."""
+        the file's ``output.every`` if it gives one, else it follows the steps (steps / 50).
+        Raises :class:`SceneError` when an event falls after the end of the shorter run."""
         steps = self.steps if steps is None else steps
         if every is not None:
-            return replace(self, steps=steps, every=every, every_given=True)
-        every = self.every if self.every_given else _default_every(steps)
-        return replace(self, steps=steps, every=every)
+            sc = replace(self, steps=steps, every=every, every_given=True)
+        else:
+            every = self.every if self.every_given else _default_every(steps)
+            sc = replace(self, steps=steps, every=every)
+        sc.check_events()
+        return sc
 
     def load_gmap(self) -> GMap:
         """The scene's G-map: the mesh file read, or the generated mesh."""
@@ -442,8 +497,10 @@ class Scene:
         mesh's dimension or matches nothing, a predicate that selects nothing, ...), with
         the :class:`SimulationError` as its cause."""
         fail = self._fail()
+        self.check_events()
         g = self.load_gmap() if gmap is None else gmap
         _check_models(self.config["models"], g.dimension, fail)
+        _check_fracture(self.config.get("fracture"), g, fail)
         try:
             return Simulation(g, self.config)
         except SimulationError as e:
@@ -471,6 +528,87 @@ _KERNEL_WHAT = {
     "material region": "region",
     "model": "model",
 }
+
+
+def _check_fracture(fracture: Mapping[str, Any] | None, g: GMap, fail: _Fail) -> None:
+    """Refuses the stress criterion on a mesh it cannot measure: it needs tetrahedra."""
+    if fracture is None or fracture["criterion"] != "stress":
+        return
+    if g.dimension != 3:
+        raise fail(
+            "fracture.criterion",
+            "the stress criterion needs a volume mesh of tetrahedra, the mesh is 2D "
+            "(a surface tears by 'strain')",
+        )
+    others = sorted(set(g.to_flat().kinds) - {"tetra"})
+    if others:
+        raise fail(
+            "fracture.criterion",
+            f"the stress criterion measures tetrahedra only, the mesh has {', '.join(others)} "
+            "cells (use 'strain')",
+        )
+
+
+def _events(tables: list[_Table], fail: _Fail) -> list[dict[str, Any]]:
+    """The ``[[event]]`` tables as :class:`Simulation` takes them."""
+    events: list[dict[str, Any]] = []
+    for t in tables:
+        time = t.number("time", nonneg=True)
+        kind = t.string("kind")
+        t.done(extra=("plane", "where"))
+        if time is None:
+            raise fail(t.key("time"), "missing: when the event happens (s, >= 0)")
+        if kind is None:
+            raise fail(t.key("kind"), f"missing: the event's kind ({_or(EVENT_KINDS)})")
+        if kind not in EVENT_KINDS:
+            raise fail(
+                t.key("kind"), f"unknown event kind {_show(kind)} (expected {_or(EVENT_KINDS)})"
+            )
+        event: dict[str, Any] = {"time": time, "kind": kind}
+        if t.has("plane") and t.has("where"):
+            raise fail(
+                t.key("where"),
+                f"give either {t.key('plane')} or {t.key('where')}, not both",
+            )
+        if t.has("plane"):
+            p = t.table("plane")
+            normal = p.vector("normal", 3)
+            offset = p.number("offset")
+            p.done()
+            if normal is None:
+                raise fail(p.key("normal"), "missing: the plane's normal [nx, ny, nz]")
+            if all(x == 0.0 for x in normal):
+                raise fail(p.key("normal"), "must not be zero")
+            if offset is None:
+                raise fail(p.key("offset"), "missing: the plane is normal . x = offset")
+            event["plane"] = {"normal": list(normal), "offset": offset}
+        elif t.has("where"):
+            where = _required_str(t, "where", fail)
+            event["where"] = _check_predicate(where, t.key("where"), fail)
+        else:
+            raise fail(
+                t.path,
+                "missing the cut's geometry: give plane = { normal = [nx, ny, nz], "
+                'offset = d } or where = "predicate on x, y, z"',
+            )
+        events.append(event)
+    return events
+
+
+def _fracture(top: _Table, fail: _Fail) -> dict[str, Any] | None:
+    """The ``[fracture]`` table as :class:`Simulation` takes it (None without one)."""
+    if not top.has("fracture"):
+        return None
+    t = top.table("fracture")
+    t.done(extra=("criterion", "threshold"))
+    if not t.has("criterion"):
+        raise fail(t.key("criterion"), f"missing: {_or(FRACTURE_CRITERIA)}")
+    criterion = t.choice("criterion", FRACTURE_CRITERIA, "strain")
+    threshold = t.number("threshold", positive=True)
+    if threshold is None:
+        unit = "a stress in Pa" if criterion == "stress" else "a strain, l / l0 - 1"
+        raise fail(t.key("threshold"), f"missing: {unit} above which a face or edge opens")
+    return {"criterion": criterion, "threshold": threshold}
 
 
 def _default_every(steps: int) -> int:
@@ -710,6 +848,8 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     out = top.table("output")
     every_v = out.integer("every", None, minimum=0)
     out.done()
+    events = _events(top.tables("event"), fail)
+    fracture = _fracture(top, fail)
     top.done()
 
     config: dict[str, Any] = {
@@ -725,6 +865,8 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         "ground": ground,
         "integrator": kind,
         "dt": dt,
+        "events": events,
+        "fracture": fracture,
     }
     scene = Scene(
         name=name,
@@ -737,6 +879,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         every_given=every_v is not None,
         origins=tuple(origins),
     )
+    scene.check_events()
     return scene
 
 

@@ -43,7 +43,14 @@ from topomech._gmap import GMap
 if TYPE_CHECKING:
     from topomech._gmap import PathLike
 
-__all__ = ["DivergenceError", "ModelInfo", "Simulation", "SimulationError", "available_models"]
+__all__ = [
+    "DivergenceError",
+    "ModelInfo",
+    "Simulation",
+    "SimulationError",
+    "TopologyChange",
+    "available_models",
+]
 
 #: A model as :class:`Simulation` takes it: its kind alone, or ``{"kind": ..., param: value}``.
 ModelArg = Union[str, Mapping[str, Union[str, float]]]
@@ -61,6 +68,19 @@ class ModelInfo(TypedDict):
     params: dict[str, float]
     #: What it needs of the mesh (``edges``, ``tetrahedra``).
     needs: str
+
+
+class TopologyChange(TypedDict):
+    """A topology change that happened during a run (:meth:`Simulation.topology_changes`)."""
+
+    #: The step after which it happened (0: before the first step).
+    step: int
+    #: The simulated time then.
+    time: float
+    #: ``cut`` (a timed event or :meth:`Simulation.cut`) or ``fracture``.
+    kind: str
+    #: Faces (3D) or edges (2D) unsewn.
+    unsewn: int
 
 
 def available_models() -> list[ModelInfo]:
@@ -92,7 +112,23 @@ class Simulation:
       ..., "young": ..., "poisson": ...}`` giving some elements another material;
     - ``ground``: the height of a ground plane ``y = ground``, or None;
     - ``integrator``: ``explicit_euler``, ``symplectic_euler``, ``implicit_euler`` or
-      ``static`` (each step solves for the equilibrium); ``dt``: the time step.
+      ``static`` (each step solves for the equilibrium); ``dt``: the time step;
+    - ``events``: topology changes at given times, dicts ``{"time": t, "kind": "cut",
+      "plane": {"normal": [nx, ny, nz], "offset": o}}`` (elements whose centroids lie on
+      opposite sides of the plane ``normal . x = offset`` are separated) or ``{"time": t,
+      "kind": "cut", "where": predicate}`` (a predicate on the centroid ``x``, ``y``, ``z``
+      of the face, in 3D, or edge, in 2D, shared by two elements). An event happens after
+      the first step that reaches its time; one that separates nothing makes that step raise
+      :class:`SimulationError` (``... misses the object``);
+    - ``fracture``: ``{"criterion": "stress" | "strain", "threshold": x}``, tested after
+      every step: ``stress`` opens a face between two tetrahedra whose mean largest
+      principal stress exceeds ``x`` (Pa, 3D only), ``strain`` a face whose edges' mean
+      spring strain ``l / l0 - 1`` exceeds ``x`` (3D), or an edge whose strain does (2D:
+      tearing).
+
+    After a topology change the vertices on the opened faces or edges are split (their
+    copies keep the position and velocity), so :attr:`n_vertices` grows; the total mass
+    stays the same.
 
     The kernel object is :attr:`core`.
     """
@@ -131,6 +167,33 @@ class Simulation:
         """Runs ``n`` time steps; raises :class:`DivergenceError` on divergence (the state is
         then the one before the failed step)."""
         self._core.step(n)
+
+    # ------------------------------------------------------------------ topology
+
+    def cut(self, normal: Any, offset: float) -> int:
+        """Cuts now along the plane ``normal . x = offset``: every face (3D) or edge (2D)
+        between two elements whose centroids lie on opposite sides is unsewn and the vertices
+        on it split. Returns how many faces or edges were unsewn (0 when the plane misses the
+        object; nothing changes then)."""
+        return self._core.cut(np.ascontiguousarray(normal, dtype=np.float64), offset)
+
+    def fracture(self, criterion: str, threshold: float) -> int:
+        """Opens now every face (3D) or edge (2D) where ``criterion`` (``"stress"`` or
+        ``"strain"``, see the ``fracture`` setting) exceeds ``threshold``; returns how many.
+        The stress criterion needs the simulation built with a stress ``fracture``."""
+        return self._core.fracture(criterion, threshold)
+
+    def topology_changes(self) -> list[TopologyChange]:
+        """The topology changes so far, in order."""
+        return [
+            TopologyChange(
+                step=int(c["step"]),
+                time=float(c["time"]),
+                kind=str(c["kind"]),
+                unsewn=int(c["unsewn"]),
+            )
+            for c in self._core.topology_changes()
+        ]
 
     # ------------------------------------------------------------------ state
 
