@@ -240,6 +240,14 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
+    /// How many errors were reported so far.
+    fn errors(&self) -> usize {
+        self.out
+            .iter()
+            .filter(|d| d.severity == Severity::Error)
+            .count()
+    }
+
     fn error(&mut self, pos: Pos, condition: &'static str, message: String) {
         self.out.push(Diagnostic {
             file: self.file.to_string(),
@@ -534,11 +542,7 @@ fn sources(
 
 #[allow(clippy::too_many_lines)]
 fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> Option<Rule> {
-    let errors_before = c
-        .out
-        .iter()
-        .filter(|d| d.severity == Severity::Error)
-        .count();
+    let errors_before = c.errors();
     let rn = r.name.as_str();
     let Some(left) = &r.left else {
         c.error(r.pos, "syntax", format!("rule '{rn}' has no left graph"));
@@ -633,11 +637,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
             format!("rule '{rn}': the left graph is empty; it needs a hook"),
         );
     }
-    let errors_now = c
-        .out
-        .iter()
-        .filter(|d| d.severity == Severity::Error)
-        .count();
+    let errors_now = c.errors();
     if errors_now > errors_before {
         return None; // later conditions rely on names, arity and dimensions
     }
@@ -723,11 +723,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
             c.error(nd.orbit_pos, "hook", format!("rule '{rn}': hook '{}' has a different orbit type from hook '{}': hooks of one rule are matched in parallel", nodes[h].name, nodes[hooks[0]].name));
         }
     }
-    let errors_now = c
-        .out
-        .iter()
-        .filter(|d| d.severity == Severity::Error)
-        .count();
+    let errors_now = c.errors();
     if errors_now > errors_before {
         return None;
     }
@@ -880,11 +876,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         }
     }
     check_embeddings(c, rn, &nodes, &right_arcs, &left_arcs, embs, &writes, arity);
-    let errors_now = c
-        .out
-        .iter()
-        .filter(|d| d.severity == Severity::Error)
-        .count();
+    let errors_now = c.errors();
     if errors_now > errors_before {
         return None;
     }

@@ -435,31 +435,23 @@ impl Parser {
 
     fn unary(&mut self) -> R<Expr> {
         let pos = self.pos();
-        if self.eat_punct("-") {
-            self.depth += 1;
-            if self.depth > MAX_DEPTH {
-                return self.err("expression nested too deeply");
-            }
-            let e = self.unary()?;
-            self.depth -= 1;
-            return Ok(Expr {
-                kind: ExprKind::Unary(UnOp::Neg, Box::new(e)),
-                pos,
-            });
+        let op = if self.eat_punct("-") {
+            UnOp::Neg
+        } else if self.eat_punct("!") {
+            UnOp::Not
+        } else {
+            return self.primary();
+        };
+        self.depth += 1;
+        if self.depth > MAX_DEPTH {
+            return self.err("expression nested too deeply");
         }
-        if self.eat_punct("!") {
-            self.depth += 1;
-            if self.depth > MAX_DEPTH {
-                return self.err("expression nested too deeply");
-            }
-            let e = self.unary()?;
-            self.depth -= 1;
-            return Ok(Expr {
-                kind: ExprKind::Unary(UnOp::Not, Box::new(e)),
-                pos,
-            });
-        }
-        self.primary()
+        let e = self.unary()?;
+        self.depth -= 1;
+        Ok(Expr {
+            kind: ExprKind::Unary(op, Box::new(e)),
+            pos,
+        })
     }
 
     fn primary(&mut self) -> R<Expr> {
