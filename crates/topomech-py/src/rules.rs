@@ -46,11 +46,11 @@ fn loaded(
     }
 }
 
-/// The map behind `obj`: a `topomech._core.GMap`, or anything whose `core` attribute is one
-/// (the `topomech.GMap` wrapper), borrowed for writing.
-fn gmap_arg<'py>(obj: &Bound<'py, PyAny>) -> PyResult<PyRefMut<'py, PyGMap>> {
-    let core = match obj.cast::<PyGMap>() {
-        Ok(g) => g.clone(),
+/// The `topomech._core.GMap` behind `obj`: the object itself, or its `core` attribute (the
+/// `topomech.GMap` wrapper).
+pub(crate) fn gmap_core<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyGMap>> {
+    match obj.cast::<PyGMap>() {
+        Ok(g) => Ok(g.clone()),
         Err(_) => obj
             .getattr("core")
             .ok()
@@ -60,9 +60,13 @@ fn gmap_arg<'py>(obj: &Bound<'py, PyAny>) -> PyResult<PyRefMut<'py, PyGMap>> {
                     "gmap must be a topomech.GMap or a topomech._core.GMap, got {}",
                     type_name(obj)
                 )))
-            })?,
-    };
-    Ok(core.try_borrow_mut()?)
+            }),
+    }
+}
+
+/// The map behind `obj` (see [`gmap_core`]), borrowed for writing.
+fn gmap_arg<'py>(obj: &Bound<'py, PyAny>) -> PyResult<PyRefMut<'py, PyGMap>> {
+    Ok(gmap_core(obj)?.try_borrow_mut()?)
 }
 
 /// The hook darts: one int, or a sequence of ints (one per hook), each a live dart of `g`.

@@ -468,22 +468,9 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
     Ok(cfg)
 }
 
-/// The map behind `obj`: a `topomech._core.GMap`, or anything whose `core` attribute is one
-/// (the `topomech.GMap` wrapper), copied.
+/// The map behind `obj` (see [`crate::rules::gmap_core`]), copied.
 fn gmap_copy_arg(obj: &Bound<'_, PyAny>) -> PyResult<topomech_gmap::GMap> {
-    let core = match obj.cast::<PyGMap>() {
-        Ok(g) => g.clone(),
-        Err(_) => obj
-            .getattr("core")
-            .ok()
-            .and_then(|c| c.cast_into::<PyGMap>().ok())
-            .ok_or_else(|| {
-                PyErr::from(type_error(format!(
-                    "gmap must be a topomech.GMap or a topomech._core.GMap, got {}",
-                    type_name(obj)
-                )))
-            })?,
-    };
+    let core = crate::rules::gmap_core(obj)?;
     let g = core.try_borrow()?;
     Ok(g.map()?.clone())
 }
