@@ -13,6 +13,9 @@
     clippy::large_types_passed_by_value
 )]
 
+mod common;
+
+use common::{add, cross, dot, norm, scale, sub, Flat};
 use std::collections::HashMap;
 use std::ops::{Add, Div, Mul, Sub};
 
@@ -212,83 +215,37 @@ fn angular_bending_matches_the_reference() {
             ..Config::default()
         };
         let mut sim = Simulation::new(g, cfg).unwrap();
-        // reference state
-        let n = mesh.points.len();
+        // the reference: lumped masses (a polygon's area shared by its vertices), springs
         let rest = mesh.points.clone();
-        let mut x = rest.clone();
-        let mut v = vec![[0.0; 3]; n];
-        let mut m = vec![0.0; n];
+        let mut m = vec![0.0; rest.len()];
         for c in &mesh.cells {
             let p = |i: usize| mesh.points[c[i]];
             let area: f64 = (1..c.len() - 1)
-                .map(|k| {
-                    let (a, b) = (
-                        [p(k)[0] - p(0)[0], p(k)[1] - p(0)[1], 0.0],
-                        [p(k + 1)[0] - p(0)[0], p(k + 1)[1] - p(0)[1], 0.0],
-                    );
-                    0.5 * (a[0] * b[1] - a[1] * b[0]).abs()
-                })
+                .map(|k| 0.5 * norm(cross(sub(p(k), p(0)), sub(p(k + 1), p(0)))))
                 .sum();
             for &i in c {
                 m[i] += area / c.len() as f64;
             }
         }
-        let fixed: Vec<bool> = rest.iter().map(|p| p[0] < 1e-9).collect();
+        let mut r = Flat::new(rest.clone(), m, 1e-9, gravity, dt);
         let springs: Vec<(usize, usize, f64)> = mesh
             .cells
             .iter()
             .flat_map(|c| (0..c.len()).map(move |j| (c[j], c[(j + 1) % c.len()])))
-            .map(|(a, b)| {
-                (
-                    a,
-                    b,
-                    ((rest[b][0] - rest[a][0]).powi(2) + (rest[b][1] - rest[a][1]).powi(2)).sqrt(),
-                )
-            })
+            .map(|(a, b)| (a, b, norm(sub(rest[b], rest[a]))))
             .collect();
         for _ in 0..100 {
             sim.step().unwrap();
-            let mut f = bending_forces(&mesh, &x, &v, &rest, kb, cb);
+            let mut f = bending_forces(&mesh, &r.x, &r.v, &rest, kb, cb);
             for &(a, b, l0) in &springs {
-                let d = [x[b][0] - x[a][0], x[b][1] - x[a][1], x[b][2] - x[a][2]];
-                let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                for k in 0..3 {
-                    let fa = ks * (l - l0) * d[k] / l;
-                    f[a][k] += fa;
-                    f[b][k] -= fa;
-                }
+                let d = sub(r.x[b], r.x[a]);
+                let fa = scale(ks * (norm(d) - l0) / norm(d), d);
+                f[a] = add(f[a], fa);
+                f[b] = sub(f[b], fa);
             }
-            for i in 0..n {
-                if fixed[i] {
-                    continue;
-                }
-                for k in 0..3 {
-                    v[i][k] += dt * (f[i][k] / m[i] + gravity[k]);
-                    x[i][k] += dt * v[i][k];
-                }
-            }
+            r.step(&f);
         }
-        let index: HashMap<[u64; 3], usize> = rest
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (p.map(f64::to_bits), i))
-            .collect();
-        let srest = sim.vertex_vec3("rest").unwrap();
-        let sx = sim.vertex_vec3("position").unwrap();
-        let disp = x
-            .iter()
-            .zip(&rest)
-            .map(|(a, b)| (a[2] - b[2]).abs())
-            .fold(0.0, f64::max);
-        assert!(disp > 1e-3, "the sheet falls");
-        let worst = srest
-            .iter()
-            .zip(&sx)
-            .map(|(r, p)| {
-                let i = index[&r.map(f64::to_bits)];
-                (0..3).map(|k| (p[k] - x[i][k]).abs()).fold(0.0, f64::max) / disp
-            })
-            .fold(0.0, f64::max);
+        let worst = r.worst_relative(&sim, 1e-3);
         assert!(worst < 1e-10, "{element:?}: relative difference {worst:e}");
     }
 }
@@ -379,20 +336,14 @@ fn linear_bending_matches_the_reference() {
         ..Config::default()
     };
     let mut sim = Simulation::new(g, cfg).unwrap();
-    let n = mesh.points.len();
     let rest = mesh.points.clone();
-    let mut x = rest.clone();
-    let mut v = vec![[0.0; 3]; n];
-    let mut m = vec![0.0; n];
+    let mut m = vec![0.0; rest.len()];
     for c in &mesh.cells {
         for &i in c {
             m[i] += 0.5 * 0.5 / 4.0;
         }
     }
-    let fixed: Vec<bool> = rest.iter().map(|p| p[0] < 1e-9).collect();
-    let len = |a: [f64; 3], b: [f64; 3]| {
-        ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt()
-    };
+    let mut r = Flat::new(rest.clone(), m, 1e-9, gravity, dt);
     let mut springs: Vec<(usize, usize, f64, f64)> = mesh
         .cells
         .iter()
@@ -404,44 +355,19 @@ fn linear_bending_matches_the_reference() {
     springs.extend(bend.into_iter().map(|(a, b)| (a, b, kb, cb)));
     for _ in 0..100 {
         sim.step().unwrap();
-        let mut f = vec![[0.0; 3]; n];
+        let mut f = vec![[0.0; 3]; rest.len()];
         for &(a, b, k, c) in &springs {
-            let d = [x[b][0] - x[a][0], x[b][1] - x[a][1], x[b][2] - x[a][2]];
-            let l = len(x[a], x[b]);
-            let u = d.map(|t| t / l);
-            let dv: f64 = (0..3).map(|t| (v[b][t] - v[a][t]) * u[t]).sum();
-            let s = k * (l - len(rest[a], rest[b])) + c * dv;
-            for t in 0..3 {
-                f[a][t] += s * u[t];
-                f[b][t] -= s * u[t];
-            }
+            let d = sub(r.x[b], r.x[a]);
+            let u = scale(1.0 / norm(d), d);
+            let fa = scale(
+                k * (norm(d) - norm(sub(rest[b], rest[a]))) + c * dot(sub(r.v[b], r.v[a]), u),
+                u,
+            );
+            f[a] = add(f[a], fa);
+            f[b] = sub(f[b], fa);
         }
-        for i in 0..n {
-            if !fixed[i] {
-                for t in 0..3 {
-                    v[i][t] += dt * (f[i][t] / m[i] + gravity[t]);
-                    x[i][t] += dt * v[i][t];
-                }
-            }
-        }
+        r.step(&f);
     }
-    let index: HashMap<[u64; 3], usize> = rest
-        .iter()
-        .enumerate()
-        .map(|(i, p)| (p.map(f64::to_bits), i))
-        .collect();
-    let disp = x
-        .iter()
-        .zip(&rest)
-        .map(|(a, b)| (a[2] - b[2]).abs())
-        .fold(0.0, f64::max);
-    assert!(disp > 1e-3);
-    let worst = sim
-        .vertex_vec3("rest")
-        .unwrap()
-        .iter()
-        .zip(sim.vertex_vec3("position").unwrap())
-        .map(|(r, p)| len(p, x[index[&r.map(f64::to_bits)]]) / disp)
-        .fold(0.0, f64::max);
+    let worst = r.worst_relative(&sim, 1e-3);
     assert!(worst < 1e-10, "relative difference {worst:e}");
 }
