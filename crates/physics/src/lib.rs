@@ -409,8 +409,10 @@ pub struct Simulation {
     time: f64,
     steps: u64,
     /// vertex index of each dart, and the number of vertices
-    labels: (Vec<u32>, usize),
-    labels_version: u64,
+    /// One dart per vertex (the smallest of its orbit), in vertex order; derived from the map
+    /// and rebuilt when its topology version changes.
+    vertex_darts: Vec<Dart>,
+    vertex_darts_version: u64,
     /// The diagonal of the rest bounding box: no vertex moves that far in one step.
     size: f64,
     /// Which events have happened.
@@ -732,8 +734,8 @@ impl Simulation {
             ("damping".to_string(), Val::F(cfg.damping)),
         ]
         .into();
-        let labels = g.orbit_labels(OrbitType::vertex(dim));
-        let labels_version = g.version();
+        let vertex_darts = g.orbit_representatives(OrbitType::vertex(dim));
+        let vertex_darts_version = g.version();
         let size = {
             let pos = g
                 .require("rest")
@@ -758,8 +760,8 @@ impl Simulation {
             step_params,
             time: 0.0,
             steps: 0,
-            labels,
-            labels_version,
+            vertex_darts,
+            vertex_darts_version,
             size,
             events_done: vec![false; cfg_events],
             changes: Vec::new(),
@@ -943,7 +945,7 @@ impl Simulation {
     /// rule application).
     fn after_topology_change(&mut self) {
         self.g.refresh_derived();
-        self.refresh_labels();
+        self.refresh_vertex_darts();
     }
 
     /// Refuses events that a run ending at `end_time` would never reach.
@@ -1196,24 +1198,19 @@ impl Simulation {
         self.steps
     }
 
-    fn refresh_labels(&mut self) {
-        if self.labels_version != self.g.version() {
-            self.labels = self.g.orbit_labels(OrbitType::vertex(self.g.dimension()));
-            self.labels_version = self.g.version();
+    fn refresh_vertex_darts(&mut self) {
+        if self.vertex_darts_version != self.g.version() {
+            self.vertex_darts = self
+                .g
+                .orbit_representatives(OrbitType::vertex(self.g.dimension()));
+            self.vertex_darts_version = self.g.version();
         }
     }
 
-    /// One dart per vertex, in vertex order ([`GMap::orbit_labels`] of the vertex orbit).
+    /// One dart per vertex, in vertex order: the smallest dart of each vertex orbit, in
+    /// increasing order (the numbering of [`GMap::orbit_labels`]).
     pub fn vertex_darts(&self) -> Vec<Dart> {
-        let (labels, n) = &self.labels;
-        let mut out = vec![Dart(u32::MAX); *n];
-        for d in self.g.darts() {
-            let l = labels[d.index()] as usize;
-            if out[l].0 == u32::MAX {
-                out[l] = d;
-            }
-        }
-        out
+        self.vertex_darts.clone()
     }
 
     fn id(&self, name: &str) -> Result<EmbeddingId, PhysicsError> {
@@ -1267,7 +1264,7 @@ impl Simulation {
 
     /// Sets a vec3 vertex embedding from values in vertex order.
     pub fn set_vertex_vec3(&mut self, name: &str, values: &[[f64; 3]]) -> Result<(), PhysicsError> {
-        self.refresh_labels();
+        self.refresh_vertex_darts();
         let id = self.id(name)?;
         let darts = self.vertex_darts();
         if values.len() != darts.len() {
