@@ -4,7 +4,8 @@
 #   make develop  build the extension (release) and install the package into .venv
 #   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest
 #   make demo     run `topomech demo` (writes out/demo)
-#   make bench    kernel benchmarks and the cost of topology changes
+#   make bench    kernel benchmarks, the cost of topology changes, the engine against
+#                 hand-written baselines (writes bench/results.md and bench/results.json)
 #   make clean    remove build outputs and the venv
 #
 # Stamp files under .venv make the targets idempotent: `make test` twice rebuilds nothing
@@ -58,9 +59,13 @@ py-test: $(DEVELOP_STAMP)
 demo: $(DEVELOP_STAMP)
 	$(VENV)/bin/topomech demo
 
+# Under 10 minutes on 2 cores: the engine bench skips, and records as skipped, a size that the
+# previous one predicts over its budget (TOPOMECH_BENCH_* variables: crates/physics/benches/engine.rs).
 bench:
 	$(CARGO) bench -p topomech-gmap
 	$(CARGO) bench -p topomech-physics --bench topology
+	$(CARGO) bench -p topomech-physics --bench engine
+	$(PYTHON) bench/report.py
 
 clean:
 	$(CARGO) clean

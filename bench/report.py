@@ -1,0 +1,354 @@
+#!/usr/bin/env python3
+"""Writes bench/results.md from bench/results.json (the engine bench) and bench/peers.json
+(the peers' bench, if it exists). Python standard library only.
+
+    python3 bench/report.py [--results bench/results.json] [--peers bench/peers.json]
+                            [--out bench/results.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+MODEL_TITLES = {
+    "cloth": "cloth (cumulated stretch springs)",
+    "corotational": "co-rotational tetrahedra",
+    "mass_tensor": "mass-tensor tetrahedra",
+}
+
+
+def fmt_ms(s: float | None) -> str:
+    if s is None:
+        return "-"
+    ms = s * 1e3
+    if ms >= 100:
+        return f"{ms:,.0f}"
+    if ms >= 1:
+        return f"{ms:.2f}"
+    return f"{ms:.4f}"
+
+
+def fmt_num(x: float | None, digits: int = 2) -> str:
+    if x is None:
+        return "-"
+    return f"{x:,.{digits}f}"
+
+
+def fmt_int(x: float | None) -> str:
+    return "-" if x is None else f"{round(x):,}"
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return out
+
+
+def engine_step(case: dict[str, Any], threads: int) -> float | None:
+    for e in case.get("engine", []):
+        if e.get("threads") == threads:
+            return e.get("step_s")
+    return None
+
+
+def machine_lines(m: dict[str, Any]) -> list[str]:
+    cores = m.get("logical_cpus")
+    phys = m.get("physical_cores")
+    core_txt = f"{cores} logical CPUs" + (f" ({phys} physical cores)" if phys else "")
+    mem = m.get("memory_gib")
+    return [
+        f"Machine: {m.get('cpu', 'unknown')}, {core_txt}"
+        + (f", {mem} GiB memory" if mem is not None else "")
+        + f"; {m.get('os', '')}; {m.get('rustc', '')}.",
+        f"Measured {m.get('date', '?')}"
+        + (f" at commit {m['git_commit']}" if m.get("git_commit") else "")
+        + ".",
+    ]
+
+
+def engine_sections(res: dict[str, Any]) -> list[str]:
+    cases = res.get("cases", [])
+    settings = res.get("settings", {})
+    out: list[str] = []
+    out += machine_lines(res.get("machine", {}))
+    out.append("")
+    dt = settings.get("dt", "?")
+    samples = settings.get("max_samples", "?")
+    tol = settings.get("tolerance", 1e-9)
+    out.append(
+        "One full step: every interaction rule, the accumulation of forces per vertex and "
+        f"symplectic Euler (dt = {dt}), through the rules (`Simulation::step`), against a "
+        "hand-written flat-array kernel of the same algorithm "
+        "(`crates/physics/benches/baselines`), single-threaded, f64. Elements: quads for the "
+        f"cloth, tetrahedra for the volumes. Times are medians of up to {samples} samples; both "
+        "sides take the same steps and must end at the same positions (the last column: largest "
+        "position difference relative to the motion; the bench aborts above "
+        f"{tol:g}). Targets (issue 6): ratio at most 1.5 at 10^5 and 10^6 elements, near 2x on "
+        "2 threads, time per element constant from 10^3 to 10^6."
+    )
+    out.append("")
+
+    out.append("## Engine vs hand-written baseline (1 thread)")
+    out.append("")
+    rows = []
+    for c in cases:
+        name = MODEL_TITLES.get(c["model"], c["model"])
+        n = f"{fmt_int(c['elements'])} {c['element']}s"
+        if c.get("status") != "ok":
+            rows.append([name, n, "-", "-", "-", "-", "-", c.get("reason", "skipped")])
+            continue
+        t1 = engine_step(c, 1) or c["engine"][0]["step_s"]
+        first = c.get("first_steps_s") or [None]
+        agree = c["agreement"]
+        rows.append(
+            [
+                name,
+                n,
+                fmt_ms(t1),
+                fmt_ms(c["baseline"]["step_s"]),
+                f"**{fmt_num(c['ratio'])}**",
+                fmt_num(c.get("setup_engine_s"), 1) + " / " + fmt_num(first[0], 2),
+                fmt_num(c.get("setup_baseline_s"), 2),
+                f"{agree['max_relative_difference']:.1e} after {agree['steps']} steps",
+            ]
+        )
+    out += table(
+        [
+            "model",
+            "elements",
+            "engine ms/step",
+            "baseline ms/step",
+            "ratio",
+            "engine setup s / first step s",
+            "baseline setup s",
+            "agreement",
+        ],
+        rows,
+    )
+    out.append("")
+
+    threads = settings.get("threads", [1, 2])
+    others = [t for t in threads if t != 1]
+    if others:
+        out.append("## Threads (engine, rayon pool)")
+        out.append("")
+        rows = []
+        for c in cases:
+            if c.get("status") != "ok":
+                continue
+            t1 = engine_step(c, 1)
+            row = [
+                MODEL_TITLES.get(c["model"], c["model"]),
+                f"{fmt_int(c['elements'])} {c['element']}s",
+                fmt_ms(t1),
+            ]
+            for t in others:
+                tk = engine_step(c, t)
+                row += [fmt_ms(tk), f"{t1 / tk:.2f}x" if t1 and tk else "-"]
+            rows.append(row)
+        header = ["model", "elements", "1 thread ms/step"]
+        for t in others:
+            header += [f"{t} threads ms/step", f"speedup {t} threads"]
+        out += table(header, rows)
+        out.append("")
+
+    out.append("## Scaling: time per element and step (ns), engine (baseline)")
+    out.append("")
+    sizes = sorted({c["target"] for c in cases})
+    rows = []
+    for model in dict.fromkeys(c["model"] for c in cases):
+        mc = {c["target"]: c for c in cases if c["model"] == model}
+        row = [MODEL_TITLES.get(model, model)]
+        measured = []
+        for s in sizes:
+            c = mc.get(s)
+            if c is None or c.get("status") != "ok":
+                row.append("skipped" if c is not None else "-")
+                continue
+            e, b = c["engine_ns_per_element"], c["baseline_ns_per_element"]
+            measured.append((c["elements"], e, b))
+            row.append(f"{fmt_num(e, 0)} ({fmt_num(b, 1)})")
+        if len(measured) >= 2:
+            (n0, e0, b0), (n1, e1, b1) = measured[0], measured[-1]
+            row.append(f"{e1 / e0:.2f} ({b1 / b0:.2f}) from {fmt_int(n0)} to {fmt_int(n1)}")
+        else:
+            row.append("-")
+        rows.append(row)
+    out += table(
+        ["model"] + [f"~{s:.0e}".replace("e+0", "e") for s in sizes] + ["growth per element"], rows
+    )
+    out.append("")
+    out.append(
+        "Growth per element: time per element at the largest measured size over the smallest "
+        "(1.00 is linear)."
+    )
+    out.append("")
+
+    out.append("## Memory per element (bytes)")
+    out.append("")
+    rows = []
+    for c in cases:
+        if c.get("status") != "ok":
+            continue
+        m = c["memory"]
+        rows.append(
+            [
+                MODEL_TITLES.get(c["model"], c["model"]),
+                f"{fmt_int(c['elements'])} {c['element']}s",
+                fmt_int(m["engine_bytes_per_element"]),
+                fmt_int(m["topology_bytes_per_element"]),
+                fmt_int(m["embedding_index_bytes_per_element"]),
+                fmt_int(m["embedding_values_bytes_per_element"]),
+                fmt_int(m.get("embedding_other_bytes_per_element")),
+                f"{fmt_num(m['darts_per_element'], 0)} / {fmt_int(m['embeddings'])}",
+                fmt_int(m["baseline_bytes_per_element"]),
+                f"{m['engine_bytes_per_element'] / m['baseline_bytes_per_element']:.1f}x",
+            ]
+        )
+    out += table(
+        [
+            "model",
+            "elements",
+            "engine",
+            "topology",
+            "slot indices",
+            "values",
+            "other",
+            "darts / embeddings",
+            "baseline",
+            "engine / baseline",
+        ],
+        rows,
+    )
+    out.append("")
+    out.append(
+        "Engine: the G-map's `memory_bytes()` (alpha links and liveness; for every embedding a "
+        "4-byte slot index per dart unless it lives on `<>`, its value column, and slot use "
+        "counts, free lists and spare vector capacity as `other`). Baseline: its flat arrays "
+        "(positions, velocities, forces, rest positions, 1/mass, fixed flags, element or edge "
+        "data)."
+    )
+    out.append("")
+    largest: dict[str, dict[str, Any]] = {}
+    for c in cases:
+        if c.get("status") == "ok":
+            largest[c["model"]] = c
+    for model, c in largest.items():
+        emb = c["memory"]["by_embedding"][:8]
+        parts = ", ".join(
+            f"`{e['name']}` {e['orbit']} {fmt_int(e['bytes_per_element'])}" for e in emb
+        )
+        out.append(
+            f"- largest embeddings, {MODEL_TITLES.get(model, model)} at "
+            f"{fmt_int(c['elements'])} {c['element']}s: {parts}"
+        )
+    out.append("")
+    return out
+
+
+def scalar(x: Any) -> str:
+    if isinstance(x, float):
+        return f"{x:.4g}"
+    if isinstance(x, (list, tuple)):
+        return ", ".join(scalar(v) for v in x)
+    return str(x)
+
+
+def flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            flat.update(flatten(v, key + "."))
+        else:
+            flat[key] = v
+    return flat
+
+
+def records_table(records: list[Any]) -> list[str]:
+    dicts = [flatten(r) for r in records if isinstance(r, dict)]
+    if not dicts:
+        return ["- " + scalar(r) for r in records]
+    cols: list[str] = []
+    for d in dicts:
+        for k in d:
+            if k not in cols:
+                cols.append(k)
+    return table(cols, [[scalar(d.get(k, "")) for k in cols] for d in dicts])
+
+
+def peers_section(path: Path) -> list[str]:
+    out = ["## Peers", ""]
+    if not path.exists():
+        out.append(f"No peer results (`{path.name}` is missing): run `make bench-peers`.")
+        out.append("")
+        return out
+    try:
+        peers = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        out.append(f"`{path.name}` could not be read ({e}): run `make bench-peers` again.")
+        out.append("")
+        return out
+    out.append(
+        f"From `{path.name}` (written by `make bench-peers`; schema in `bench/peers/run.py`)."
+    )
+    out.append("")
+    if isinstance(peers, list):
+        out += records_table(peers)
+        out.append("")
+        return out
+    if not isinstance(peers, dict):
+        out.append(scalar(peers))
+        out.append("")
+        return out
+    if isinstance(peers.get("machine"), dict):
+        out += machine_lines(peers["machine"])
+        out.append("")
+    for key, val in peers.items():
+        if key == "machine":
+            continue
+        if isinstance(val, list):
+            out.append(f"### {key}")
+            out.append("")
+            out += records_table(val)
+            out.append("")
+        elif isinstance(val, dict):
+            out.append(f"### {key}")
+            out.append("")
+            if all(isinstance(v, dict) for v in val.values()):
+                out += records_table([{"name": k, **v} for k, v in val.items()])
+            else:
+                out += records_table([val])
+            out.append("")
+        else:
+            out.append(f"- {key}: {scalar(val)}")
+    out.append("")
+    return out
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--results", type=Path, default=HERE / "results.json")
+    ap.add_argument("--peers", type=Path, default=HERE / "peers.json")
+    ap.add_argument("--out", type=Path, default=HERE / "results.md")
+    args = ap.parse_args(argv)
+    lines = ["# topomech benchmark results", ""]
+    if args.results.exists():
+        lines += engine_sections(json.loads(args.results.read_text()))
+    else:
+        lines += [f"No engine results (`{args.results}` is missing): run `make bench`.", ""]
+    lines += peers_section(args.peers)
+    args.out.write_text("\n".join(lines).rstrip("\n") + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,696 @@
+//! Hand-written flat-array baselines of three models, for the engine benchmark (and the test
+//! that keeps them honest, `tests/baselines.rs`). Never used by the engine.
+//!
+//! Each baseline is what an engineer would write for one model on one CPU core: positions,
+//! velocities and forces in flat arrays (`Vec<[f64; 3]>`, contiguous), element and edge data
+//! in flat arrays indexed by precomputed vertex indices, no allocation per step, `f64`
+//! throughout. A step is the engine's: every force accumulated per vertex, then symplectic
+//! Euler exactly as the `symplectic_euler` rule of `models/common{2,3}d.tmr`
+//! (`a = f / m + g - damping v; v += dt a; x += dt v`, fixed vertices skipped).
+//!
+//! The models (the same algorithms as the rules, term by term):
+//! - [`Cloth`]: cumulated stretch springs (`stretch_cumulated`), one spring per edge with the
+//!   summed stiffness and damping of its faces' sides and their mean rest length (Provot
+//!   damping along the spring);
+//! - [`Corotational`]: co-rotational linear tetrahedra (Müller & Gross 2004),
+//!   `f = -R K (R^T x - X)`, R the polar rotation of `F = Ds Dm^-1` computed by the same
+//!   one-sided Jacobi SVD as the engine's `polar` built-in;
+//! - [`MassTensor`]: mass-tensor tetrahedra (Cotin et al. 2000), `f_i = -K_ii u_i - sum_j K_ij u_j`
+//!   with the tensors cumulated on vertices and edges, `u = x - X`.
+//!
+//! Initialisation (rest lengths, stiffness matrices, masses, cumulated tensors) is read from
+//! the engine's map after `Simulation::new`, so that both start from identical numbers; the
+//! per-step kernels are this file's own code. Vertices are numbered as the engine numbers them
+//! (`GMap::orbit_labels` of the vertex orbit), so positions compare index by index.
+
+// Numeric kernels: index loops over fixed-size blocks mirror the math, and the sums are written
+// in the engine's order (no fused multiply-add), so results agree to rounding.
+#![allow(
+    clippy::needless_range_loop,
+    clippy::suboptimal_flops,
+    clippy::doc_markdown,
+    dead_code
+)]
+
+use topomech_gmap::{Dart, GMap, OrbitType};
+use topomech_physics::Simulation;
+
+/// The time step of every benchmarked simulation (stable at every size).
+pub const DT: f64 = 1e-4;
+
+/// A point or vector.
+pub type V3 = [f64; 3];
+/// A 3x3 matrix, row-major.
+pub type M3 = [[f64; 3]; 3];
+
+/// A baseline: one step, and what to compare.
+pub trait Baseline {
+    /// One full step: forces, accumulation, symplectic Euler.
+    fn step(&mut self);
+    /// Positions in the engine's vertex order.
+    fn positions(&self) -> &[V3];
+    /// Bytes of every array the baseline keeps.
+    fn memory_bytes(&self) -> usize;
+}
+
+/// The vertex state and the integrator, shared by the three baselines.
+pub struct State {
+    /// Positions.
+    pub x: Vec<V3>,
+    /// Velocities.
+    pub v: Vec<V3>,
+    /// Forces, accumulated per vertex each step.
+    pub f: Vec<V3>,
+    /// Rest positions.
+    pub rest: Vec<V3>,
+    /// 1 / mass (0 for a fixed vertex without mass, never read).
+    pub inv_m: Vec<f64>,
+    /// Fixed vertices (not integrated).
+    pub fixed: Vec<bool>,
+    dt: f64,
+    gravity: V3,
+    damping: f64,
+}
+
+impl State {
+    /// The simulation's current vertex state and its integrator settings.
+    pub fn from_sim(sim: &Simulation) -> Self {
+        let cfg = sim.config();
+        let m = sim.vertex_scalar("mass").expect("mass");
+        let x = sim.vertex_vec3("position").expect("position");
+        let n = x.len();
+        State {
+            x,
+            v: sim.vertex_vec3("velocity").expect("velocity"),
+            f: vec![[0.0; 3]; n],
+            rest: sim.vertex_vec3("rest").expect("rest"),
+            inv_m: m
+                .iter()
+                .map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 })
+                .collect(),
+            fixed: sim.vertex_bool("fixed").expect("fixed"),
+            dt: cfg.dt,
+            gravity: cfg.gravity,
+            damping: cfg.damping,
+        }
+    }
+
+    fn clear_forces(&mut self) {
+        self.f.fill([0.0; 3]);
+    }
+
+    /// Symplectic Euler: `a = f / m + g - damping v; v += dt a; x += dt v`.
+    fn integrate(&mut self) {
+        let (dt, g, c) = (self.dt, self.gravity, self.damping);
+        for ((((x, v), f), &im), &fixed) in self
+            .x
+            .iter_mut()
+            .zip(&mut self.v)
+            .zip(&self.f)
+            .zip(&self.inv_m)
+            .zip(&self.fixed)
+        {
+            if fixed {
+                continue;
+            }
+            for k in 0..3 {
+                let a = f[k] * im + g[k] - c * v[k];
+                v[k] += dt * a;
+                x[k] += dt * v[k];
+            }
+        }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        let n = self.x.len();
+        n * (4 * 24 + 8 + 1)
+    }
+}
+
+/// The engine's vertex number of every dart.
+fn vertex_labels(g: &GMap) -> Vec<u32> {
+    g.orbit_labels(OrbitType::vertex(g.dimension())).0
+}
+
+fn read<const N: usize>(g: &GMap, name: &str, d: Dart) -> [f64; N] {
+    let id = g
+        .embedding_id(name)
+        .unwrap_or_else(|| panic!("no embedding '{name}'"));
+    g.real(id, d).try_into().expect("width")
+}
+
+fn m3(a: [f64; 9]) -> M3 {
+    [[a[0], a[1], a[2]], [a[3], a[4], a[5]], [a[6], a[7], a[8]]]
+}
+
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// `m v`.
+fn mv(m: &M3, v: V3) -> V3 {
+    [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
+}
+
+// ------------------------------------------------------------------------------------ cloth
+
+/// Cumulated stretch springs: one spring per edge.
+pub struct Cloth {
+    /// Vertex state.
+    pub s: State,
+    /// Edge end vertices.
+    edges: Vec<[u32; 2]>,
+    /// Per edge: stiffness, damping, rest length.
+    params: Vec<[f64; 3]>,
+}
+
+impl Cloth {
+    /// From a simulation of `stretch_cumulated` (2D or 3D).
+    pub fn from_sim(sim: &Simulation) -> Self {
+        let g = sim.gmap();
+        let label = vertex_labels(g);
+        let reps = g.orbit_representatives(OrbitType::edge(g.dimension()));
+        let mut edges = Vec::with_capacity(reps.len());
+        let mut params = Vec::with_capacity(reps.len());
+        for d in reps {
+            let b = g.alpha(0, d);
+            edges.push([label[d.index()], label[b.index()]]);
+            params.push([
+                read::<1>(g, "spring_k_edge", d)[0],
+                read::<1>(g, "spring_c_edge", d)[0],
+                read::<1>(g, "spring_l0_edge", d)[0],
+            ]);
+        }
+        Cloth {
+            s: State::from_sim(sim),
+            edges,
+            params,
+        }
+    }
+
+    fn forces(&mut self) {
+        self.s.clear_forces();
+        let (x, v, f) = (&self.s.x, &self.s.v, &mut self.s.f);
+        for (&[a, b], &[k, c, l0]) in self.edges.iter().zip(&self.params) {
+            let (a, b) = (a as usize, b as usize);
+            let d = sub(x[b], x[a]);
+            let l = dot(d, d).sqrt();
+            let il = 1.0 / l;
+            let u = [d[0] * il, d[1] * il, d[2] * il];
+            let s = k * (l - l0) + c * dot(sub(v[b], v[a]), u);
+            for i in 0..3 {
+                f[a][i] += s * u[i];
+                f[b][i] -= s * u[i];
+            }
+        }
+    }
+}
+
+impl Baseline for Cloth {
+    fn step(&mut self) {
+        self.forces();
+        self.s.integrate();
+    }
+    fn positions(&self) -> &[V3] {
+        &self.s.x
+    }
+    fn memory_bytes(&self) -> usize {
+        self.s.memory_bytes() + self.edges.len() * (8 + 24)
+    }
+}
+
+// ------------------------------------------------------------------------------ tetrahedra
+
+/// The vertices of each tetrahedron in the engine's numbering (from its `vertex0` dart, the
+/// smallest of the volume): `n0`, `a0(n0)`, `a0(a1(n0))`, `a0(a1(a2(n0)))`.
+fn tet_vertices(g: &GMap, label: &[u32]) -> Vec<(Dart, [u32; 4])> {
+    g.orbit_representatives(OrbitType::volume())
+        .into_iter()
+        .map(|n0| {
+            let n1 = g.alpha(0, n0);
+            let n2 = g.alpha(0, g.alpha(1, n0));
+            let n3 = g.alpha(0, g.alpha(1, g.alpha(2, n0)));
+            let l = |d: Dart| label[d.index()];
+            (n0, [l(n0), l(n1), l(n2), l(n3)])
+        })
+        .collect()
+}
+
+/// Co-rotational linear tetrahedra.
+pub struct Corotational {
+    /// Vertex state.
+    pub s: State,
+    tets: Vec<[u32; 4]>,
+    /// Inverse rest edge matrix `Dm^-1`.
+    dm_inv: Vec<M3>,
+    /// Rest positions of the four vertices.
+    x_rest: Vec<[f64; 12]>,
+    /// Element stiffness, 12x12 row-major, node-major (x0, y0, z0, x1, ...).
+    k: Vec<[f64; 144]>,
+}
+
+impl Corotational {
+    /// From a simulation of `corotational` on tetrahedra.
+    pub fn from_sim(sim: &Simulation) -> Self {
+        let g = sim.gmap();
+        let label = vertex_labels(g);
+        let tv = tet_vertices(g, &label);
+        let mut b = Corotational {
+            s: State::from_sim(sim),
+            tets: Vec::with_capacity(tv.len()),
+            dm_inv: Vec::with_capacity(tv.len()),
+            x_rest: Vec::with_capacity(tv.len()),
+            k: Vec::with_capacity(tv.len()),
+        };
+        for (n0, verts) in tv {
+            b.tets.push(verts);
+            b.dm_inv.push(m3(read(g, "dm_inv", n0)));
+            b.x_rest.push(read(g, "x_rest", n0));
+            b.k.push(read(g, "k_elem", n0));
+        }
+        b
+    }
+
+    fn forces(&mut self) {
+        self.s.clear_forces();
+        let (x, f) = (&self.s.x, &mut self.s.f);
+        for (((t, dm), xr), k) in self
+            .tets
+            .iter()
+            .zip(&self.dm_inv)
+            .zip(&self.x_rest)
+            .zip(&self.k)
+        {
+            let p = t.map(|i| x[i as usize]);
+            // F = Ds Dm^-1, Ds the edge matrix (columns x1 - x0, x2 - x0, x3 - x0)
+            let e = [sub(p[1], p[0]), sub(p[2], p[0]), sub(p[3], p[0])];
+            let mut fm = [[0.0; 3]; 3];
+            for r in 0..3 {
+                for c in 0..3 {
+                    fm[r][c] = e[0][r] * dm[0][c] + e[1][r] * dm[1][c] + e[2][r] * dm[2][c];
+                }
+            }
+            let rot = polar3(&fm);
+            // y = R^T x - X, node by node
+            let mut y = [0.0; 12];
+            for n in 0..4 {
+                for r in 0..3 {
+                    y[3 * n + r] = rot[0][r] * p[n][0] + rot[1][r] * p[n][1] + rot[2][r] * p[n][2]
+                        - xr[3 * n + r];
+                }
+            }
+            // g = K y, then f = -R g node by node
+            let mut gk = [0.0; 12];
+            for r in 0..12 {
+                let row = &k[12 * r..12 * r + 12];
+                let mut acc = 0.0;
+                for c in 0..12 {
+                    acc += row[c] * y[c];
+                }
+                gk[r] = acc;
+            }
+            for n in 0..4 {
+                let gn = [gk[3 * n], gk[3 * n + 1], gk[3 * n + 2]];
+                let fi = &mut f[t[n] as usize];
+                for r in 0..3 {
+                    fi[r] -= dot(rot[r], gn);
+                }
+            }
+        }
+    }
+}
+
+impl Baseline for Corotational {
+    fn step(&mut self) {
+        self.forces();
+        self.s.integrate();
+    }
+    fn positions(&self) -> &[V3] {
+        &self.s.x
+    }
+    fn memory_bytes(&self) -> usize {
+        self.s.memory_bytes() + self.tets.len() * (16 + 72 + 96 + 1152)
+    }
+}
+
+/// Mass-tensor tetrahedra, tensors cumulated on vertices and edges.
+pub struct MassTensor {
+    /// Vertex state.
+    pub s: State,
+    /// Displacements `x - X`, recomputed each step.
+    u: Vec<V3>,
+    /// Cumulated vertex tensors `K_ii`.
+    t_vertex: Vec<M3>,
+    /// Edges `(i, j)`.
+    edges: Vec<[u32; 2]>,
+    /// Cumulated edge tensors `(K_ij, K_ji)`.
+    t_edge: Vec<[M3; 2]>,
+}
+
+impl MassTensor {
+    /// From a simulation of `mass_tensor`.
+    pub fn from_sim(sim: &Simulation) -> Self {
+        let g = sim.gmap();
+        let label = vertex_labels(g);
+        let t_vertex = sim
+            .vertex_darts()
+            .into_iter()
+            .map(|d| m3(read(g, "t_vertex_cum", d)))
+            .collect();
+        let reps = g.orbit_representatives(OrbitType::edge(3));
+        let mut edges = Vec::with_capacity(reps.len());
+        let mut t_edge = Vec::with_capacity(reps.len());
+        for d in reps {
+            // the edge-end at i stores K_ij: the force on i from the displacement of j
+            let e = g.alpha(0, d);
+            edges.push([label[d.index()], label[e.index()]]);
+            t_edge.push([m3(read(g, "t_edge_cum", d)), m3(read(g, "t_edge_cum", e))]);
+        }
+        let s = State::from_sim(sim);
+        MassTensor {
+            u: vec![[0.0; 3]; s.x.len()],
+            s,
+            t_vertex,
+            edges,
+            t_edge,
+        }
+    }
+
+    fn forces(&mut self) {
+        let s = &mut self.s;
+        for (((u, x), r), (f, t)) in self
+            .u
+            .iter_mut()
+            .zip(&s.x)
+            .zip(&s.rest)
+            .zip(s.f.iter_mut().zip(&self.t_vertex))
+        {
+            *u = sub(*x, *r);
+            let k = mv(t, *u);
+            *f = [-k[0], -k[1], -k[2]];
+        }
+        let (u, f) = (&self.u, &mut s.f);
+        for (&[i, j], [kij, kji]) in self.edges.iter().zip(&self.t_edge) {
+            let (i, j) = (i as usize, j as usize);
+            let fi = mv(kij, u[j]);
+            let fj = mv(kji, u[i]);
+            for r in 0..3 {
+                f[i][r] -= fi[r];
+                f[j][r] -= fj[r];
+            }
+        }
+    }
+}
+
+impl Baseline for MassTensor {
+    fn step(&mut self) {
+        self.forces();
+        self.s.integrate();
+    }
+    fn positions(&self) -> &[V3] {
+        &self.s.x
+    }
+    fn memory_bytes(&self) -> usize {
+        self.s.memory_bytes() + self.u.len() * (24 + 72) + self.edges.len() * (8 + 144)
+    }
+}
+
+// ---------------------------------------------------------------------------- polar rotation
+
+fn norm(a: V3) -> f64 {
+    dot(a, a).sqrt()
+}
+
+fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn unit_or(x: V3, fallback: V3) -> V3 {
+    let n = norm(x);
+    if n > 0.0 && n.is_finite() {
+        [x[0] / n, x[1] / n, x[2] / n]
+    } else {
+        fallback
+    }
+}
+
+fn perpendicular(u: V3) -> V3 {
+    let mut k = 0;
+    for i in 1..3 {
+        if u[i].abs() < u[k].abs() {
+            k = i;
+        }
+    }
+    let mut w = u.map(|x| -u[k] * x);
+    w[k] += 1.0;
+    unit_or(w, [0.0, 0.0, 1.0])
+}
+
+/// The rotation of the polar decomposition of `m`, by the algorithm of the engine's `polar`
+/// built-in (crates/rules/src/builtins.rs, `polar3`): a one-sided Jacobi SVD `m = U S V^T` of
+/// the scaled matrix (Hestenes rotations until every pair of columns is orthogonal to machine
+/// precision), singular values ordered, `det V = +1`, `U` completed with `det U = +1` so that
+/// the smallest singular value carries the sign of `det m` (Irving et al. 2004); `R = U V^T`.
+/// Written for fixed-size arrays, without allocation.
+pub fn polar3(m: &M3) -> M3 {
+    let mut s = 0.0_f64;
+    for row in m {
+        for &x in row {
+            s = s.max(x.abs());
+        }
+    }
+    if s == 0.0 {
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
+    let inv_s = 1.0 / s;
+    // columns of A = (m / s) V, and of V
+    let mut a = [[0.0; 3]; 3];
+    for j in 0..3 {
+        for i in 0..3 {
+            a[j][i] = m[i][j] * inv_s;
+        }
+    }
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _sweep in 0..64 {
+        let mut rotated = false;
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            let alpha = dot(a[p], a[p]);
+            let beta = dot(a[q], a[q]);
+            let gamma = dot(a[p], a[q]);
+            if gamma == 0.0 || gamma.abs() <= f64::EPSILON * (alpha * beta).sqrt() {
+                continue;
+            }
+            rotated = true;
+            let zeta = (beta - alpha) / (2.0 * gamma);
+            let t = zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt());
+            let c = 1.0 / (1.0 + t * t).sqrt();
+            let sn = c * t;
+            for w in [&mut a, &mut v] {
+                let (x, y) = (w[p], w[q]);
+                w[p] = [
+                    c * x[0] - sn * y[0],
+                    c * x[1] - sn * y[1],
+                    c * x[2] - sn * y[2],
+                ];
+                w[q] = [
+                    sn * x[0] + c * y[0],
+                    sn * x[1] + c * y[1],
+                    sn * x[2] + c * y[2],
+                ];
+            }
+        }
+        if !rotated {
+            break;
+        }
+    }
+    // order by decreasing singular value (stable, as the engine's sort)
+    let n = [norm(a[0]), norm(a[1]), norm(a[2])];
+    let mut order = [0, 1, 2];
+    for i in 1..3 {
+        let mut j = i;
+        while j > 0 && n[order[j]] > n[order[j - 1]] {
+            order.swap(j, j - 1);
+            j -= 1;
+        }
+    }
+    let a = order.map(|k| a[k]);
+    let mut v = order.map(|k| v[k]);
+    if dot(v[0], cross(v[1], v[2])) < 0.0 {
+        v[2] = v[2].map(|x| -x);
+    }
+    let u1 = unit_or(a[0], [1.0, 0.0, 0.0]);
+    let mut w = a[1];
+    for _ in 0..2 {
+        let d = dot(u1, w);
+        w = [w[0] - d * u1[0], w[1] - d * u1[1], w[2] - d * u1[2]];
+    }
+    let u2 = if norm(w) > 1e-290 {
+        unit_or(w, perpendicular(u1))
+    } else {
+        perpendicular(u1)
+    };
+    let u3 = unit_or(cross(u1, u2), [0.0, 0.0, 1.0]);
+    let u = [u1, u2, u3];
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] = u[0][i] * v[0][j] + u[1][i] * v[1][j] + u[2][i] * v[2][j];
+        }
+    }
+    r
+}
+
+// ------------------------------------------------------------------------------ the cases
+
+/// The three benchmarked models.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Model {
+    /// `stretch_cumulated` on a quad grid (elements: quads).
+    Cloth,
+    /// `corotational` on a box of tetrahedra (elements: tetrahedra).
+    Corotational,
+    /// `mass_tensor` on a box of tetrahedra (elements: tetrahedra).
+    MassTensor,
+}
+
+impl Model {
+    /// Every model, in report order.
+    pub const ALL: [Model; 3] = [Model::Cloth, Model::Corotational, Model::MassTensor];
+
+    /// The engine's name of the model.
+    pub fn kind(self) -> &'static str {
+        match self {
+            Model::Cloth => "stretch_cumulated",
+            Model::Corotational => "corotational",
+            Model::MassTensor => "mass_tensor",
+        }
+    }
+
+    /// What an element is.
+    pub fn element(self) -> &'static str {
+        match self {
+            Model::Cloth => "quad",
+            Model::Corotational | Model::MassTensor => "tet",
+        }
+    }
+
+    /// The mesh of about `target` elements: its cell counts and the number of elements.
+    /// Cloth: a square grid of n x n quads on the unit square. Volumes: a box of cubes,
+    /// `nx x n x n` (about twice as long as wide), each cube split into 6 tetrahedra.
+    pub fn cells(self, target: usize) -> (Vec<usize>, usize) {
+        let t = target as f64;
+        match self {
+            Model::Cloth => {
+                let n = (t.sqrt().round() as usize).max(2);
+                (vec![n, n], n * n)
+            }
+            Model::Corotational | Model::MassTensor => {
+                let n = ((t / 12.0).cbrt().round() as usize).max(2);
+                let nx = ((t / (6.0 * (n * n) as f64)).round() as usize).max(2);
+                (vec![nx, n, n], 6 * nx * n * n)
+            }
+        }
+    }
+
+    /// The simulation of this model on the mesh of `cells` (from [`Model::cells`]), built at
+    /// rest and then deformed (the same deformation for every size): a cloth fixed along
+    /// `x = 0` with a bump out of its plane, a box fixed at `x = 0`, stretched by 1% and twisted
+    /// about its axis. Gravity, viscous damping, and spring damping for the cloth.
+    pub fn simulation(self, cells: &[usize]) -> Simulation {
+        use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
+        use topomech_gmap::mesh::{build, BuildOptions};
+        use topomech_physics::{Config, ModelSpec};
+        let (mesh, params): (_, Vec<(String, f64)>) = match self {
+            Model::Cloth => (
+                grid([cells[0], cells[1]], [1.0, 1.0], GridElement::Quad),
+                vec![("stiffness".into(), 1e3), ("damping".into(), 0.1)],
+            ),
+            Model::Corotational | Model::MassTensor => {
+                let len = cells[0] as f64 / cells[1] as f64;
+                (
+                    cuboid(
+                        [cells[0], cells[1], cells[2]],
+                        [len, 1.0, 1.0],
+                        BoxElement::Tetra,
+                    ),
+                    vec![],
+                )
+            }
+        };
+        let (g, _) = build(&mesh, &BuildOptions::default()).expect("a valid mesh");
+        let cfg = Config {
+            models: vec![ModelSpec {
+                kind: self.kind().into(),
+                params: params.into_iter().collect(),
+            }],
+            density: if self == Model::Cloth { 1.0 } else { 1000.0 },
+            young: 1e6,
+            poisson: 0.3,
+            damping: 0.5,
+            gravity: [0.0, -9.81, 0.0],
+            fixed: vec!["x < 1e-9".into()],
+            dt: DT,
+            ..Config::default()
+        };
+        let mut sim = Simulation::new(g, cfg).expect("the simulation builds");
+        let x: Vec<V3> = sim
+            .vertex_vec3("rest")
+            .expect("rest")
+            .into_iter()
+            .map(|p| self.deformed(p))
+            .collect();
+        sim.set_vertex_vec3("position", &x).expect("set positions");
+        sim
+    }
+
+    /// The initial deformation (none at `x = 0`, where vertices are fixed).
+    fn deformed(self, p: V3) -> V3 {
+        let pi = std::f64::consts::PI;
+        match self {
+            Model::Cloth => [p[0], p[1], 0.05 * (pi * p[0]).sin() * (pi * p[1]).sin()],
+            Model::Corotational | Model::MassTensor => {
+                let th = 0.2 * p[0];
+                let (s, c) = th.sin_cos();
+                let (y, z) = (p[1] - 0.5, p[2] - 0.5);
+                [1.01 * p[0], 0.5 + c * y - s * z, 0.5 + s * y + c * z]
+            }
+        }
+    }
+
+    /// The baseline of this model, from the simulation's current state.
+    pub fn baseline(self, sim: &Simulation) -> Box<dyn Baseline> {
+        match self {
+            Model::Cloth => Box::new(Cloth::from_sim(sim)),
+            Model::Corotational => Box::new(Corotational::from_sim(sim)),
+            Model::MassTensor => Box::new(MassTensor::from_sim(sim)),
+        }
+    }
+}
+
+/// How far the engine's positions are from the baseline's: the largest distance between
+/// corresponding vertices, relative to the largest distance a vertex moved from `start` (the
+/// positions both began the compared steps from). Returns (relative difference, motion).
+pub fn disagreement(sim: &Simulation, base: &dyn Baseline, start: &[V3]) -> (f64, f64) {
+    let x = sim.vertex_vec3("position").expect("positions");
+    let y = base.positions();
+    assert_eq!(x.len(), y.len(), "vertex counts differ");
+    let motion = y
+        .iter()
+        .zip(start)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .fold(0.0, f64::max);
+    let diff = x
+        .iter()
+        .zip(y)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .fold(0.0, f64::max);
+    (diff / motion, motion)
+}

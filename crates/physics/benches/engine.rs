@@ -1,0 +1,752 @@
+//! The engine against hand-written baselines (issue 6): one full simulation step
+//! (interactions, accumulation, symplectic Euler) through the rules, against the same
+//! algorithm written by hand on flat arrays (`baselines/mod.rs`), for three models — cumulated
+//! stretch springs on a quad cloth, co-rotational tetrahedra, mass-tensor tetrahedra — at about
+//! 10^3 .. 10^6 elements (quads for the cloth, tetrahedra for the volumes).
+//!
+//! For each model and size: the simulation is built and deformed; its baseline is built from the
+//! engine's map (same masses, rest lengths, stiffness matrices, tensors); both take the same
+//! steps and must end at the same positions (to 1e-9 relative to how far the vertices moved:
+//! the bench aborts otherwise, the baseline would not be the same algorithm); then the time of
+//! a step is the median of repeated samples, the engine's inside a rayon pool of 1 and of 2
+//! threads, the baseline's single-threaded. Memory: the map's bytes per element, split into
+//! topology, embedding slot indices and embedding values, and the baseline's arrays.
+//!
+//! A case that the previous size predicts to exceed the time budget (or the available memory)
+//! is skipped and recorded as such. Writes `bench/results.json`; `bench/report.py` turns it
+//! into `bench/results.md`.
+//!
+//! Environment:
+//! - `TOPOMECH_BENCH_SIZES`: target element counts, e.g. `1e3,1e4` (default `1e3,1e4,1e5,1e6`)
+//! - `TOPOMECH_BENCH_MODELS`: any of `cloth,corotational,mass_tensor` (default all)
+//! - `TOPOMECH_BENCH_THREADS`: engine pool sizes (default `1,2`)
+//! - `TOPOMECH_BENCH_CASE_BUDGET_S`: seconds one case may take (default 75)
+//! - `TOPOMECH_BENCH_TOTAL_BUDGET_S`: seconds for the whole bench (default 400)
+//! - `TOPOMECH_BENCH_OUT`: the output directory (default `bench/` at the workspace root)
+
+mod baselines;
+
+use std::fmt::Write as _;
+use std::hint::black_box;
+use std::time::Instant;
+
+use baselines::{disagreement, Baseline, Model};
+use topomech_gmap::EmbeddingType;
+use topomech_physics::Simulation;
+
+/// Largest disagreement accepted between engine and baseline, relative to the motion.
+const TOLERANCE: f64 = 1e-9;
+/// Steps both take before timing (the engine's first builds its rules' plans).
+const CHECK_STEPS: usize = 2;
+/// Samples per timing, at most.
+const MAX_SAMPLES: usize = 7;
+/// Samples a case must have time for, by the previous size's prediction, to be run at all.
+const MIN_SAMPLES: usize = 3;
+/// A sample lasts at least this long (several steps per sample for small meshes).
+const SAMPLE_S: f64 = 0.02;
+
+// ------------------------------------------------------------------------------ JSON
+
+/// A JSON value, written by hand (the bench has no dependencies beyond the workspace's).
+enum J {
+    Null,
+    Num(f64),
+    Str(String),
+    Arr(Vec<J>),
+    Obj(Vec<(&'static str, J)>),
+}
+
+impl J {
+    fn num(x: f64) -> J {
+        if x.is_finite() {
+            J::Num(x)
+        } else {
+            J::Null
+        }
+    }
+    fn str(s: impl Into<String>) -> J {
+        J::Str(s.into())
+    }
+    fn write(&self, out: &mut String, indent: usize) {
+        let pad = |out: &mut String, n: usize| out.extend(std::iter::repeat_n(' ', n));
+        match self {
+            J::Null => out.push_str("null"),
+            J::Num(x) => {
+                if x.fract() == 0.0 && x.abs() < 1e15 {
+                    let _ = write!(out, "{}", *x as i64);
+                } else {
+                    let _ = write!(out, "{x:e}");
+                }
+            }
+            J::Str(s) => {
+                out.push('"');
+                for c in s.chars() {
+                    match c {
+                        '"' => out.push_str("\\\""),
+                        '\\' => out.push_str("\\\\"),
+                        '\n' => out.push_str("\\n"),
+                        c if (c as u32) < 0x20 => {
+                            let _ = write!(out, "\\u{:04x}", c as u32);
+                        }
+                        c => out.push(c),
+                    }
+                }
+                out.push('"');
+            }
+            J::Arr(v) => {
+                if v.iter().all(|x| matches!(x, J::Num(_) | J::Null)) {
+                    out.push('[');
+                    for (i, x) in v.iter().enumerate() {
+                        if i > 0 {
+                            out.push_str(", ");
+                        }
+                        x.write(out, indent);
+                    }
+                    out.push(']');
+                    return;
+                }
+                out.push_str("[\n");
+                for (i, x) in v.iter().enumerate() {
+                    pad(out, indent + 2);
+                    x.write(out, indent + 2);
+                    out.push_str(if i + 1 < v.len() { ",\n" } else { "\n" });
+                }
+                pad(out, indent);
+                out.push(']');
+            }
+            J::Obj(v) => {
+                out.push_str("{\n");
+                for (i, (k, x)) in v.iter().enumerate() {
+                    pad(out, indent + 2);
+                    let _ = write!(out, "\"{k}\": ");
+                    x.write(out, indent + 2);
+                    out.push_str(if i + 1 < v.len() { ",\n" } else { "\n" });
+                }
+                pad(out, indent);
+                out.push('}');
+            }
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------ settings
+
+fn env_list<T>(name: &str, default: &str, parse: impl Fn(&str) -> Option<T>) -> Vec<T> {
+    let s = std::env::var(name).unwrap_or_else(|_| default.to_string());
+    s.split(',')
+        .map(str::trim)
+        .filter(|x| !x.is_empty())
+        .map(|x| parse(x).unwrap_or_else(|| panic!("{name}: cannot read '{x}'")))
+        .collect()
+}
+
+fn env_f64(name: &str, default: f64) -> f64 {
+    std::env::var(name).ok().map_or(default, |s| {
+        s.trim()
+            .parse()
+            .unwrap_or_else(|_| panic!("{name}: not a number: '{s}'"))
+    })
+}
+
+fn model_named(s: &str) -> Option<Model> {
+    match s {
+        "cloth" | "stretch_cumulated" => Some(Model::Cloth),
+        "corotational" | "corot" => Some(Model::Corotational),
+        "mass_tensor" | "mass-tensor" => Some(Model::MassTensor),
+        _ => None,
+    }
+}
+
+fn model_label(m: Model) -> &'static str {
+    match m {
+        Model::Cloth => "cloth",
+        Model::Corotational => "corotational",
+        Model::MassTensor => "mass_tensor",
+    }
+}
+
+// ------------------------------------------------------------------------------ machine
+
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, v)| v.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".into())
+}
+
+fn physical_cores() -> Option<usize> {
+    let s = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let mut cores = std::collections::BTreeSet::new();
+    let (mut phys, mut core) = (None, None);
+    for l in s.lines().chain(std::iter::once("")) {
+        if l.trim().is_empty() {
+            if let (Some(p), Some(c)) = (phys.take(), core.take()) {
+                cores.insert((p, c));
+            }
+            continue;
+        }
+        if let Some((k, v)) = l.split_once(':') {
+            match k.trim() {
+                "physical id" => phys = Some(v.trim().to_string()),
+                "core id" => core = Some(v.trim().to_string()),
+                _ => {}
+            }
+        }
+    }
+    (!cores.is_empty()).then_some(cores.len())
+}
+
+fn meminfo_kib(key: &str) -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let l = s.lines().find(|l| l.starts_with(key))?;
+    l.split_whitespace().nth(1)?.parse().ok()
+}
+
+fn command_output(cmd: &str, args: &[&str]) -> Option<String> {
+    let out = std::process::Command::new(cmd).args(args).output().ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+/// UTC now as `YYYY-MM-DDTHH:MM:SSZ` (civil-from-days, Hinnant).
+fn utc_now() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs()) as i64;
+    let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60
+    )
+}
+
+fn machine() -> J {
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    J::Obj(vec![
+        ("cpu", J::str(cpu_model())),
+        (
+            "logical_cpus",
+            J::num(std::thread::available_parallelism().map_or(0, std::num::NonZero::get) as f64),
+        ),
+        (
+            "physical_cores",
+            physical_cores().map_or(J::Null, |c| J::num(c as f64)),
+        ),
+        (
+            "memory_gib",
+            meminfo_kib("MemTotal:")
+                .map_or(J::Null, |k| J::num((k / 1_048_576.0 * 10.0).round() / 10.0)),
+        ),
+        (
+            "os",
+            J::str(
+                std::fs::read_to_string("/proc/sys/kernel/osrelease").map_or_else(
+                    |_| std::env::consts::OS.to_string(),
+                    |r| format!("{} {}", std::env::consts::OS, r.trim()),
+                ),
+            ),
+        ),
+        (
+            "rustc",
+            J::str(command_output(&rustc, &["--version"]).unwrap_or_else(|| "unknown".into())),
+        ),
+        (
+            "git_commit",
+            command_output("git", &["rev-parse", "--short", "HEAD"]).map_or(J::Null, J::Str),
+        ),
+        ("date", J::str(utc_now())),
+    ])
+}
+
+// ------------------------------------------------------------------------------ timing
+
+fn seconds(f: impl FnOnce()) -> f64 {
+    let t = Instant::now();
+    f();
+    t.elapsed().as_secs_f64()
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// A timing: the median seconds per step over `samples`, each of `batch` steps.
+struct Timing {
+    step_s: f64,
+    samples: Vec<f64>,
+    batch: usize,
+}
+
+impl Timing {
+    fn json(&self) -> J {
+        J::Obj(vec![
+            ("step_s", J::num(self.step_s)),
+            ("batch", J::num(self.batch as f64)),
+            (
+                "samples_s",
+                J::Arr(self.samples.iter().map(|&x| J::num(x)).collect()),
+            ),
+        ])
+    }
+}
+
+/// Times `step` in `samples` samples of `batch` steps; returns seconds per step.
+fn time_steps(samples: usize, batch: usize, mut step: impl FnMut()) -> Timing {
+    let s: Vec<f64> = (0..samples)
+        .map(|_| {
+            seconds(|| {
+                for _ in 0..batch {
+                    step();
+                }
+            }) / batch as f64
+        })
+        .collect();
+    Timing {
+        step_s: median(&s),
+        samples: s,
+        batch,
+    }
+}
+
+fn batch_for(step_s: f64, cap: usize) -> usize {
+    ((SAMPLE_S / step_s.max(1e-9)).ceil() as usize).clamp(1, cap)
+}
+
+// ------------------------------------------------------------------------------ memory
+
+/// The map's memory per element, split into topology (alpha links, liveness), embedding slot
+/// indices (4 bytes per dart and embedding not on `<>`), embedding values, and the rest (slot
+/// use counts, free lists, spare vector capacity); the largest embeddings; the baseline's.
+fn memory(sim: &Simulation, base: &dyn Baseline, elements: usize) -> J {
+    let g = sim.gmap();
+    let topo = g.topology_bytes();
+    let total = g.memory_bytes();
+    let (mut index, mut values, mut other) = (0usize, 0usize, 0usize);
+    let mut per: Vec<(String, String, usize, usize)> = Vec::new();
+    for e in g.embeddings() {
+        let bytes = e.memory_bytes();
+        let v = match e.ty() {
+            EmbeddingType::Bool => e.n_slots(),
+            EmbeddingType::I64 => e.n_slots() * 8,
+            t => e.n_slots() * t.width() * 8,
+        }
+        .min(bytes);
+        let i = if e.orbit().is_empty() {
+            0
+        } else {
+            (g.capacity() * 4).min(bytes - v)
+        };
+        index += i;
+        values += v;
+        other += bytes - v - i;
+        per.push((e.name().to_string(), e.orbit().to_string(), bytes, v));
+    }
+    per.sort_by_key(|p| std::cmp::Reverse(p.2));
+    let n = elements as f64;
+    let per_elem = |b: usize| J::num(b as f64 / n);
+    let used: Vec<J> = per
+        .iter()
+        .map(|(name, orbit, bytes, v)| {
+            J::Obj(vec![
+                ("name", J::str(name.clone())),
+                ("orbit", J::str(orbit.clone())),
+                ("bytes_per_element", per_elem(*bytes)),
+                ("values_bytes_per_element", per_elem(*v)),
+            ])
+        })
+        .collect();
+    J::Obj(vec![
+        ("engine_bytes", J::num(total as f64)),
+        ("engine_bytes_per_element", per_elem(total)),
+        ("topology_bytes_per_element", per_elem(topo)),
+        ("embedding_index_bytes_per_element", per_elem(index)),
+        ("embedding_values_bytes_per_element", per_elem(values)),
+        ("embedding_other_bytes_per_element", per_elem(other)),
+        ("embeddings", J::num(g.embeddings().len() as f64)),
+        ("darts_per_element", J::num(g.n_darts() as f64 / n)),
+        ("baseline_bytes", J::num(base.memory_bytes() as f64)),
+        ("baseline_bytes_per_element", per_elem(base.memory_bytes())),
+        ("by_embedding", J::Arr(used)),
+    ])
+}
+
+// ------------------------------------------------------------------------------ a case
+
+/// What a measured case leaves for predicting the next size.
+#[derive(Clone, Copy)]
+struct Measured {
+    elements: usize,
+    /// Engine and baseline setup plus the first steps.
+    setup_s: f64,
+    /// The slowest engine step time over the pool sizes.
+    engine_step_s: f64,
+    baseline_step_s: f64,
+    memory_bytes: f64,
+}
+
+struct Budget {
+    case_s: f64,
+    total_s: f64,
+    start: Instant,
+}
+
+impl Budget {
+    /// Seconds left to the bench.
+    fn left(&self) -> f64 {
+        self.total_s - self.start.elapsed().as_secs_f64()
+    }
+    /// Seconds left to a case started at `started`: its own budget or the bench's.
+    fn case_left(&self, started: Instant) -> f64 {
+        (self.case_s - started.elapsed().as_secs_f64()).min(self.left())
+    }
+}
+
+fn skipped(model: Model, target: usize, cells: &[usize], elements: usize, why: String) -> J {
+    println!(
+        "  {:13} {elements:>9} {}s  {why}",
+        model_label(model),
+        model.element()
+    );
+    J::Obj(vec![
+        ("model", J::str(model_label(model))),
+        ("kind", J::str(model.kind())),
+        ("element", J::str(model.element())),
+        ("target", J::num(target as f64)),
+        (
+            "cells",
+            J::Arr(cells.iter().map(|&c| J::num(c as f64)).collect()),
+        ),
+        ("elements", J::num(elements as f64)),
+        ("status", J::str("skipped")),
+        ("reason", J::str(why)),
+    ])
+}
+
+/// Runs one case; `None` for the JSON means the engine and the baseline disagree (fatal).
+fn run_case(
+    model: Model,
+    target: usize,
+    threads: &[usize],
+    prev: Option<Measured>,
+    budget: &Budget,
+) -> (J, Option<Measured>) {
+    let (cells, elements) = model.cells(target);
+    let left = budget.left().min(budget.case_s);
+    if let Some(p) = prev {
+        let scale = elements as f64 / p.elements as f64;
+        let predicted = scale
+            * (p.setup_s
+                + (CHECK_STEPS + MIN_SAMPLES * threads.len()) as f64 * p.engine_step_s
+                + (CHECK_STEPS + MIN_SAMPLES) as f64 * p.baseline_step_s);
+        if predicted > left {
+            let why = format!(
+                "skipped: over time budget (predicted {predicted:.0} s from {} elements, {left:.0} s left)",
+                p.elements
+            );
+            return (skipped(model, target, &cells, elements, why), None);
+        }
+        let mem = scale * p.memory_bytes * 1.5;
+        if let Some(avail) = meminfo_kib("MemAvailable:") {
+            if mem > 0.8 * avail * 1024.0 {
+                let why = format!(
+                    "skipped: over memory (predicted {:.1} GiB, {:.1} GiB available)",
+                    mem / 1_073_741_824.0,
+                    avail / 1_048_576.0
+                );
+                return (skipped(model, target, &cells, elements, why), None);
+            }
+        }
+    }
+    let started = Instant::now();
+    let mut sim = None;
+    let setup_engine_s = seconds(|| sim = Some(model.simulation(&cells)));
+    let mut sim = sim.expect("built");
+    let mut check: Option<Box<dyn Baseline>> = None;
+    let setup_baseline_s = seconds(|| check = Some(model.baseline(&sim)));
+    let mut check = check.expect("built");
+    let mut timed = model.baseline(&sim);
+    let start = sim.vertex_vec3("position").expect("positions");
+    let vertices = start.len();
+
+    // the same steps on both; the engine's first builds its plans
+    let mut first_steps = Vec::new();
+    for _ in 0..CHECK_STEPS {
+        first_steps.push(seconds(|| sim.step().expect("the engine steps")));
+        check.step();
+    }
+    let mut engine_steps = CHECK_STEPS;
+    let agree = |sim: &Simulation, check: &dyn Baseline, steps: usize| {
+        let (rel, motion) = disagreement(sim, check, &start);
+        if rel.is_nan() || rel > TOLERANCE {
+            eprintln!(
+                "\nABORT: the {} baseline disagrees with the engine on {elements} {}s after {steps} steps: \
+                 max position difference {rel:e} relative to the motion ({motion:e}), tolerance {TOLERANCE:e}. \
+                 The baseline is not the engine's algorithm; fix benches/baselines/mod.rs \
+                 (tests/baselines.rs checks the same on small meshes).",
+                model_label(model),
+                model.element()
+            );
+            std::process::exit(2);
+        }
+        (rel, motion)
+    };
+    agree(&sim, check.as_ref(), engine_steps);
+
+    // baseline timing (on its own copy, which may run many steps)
+    let one = seconds(|| timed.step());
+    let bbatch = batch_for(one, 1000);
+    let baseline = time_steps(MAX_SAMPLES, bbatch, || timed.step());
+
+    // engine timing: the pool sizes take turns, sample by sample (drift in the machine's load
+    // or in the state touches them alike), as many samples as the budget leaves
+    let est = *first_steps.last().expect("steps");
+    let batch = batch_for(est, 100);
+    let pools: Vec<rayon::ThreadPool> = threads
+        .iter()
+        .map(|&t| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .expect("a thread pool")
+        })
+        .collect();
+    let round_s = est * (batch * threads.len()) as f64;
+    let mut samples: Vec<Vec<f64>> = vec![Vec::new(); threads.len()];
+    for round in 0..MAX_SAMPLES {
+        if round > 0 && budget.case_left(started) < round_s {
+            break;
+        }
+        for (pool, out) in pools.iter().zip(&mut samples) {
+            let t = pool.install(|| {
+                seconds(|| {
+                    for _ in 0..batch {
+                        black_box(sim.step()).expect("the engine steps");
+                    }
+                })
+            });
+            out.push(t / batch as f64);
+            engine_steps += batch;
+        }
+    }
+    let engine: Vec<(usize, Timing)> = threads
+        .iter()
+        .zip(samples)
+        .map(|(&t, s)| {
+            (
+                t,
+                Timing {
+                    step_s: median(&s),
+                    samples: s,
+                    batch,
+                },
+            )
+        })
+        .collect();
+
+    // the checking baseline catches up: same steps, same positions
+    for _ in CHECK_STEPS..engine_steps {
+        check.step();
+    }
+    let (rel, motion) = agree(&sim, check.as_ref(), engine_steps);
+
+    let mem = memory(&sim, check.as_ref(), elements);
+    let mem_bytes = sim.gmap().memory_bytes() as f64;
+    let t1 = engine
+        .iter()
+        .find(|(t, _)| *t == 1)
+        .map_or(engine[0].1.step_s, |(_, x)| x.step_s);
+    let ratio = t1 / baseline.step_s;
+    let slowest = engine.iter().map(|(_, x)| x.step_s).fold(0.0, f64::max);
+    let mut line = format!(
+        "  {:13} {elements:>9} {}s  engine {:9.3} ms  baseline {:9.3} ms  ratio {ratio:7.2}",
+        model_label(model),
+        model.element(),
+        t1 * 1e3,
+        baseline.step_s * 1e3
+    );
+    for (t, x) in &engine {
+        if *t != 1 {
+            let _ = write!(line, "  {t} threads x{:.2}", t1 / x.step_s);
+        }
+    }
+    let _ = write!(
+        line,
+        "  {:.0} B/{}  (baseline {:.0})  setup {:.1} s  agree {rel:.1e}",
+        mem_bytes / elements as f64,
+        model.element(),
+        check.memory_bytes() as f64 / elements as f64,
+        setup_engine_s
+    );
+    println!("{line}");
+    let json = J::Obj(vec![
+        ("model", J::str(model_label(model))),
+        ("kind", J::str(model.kind())),
+        ("element", J::str(model.element())),
+        ("target", J::num(target as f64)),
+        (
+            "cells",
+            J::Arr(cells.iter().map(|&c| J::num(c as f64)).collect()),
+        ),
+        ("elements", J::num(elements as f64)),
+        ("vertices", J::num(vertices as f64)),
+        ("darts", J::num(sim.gmap().n_darts() as f64)),
+        ("status", J::str("ok")),
+        ("setup_engine_s", J::num(setup_engine_s)),
+        ("setup_baseline_s", J::num(setup_baseline_s)),
+        (
+            "first_steps_s",
+            J::Arr(first_steps.iter().map(|&x| J::num(x)).collect()),
+        ),
+        (
+            "engine",
+            J::Arr(
+                engine
+                    .iter()
+                    .map(|(t, x)| {
+                        let J::Obj(mut o) = x.json() else {
+                            unreachable!()
+                        };
+                        o.insert(0, ("threads", J::num(*t as f64)));
+                        o.push(("speedup_vs_1", J::num(t1 / x.step_s)));
+                        J::Obj(o)
+                    })
+                    .collect(),
+            ),
+        ),
+        ("baseline", baseline.json()),
+        ("ratio", J::num(ratio)),
+        ("engine_ns_per_element", J::num(t1 * 1e9 / elements as f64)),
+        (
+            "baseline_ns_per_element",
+            J::num(baseline.step_s * 1e9 / elements as f64),
+        ),
+        (
+            "agreement",
+            J::Obj(vec![
+                ("steps", J::num(engine_steps as f64)),
+                ("max_relative_difference", J::num(rel)),
+                ("motion", J::num(motion)),
+                ("tolerance", J::num(TOLERANCE)),
+            ]),
+        ),
+        ("memory", mem),
+        ("wall_s", J::num(started.elapsed().as_secs_f64())),
+    ]);
+    let measured = Measured {
+        elements,
+        setup_s: setup_engine_s + setup_baseline_s + first_steps[0],
+        engine_step_s: slowest,
+        baseline_step_s: baseline.step_s,
+        memory_bytes: mem_bytes,
+    };
+    (json, Some(measured))
+}
+
+fn main() {
+    let sizes: Vec<usize> = env_list("TOPOMECH_BENCH_SIZES", "1e3,1e4,1e5,1e6", |s| {
+        s.parse::<f64>()
+            .ok()
+            .filter(|x| *x >= 1.0)
+            .map(|x| x as usize)
+    });
+    let models = env_list(
+        "TOPOMECH_BENCH_MODELS",
+        "cloth,corotational,mass_tensor",
+        model_named,
+    );
+    let threads: Vec<usize> = env_list("TOPOMECH_BENCH_THREADS", "1,2", |s| {
+        s.parse().ok().filter(|&t| t >= 1)
+    });
+    let budget = Budget {
+        case_s: env_f64("TOPOMECH_BENCH_CASE_BUDGET_S", 75.0),
+        total_s: env_f64("TOPOMECH_BENCH_TOTAL_BUDGET_S", 400.0),
+        start: Instant::now(),
+    };
+    let out_dir = std::env::var("TOPOMECH_BENCH_OUT").map_or_else(
+        |_| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bench"),
+        std::path::PathBuf::from,
+    );
+    println!(
+        "engine vs hand-written baselines: one full step (forces, accumulation, symplectic Euler), \
+         median of up to {MAX_SAMPLES} samples; engine in rayon pools of {threads:?} threads"
+    );
+    let mut cases = Vec::new();
+    for &model in &models {
+        let mut prev = None;
+        for &target in &sizes {
+            let (json, measured) = run_case(model, target, &threads, prev, &budget);
+            cases.push(json);
+            if measured.is_some() {
+                prev = measured;
+            }
+        }
+    }
+    let results = J::Obj(vec![
+        ("machine", machine()),
+        (
+            "settings",
+            J::Obj(vec![
+                (
+                    "sizes",
+                    J::Arr(sizes.iter().map(|&s| J::num(s as f64)).collect()),
+                ),
+                (
+                    "models",
+                    J::Arr(models.iter().map(|&m| J::str(model_label(m))).collect()),
+                ),
+                (
+                    "threads",
+                    J::Arr(threads.iter().map(|&t| J::num(t as f64)).collect()),
+                ),
+                ("case_budget_s", J::num(budget.case_s)),
+                ("total_budget_s", J::num(budget.total_s)),
+                ("max_samples", J::num(MAX_SAMPLES as f64)),
+                ("check_steps", J::num(CHECK_STEPS as f64)),
+                ("tolerance", J::num(TOLERANCE)),
+                ("integrator", J::str("symplectic_euler")),
+                ("dt", J::num(baselines::DT)),
+                (
+                    "profile",
+                    J::str(if cfg!(debug_assertions) {
+                        "debug"
+                    } else {
+                        "release"
+                    }),
+                ),
+                ("wall_s", J::num(budget.start.elapsed().as_secs_f64())),
+            ]),
+        ),
+        ("cases", J::Arr(cases)),
+    ]);
+    let mut s = String::new();
+    results.write(&mut s, 0);
+    s.push('\n');
+    std::fs::create_dir_all(&out_dir).expect("the output directory");
+    let path = out_dir.join("results.json");
+    std::fs::write(&path, s).expect("write results.json");
+    println!("wrote {}", path.display());
+}
