@@ -6,6 +6,9 @@
 #   make demo     run `topomech demo` (writes out/demo)
 #   make bench    kernel benchmarks, the cost of topology changes, the engine against
 #                 hand-written baselines (writes bench/results.md and bench/results.json)
+#   make browser  playwright into .venv, and Debian's chromium when missing (for the viewer's
+#                 browser tests; never fails: without them those tests are skipped)
+#   make docs-pictures  run every shipped scene, write its picture under docs/scenes
 #   make clean    remove build outputs and the venv
 #
 # Stamp files under .venv make the targets idempotent: `make test` twice rebuilds nothing
@@ -21,9 +24,10 @@ RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml
 VENV_STAMP := $(VENV)/.stamp-venv
 DEVELOP_STAMP := $(VENV)/.stamp-develop
 # Linters are pinned to a minor (ruff) or major (mypy) version: new releases add checks.
-DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 mypy>=2,<3
+DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 mypy>=2,<3 \
+	pillow>=10.1 matplotlib>=3.7 imageio-ffmpeg>=0.4.9 playwright>=1.40
 
-.PHONY: venv develop test rust-test py-test lint demo bench clean
+.PHONY: venv develop test rust-test py-test lint demo bench clean browser docs-pictures
 
 venv: $(VENV_STAMP)
 
@@ -53,8 +57,14 @@ lint: $(DEVELOP_STAMP)
 	MYPY_CACHE_DIR=$(VENV)/.mypy_cache $(VPY) -m mypy
 	MYPY_CACHE_DIR=$(VENV)/.mypy_cache $(VPY) -m mypy.stubtest topomech._core
 
-py-test: $(DEVELOP_STAMP)
+py-test: $(DEVELOP_STAMP) browser
 	$(VPY) -m pytest -q
+
+browser: $(VENV_STAMP)
+	scripts/install_browser.sh $(VPY)
+
+docs-pictures: $(DEVELOP_STAMP)
+	$(VPY) scripts/make_docs_pictures.py
 
 demo: $(DEVELOP_STAMP)
 	$(VENV)/bin/topomech demo

@@ -150,7 +150,11 @@ def _add_run(sub: Any) -> None:
         description=(
             "Run the simulation a scene file describes (or a shipped scene by name: see "
             "--list) and write DIR/summary.json, DIR/final.vtu and, every output.every steps, "
-            "DIR/frames/frame_NNNNN.vtu with DIR/animation.pvd (open it in ParaView). Exit 0 "
+            "DIR/frames/frame_NNNNN.vtu with DIR/animation.pvd (open it in ParaView), the "
+            "frames for `topomech view DIR` (DIR/view.json, DIR/view.bin), and previews "
+            "rendered headless: DIR/preview.gif (DIR/preview.mp4 when imageio-ffmpeg is "
+            "installed), DIR/energy.png and DIR/energy.csv (kinetic, gravitational, elastic "
+            "and total energy at every step; --no-preview skips them). Exit 0 "
             "when every step ran; 1 when the simulation diverged or a step failed, a timed "
             "cut that separates nothing (misses the object) included (what was written "
             "stays, summary.json has an 'error' entry naming the step, or the event); 2 when "
@@ -168,6 +172,12 @@ def _add_run(sub: Any) -> None:
         help="a frame every N steps, 0 for none (default: the scene's output.every)",
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar and no report")
+    p.add_argument(
+        "--no-preview",
+        dest="preview",
+        action="store_false",
+        help="no energies, no preview.gif/mp4 and no energy.png (a faster run)",
+    )
     p.add_argument("--list", action="store_true", help="list the shipped scenes and exit")
     p.set_defaults(run=_run_run)
 
@@ -247,10 +257,24 @@ def _report(s: dict[str, Any], out: Path) -> None:
         wrote.append(out / "animation.pvd")
     frames = f" ({s['frames']} frames in {out / 'frames'})" if s["frames"] else ""
     print(f"{'wrote':<11} {', '.join(map(str, wrote))}{frames}")
+    previews = [
+        out / s["outputs"][k]
+        for k in ("preview", "video", "energy_plot")
+        if s["outputs"].get(k) is not None
+    ]
+    if previews:
+        print(f"{'previews':<11} {', '.join(map(str, previews))}")
+    if s["outputs"].get("view"):
+        print(f"{'view':<11} topomech view {out}")
 
 
 def _run_scene_cli(
-    scene: str, out: Path | None, steps: int | None, every: int | None, quiet: bool
+    scene: str,
+    out: Path | None,
+    steps: int | None,
+    every: int | None,
+    quiet: bool,
+    preview: bool = True,
 ) -> tuple[int, Path | None]:
     """Runs a scene for ``run`` and ``demo``: the exit code and the output directory."""
     from topomech.run import run_scene
@@ -263,7 +287,7 @@ def _run_scene_cli(
             sc = sc.with_steps(steps, every)
         out_dir = out if out is not None else Path("out") / sc.name
         show = not quiet and sys.stderr.isatty()
-        summary = run_scene(sc, out_dir, progress=show)
+        summary = run_scene(sc, out_dir, progress=show, preview=preview)
     except SceneError as e:
         _error(str(e))
         return EXIT_REFUSED, None
@@ -291,7 +315,7 @@ def _run_run(args: argparse.Namespace) -> int:
     if args.scene is None:
         _error("give a SCENE (a .toml file or a shipped scene's name; --list lists them)")
         return EXIT_REFUSED
-    code, _ = _run_scene_cli(args.scene, args.out, args.steps, args.every, args.quiet)
+    code, _ = _run_scene_cli(args.scene, args.out, args.steps, args.every, args.quiet, args.preview)
     return code
 
 
@@ -323,6 +347,73 @@ def _run_demo(args: argparse.Namespace) -> int:
     if code == EXIT_OK and out is not None and not args.quiet:
         print(f"\nopen {out / 'animation.pvd'} in ParaView to watch the beam bend")
     return code
+
+
+# ---------------------------------------------------------------------------------- view
+
+
+def _add_view(sub: Any) -> None:
+    p = sub.add_parser(
+        "view",
+        help="play a run's frames in a web viewer (with a dart view of the G-map)",
+        description=(
+            "Write OUT_DIR/viewer.html, a self-contained page (script and data inlined: it "
+            "opens from disk, without network) that plays the frames `topomech run` wrote: "
+            "play/pause, scrub, field coloring, wireframe, and a dart view drawing the "
+            "G-map's darts and alpha links (for maps of a few thousand darts). Then serve "
+            "OUT_DIR on 127.0.0.1 (a free port unless --port) and print the address, until "
+            "Ctrl-C. Exit 0; 2 when OUT_DIR is missing, is not a run directory, or its view "
+            "data cannot be read."
+        ),
+    )
+    p.add_argument("out_dir", metavar="OUT_DIR", type=Path, help="a directory `topomech run` wrote")
+    p.add_argument(
+        "--html",
+        "--no-serve",
+        dest="serve",
+        action="store_false",
+        help="only write OUT_DIR/viewer.html (or --output) and print its path",
+    )
+    p.add_argument("--output", metavar="FILE", type=Path, help="where to write the page")
+    p.add_argument("--port", type=int, default=0, help="port to serve on (default: a free one)")
+    p.add_argument("--open", action="store_true", help="open the page in the default browser")
+    p.set_defaults(run=_run_view)
+
+
+def _run_view(args: argparse.Namespace) -> int:
+    from topomech.viewer import Server, ViewError, write_viewer
+
+    try:
+        if not args.serve:
+            page = write_viewer(args.out_dir, args.output)
+            print(f"wrote {page}")
+            if args.open:
+                import webbrowser
+
+                webbrowser.open(page.resolve().as_uri())
+            return EXIT_OK
+        server = Server(args.out_dir, args.port)
+    except ViewError as e:
+        _error(str(e))
+        return EXIT_REFUSED
+    except OSError as e:  # the port is taken, the page cannot be written
+        _error(f"cannot serve {args.out_dir}: {e.strerror or e}")
+        return EXIT_REFUSED
+    if args.output is not None:
+        write_viewer(args.out_dir, args.output)
+    server.start()
+    print(f"serving {args.out_dir} at {server.url} (Ctrl-C stops)", flush=True)
+    if args.open:
+        import webbrowser
+
+        webbrowser.open(server.url)
+    try:
+        server.thread.join()
+    except KeyboardInterrupt:
+        print("stopped")
+    finally:
+        server.stop()
+    return EXIT_OK
 
 
 # ---------------------------------------------------------------------------------- rules
@@ -578,7 +669,14 @@ def _run_apply(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------- main
 
 #: The subcommands, in the order `--help` lists them.
-SUBCOMMANDS: list[Callable[[Any], None]] = [_add_info, _add_check, _add_apply, _add_run, _add_demo]
+SUBCOMMANDS: list[Callable[[Any], None]] = [
+    _add_info,
+    _add_check,
+    _add_apply,
+    _add_run,
+    _add_view,
+    _add_demo,
+]
 
 
 def build_parser() -> argparse.ArgumentParser:

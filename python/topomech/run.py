@@ -7,7 +7,13 @@
   ``displacement``, ``velocity`` and ``fixed`` (1 for held vertices), cells from the map;
 - ``frames/frame_NNNNN.vtu``: a frame every ``every`` steps, frame 0 being the initial state
   (and the last state as a last frame when the step count is not a multiple of ``every``),
-  with ``animation.pvd``, the ParaView collection of the frames and their times.
+  with ``animation.pvd``, the ParaView collection of the frames and their times;
+- ``view.json`` and ``view.bin``: the frames for ``topomech view`` and the previews
+  (positions, fields, surfaces and, for small maps, darts with their alpha links; see
+  :mod:`topomech.recording`);
+- with ``preview`` (the default): ``energy.csv`` (kinetic, gravitational, elastic and total
+  energy at every step) and ``energy.png``, ``preview.gif`` (the frames rendered headless,
+  see :mod:`topomech.render`) and ``preview.mp4`` when imageio-ffmpeg's encoder is installed.
 
 A divergence stops the run: what was written stays, ``final.vtu`` holds the last good state,
 and ``summary.json`` has an ``error`` entry naming the step and the vertex.
@@ -41,6 +47,7 @@ import numpy.typing as npt
 from topomech import __version__
 from topomech._cells import flat_to_blocks
 from topomech._core import DivergenceError, SimulationError
+from topomech.recording import Recorder
 from topomech.scene import Scene, load_scene
 
 if TYPE_CHECKING:
@@ -243,6 +250,8 @@ def run_scene(
     steps: int | None = None,
     every: int | None = None,
     progress: bool | Callable[[int, int], None] = False,
+    preview: bool = True,
+    video: bool = True,
 ) -> dict[str, Any]:
     """Runs a scene (a :class:`Scene` or a scene file) and writes its outputs under ``out``
     (default ``out/<scene name>``); ``steps`` and ``every`` override the scene's. Returns the
@@ -259,6 +268,10 @@ def run_scene(
     a timed cut that separated nothing) when a step failed.
 
     ``progress``: True for a progress bar on stderr, or a callable ``(done, total)``.
+    ``preview``: track the energies and render ``preview.gif``, ``energy.png`` (and
+    ``preview.mp4`` with ``video``, when an encoder is installed); the frames for the viewer
+    (``view.json``) are written either way. ``outputs`` names each file written (None for
+    those that were not).
     Raises :class:`SceneError` for a scene that is refused (nothing is written then), an
     event after the end of the run included (with ``steps`` too).
     """
@@ -273,16 +286,31 @@ def run_scene(
     frames_dir = out_dir / "frames"
     for old in frames_dir.glob("frame_*.vtu") if frames_dir.is_dir() else ():
         old.unlink()
-    for stale in ("animation.pvd", "final.vtu", "summary.json"):
+    for stale in (
+        "animation.pvd",
+        "final.vtu",
+        "summary.json",
+        "view.json",
+        "view.bin",
+        "viewer.html",
+        "energy.csv",
+        "energy.png",
+        "preview.gif",
+        "preview.mp4",
+    ):
         (out_dir / stale).unlink(missing_ok=True)
     writer = _Writer.of(sim)
+    recorder = Recorder(sim, sc, energy=preview)
     frames: list[tuple[float, str]] = []
 
     def frame() -> None:
         frames_dir.mkdir(exist_ok=True)
         name = f"frame_{len(frames):05d}.vtu"
         writer.write(frames_dir / name)
+        recorder.frame()
         frames.append((sim.time, f"frames/{name}"))
+
+    recorder.start()
 
     if sc.every > 0:
         frame()
@@ -299,6 +327,7 @@ def run_scene(
             ts = time.perf_counter()
             sim.step()
             step_seconds += time.perf_counter() - ts
+            recorder.after_step()
             if sc.every > 0 and (k % sc.every == 0 or k == sc.steps):
                 frame()
             if bar is not None:
@@ -335,6 +364,19 @@ def run_scene(
     counts = sim.gmap().cell_counts()  # of the final map: a topology change changes them
     if frames:
         write_pvd(out_dir / "animation.pvd", frames)
+    changes = [dict(c) for c in sim.topology_changes()]
+    recorder.finish()
+    outputs: dict[str, str | None] = {
+        "view": "view.json" if recorder.write_view(out_dir, changes) else None,
+        "energy": "energy.csv" if recorder.write_energy(out_dir / "energy.csv") else None,
+        "preview": None,
+        "video": None,
+        "energy_plot": None,
+    }
+    if preview and (error is None or error["type"] != "interrupted"):
+        from topomech.render import render_previews
+
+        outputs.update(render_previews(out_dir, video=video, name=sc.name, events=changes))
     summary: dict[str, Any] = {
         "scene": str(sc.path) if sc.path is not None else None,
         "name": sc.name,
@@ -351,7 +393,7 @@ def run_scene(
         "faces": counts["faces"],
         "volumes": counts["volumes"],
         "components": counts["components"],
-        "topology_changes": [dict(c) for c in sim.topology_changes()],
+        "topology_changes": changes,
         "total_mass": sim.total_mass(),
         "kinetic_energy": sim.kinetic_energy(),
         "momentum": [float(x) for x in sim.momentum()],
@@ -364,6 +406,7 @@ def run_scene(
             "summary": "summary.json",
             "final": "final.vtu",
             "animation": "animation.pvd" if frames else None,
+            **outputs,
             "frames": [f for _, f in frames],
         },
         "topomech_version": __version__,

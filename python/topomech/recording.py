@@ -1,0 +1,717 @@
+"""What a run keeps for looking at it: frames for the viewer and the previews, and energies.
+
+:class:`Recorder` follows a :class:`Simulation` during :func:`topomech.run.run_scene`:
+
+- **frames** (:meth:`Recorder.frame`): the positions, the fields (displacement magnitude,
+  and von Mises stress for the continuous 3D models) and the topology they are drawn on. A
+  topology is recorded again only when the map's darts were relinked (a cut, a fracture): its
+  surface polygons, its edges and, for maps of at most :data:`DART_LIMIT` darts, the darts
+  themselves with their alpha links, so that the viewer's dart view shows links disappearing.
+  :meth:`Recorder.write_view` writes them as ``view.json`` (the description) and
+  ``view.bin`` (the arrays, little-endian, 4 bytes per value) — see :func:`read_view`.
+- **energies** (:meth:`Recorder.after_step`), at every step: kinetic ``sum m |v|^2 / 2``;
+  gravitational ``-sum m g . (x - X)`` (zero at the rest positions ``X``); elastic, the work
+  done against the models' conservative forces since the rest state: ``E(x_0)`` is the
+  integral of ``-f . dx`` along the straight path from the rest positions to the initial
+  ones (3-point Gauss-Legendre; zero when the run starts at rest), then every step adds
+  ``-(f(x_k) + f(x_{k+1})) / 2 . (x_{k+1} - x_k)`` (the trapezoid rule: exact for forces
+  linear in the positions — linear FEM, mass-tensor — and second order otherwise). The
+  forces are the models' forces at zero velocity, so the dashpots of damped springs do no
+  work here: what they and the viscous damping dissipate shows as the total
+  ``kinetic + gravitational + elastic`` going down. Written as ``energy.csv``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from topomech._core import TopomechError
+
+if TYPE_CHECKING:
+    from topomech.scene import Scene
+    from topomech.simulation import Simulation
+
+__all__ = [
+    "DART_LIMIT",
+    "VIEW_FORMAT",
+    "Recorder",
+    "ViewError",
+    "read_energy",
+    "read_view",
+]
+
+#: Maps with at most this many darts have their darts recorded for the dart view.
+DART_LIMIT = 12000
+#: The ``format`` of ``view.json``.
+VIEW_FORMAT = "topomech-view"
+VIEW_VERSION = 1
+#: The models whose stress is the linear-elastic one (von Mises is computed for them).
+FEM_MODELS = {"linear_fem": "linear", "mass_tensor": "linear", "corotational": "corotated"}
+#: ``energy.csv``'s columns.
+ENERGY_COLUMNS = ("step", "time", "kinetic", "gravitational", "elastic", "total")
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+# Faces of the volume cells, VTK vertex order (orientation does not matter: the renderers
+# light both sides).
+_CELL_FACES: dict[str, tuple[tuple[int, ...], ...]] = {
+    "tetra": ((0, 1, 2), (0, 1, 3), (1, 2, 3), (0, 2, 3)),
+    "hexahedron": (
+        (0, 1, 2, 3),
+        (4, 5, 6, 7),
+        (0, 1, 5, 4),
+        (1, 2, 6, 5),
+        (2, 3, 7, 6),
+        (3, 0, 4, 7),
+    ),
+    "wedge": ((0, 1, 2), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)),
+    "pyramid": ((0, 1, 2, 3), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
+}
+# Signs of the hexahedron's nodes in its reference cube (VTK order).
+_HEX_SIGNS = np.array(
+    [
+        [-1, -1, -1],
+        [1, -1, -1],
+        [1, 1, -1],
+        [-1, 1, -1],
+        [-1, -1, 1],
+        [1, -1, 1],
+        [1, 1, 1],
+        [-1, 1, 1],
+    ],
+    dtype=np.float64,
+)
+
+
+class ViewError(Exception):
+    """A directory without readable view data (``view.json`` and ``view.bin``)."""
+
+
+# ------------------------------------------------------------------------------ topology
+
+
+@dataclass
+class Topology:
+    """What frames are drawn on, between two topology changes."""
+
+    step: int
+    n_vertices: int
+    #: The polygons drawn: the boundary faces of a volume mesh, every face of a surface.
+    face_offsets: I64
+    face_indices: I64
+    #: Unique edges ``(E, 2)`` of the cells (the wireframe).
+    edges: I64
+    #: The cells (kernel kinds and vertex lists), for the stresses.
+    cells: list[tuple[str, I64]]
+    rest: F64
+    #: Per dart (``-1`` for removed darts): vertex, alpha_0..alpha_3, face and volume ids;
+    #: None for maps above :data:`DART_LIMIT`.
+    darts: dict[str, I64] | None
+    n_darts: int
+
+
+def _components(n: int, links: list[I64], live: npt.NDArray[np.bool_]) -> I64:
+    """The smallest dart of each dart's orbit through ``links`` (label propagation)."""
+    label = np.arange(n, dtype=np.int64)
+    while True:
+        new = label.copy()
+        for a in links:
+            new = np.minimum(new, new[a])
+        new = np.where(live, new, -1)
+        if np.array_equal(new, label):
+            return label
+        label = np.where(live, new, label)
+
+
+def _dart_table(gmap: Any, dimension: int) -> dict[str, I64]:
+    labels = np.asarray(gmap.vertex_labels(), dtype=np.int64)
+    n = len(labels)
+    live = labels >= 0
+    alpha = np.tile(np.arange(n, dtype=np.int64), (4, 1))
+    for i in range(dimension + 1):
+        for d in np.flatnonzero(live):
+            alpha[i, d] = gmap.alpha(i, int(d))
+    face = _components(n, [alpha[0], alpha[1]], live)
+    volume = (
+        _components(n, [alpha[0], alpha[1], alpha[2]], live)
+        if dimension == 3
+        else np.where(live, 0, -1)
+    )
+    return {"vertex": labels, "alpha": alpha, "face": face, "volume": volume}
+
+
+def _surface(cells: list[tuple[str, I64]], dimension: int) -> tuple[list[tuple[int, ...]], I64]:
+    """The polygons to draw and the unique edges."""
+    faces: list[tuple[int, ...]] = []
+    edges: set[tuple[int, int]] = set()
+    if dimension == 2:
+        for _, c in cells:
+            f = tuple(int(v) for v in c)
+            faces.append(f)
+    else:
+        seen: dict[tuple[int, ...], int] = {}
+        for kind, c in cells:
+            for local in _CELL_FACES.get(kind, ()):
+                f = tuple(int(c[k]) for k in local)
+                key = tuple(sorted(f))
+                if key in seen:
+                    seen[key] = -1
+                else:
+                    seen[key] = len(faces)
+                    faces.append(f)
+        faces = [f for f in faces if seen[tuple(sorted(f))] >= 0]
+    for kind, c in cells:
+        polys = (
+            [tuple(int(v) for v in c)]
+            if dimension == 2
+            else [tuple(int(c[k]) for k in local) for local in _CELL_FACES.get(kind, ())]
+        )
+        for p in polys:
+            for a, b in zip(p, p[1:] + p[:1]):
+                edges.add((min(a, b), max(a, b)))
+    e = np.array(sorted(edges), dtype=np.int64).reshape(-1, 2)
+    return faces, e
+
+
+# ------------------------------------------------------------------------------ stresses
+
+
+def _region_predicate(text: str) -> Any:
+    """A region's ``where`` (rule-language predicate on x, y, z) as Python code, or None
+    when it uses more than the arithmetic, comparisons and ``&& || !`` of the language."""
+    py = text.replace("&&", " and ").replace("||", " or ")
+    py = "".join(" not " if ch == "!" and nxt != "=" else ch for ch, nxt in zip(py, [*py[1:], ""]))
+    py = py.replace("true", "True").replace("false", "False")
+    try:
+        return compile(py, "<region>", "eval")
+    except SyntaxError:
+        return None
+
+
+_MATH = {"abs": abs, "min": min, "max": max, "sqrt": math.sqrt}
+
+
+@dataclass
+class _Material:
+    young: float
+    poisson: float
+    #: ``(code, young, poisson)`` of the regions, in order (a later one wins).
+    regions: list[tuple[Any, float | None, float | None]] = field(default_factory=list)
+
+    def of(self, centroids: F64) -> tuple[F64, F64]:
+        young = np.full(len(centroids), self.young)
+        poisson = np.full(len(centroids), self.poisson)
+        for code, e, nu in self.regions:
+            if code is None or (e is None and nu is None):
+                continue
+            for k, (x, y, z) in enumerate(centroids):
+                try:
+                    hit = eval(code, {"__builtins__": {}}, {**_MATH, "x": x, "y": y, "z": z})
+                except Exception:
+                    hit = False
+                if hit:
+                    if e is not None:
+                        young[k] = e
+                    if nu is not None:
+                        poisson[k] = nu
+        return young, poisson
+
+
+def _von_mises(sigma: F64) -> F64:
+    s = sigma
+    return np.asarray(
+        np.sqrt(
+            0.5
+            * (
+                (s[:, 0, 0] - s[:, 1, 1]) ** 2
+                + (s[:, 1, 1] - s[:, 2, 2]) ** 2
+                + (s[:, 2, 2] - s[:, 0, 0]) ** 2
+            )
+            + 3.0 * (s[:, 0, 1] ** 2 + s[:, 1, 2] ** 2 + s[:, 0, 2] ** 2)
+        ),
+        dtype=np.float64,
+    )
+
+
+def element_stress(kind: str, rest: F64, x: F64, young: F64, poisson: F64, strain: str) -> F64:
+    """Von Mises stress of each element of one kind (``(E, k)`` vertex rows ``rest``/``x``
+    gathered as ``(E, k, 3)``), Hooke's law on the small strain: ``sym(F) - I`` for
+    ``strain="linear"``, ``S - I`` with ``F = R S`` (polar decomposition) for
+    ``"corotated"``; the deformation gradient ``F`` is the tetrahedron's (constant) or the
+    hexahedron's at its centre."""
+    if kind == "tetra":
+        dm = np.transpose(rest[:, 1:] - rest[:, :1], (0, 2, 1))
+        ds = np.transpose(x[:, 1:] - x[:, :1], (0, 2, 1))
+    elif kind == "hexahedron":
+        grad = _HEX_SIGNS / 8.0  # dN/dxi at the centre, (8, 3)
+        dm = np.einsum("eai,ak->eik", rest, grad)
+        ds = np.einsum("eai,ak->eik", x, grad)
+    else:
+        raise ValueError(kind)
+    f = ds @ np.linalg.inv(dm)
+    if strain == "corotated":
+        u, _, vt = np.linalg.svd(f)
+        flip = np.linalg.det(u @ vt) < 0
+        u[flip, :, 2] *= -1
+        r = u @ vt
+        s = np.transpose(r, (0, 2, 1)) @ f
+    else:
+        s = f
+    eps = 0.5 * (s + np.transpose(s, (0, 2, 1))) - np.eye(3)
+    lam = young * poisson / ((1 + poisson) * (1 - 2 * poisson))
+    mu = young / (2 * (1 + poisson))
+    tr = np.trace(eps, axis1=1, axis2=2)
+    sigma = lam[:, None, None] * tr[:, None, None] * np.eye(3) + 2 * mu[:, None, None] * eps
+    return _von_mises(sigma)
+
+
+# ------------------------------------------------------------------------------ energy
+
+
+def _carry(old_rest: F64, old_x: F64, new_rest: F64, new_x: F64) -> I64:
+    """The old vertex each vertex of a renumbered map comes from (a split vertex's copies
+    keep its rest position; among old vertices sharing a rest position, the nearest)."""
+    by_rest: dict[bytes, list[int]] = {}
+    for i, r in enumerate(old_rest):
+        by_rest.setdefault(r.tobytes(), []).append(i)
+    src = np.empty(len(new_rest), dtype=np.int64)
+    for j, r in enumerate(new_rest):
+        cands = by_rest.get(r.tobytes())
+        if not cands:
+            cands = [int(np.argmin(((old_rest - r) ** 2).sum(axis=1)))]
+        if len(cands) == 1:
+            src[j] = cands[0]
+        else:
+            d = ((old_x[cands] - new_x[j]) ** 2).sum(axis=1)
+            src[j] = cands[int(np.argmin(d))]
+    return src
+
+
+@dataclass
+class _State:
+    x: F64
+    rest: F64
+    version: int
+
+
+class Recorder:
+    """Frames and energies of a run (see the module docstring)."""
+
+    def __init__(
+        self,
+        sim: Simulation,
+        scene: Scene | None = None,
+        *,
+        energy: bool = True,
+        dart_limit: int = DART_LIMIT,
+    ) -> None:
+        self.sim = sim
+        self.dart_limit = dart_limit
+        cfg = scene.config if scene is not None else {}
+        self.name = scene.name if scene is not None else "simulation"
+        self.gravity = np.asarray(cfg.get("gravity", [0.0, 0.0, 0.0]), dtype=np.float64)
+        models = cfg.get("models", [])
+        self.damped = any(float(m.get("damping", 0.0) or 0.0) != 0.0 for m in models)
+        kinds = {m["kind"] for m in models}
+        self.strain: str | None = None
+        if sim.dimension == 3 and kinds and kinds <= set(FEM_MODELS):
+            self.strain = "corotated" if "corotational" in kinds else "linear"
+        self.material = _Material(
+            float(cfg.get("young", 1e6)),
+            float(cfg.get("poisson", 0.3)),
+            [
+                (
+                    _region_predicate(str(r.get("where", ""))),
+                    float(r["young"]) if r.get("young") is not None else None,
+                    float(r["poisson"]) if r.get("poisson") is not None else None,
+                )
+                for r in cfg.get("regions", [])
+            ],
+        )
+        self.topologies: list[Topology] = []
+        self.frames: list[dict[str, Any]] = []
+        self.positions: list[npt.NDArray[np.float32]] = []
+        self.fields: dict[str, list[npt.NDArray[np.float32]]] = {"displacement": []}
+        if self.strain is not None:
+            self.fields["von_mises"] = []
+        self._topo_version = -1
+        # energies
+        self.track_energy = energy
+        self.energy: dict[str, list[float]] = {c: [] for c in ENERGY_COLUMNS}
+        self._state: _State | None = None
+        self._force: F64 | None = None
+        self._elastic = 0.0
+        self._masses: tuple[int, F64] | None = None
+        self._pending: tuple[F64, F64, int] | None = None
+        #: Whether the forces of a step are read from the kernel after it (its ``force``
+        #: embedding holds those of the state before the step) instead of computed again:
+        #: when they are the elastic forces (no damped model) of an integrator that computes
+        #: them at the start of the step, and the vertices are never renumbered (no events,
+        #: no fracture).
+        self.lagged = (
+            not self.damped
+            and sim.integrator in ("explicit_euler", "symplectic_euler", "implicit_euler")
+            and not cfg.get("events")
+            and not cfg.get("fracture")
+        )
+
+    # -------------------------------------------------------------- frames
+
+    def _topology(self) -> Topology:
+        version = self.sim.topology_version
+        if self.topologies and self._topo_version == version:
+            return self.topologies[-1]
+        gmap = self.sim.core.gmap()
+        _, kinds, offsets, conn = gmap.to_flat()
+        cells = [
+            (str(k), np.asarray(conn[offsets[c] : offsets[c + 1]], dtype=np.int64))
+            for c, k in enumerate(kinds)
+        ]
+        faces, edges = _surface(cells, self.sim.dimension)
+        f_off = np.zeros(len(faces) + 1, dtype=np.int64)
+        f_off[1:] = np.cumsum([len(f) for f in faces])
+        f_idx = np.array([v for f in faces for v in f], dtype=np.int64)
+        n_darts = int(gmap.n_darts)
+        darts = _dart_table(gmap, self.sim.dimension) if n_darts <= self.dart_limit else None
+        topo = Topology(
+            step=self.sim.steps,
+            n_vertices=self.sim.n_vertices,
+            face_offsets=f_off,
+            face_indices=f_idx,
+            edges=edges,
+            cells=cells,
+            rest=self.sim.rest_positions(),
+            darts=darts,
+            n_darts=n_darts,
+        )
+        self.topologies.append(topo)
+        self._topo_version = version
+        return topo
+
+    def _stress(self, topo: Topology, x: F64) -> npt.NDArray[np.float32]:
+        """Von Mises per vertex: the mean of its elements'."""
+        assert self.strain is not None
+        total = np.zeros(len(x))
+        count = np.zeros(len(x))
+        for kind in ("tetra", "hexahedron"):
+            rows = [c for k, c in topo.cells if k == kind]
+            if not rows:
+                continue
+            idx = np.array(rows, dtype=np.int64)
+            rest = topo.rest[idx]
+            young, poisson = self.material.of(rest.mean(axis=1))
+            vm = element_stress(kind, rest, x[idx], young, poisson, self.strain)
+            np.add.at(total, idx, np.repeat(vm[:, None], idx.shape[1], axis=1))
+            np.add.at(count, idx, 1.0)
+        return (total / np.maximum(count, 1.0)).astype(np.float32)
+
+    def frame(self) -> None:
+        """Records the current state as a frame."""
+        topo = self._topology()
+        x = self.sim.positions()
+        self.frames.append(
+            {"time": self.sim.time, "step": self.sim.steps, "topology": len(self.topologies) - 1}
+        )
+        self.positions.append(x.astype(np.float32))
+        self.fields["displacement"].append(np.linalg.norm(x - topo.rest, axis=1).astype(np.float32))
+        if "von_mises" in self.fields:
+            self.fields["von_mises"].append(self._stress(topo, x))
+
+    # -------------------------------------------------------------- energy
+
+    def _elastic_forces(self) -> F64:
+        """The models' forces at the current positions and zero velocity."""
+        if not self.damped:
+            return self.sim.forces()
+        v = self.sim.velocities()
+        self.sim.set_velocities(np.zeros_like(v))
+        try:
+            return self.sim.forces()
+        finally:
+            self.sim.set_velocities(v)
+
+    def _mass(self) -> F64:
+        version = self.sim.topology_version
+        if self._masses is None or self._masses[0] != version:
+            self._masses = (version, self.sim.masses())
+        return self._masses[1]
+
+    def _record_state(self, x: F64, rest: F64) -> None:
+        """Kinetic and gravitational energy of the current state (its elastic energy is
+        appended by :meth:`_complete`, once the force at ``x`` is known)."""
+        m = self._mass()
+        e = self.energy
+        e["step"].append(float(self.sim.steps))
+        e["time"].append(self.sim.time)
+        e["kinetic"].append(self.sim.kinetic_energy())
+        e["gravitational"].append(float(-(m[:, None] * (x - rest)).sum(axis=0) @ self.gravity))
+
+    def _complete(self, x: F64, rest: F64, version: int, f: F64) -> None:
+        """Adds the work from the last state whose force is known to ``x`` (force ``f``)."""
+        old = self._state
+        assert old is not None
+        assert self._force is not None
+        if version == old.version:
+            work = 0.5 * float(((self._force + f) * (x - old.x)).sum())
+        else:  # renumbered: each new vertex's displacement from the vertex it comes from
+            src = _carry(old.rest, old.x, rest, x)
+            dx = x - old.x[src]
+            copies = np.bincount(src, minlength=len(old.x)).astype(np.float64)
+            before = (self._force[src] / copies[src][:, None] * dx).sum()
+            work = 0.5 * float(before + (f * dx).sum())
+        self._elastic -= work
+        self.energy["elastic"].append(self._elastic)
+        self._state = _State(x, rest, version)
+        self._force = f
+
+    def start(self) -> None:
+        """Before the first step: the initial energies (the elastic one integrated from the
+        rest positions)."""
+        if not self.track_energy:
+            return
+        x0 = self.sim.positions()
+        rest = self.sim.rest_positions()
+        d = x0 - rest
+        self._elastic = 0.0
+        if np.any(d != 0.0):
+            v0 = self.sim.velocities()
+            nodes, weights = np.polynomial.legendre.leggauss(3)
+            try:
+                for t, w in zip((nodes + 1) / 2, weights / 2):
+                    self.sim.set_positions(rest + t * d)
+                    self._elastic -= float(w * (self._elastic_forces() * d).sum())
+            finally:
+                self.sim.set_positions(x0)
+                self.sim.set_velocities(v0)
+        self._state = _State(x0, rest, self.sim.topology_version)
+        self._force = self._elastic_forces()
+        self._record_state(x0, rest)
+        self.energy["elastic"].append(self._elastic)
+        self._pending = None
+
+    def after_step(self) -> None:
+        """After each step: the energies, the elastic one by the work of the forces over the
+        step (with :attr:`lagged`, that of the step before, whose end force the step just
+        computed)."""
+        if not self.track_energy or self._state is None:
+            return
+        x = self.sim.positions()
+        version = self.sim.topology_version
+        rest = self._state.rest if version == self._state.version else self.sim.rest_positions()
+        if self.lagged:
+            if self._pending is not None:
+                # the step's forces were those of the state before it, at zero damping
+                self._complete(*self._pending, self.sim.embedding("force"))
+            self._pending = (x, rest, version)
+            self._record_state(x, rest)
+        else:
+            self._record_state(x, rest)
+            self._complete(x, rest, version, self._elastic_forces())
+
+    def finish(self) -> None:
+        """After the last step: completes the last state's elastic energy (lagged mode)."""
+        if self._pending is None:
+            return
+        pending, self._pending = self._pending, None
+        try:
+            self._complete(*pending, self._elastic_forces())
+        except TopomechError:
+            for c in ENERGY_COLUMNS:
+                if c != "elastic" and c != "total":
+                    self.energy[c].pop()
+
+    # -------------------------------------------------------------- output
+
+    def write_energy(self, path: Path) -> bool:
+        """Writes ``energy.csv``; False when no energies were tracked."""
+        self.finish()
+        e = self.energy
+        cols = ("step", "time", "kinetic", "gravitational", "elastic")
+        n = min(len(e[c]) for c in cols)  # an interrupted step may have left part of a row
+        for c in cols:
+            del e[c][n:]
+        e["total"] = [a + b + c for a, b, c in zip(e["kinetic"], e["gravitational"], e["elastic"])]
+        if not e["step"]:
+            return False
+        with path.open("w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(ENERGY_COLUMNS)
+            for row in zip(*(self.energy[c] for c in ENERGY_COLUMNS)):
+                w.writerow([int(row[0]), *(repr(float(v)) for v in row[1:])])
+        return True
+
+    def write_view(self, out_dir: Path, events: list[dict[str, Any]] | None = None) -> bool:
+        """Writes ``view.json`` and ``view.bin``; False (nothing written) without frames."""
+        if not self.frames:
+            return False
+        blob = bytearray()
+
+        def put(a: npt.NDArray[Any], dtype: str) -> dict[str, Any]:
+            arr = np.ascontiguousarray(a, dtype=np.dtype(dtype).newbyteorder("<"))
+            ref = {"offset": len(blob), "dtype": dtype, "shape": list(arr.shape)}
+            blob.extend(arr.tobytes())
+            return ref
+
+        topologies = []
+        for t in self.topologies:
+            topologies.append(
+                {
+                    "step": t.step,
+                    "vertices": t.n_vertices,
+                    "darts": t.n_darts,
+                    "face_offsets": put(t.face_offsets, "i4"),
+                    "face_indices": put(t.face_indices, "i4"),
+                    "edges": put(t.edges, "i4"),
+                    "dart_table": None
+                    if t.darts is None
+                    else {k: put(v, "i4") for k, v in t.darts.items()},
+                }
+            )
+        fields_meta: dict[str, Any] = {}
+        labels = {
+            "displacement": ("displacement magnitude", "m"),
+            "von_mises": ("von Mises stress", "Pa"),
+        }
+        for name, values in self.fields.items():
+            finite = [v[np.isfinite(v)] for v in values]
+            hi = max((float(v.max()) for v in finite if len(v)), default=0.0)
+            fields_meta[name] = {
+                "label": labels[name][0],
+                "unit": labels[name][1],
+                "min": 0.0,
+                "max": hi,
+            }
+        frames = []
+        for k, fr in enumerate(self.frames):
+            frames.append(
+                {
+                    **fr,
+                    "positions": put(self.positions[k], "f4"),
+                    "fields": {n: put(v[k], "f4") for n, v in self.fields.items()},
+                }
+            )
+        allx = np.concatenate([p[np.isfinite(p).all(axis=1)] for p in self.positions])
+        low = allx.min(axis=0) if len(allx) else np.zeros(3)
+        high = allx.max(axis=0) if len(allx) else np.ones(3)
+        g = self.gravity
+        up = (-g / np.linalg.norm(g)) if np.linalg.norm(g) > 0 else np.array([0.0, 1.0, 0.0])
+        meta = {
+            "format": VIEW_FORMAT,
+            "version": VIEW_VERSION,
+            "name": self.name,
+            "dimension": self.sim.dimension,
+            "up": [float(v) for v in up],
+            "bounds": {"min": [float(v) for v in low], "max": [float(v) for v in high]},
+            "fields": fields_meta,
+            "default_field": "von_mises" if "von_mises" in self.fields else "displacement",
+            "dart_limit": self.dart_limit,
+            "events": events or [],
+            "topologies": topologies,
+            "frames": frames,
+            "bin": "view.bin",
+            "bin_bytes": len(blob),
+        }
+        (out_dir / "view.bin").write_bytes(bytes(blob))
+        (out_dir / "view.json").write_text(json.dumps(meta), encoding="utf-8")
+        return True
+
+
+# ------------------------------------------------------------------------------ reading
+
+
+@dataclass
+class View:
+    """``view.json`` with its arrays read from ``view.bin``."""
+
+    meta: dict[str, Any]
+    data: bytes
+    directory: Path
+
+    def array(self, ref: dict[str, Any]) -> npt.NDArray[Any]:
+        dt = np.dtype(ref["dtype"]).newbyteorder("<")
+        count = int(np.prod(ref["shape"])) if ref["shape"] else 1
+        a = np.frombuffer(self.data, dtype=dt, count=count, offset=int(ref["offset"]))
+        return a.reshape(ref["shape"])
+
+    @property
+    def frames(self) -> list[dict[str, Any]]:
+        frames: list[dict[str, Any]] = self.meta["frames"]
+        return frames
+
+    def positions(self, k: int) -> npt.NDArray[np.float32]:
+        return self.array(self.frames[k]["positions"])
+
+    def field(self, k: int, name: str) -> npt.NDArray[np.float32]:
+        return self.array(self.frames[k]["fields"][name])
+
+    def topology(self, k: int) -> dict[str, Any]:
+        t: dict[str, Any] = self.meta["topologies"][self.frames[k]["topology"]]
+        return t
+
+    def faces(self, k: int) -> list[npt.NDArray[np.int32]]:
+        t = self.topology(k)
+        off = self.array(t["face_offsets"])
+        idx = self.array(t["face_indices"])
+        return [idx[off[i] : off[i + 1]] for i in range(len(off) - 1)]
+
+
+def read_view(out_dir: Path) -> View:
+    """The view data of a run directory; raises :class:`ViewError` saying what is wrong."""
+    out_dir = Path(out_dir)
+    if not out_dir.exists():
+        raise ViewError(f"{out_dir}: no such directory")
+    if not out_dir.is_dir():
+        raise ViewError(f"{out_dir}: not a directory")
+    jpath = out_dir / "view.json"
+    if not jpath.is_file():
+        if (out_dir / "summary.json").is_file():
+            raise ViewError(
+                f"{out_dir}: the run wrote no frames to view (no view.json: output.every = 0, "
+                "or a run by an older topomech); run it again with frames"
+            )
+        raise ViewError(
+            f"{out_dir}: not a run directory (no view.json); write one with "
+            "`topomech run SCENE --out DIR`"
+        )
+    try:
+        meta = json.loads(jpath.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ViewError(f"{jpath}: cannot read the view description: {e}") from None
+    if not isinstance(meta, dict) or meta.get("format") != VIEW_FORMAT:
+        raise ViewError(f"{jpath}: not a topomech view description")
+    if meta.get("version") != VIEW_VERSION:
+        raise ViewError(
+            f"{jpath}: view format version {meta.get('version')!r}, this topomech reads "
+            f"{VIEW_VERSION}"
+        )
+    bpath = out_dir / str(meta.get("bin", "view.bin"))
+    try:
+        data = bpath.read_bytes()
+    except OSError as e:
+        raise ViewError(f"{bpath}: cannot read the view data: {e.strerror or e}") from None
+    if len(data) != meta.get("bin_bytes"):
+        raise ViewError(
+            f"{bpath}: {len(data)} bytes, view.json expects {meta.get('bin_bytes')} "
+            "(truncated or from another run)"
+        )
+    if not meta.get("frames"):
+        raise ViewError(f"{jpath}: no frames")
+    return View(meta, data, out_dir)
+
+
+def read_energy(path: Path) -> dict[str, F64]:
+    """``energy.csv`` as columns."""
+    with Path(path).open(encoding="utf-8", newline="") as fh:
+        rows = list(csv.reader(fh))
+    header, body = rows[0], rows[1:]
+    cols = np.array(body, dtype=np.float64).reshape(len(body), len(header))
+    return {h: cols[:, i] for i, h in enumerate(header)}
