@@ -176,7 +176,10 @@ def render_frame(
         t = None
     light = _light(camera)
     faces = view.faces(k)
-    outline = len(faces) <= 4000
+    # mesh lines where the faces are large enough on screen for them not to darken the picture
+    first = np.array([f[:2] for f in faces if len(f) >= 2], dtype=np.int64).reshape(-1, 2)
+    seg = np.linalg.norm(xy[first[:, 0]] - xy[first[:, 1]], axis=1) / ss
+    outline = len(faces) <= 4000 and bool(np.nanmedian(seg) > 12) if len(seg) else False
     polys: list[tuple[float, list[tuple[float, float]], tuple[int, ...], tuple[int, ...]]] = []
     by_size: dict[int, list[int]] = {}
     for i, f in enumerate(faces):
