@@ -192,6 +192,29 @@ pub struct Derived {
     pub aggregate: Aggregate,
 }
 
+/// A read-only view of an embedding's value column ([`Embedding::column`]): slot `s` of a
+/// real embedding of width `w` is `v[s * w..(s + 1) * w]`.
+#[derive(Clone, Copy, Debug)]
+pub enum ColumnRef<'a> {
+    /// Reals.
+    Real(&'a [f64]),
+    /// Integers.
+    Int(&'a [i64]),
+    /// Booleans.
+    Bool(&'a [bool]),
+}
+
+/// A mutable view of a stored embedding's value column ([`crate::GMap::column_mut`]).
+#[derive(Debug)]
+pub enum ColumnMut<'a> {
+    /// Reals.
+    Real(&'a mut [f64]),
+    /// Integers.
+    Int(&'a mut [i64]),
+    /// Booleans.
+    Bool(&'a mut [bool]),
+}
+
 /// The value column of an embedding.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Column {
@@ -421,6 +444,15 @@ impl Embedding {
         match &self.values {
             Column::Real(v) => Some(v),
             _ => None,
+        }
+    }
+
+    /// The whole value column, one entry per slot (`width` scalars per slot when real).
+    pub fn column(&self) -> ColumnRef<'_> {
+        match &self.values {
+            Column::Real(v) => ColumnRef::Real(v),
+            Column::Int(v) => ColumnRef::Int(v),
+            Column::Bool(v) => ColumnRef::Bool(v),
         }
     }
 

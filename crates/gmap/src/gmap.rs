@@ -1,6 +1,8 @@
 //! The generalized map: darts, alpha links, orbits and embeddings.
 
-use crate::embedding::{Column, Derived, Embedding, EmbeddingId, EmbeddingType, Policy, Value};
+use crate::embedding::{
+    Column, ColumnMut, Derived, Embedding, EmbeddingId, EmbeddingType, Policy, Value,
+};
 use crate::marks::{with_marks, Marks};
 use crate::{Aggregate, Dart, EmbeddingError, GMapError, LinkError, OrbitType};
 
@@ -646,6 +648,22 @@ impl GMap {
         e.values.set(e.ty.width(), slot, v);
         e.writes += 1;
         Ok(())
+    }
+
+    /// The whole value column of the stored embedding `id`, for engines that write many slots
+    /// at once; counts as one write (see [`Embedding::writes`]). Refused for a derived
+    /// embedding, which is recomputed, never written.
+    pub fn column_mut(&mut self, id: EmbeddingId) -> Result<ColumnMut<'_>, EmbeddingError> {
+        let e = &mut self.embeddings[id.0 as usize];
+        if e.derived.is_some() {
+            return Err(EmbeddingError::Derived(e.name.clone()));
+        }
+        e.writes += 1;
+        Ok(match &mut e.values {
+            Column::Real(v) => ColumnMut::Real(v),
+            Column::Int(v) => ColumnMut::Int(v),
+            Column::Bool(v) => ColumnMut::Bool(v),
+        })
     }
 
     /// Sets every value of the stored embedding `id` to zero (or false).

@@ -28,7 +28,8 @@ mod valid;
 
 pub use dart::Dart;
 pub use embedding::{
-    Aggregate, Derived, Embedding, EmbeddingId, EmbeddingType, Policy, Value, MAX_MAT,
+    Aggregate, ColumnMut, ColumnRef, Derived, Embedding, EmbeddingId, EmbeddingType, Policy, Value,
+    MAX_MAT,
 };
 pub use error::{EmbeddingError, GMapError, LinkError, SewError};
 pub use gmap::{CellCounts, GMap, MAX_DARTS};

@@ -652,7 +652,14 @@ impl Simulation {
                 "the map has no 'position' embedding".into(),
             ));
         }
-        rules.prepare(&mut g)?;
+        // the data the simulation itself reads; each rule adds what it uses when it first runs
+        rules.prepare_named(
+            &mut g,
+            &[
+                "position", "rest", "velocity", "force", "fixed", "mass", "dx", "dv", "df",
+                "vertex0", "face0",
+            ],
+        )?;
         mark_vertex0(&mut g)?;
         let none = Params::new();
         rules.apply_everywhere(&mut g, "init_rest", &none)?;
@@ -727,6 +734,19 @@ impl Simulation {
                 )));
             }
         }
+        // the derived data of what the models stored (cumulated springs, tensors) exists from
+        // the start, so that it is kept up to date through topology changes
+        let embs = rules.embeddings();
+        let derived: Vec<&str> = embs
+            .iter()
+            .filter(|e| {
+                e.derived
+                    .is_some_and(|(_, src)| g.embedding_id(&embs[src].name).is_some())
+            })
+            .map(|e| e.name.as_str())
+            .collect();
+        rules.prepare_named(&mut g, &derived)?;
+        rules.clear_plans();
         g.refresh_derived();
         let step_params: Params = [
             ("dt".to_string(), Val::F(cfg.dt)),
@@ -1171,6 +1191,12 @@ impl Simulation {
         self.rules
             .apply_everywhere(&mut self.g, "accumulate", &none)?;
         Ok(())
+    }
+
+    /// Whether the computation rules run through compiled plans (the default) or through the
+    /// interpreter only: both give the same results; the switch exists to compare them.
+    pub fn set_compiled(&mut self, on: bool) {
+        self.rules.set_compiled(on);
     }
 
     /// The map with all its embeddings.

@@ -844,7 +844,7 @@ fn to_i64(x: f64) -> Result<i64, EvalError> {
     }
 }
 
-fn scalar1(name: &str, x: f64) -> f64 {
+pub(crate) fn scalar1(name: &str, x: f64) -> f64 {
     match name {
         "abs" => x.abs(),
         "sign" => {
@@ -871,7 +871,7 @@ fn scalar1(name: &str, x: f64) -> f64 {
     }
 }
 
-fn scalar2(name: &str, a: f64, b: f64) -> f64 {
+pub(crate) fn scalar2(name: &str, a: f64, b: f64) -> f64 {
     match name {
         "atan2" => a.atan2(b),
         "pow" => a.powf(b),
@@ -915,20 +915,20 @@ fn is_finite(x: &Val) -> bool {
 // ---------------------------------------------------------------------------------------------
 // Vector and matrix algebra.
 
-fn dot(x: &[f64], y: &[f64]) -> f64 {
+pub(crate) fn dot(x: &[f64], y: &[f64]) -> f64 {
     x.iter().zip(y).map(|(a, b)| a * b).sum()
 }
 
 /// `a * b - c * d` with one rounding error instead of two (Kahan's algorithm with a fused
 /// multiply-add).
-fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
+pub(crate) fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
     let w = c * d;
     let e = (-c).mul_add(d, w);
     let f = a.mul_add(b, -w);
     f + e
 }
 
-fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+pub(crate) fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     [
         diff_of_products(a[1], b[2], a[2], b[1]),
         diff_of_products(a[2], b[0], a[0], b[2]),
@@ -948,7 +948,7 @@ fn max_abs(x: &[f64]) -> f64 {
 }
 
 /// Euclidean norm, scaled by the largest entry so that it neither overflows nor underflows.
-fn norm(x: &[f64]) -> f64 {
+pub(crate) fn norm(x: &[f64]) -> f64 {
     let m = max_abs(x);
     if m == 0.0 || !m.is_finite() {
         return m;
@@ -957,7 +957,7 @@ fn norm(x: &[f64]) -> f64 {
 }
 
 /// `x / |x|`, the zero vector for a zero input.
-fn normalize(x: &[f64]) -> Vec<f64> {
+pub(crate) fn normalize(x: &[f64]) -> Vec<f64> {
     let m = max_abs(x);
     if m == 0.0 {
         return x.iter().map(|_| 0.0).collect();
@@ -966,6 +966,22 @@ fn normalize(x: &[f64]) -> Vec<f64> {
     let y: Vec<f64> = x.iter().map(|v| v / m).collect();
     let n = norm(&y);
     y.iter().map(|v| v / n).collect()
+}
+
+/// [`normalize`] into `z` (of `x`'s length), without allocating.
+pub(crate) fn normalize_into(x: &[f64], z: &mut [f64]) {
+    let m = max_abs(x);
+    if m == 0.0 {
+        z.fill(0.0);
+        return;
+    }
+    for (zi, v) in z.iter_mut().zip(x) {
+        *zi = v / m;
+    }
+    let n = norm(z);
+    for zi in z.iter_mut() {
+        *zi /= n;
+    }
 }
 
 /// Unsigned angle `atan2(|a x b|, a . b)`, each vector first scaled by its largest entry.
@@ -1107,12 +1123,15 @@ fn inverse(m: &Mat) -> Result<Mat, EvalError> {
 }
 
 fn require_finite(name: &str, m: &Mat) -> Result<(), EvalError> {
-    if m.data.iter().all(|x| x.is_finite()) {
+    require_finite_data(name, m.rows, m.cols, &m.data)
+}
+
+fn require_finite_data(name: &str, rows: usize, cols: usize, m: &[f64]) -> Result<(), EvalError> {
+    if m.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
         Err(err(format!(
-            "{name}: the {}x{} matrix has non-finite entries",
-            m.rows, m.cols
+            "{name}: the {rows}x{cols} matrix has non-finite entries"
         )))
     }
 }
@@ -1121,12 +1140,16 @@ fn require_finite(name: &str, m: &Mat) -> Result<(), EvalError> {
 /// `tr(R^T m) = cos t (m00 + m11) + sin t (m10 - m01)`, in closed form.
 /// When no rotation is closer than another (`m = [[a, b], [b, -a]]`), the identity.
 fn polar2(m: &Mat) -> Result<Mat, EvalError> {
-    require_finite("polar", m)?;
-    let a = &m.data;
+    polar2_data(&m.data).map(|r| mat_rows([[r[0], r[1]], [r[2], r[3]]]))
+}
+
+/// [`polar2`] on the 4 row-major entries of a 2x2 matrix, without allocating.
+pub(crate) fn polar2_data(a: &[f64]) -> Result<[f64; 4], EvalError> {
+    require_finite_data("polar", 2, 2, a)?;
     // Scale first: the sums below must not overflow.
     let s = max_abs(a);
     if s == 0.0 {
-        return Ok(Mat::identity(2));
+        return Ok([1.0, 0.0, 0.0, 1.0]);
     }
     let (c, d) = (
         a[0] / s + a[3] / s, // tr(m) / s
@@ -1135,10 +1158,10 @@ fn polar2(m: &Mat) -> Result<Mat, EvalError> {
     // The maximizing angle is atan2(d, c); its cosine and sine directly, without the angle.
     let h = c.hypot(d);
     if h == 0.0 {
-        return Ok(Mat::identity(2));
+        return Ok([1.0, 0.0, 0.0, 1.0]);
     }
     let (cos, sin) = (c / h, d / h);
-    Ok(mat_rows([[cos, -sin], [sin, cos]]))
+    Ok([cos, -sin, sin, cos])
 }
 
 /// The closest rotation to a 3x3 matrix, by a one-sided Jacobi SVD `m = U S V^T`:
@@ -1146,16 +1169,25 @@ fn polar2(m: &Mat) -> Result<Mat, EvalError> {
 /// `det m` (Irving et al. 2004). Rank-deficient input still gives a rotation: missing left
 /// singular directions are completed orthogonally.
 fn polar3(m: &Mat) -> Result<Mat, EvalError> {
-    require_finite("polar", m)?;
-    let s = max_abs(&m.data);
+    polar3_data(&m.data).map(|r| Mat {
+        rows: 3,
+        cols: 3,
+        data: r.to_vec(),
+    })
+}
+
+/// [`polar3`] on the 9 row-major entries of a 3x3 matrix, without allocating.
+pub(crate) fn polar3_data(m: &[f64]) -> Result<[f64; 9], EvalError> {
+    require_finite_data("polar", 3, 3, m)?;
+    let s = max_abs(m);
     if s == 0.0 {
-        return Ok(Mat::identity(3));
+        return Ok([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
     }
     // Columns of A = (m / s) V, and of V.
     let mut a = [[0.0; 3]; 3];
     for (j, col) in a.iter_mut().enumerate() {
         for (i, x) in col.iter_mut().enumerate() {
-            *x = m.get(i, j) / s;
+            *x = m[3 * i + j] / s;
         }
     }
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
@@ -1206,11 +1238,11 @@ fn polar3(m: &Mat) -> Result<Mat, EvalError> {
     };
     let u3 = unit_or(&cross(&u1, &u2), [0.0, 0.0, 1.0]);
     // R = U V^T = sum over k of u_k v_k^T.
-    let mut r = Mat::zeros(3, 3);
+    let mut r = [0.0; 9];
     for (uk, vk) in [u1, u2, u3].iter().zip(&v) {
         for (i, ui) in uk.iter().enumerate() {
             for (j, vj) in vk.iter().enumerate() {
-                r.data[3 * i + j] += ui * vj;
+                r[3 * i + j] += ui * vj;
             }
         }
     }

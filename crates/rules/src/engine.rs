@@ -126,17 +126,30 @@ pub struct ApplyReport {
 fn rows_of(g: &GMap, d: Dart, labels: &[u8]) -> (Vec<Dart>, Vec<u32>) {
     let k = labels.len();
     let mut darts = vec![d];
-    let mut row_of: HashMap<Dart, u32> = HashMap::from([(d, 0)]);
+    // small orbits (the usual case) are searched linearly; large ones through a map
+    let mut row_of: Option<HashMap<Dart, u32, FastHash>> = None;
     let mut next = Vec::new();
     let mut r = 0;
     while r < darts.len() {
         let x = darts[r];
         for &l in labels {
             let y = g.alpha(l as usize, x);
-            let s = *row_of.entry(y).or_insert_with(|| {
+            if row_of.is_none() && darts.len() > 32 {
+                let mut map = HashMap::with_capacity_and_hasher(64, FastHash);
+                map.extend(darts.iter().enumerate().map(|(i, &z)| (z, i as u32)));
+                row_of = Some(map);
+            }
+            let s = if let Some(map) = &mut row_of {
+                *map.entry(y).or_insert_with(|| {
+                    darts.push(y);
+                    (darts.len() - 1) as u32
+                })
+            } else if let Some(i) = darts.iter().position(|&z| z == y) {
+                i as u32
+            } else {
                 darts.push(y);
                 (darts.len() - 1) as u32
-            });
+            };
             next.push(s);
         }
         r += 1;
@@ -264,14 +277,34 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
             }
         }
     }
-    // no dart twice
-    let mut seen = Marks::with_capacity(g.capacity());
-    for (k, col) in darts.iter().enumerate() {
-        for &x in col {
-            if !seen.mark(x) {
-                return Err(format!("dart {x} would be matched twice (node '{}'): the pattern folds onto itself here", rule.nodes[k].name));
+    // no dart twice (pairwise for a small footprint, else sorted: the map may be huge)
+    let total: usize = darts.iter().map(Vec::len).sum();
+    if total <= 16 {
+        let flat = || {
+            darts
+                .iter()
+                .enumerate()
+                .flat_map(|(k, col)| col.iter().map(move |&x| (x, k)))
+        };
+        for (i, (x, k)) in flat().enumerate() {
+            if let Some((_, k2)) = flat().skip(i + 1).find(|(y, _)| *y == x) {
+                return Err(format!("dart {x} would be matched twice (node '{}'): the pattern folds onto itself here", rule.nodes[k.max(k2)].name));
             }
         }
+        return Ok(Match { rows, next, darts });
+    }
+    let mut all: Vec<(Dart, usize)> = darts
+        .iter()
+        .enumerate()
+        .flat_map(|(k, col)| col.iter().map(move |&x| (x, k)))
+        .collect();
+    all.sort_unstable();
+    if let Some(w) = all.windows(2).find(|w| w[0].0 == w[1].0) {
+        let (x, k) = (w[0].0, w[0].1.max(w[1].1));
+        return Err(format!(
+            "dart {x} would be matched twice (node '{}'): the pattern folds onto itself here",
+            rule.nodes[k].name
+        ));
     }
     Ok(Match { rows, next, darts })
 }
@@ -286,22 +319,33 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
 pub struct RuleSet {
     checked: Checked,
     plans: std::sync::Mutex<HashMap<usize, Plan>>,
+    compile: bool,
 }
 
 impl Clone for RuleSet {
     fn clone(&self) -> Self {
-        RuleSet::new(self.checked.clone())
+        let mut r = RuleSet::new(self.checked.clone());
+        r.compile = self.compile;
+        r
     }
 }
 
-/// The matches of a computation rule, and what they were computed from.
+/// The plan of a computation rule, and what it was computed from.
 #[derive(Debug)]
 struct Plan {
     /// The map's identity and topology version ([`GMap::identity`]).
     identity: (u64, u64),
     /// Write counts of the embeddings the guard reads.
     reads: Vec<u64>,
-    matches: Vec<Match>,
+    kind: PlanKind,
+}
+
+#[derive(Debug)]
+enum PlanKind {
+    /// Compiled to flat index arrays and a program (see [`crate::compiled`]).
+    Compiled(Box<crate::compiled::Plan>),
+    /// Left to the interpreter: the matches.
+    Matches(Vec<Match>),
 }
 
 struct Bound<'a> {
@@ -317,6 +361,7 @@ impl RuleSet {
         RuleSet {
             checked,
             plans: std::sync::Mutex::new(HashMap::new()),
+            compile: true,
         }
     }
 
@@ -348,6 +393,34 @@ impl RuleSet {
     /// with the same type and orbit (an absent one is added, zero everywhere; a derived one is
     /// added and computed). Refreshes stale derived embeddings.
     pub fn prepare(&self, g: &mut GMap) -> Result<Vec<EmbeddingId>, ApplyError> {
+        self.prepare_some(g, |_, _| true)
+    }
+
+    /// [`RuleSet::prepare`] for the embeddings named in `names` only (and the sources of the
+    /// derived ones among them); the others keep their state.
+    pub fn prepare_named(&self, g: &mut GMap, names: &[&str]) -> Result<(), ApplyError> {
+        self.prepare_some(g, |_, e| names.contains(&e.name.as_str()))
+            .map(|_| ())
+    }
+
+    /// Prepares the embeddings `want` selects, and the sources of the derived ones; the ids
+    /// of the others are theirs in `g` if they exist, else [`EmbeddingId`]`(u32::MAX)`, never
+    /// dereferenced by a caller that only uses what it asked for.
+    fn prepare_some(
+        &self,
+        g: &mut GMap,
+        want: impl Fn(usize, &EmbDecl) -> bool,
+    ) -> Result<Vec<EmbeddingId>, ApplyError> {
+        let embs = &self.checked.embeddings;
+        let mut needed: Vec<bool> = embs.iter().enumerate().map(|(k, e)| want(k, e)).collect();
+        // the sources of derived embeddings, transitively (declared before their users)
+        for k in (0..embs.len()).rev() {
+            if needed[k] {
+                if let Some((_, src)) = embs[k].derived {
+                    needed[src] = true;
+                }
+            }
+        }
         if g.dimension() != self.checked.dim {
             return Err(ApplyError::Map(format!(
                 "the rules are for dimension {}, the map has dimension {}",
@@ -356,7 +429,11 @@ impl RuleSet {
             )));
         }
         let mut ids = Vec::new();
-        for e in &self.checked.embeddings {
+        for (k, e) in self.checked.embeddings.iter().enumerate() {
+            if !needed[k] {
+                ids.push(g.embedding_id(&e.name).unwrap_or(EmbeddingId(u32::MAX)));
+                continue;
+            }
             let ty = emb_type(e.ty);
             let id = if let Some(id) = g.embedding_id(&e.name) {
                 let have = g.embedding(id);
@@ -391,8 +468,28 @@ impl RuleSet {
         name: &str,
         params: &Params,
     ) -> Result<Bound<'a>, ApplyError> {
+        self.bind_for(g, name, params, false)
+    }
+
+    /// Binds rule `name`: its parameters, and the embeddings it uses (`guard_only`: those its
+    /// guard reads, enough to find its matches). A model's file may declare data for elements
+    /// the mesh does not have: a rule without matches adds nothing to the map.
+    fn bind_for<'a>(
+        &'a self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        guard_only: bool,
+    ) -> Result<Bound<'a>, ApplyError> {
         let rule = self.rule(name)?;
-        let ids = self.prepare(g)?;
+        let used = if guard_only {
+            let mut v = rule.guard_reads.clone();
+            v.sort_unstable();
+            v
+        } else {
+            rule_embeddings(rule)
+        };
+        let ids = self.prepare_some(g, |k, _| used.binary_search(&k).is_ok())?;
         let mut vals = Vec::new();
         for (p, ty) in &rule.params {
             let v = params.get(p).ok_or_else(|| ApplyError::Param {
@@ -500,9 +597,13 @@ impl RuleSet {
         name: &str,
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
-        let b = self.bind(g, name, params)?;
+        let b = self.bind_for(g, name, params, true)?;
         if b.rule.changes_topology {
             let ms = find_all(g, &b)?;
+            if ms.is_empty() {
+                return Ok(ApplyReport::default());
+            }
+            let b = self.bind(g, name, params)?;
             return apply_matches(g, &b, &ms);
         }
         // a computation rule: reuse its plan while the topology and the guard's inputs stay
@@ -527,16 +628,108 @@ impl RuleSet {
             .is_some_and(|p| p.identity == g.identity() && p.reads == reads);
         if !fresh {
             let matches = find_all(g, &b)?;
+            let kind = if matches.is_empty() {
+                PlanKind::Matches(matches)
+            } else {
+                let b = self.bind(g, name, params)?;
+                match crate::compiled::compile(b.rule, b.embs) {
+                    Ok(prog) if self.compile => PlanKind::Compiled(Box::new(
+                        crate::compiled::Plan::build(prog, b.rule, g, &b.ids, &matches),
+                    )),
+                    _ => PlanKind::Matches(matches),
+                }
+            };
             plans.insert(
                 index,
                 Plan {
                     identity: g.identity(),
                     reads,
-                    matches,
+                    kind,
                 },
             );
         }
-        apply_matches(g, &b, &plans[&index].matches)
+        let plan = plans.get_mut(&index).expect("inserted above");
+        if matches!(&plan.kind, PlanKind::Matches(ms) if ms.is_empty()) {
+            return Ok(ApplyReport::default());
+        }
+        let b = self.bind(g, name, params)?;
+        match &mut plan.kind {
+            PlanKind::Compiled(p) => {
+                if p.run(g, &b.ids, &b.params).is_ok() {
+                    return Ok(ApplyReport {
+                        matches: p.matches(),
+                        evaluations: p.evaluations(),
+                        ..ApplyReport::default()
+                    });
+                }
+                // the interpreter reports what failed, with the dart (or applies the rule
+                // where a failure was in a branch the interpreter does not take)
+                let ms = find_all(g, &b)?;
+                apply_matches(g, &b, &ms)
+            }
+            PlanKind::Matches(ms) => apply_matches(g, &b, ms),
+        }
+    }
+
+    /// Drops every plan (they are rebuilt when needed): after rules that run once.
+    pub fn clear_plans(&self) {
+        self.plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clear();
+    }
+
+    /// Whether computation rules run through compiled plans (the default) or through the
+    /// interpreter only (for comparisons and tests: both give the same results).
+    pub fn set_compiled(&mut self, on: bool) {
+        self.compile = on;
+        self.plans
+            .get_mut()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clear();
+    }
+
+    /// Which computation rules run compiled: `(rule, compiled)` for every rule whose plan
+    /// exists now and has matches (a plan is built by the rule's first global application).
+    pub fn plan_kinds(&self) -> Vec<(String, bool)> {
+        let plans = self
+            .plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut out: Vec<(String, bool)> = plans
+            .iter()
+            .filter(|(_, p)| !matches!(&p.kind, PlanKind::Matches(ms) if ms.is_empty()))
+            .map(|(k, p)| {
+                (
+                    self.checked.rules[*k].name.clone(),
+                    matches!(p.kind, PlanKind::Compiled(_)),
+                )
+            })
+            .collect();
+        out.sort();
+        out
+    }
+
+    /// Bytes held by the plans (index arrays, output buffers, cached matches).
+    pub fn plan_bytes(&self) -> usize {
+        let plans = self
+            .plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        plans
+            .values()
+            .map(|p| match &p.kind {
+                PlanKind::Compiled(c) => c.memory_bytes(),
+                PlanKind::Matches(ms) => ms
+                    .iter()
+                    .map(|m| {
+                        std::mem::size_of::<Match>()
+                            + m.next.capacity() * 4
+                            + m.darts.iter().map(|d| 24 + d.capacity() * 4).sum::<usize>()
+                    })
+                    .sum(),
+            })
+            .sum()
     }
 
     /// The number of matches [`RuleSet::apply_everywhere`] would apply.
@@ -548,6 +741,50 @@ impl RuleSet {
     ) -> Result<usize, ApplyError> {
         Ok(self.find_matches(g, name, params)?.len())
     }
+}
+
+/// The embeddings a rule reads or writes (its program and guard), sorted.
+fn rule_embeddings(rule: &Rule) -> Vec<usize> {
+    fn walk(e: &TExpr, out: &mut Vec<usize>) {
+        match e {
+            TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
+            TExpr::Read { emb, .. } => out.push(*emb),
+            TExpr::Agg { emb, .. } => out.extend(emb.iter().copied()),
+            TExpr::Bin(_, a, b) => {
+                walk(a, out);
+                walk(b, out);
+            }
+            TExpr::Un(_, a) | TExpr::ToReal(a) => walk(a, out),
+            TExpr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
+            TExpr::If(c, a, b) => {
+                walk(c, out);
+                walk(a, out);
+                walk(b, out);
+            }
+            TExpr::Block(lets, res) => {
+                for (_, x) in lets {
+                    walk(x, out);
+                }
+                walk(res, out);
+            }
+        }
+    }
+    let mut ids = Vec::new();
+    for s in &rule.program {
+        match s {
+            TStmt::Let(_, e) => walk(e, &mut ids),
+            TStmt::Write { emb, value, .. } => {
+                ids.push(*emb);
+                walk(value, &mut ids);
+            }
+        }
+    }
+    if let Some(gd) = &rule.guard {
+        walk(gd, &mut ids);
+    }
+    ids.sort_unstable();
+    ids.dedup();
+    ids
 }
 
 fn emb_type(t: Ty) -> EmbeddingType {
@@ -586,12 +823,56 @@ fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
     // darts of its hook are marked, and a match found again from another hook (the same
     // footprint) is skipped.
     let overlap = !rule.changes_topology;
+    // Leading conjuncts of the guard that read the hook dart only are tried first, on the hook
+    // dart alone (row 0 of a match is its hook dart): most darts fail them, and need no match.
+    let hook = rule.hooks[0];
+    let mut prefix = Vec::new();
+    if let Some(guard) = &rule.guard {
+        leading_conjuncts(guard, &mut prefix);
+        if let Some(k) = prefix.iter().position(|e| !reads_only(e, hook)) {
+            prefix.truncate(k);
+        }
+    }
+    // A guard reading only the hook node's embeddings on orbits that contain the hook orbit
+    // has one value on every row of the hook orbit: a dart of the orbit that fails it, fails it
+    // for all.
+    let invariant = rule
+        .guard
+        .as_ref()
+        .is_some_and(|e| row_invariant(e, hook, &rule.hook_orbit, b.embs));
+    let mut probe = Match {
+        rows: 1,
+        next: vec![0; rule.arity],
+        darts: vec![Vec::new(); rule.nodes.len()],
+    };
     let mut used = Marks::with_capacity(g.capacity());
-    let mut seen: std::collections::HashSet<Vec<u32>> = std::collections::HashSet::new();
+    // footprints kept (sorted, flat), listed by their smallest dart: a footprint found again
+    // has the same smallest dart, so only that list is compared
+    let mut head: Vec<u32> = if overlap {
+        vec![u32::MAX; g.capacity()]
+    } else {
+        Vec::new()
+    };
+    let mut chain: Vec<u32> = Vec::new();
+    let mut prints: Vec<u32> = Vec::new();
+    let mut starts: Vec<usize> = vec![0];
+    let mut key: Vec<u32> = Vec::new();
     let mut out = Vec::new();
     for d in g.darts() {
         if used.is_marked(d) {
             continue;
+        }
+        if !prefix.is_empty() {
+            probe.darts[hook].clear();
+            probe.darts[hook].push(d);
+            let mut ev = Eval::new(g, b, &probe);
+            // an error is left to the full evaluation below, which reports it in order
+            if prefix
+                .iter()
+                .any(|e| matches!(ev.eval(e, 0), Ok(Val::B(false))))
+            {
+                continue;
+            }
         }
         let Ok(m) = match_at(g, rule, &[d]) else {
             continue;
@@ -603,15 +884,37 @@ fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
             let mut ev = Eval::new(g, b, &m);
             let ok = ev.eval(guard, 0).map_err(|e| eval_err(&rule.name, d, &e))?;
             if ok != Val::B(true) {
+                if overlap && invariant {
+                    // the other darts of the hook orbit give this footprint and this guard
+                    for &x in &m.darts[hook] {
+                        used.mark(x);
+                    }
+                }
                 continue;
             }
         }
         if overlap {
-            let mut key: Vec<u32> = m.all_darts().map(|x| x.0).collect();
+            key.clear();
+            key.extend(m.all_darts().map(|x| x.0));
             key.sort_unstable();
-            if !seen.insert(key) {
+            let min = key[0] as usize;
+            let mut k = head[min];
+            let mut dup = false;
+            while k != u32::MAX {
+                let k_ = k as usize;
+                if prints[starts[k_]..starts[k_ + 1]] == key[..] {
+                    dup = true;
+                    break;
+                }
+                k = chain[k_];
+            }
+            if dup {
                 continue;
             }
+            chain.push(head[min]);
+            head[min] = (starts.len() - 1) as u32;
+            prints.extend_from_slice(&key);
+            starts.push(prints.len());
             for &x in &m.darts[rule.hooks[0]] {
                 used.mark(x);
             }
@@ -623,6 +926,84 @@ fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
         out.push(m);
     }
     Ok(out)
+}
+
+/// The operands of the leading `&&` chain of `e`, in evaluation order.
+fn leading_conjuncts<'a>(e: &'a TExpr, out: &mut Vec<&'a TExpr>) {
+    if let TExpr::Bin(BinOp::And, a, b) = e {
+        leading_conjuncts(a, out);
+        leading_conjuncts(b, out);
+    } else {
+        out.push(e);
+    }
+}
+
+/// Whether `e` reads only node `hook`, through embeddings (or aggregates) whose orbit contains
+/// every label of the hook orbit `labels`.
+fn row_invariant(e: &TExpr, hook: usize, labels: &[u8], embs: &[EmbDecl]) -> bool {
+    let covers = |o: OrbitType| labels.iter().all(|&l| o.contains(usize::from(l)));
+    let rec = |x: &TExpr| row_invariant(x, hook, labels, embs);
+    match e {
+        TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => true,
+        TExpr::Read { node, emb } => *node == hook && covers(embs[*emb].orbit),
+        TExpr::Agg { node, orbit, .. } => *node == hook && covers(*orbit),
+        TExpr::Bin(_, a, c) => rec(a) && rec(c),
+        TExpr::Un(_, a) | TExpr::ToReal(a) => rec(a),
+        TExpr::Call(_, args) => args.iter().all(rec),
+        TExpr::If(c, a, d) => rec(c) && rec(a) && rec(d),
+        TExpr::Block(lets, res) => lets.iter().all(|(_, x)| rec(x)) && rec(res),
+    }
+}
+
+/// Whether `e` reads the map only through node `hook` (and no local variable).
+fn reads_only(e: &TExpr, hook: usize) -> bool {
+    match e {
+        TExpr::Const(_) | TExpr::Param(_) => true,
+        TExpr::Local(_) | TExpr::Block(..) => false,
+        TExpr::Read { node, .. } | TExpr::Agg { node, .. } => *node == hook,
+        TExpr::Bin(_, a, b) => reads_only(a, hook) && reads_only(b, hook),
+        TExpr::Un(_, a) | TExpr::ToReal(a) => reads_only(a, hook),
+        TExpr::Call(_, args) => args.iter().all(|a| reads_only(a, hook)),
+        TExpr::If(c, a, b) => reads_only(c, hook) && reads_only(a, hook) && reads_only(b, hook),
+    }
+}
+
+/// A fast hasher for footprints (sorted dart lists): multiply-rotate over the words, as in
+/// rustc's `FxHash`. Not resistant to adversarial keys, which dart numbers are not.
+#[derive(Clone, Copy, Default)]
+struct FastHash;
+
+impl std::hash::BuildHasher for FastHash {
+    type Hasher = FastHasher;
+    fn build_hasher(&self) -> FastHasher {
+        FastHasher(0)
+    }
+}
+
+struct FastHasher(u64);
+
+impl std::hash::Hasher for FastHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        let mut chunks = bytes.chunks_exact(8);
+        for c in &mut chunks {
+            self.write_u64(u64::from_le_bytes(c.try_into().expect("8 bytes")));
+        }
+        for &b in chunks.remainder() {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u32(&mut self, x: u32) {
+        self.write_u64(u64::from(x));
+    }
+    fn write_usize(&mut self, x: usize) {
+        self.write_u64(x as u64);
+    }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
 }
 
 /// One evaluated write: the node, the embedding, and per row the value (by row class).

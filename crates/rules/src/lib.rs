@@ -25,6 +25,7 @@
 pub mod ast;
 pub mod builtins;
 pub mod check;
+mod compiled;
 pub mod engine;
 pub mod lexer;
 pub mod mechanics;

@@ -1,0 +1,232 @@
+//! Compiled plans against the interpreter: every shipped model's rules compile (no rule of a
+//! step is left to the interpreter), and a run through the plans gives the same positions as a
+//! run through the interpreter, bit for bit — the plans evaluate the same operations in the
+//! same order, so no tolerance is needed. A renamed copy of a shipped rule file (what a user
+//! would write) compiles to the same plan and gives the same results.
+// exact comparisons are the point here; the shared helpers index their arrays
+#![allow(clippy::float_cmp, clippy::needless_range_loop)]
+mod common;
+
+use common::model;
+use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
+use topomech_gmap::mesh::{build, BuildOptions, Mesh};
+use topomech_gmap::GMap;
+use topomech_physics::{Config, Integrator, Simulation};
+use topomech_rules::check::check_sources;
+use topomech_rules::{Params, RuleSet};
+
+fn config(kind: &str, integrator: Integrator) -> Config {
+    Config {
+        models: vec![model(kind, &[])],
+        gravity: [0.0, -9.81, 0.0],
+        damping: 0.3,
+        fixed: vec!["x < 1e-9".into()],
+        integrator,
+        dt: 1e-3,
+        ..Config::default()
+    }
+}
+
+fn mesh_for(kind: &str, dim: usize) -> Mesh {
+    if dim == 4 {
+        // 4: hexahedra
+        cuboid([3, 2, 2], [1.5, 1.0, 1.0], BoxElement::Hexa)
+    } else if dim == 3 {
+        cuboid([3, 2, 2], [1.5, 1.0, 1.0], BoxElement::Tetra)
+    } else if kind == "corotational" {
+        grid([4, 3], [1.0, 0.75], GridElement::Triangle)
+    } else {
+        grid([4, 3], [1.0, 0.75], GridElement::Quad)
+    }
+}
+
+fn run(
+    kind: &str,
+    dim: usize,
+    integrator: Integrator,
+    compiled: bool,
+) -> (Simulation, Vec<[f64; 3]>) {
+    let (g, _) = build(&mesh_for(kind, dim), &BuildOptions::default()).unwrap();
+    let mut s = Simulation::new(g, config(kind, integrator)).unwrap();
+    s.set_compiled(compiled);
+    for _ in 0..15 {
+        s.step().unwrap();
+    }
+    let x = s.vertex_vec3("position").unwrap();
+    (s, x)
+}
+
+/// Model and mesh: 2 (quads, or triangles for the membranes), 3 (tetrahedra), 4 (hexahedra).
+const CASES: &[(&str, usize)] = &[
+    ("stretch_elementary", 2),
+    ("stretch_cumulated", 2),
+    ("stretch_cumulated", 3),
+    ("shear_isotropic", 2),
+    ("shear_anisotropic", 2),
+    ("shear_volumic", 4),
+    ("stretch_cumulated", 4),
+    ("corotational", 4),
+    ("bending_linear", 2),
+    ("bending_angular", 2),
+    ("linear_fem", 3),
+    ("corotational", 3),
+    ("corotational", 2),
+    ("mass_tensor", 3),
+];
+
+#[test]
+fn every_model_runs_compiled_and_matches_the_interpreter_bit_for_bit() {
+    for &(kind, dim) in CASES {
+        let (s, fast) = run(kind, dim, Integrator::SymplecticEuler, true);
+        let interpreted: Vec<(String, bool)> = s
+            .rules()
+            .plan_kinds()
+            .into_iter()
+            .filter(|(_, c)| !c)
+            .collect();
+        assert!(
+            interpreted.is_empty(),
+            "{kind} ({dim}D): rules left to the interpreter: {interpreted:?}"
+        );
+        let (_, slow) = run(kind, dim, Integrator::SymplecticEuler, false);
+        assert_eq!(fast.len(), slow.len());
+        let moved = fast
+            .iter()
+            .zip(s.vertex_vec3("rest").unwrap())
+            .any(|(x, r)| x != &r);
+        assert!(
+            moved,
+            "{kind} ({dim}D): nothing moved, the comparison would be empty"
+        );
+        for (i, (a, b)) in fast.iter().zip(&slow).enumerate() {
+            assert_eq!(
+                a.map(f64::to_bits),
+                b.map(f64::to_bits),
+                "{kind} ({dim}D): vertex {i} differs: compiled {a:?}, interpreted {b:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn jacobian_vector_products_and_other_integrators_match_too() {
+    for &(kind, dim) in &[
+        ("stretch_cumulated", 2),
+        ("corotational", 3),
+        ("mass_tensor", 3),
+    ] {
+        for integ in [Integrator::ExplicitEuler, Integrator::ImplicitEuler] {
+            let (_, fast) = run(kind, dim, integ, true);
+            let (_, slow) = run(kind, dim, integ, false);
+            for (i, (a, b)) in fast.iter().zip(&slow).enumerate() {
+                assert_eq!(
+                    a.map(f64::to_bits),
+                    b.map(f64::to_bits),
+                    "{kind} ({dim}D, {integ:?}): vertex {i} differs"
+                );
+            }
+        }
+    }
+}
+
+/// The co-rotational rules as a user would copy them into a file of their own: every rule and
+/// embedding renamed. The engine knows nothing of the shipped names, so the copy must compile
+/// to a plan of the same size and give the same forces.
+#[test]
+fn a_renamed_copy_of_a_shipped_rule_file_gets_the_same_plan_and_results() {
+    let common = include_str!("../models/common3d.tmr");
+    let fem = include_str!("../models/fem3d.tmr");
+    let renamed = fem
+        .replace("corotational", "my_warped_tets")
+        .replace("f_corot", "my_force")
+        .replace("k_elem", "my_stiffness")
+        .replace("dm_inv", "my_shape")
+        .replace("x_rest", "my_rest_vector")
+        .replace("fem_init", "my_init");
+    assert!(renamed.contains("rule my_warped_tets {"));
+    let load = |text: &str, file: &str| {
+        let (checked, diags) = check_sources(&[
+            ("common3d.tmr".to_string(), common.to_string()),
+            (file.to_string(), text.to_string()),
+        ]);
+        RuleSet::new(checked.unwrap_or_else(|| panic!("{file} checks: {diags:?}")))
+    };
+    let shipped = load(fem, "fem3d.tmr");
+    let user = load(&renamed, "mine.tmr");
+    let (g0, _) = build(
+        &cuboid([3, 2, 2], [1.5, 1.0, 1.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let prepare = |rules: &RuleSet, init: &str| -> GMap {
+        let mut g = g0.clone();
+        rules.prepare(&mut g).unwrap();
+        let none = Params::new();
+        rules.apply_everywhere(&mut g, "init_rest", &none).unwrap();
+        let mut mat = Params::new();
+        mat.insert("density".into(), topomech_rules::Val::F(1000.0));
+        mat.insert("young".into(), topomech_rules::Val::F(1e5));
+        mat.insert("poisson".into(), topomech_rules::Val::F(0.3));
+        rules
+            .apply_everywhere(&mut g, "set_material", &mat)
+            .unwrap();
+        mark_vertex0(&mut g);
+        rules.apply_everywhere(&mut g, init, &none).unwrap();
+        // deform: a shear and a stretch, so that the forces are not zero
+        let pos = g.embedding_id("position").unwrap();
+        for d in g.darts().collect::<Vec<_>>() {
+            let p = g.real(pos, d).to_vec();
+            g.set_real(pos, d, &[p[0] * 1.1 + 0.2 * p[1], p[1], p[2] - 0.05 * p[0]])
+                .unwrap();
+        }
+        g
+    };
+    let mut a = prepare(&shipped, "fem_init");
+    let mut b = prepare(&user, "my_init");
+    let none = Params::new();
+    let ra = shipped
+        .apply_everywhere(&mut a, "corotational", &none)
+        .unwrap();
+    let rb = user
+        .apply_everywhere(&mut b, "my_warped_tets", &none)
+        .unwrap();
+    assert_eq!(ra, rb, "same matches and evaluations");
+    assert!(ra.matches > 0);
+    assert_eq!(
+        shipped.plan_kinds().iter().filter(|k| k.1).count(),
+        user.plan_kinds().iter().filter(|k| k.1).count()
+    );
+    assert!(
+        shipped.plan_kinds().iter().all(|k| k.1),
+        "{:?}",
+        shipped.plan_kinds()
+    );
+    assert!(
+        user.plan_kinds().iter().all(|k| k.1),
+        "{:?}",
+        user.plan_kinds()
+    );
+    assert_eq!(
+        shipped.plan_bytes(),
+        user.plan_bytes(),
+        "plans of the same size"
+    );
+    let fa = a.embedding_id("f_corot").unwrap();
+    let fb = b.embedding_id("my_force").unwrap();
+    let mut nonzero = false;
+    for d in a.darts() {
+        assert_eq!(a.real(fa, d), b.real(fb, d), "dart {d}");
+        nonzero |= a.real(fa, d).iter().any(|x| *x != 0.0);
+    }
+    assert!(nonzero);
+}
+
+/// Marks one dart per volume as its `vertex0`, as the simulation does.
+fn mark_vertex0(g: &mut GMap) {
+    let id = g.embedding_id("vertex0").unwrap();
+    let o = topomech_gmap::OrbitType::new(&[0, 1, 2]).unwrap();
+    for d in g.orbit_representatives(o) {
+        g.set_value(id, d, &topomech_gmap::Value::Bool(true))
+            .unwrap();
+    }
+}

@@ -1,0 +1,1505 @@
+//! Compiled plans: computation rules evaluated over flat arrays.
+//!
+//! A rule that changes no topology has matches that depend only on the topology (and on the
+//! embeddings its guard reads). The engine finds them once, then *compiles* the rule and its
+//! matches into a plan:
+//!
+//! - the **domain**: one row per value to compute (a match's row that represents a class of
+//!   rows sharing a value, as in the interpreter);
+//! - **gather index arrays**: for every `node.emb` the rule reads, the slot of that
+//!   embedding for each domain row; for every aggregate, the distinct slots of its orbit
+//!   (compressed rows); counts are computed once;
+//! - a **program**: the rule's expressions as a list of operations over registers, each
+//!   register a fixed number of `f64` per row (its type's width);
+//! - **scatter targets**: for every write, the slot each domain row writes.
+//!
+//! Evaluation runs the program over chunks of rows (each operation a tight loop over the
+//! chunk), in parallel on rayon's pool when there are enough rows, with one scratch buffer per
+//! thread: no orbit walk, no hash map and no allocation per step. The plan is a cache derived
+//! from the map: it is rebuilt when the topology version changes (see [`crate::RuleSet`]).
+//!
+//! Nothing here knows any model: any rule compiles the same way. A rule using what the plan
+//! machinery does not cover (integer arithmetic, reads of integer embeddings) is run by the
+//! interpreter instead, and so is an application whose evaluation fails (a built-in refusing
+//! its argument, two matches writing different values to one orbit): the interpreter then
+//! reports the error precisely, with the dart.
+
+use std::cell::RefCell;
+
+use rayon::prelude::*;
+use topomech_gmap::{ColumnMut, ColumnRef, Dart, EmbeddingId, GMap, OrbitType};
+
+use crate::ast::AggKind;
+use crate::builtins;
+use crate::check::{EmbDecl, Rule, TExpr, TStmt};
+use crate::engine::Match;
+use crate::value::{binop_type, unop_type, BinOp, Ty, UnOp, Val};
+
+/// Why a rule or an application is left to the interpreter.
+#[derive(Debug)]
+pub(crate) struct Unsupported(#[allow(dead_code)] pub String);
+
+type R = usize;
+
+/// Binary element-wise operations.
+#[derive(Clone, Copy, Debug)]
+enum Ew {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Rem,
+}
+
+impl Ew {
+    #[inline]
+    fn apply(self, x: f64, y: f64) -> f64 {
+        match self {
+            Ew::Add => x + y,
+            Ew::Sub => x - y,
+            Ew::Mul => x * y,
+            Ew::Div => x / y,
+            Ew::Rem => x % y,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Cmp {
+    Lt,
+    Le,
+    Gt,
+    Ge,
+}
+
+/// Built-ins with a flat implementation (the same arithmetic as [`builtins::call`]).
+#[derive(Clone, Copy, Debug)]
+enum Fast {
+    Dot,
+    Norm,
+    Norm2,
+    Cross3,
+    Cross2,
+    Normalize,
+    Polar2,
+    Polar3,
+    Trace,
+    Sym,
+}
+
+#[derive(Clone, Debug)]
+enum Op {
+    /// A constant or parameter, from the run's fill values at `at`.
+    Fill {
+        dst: R,
+        at: usize,
+    },
+    /// `dst[row] = column[idx[row]]`.
+    Gather {
+        dst: R,
+        col: usize,
+        idx: usize,
+    },
+    /// Sum (or mean) over the compressed slot lists `csr`.
+    Agg {
+        dst: R,
+        col: usize,
+        csr: usize,
+        mean: bool,
+    },
+    /// A value computed per row when the plan was built (counts).
+    RowData {
+        dst: R,
+        data: usize,
+    },
+    /// Same-width element-wise `a op b`.
+    Ew {
+        op: Ew,
+        dst: R,
+        a: R,
+        b: R,
+    },
+    /// `s * v` (`s` scalar).
+    ScaleL {
+        dst: R,
+        s: R,
+        v: R,
+    },
+    /// `v / s` (`s` scalar).
+    DivS {
+        dst: R,
+        v: R,
+        s: R,
+    },
+    /// `(r x k) * (k x c)`.
+    MatMul {
+        dst: R,
+        a: R,
+        b: R,
+        r: usize,
+        k: usize,
+        c: usize,
+    },
+    Neg {
+        dst: R,
+        a: R,
+    },
+    Not {
+        dst: R,
+        a: R,
+    },
+    Cmp {
+        op: Cmp,
+        dst: R,
+        a: R,
+        b: R,
+    },
+    /// Equality of two values of one type (`ne`: its negation).
+    Eq {
+        ne: bool,
+        dst: R,
+        a: R,
+        b: R,
+    },
+    And {
+        dst: R,
+        a: R,
+        b: R,
+    },
+    Or {
+        dst: R,
+        a: R,
+        b: R,
+    },
+    Select {
+        dst: R,
+        c: R,
+        a: R,
+        b: R,
+    },
+    /// `dst[k] = srcs[map[k].0][map[k].1]`, or 0 where `map[k].0` is `u16::MAX`.
+    Pick {
+        dst: R,
+        srcs: Vec<R>,
+        map: Vec<(u16, u16)>,
+    },
+    F1 {
+        f: fn(f64) -> f64,
+        dst: R,
+        a: R,
+    },
+    F2 {
+        f: fn(f64, f64) -> f64,
+        dst: R,
+        a: R,
+        b: R,
+    },
+    Fast {
+        f: Fast,
+        dst: R,
+        args: Vec<R>,
+    },
+    /// Any other built-in, through [`builtins::call`] (allocates; fails back to the
+    /// interpreter on error).
+    Generic {
+        name: String,
+        dst: R,
+        args: Vec<(R, Ty)>,
+        ty: Ty,
+    },
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Reg {
+    /// Offset, in floats per row, of the register in a row's scratch.
+    off: usize,
+    width: usize,
+}
+
+/// A gather: the node and embedding read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct ReadKey {
+    node: usize,
+    emb: usize,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct AggKey {
+    orbit: OrbitType,
+    node: usize,
+    emb: Option<usize>,
+    distinct: bool,
+}
+
+/// What a fill register holds.
+#[derive(Clone, Debug)]
+enum FillSrc {
+    Const(Vec<f64>),
+    Param(usize),
+}
+
+/// The compiled program of a rule: independent of any map.
+#[derive(Clone, Debug)]
+pub(crate) struct Program {
+    ops: Vec<Op>,
+    regs: Vec<Reg>,
+    /// Floats per row of scratch.
+    stride: usize,
+    fills: Vec<FillSrc>,
+    /// Reads: (node, rule embedding).
+    reads: Vec<ReadKey>,
+    /// Aggregates (sum, mean, count).
+    aggs: Vec<AggKey>,
+    /// Embeddings whose columns the program reads (rule embedding indices).
+    cols: Vec<usize>,
+    /// Writes, in program order: (node, rule embedding, register, uniform positions).
+    writes: Vec<(usize, usize, R, Vec<usize>)>,
+}
+
+struct Compiler<'a> {
+    rule: &'a Rule,
+    embs: &'a [EmbDecl],
+    p: Program,
+    locals: Vec<Option<(R, Ty)>>,
+}
+
+const INT_EXACT: f64 = 9_007_199_254_740_992.0; // 2^53
+
+fn unsupported<T>(why: impl Into<String>) -> Result<T, Unsupported> {
+    Err(Unsupported(why.into()))
+}
+
+impl Compiler<'_> {
+    fn reg(&mut self, width: usize) -> R {
+        let off = self.p.stride;
+        self.p.stride += width;
+        self.p.regs.push(Reg { off, width });
+        self.p.regs.len() - 1
+    }
+
+    fn col(&mut self, emb: usize) -> usize {
+        if let Some(k) = self.p.cols.iter().position(|&e| e == emb) {
+            k
+        } else {
+            self.p.cols.push(emb);
+            self.p.cols.len() - 1
+        }
+    }
+
+    fn fill(&mut self, src: FillSrc, ty: Ty) -> R {
+        let dst = self.reg(ty.width());
+        self.p.fills.push(src);
+        let at = self.p.fills.len() - 1;
+        self.p.ops.push(Op::Fill { dst, at });
+        dst
+    }
+
+    fn constant(&mut self, v: &Val) -> Result<(R, Ty), Unsupported> {
+        if let Val::I(i) = v {
+            if (*i as f64).abs() >= INT_EXACT {
+                return unsupported("an integer constant beyond 2^53");
+            }
+        }
+        let mut x = Vec::new();
+        v.to_reals(&mut x);
+        Ok((self.fill(FillSrc::Const(x), v.ty()), v.ty()))
+    }
+
+    fn expr(&mut self, e: &TExpr) -> Result<(R, Ty), Unsupported> {
+        Ok(match e {
+            TExpr::Const(v) => self.constant(v)?,
+            TExpr::Param(k) => {
+                let ty = self.rule.params[*k].1;
+                (self.fill(FillSrc::Param(*k), ty), ty)
+            }
+            TExpr::Local(k) => match self.locals.get(*k).copied().flatten() {
+                Some(x) => x,
+                None => return unsupported("a variable used before it is set"),
+            },
+            TExpr::Read { node, emb } => {
+                let ty = self.embs[*emb].ty;
+                if ty == Ty::I64 {
+                    return unsupported("a read of an integer embedding");
+                }
+                let key = ReadKey {
+                    node: *node,
+                    emb: *emb,
+                };
+                let idx = if let Some(k) = self.p.reads.iter().position(|r| *r == key) {
+                    k
+                } else {
+                    self.p.reads.push(key);
+                    self.p.reads.len() - 1
+                };
+                let col = self.col(*emb);
+                let dst = self.reg(ty.width());
+                self.p.ops.push(Op::Gather { dst, col, idx });
+                (dst, ty)
+            }
+            TExpr::Agg {
+                kind,
+                orbit,
+                node,
+                emb,
+                ty,
+            } => {
+                if *kind == AggKind::Count {
+                    let key = AggKey {
+                        orbit: *orbit,
+                        node: *node,
+                        emb: *emb,
+                        distinct: emb.is_some(),
+                    };
+                    let data = self.agg_index(key);
+                    let dst = self.reg(1);
+                    self.p.ops.push(Op::RowData { dst, data });
+                    (dst, Ty::I64)
+                } else {
+                    let Some(e) = emb else {
+                        return unsupported("an aggregate without embedding");
+                    };
+                    let ety = self.embs[*e].ty;
+                    if !ety.is_real() {
+                        return unsupported("an aggregate of integers or booleans");
+                    }
+                    let key = AggKey {
+                        orbit: *orbit,
+                        node: *node,
+                        emb: Some(*e),
+                        distinct: true,
+                    };
+                    let csr = self.agg_index(key);
+                    let col = self.col(*e);
+                    let dst = self.reg(ety.width());
+                    self.p.ops.push(Op::Agg {
+                        dst,
+                        col,
+                        csr,
+                        mean: *kind == AggKind::Mean,
+                    });
+                    (dst, if *kind == AggKind::Mean { ety } else { *ty })
+                }
+            }
+            TExpr::Bin(op, a, b) => {
+                let (ra, ta) = self.expr(a)?;
+                let (rb, tb) = self.expr(b)?;
+                self.binary(*op, (ra, ta), (rb, tb))?
+            }
+            TExpr::Un(op, a) => {
+                let (ra, ta) = self.expr(a)?;
+                let ty = unop_type(*op, ta).map_err(Unsupported)?;
+                if ta == Ty::I64 {
+                    return unsupported("integer negation");
+                }
+                let dst = self.reg(ty.width());
+                self.p.ops.push(match op {
+                    UnOp::Neg => Op::Neg { dst, a: ra },
+                    UnOp::Not => Op::Not { dst, a: ra },
+                });
+                (dst, ty)
+            }
+            TExpr::Call(name, args) => self.call(name, args)?,
+            TExpr::If(c, a, b) => {
+                let (rc, _) = self.expr(c)?;
+                let (ra, ta) = self.expr(a)?;
+                let (rb, tb) = self.expr(b)?;
+                if ta != tb {
+                    return unsupported("branches of different types");
+                }
+                let dst = self.reg(ta.width());
+                self.p.ops.push(Op::Select {
+                    dst,
+                    c: rc,
+                    a: ra,
+                    b: rb,
+                });
+                (dst, ta)
+            }
+            TExpr::Block(lets, res) => {
+                for (k, v) in lets {
+                    let x = self.expr(v)?;
+                    self.locals[*k] = Some(x);
+                }
+                self.expr(res)?
+            }
+            TExpr::ToReal(a) => {
+                let (ra, ta) = self.expr(a)?;
+                (ra, if ta == Ty::I64 { Ty::F64 } else { ta })
+            }
+        })
+    }
+
+    fn agg_index(&mut self, key: AggKey) -> usize {
+        if let Some(k) = self.p.aggs.iter().position(|a| *a == key) {
+            k
+        } else {
+            self.p.aggs.push(key);
+            self.p.aggs.len() - 1
+        }
+    }
+
+    fn binary(&mut self, op: BinOp, a: (R, Ty), b: (R, Ty)) -> Result<(R, Ty), Unsupported> {
+        let ty = binop_type(op, a.1, b.1).map_err(Unsupported)?;
+        let (ra, ta) = a;
+        let (rb, tb) = b;
+        let int = |t: Ty| t == Ty::I64;
+        let scalar = |t: Ty| matches!(t, Ty::F64 | Ty::I64);
+        let dst = self.reg(ty.width());
+        let o = match op {
+            BinOp::Add | BinOp::Sub | BinOp::Rem | BinOp::Div | BinOp::Mul
+                if int(ta) && int(tb) =>
+            {
+                return unsupported("integer arithmetic");
+            }
+            BinOp::Add | BinOp::Sub | BinOp::Rem => Op::Ew {
+                op: match op {
+                    BinOp::Add => Ew::Add,
+                    BinOp::Sub => Ew::Sub,
+                    _ => Ew::Rem,
+                },
+                dst,
+                a: ra,
+                b: rb,
+            },
+            BinOp::Div => {
+                if ta.width() == 1 {
+                    Op::Ew {
+                        op: Ew::Div,
+                        dst,
+                        a: ra,
+                        b: rb,
+                    }
+                } else {
+                    Op::DivS { dst, v: ra, s: rb }
+                }
+            }
+            BinOp::Mul => {
+                if scalar(ta) && scalar(tb) {
+                    Op::Ew {
+                        op: Ew::Mul,
+                        dst,
+                        a: ra,
+                        b: rb,
+                    }
+                } else if scalar(ta) {
+                    Op::ScaleL { dst, s: ra, v: rb }
+                } else if scalar(tb) {
+                    Op::ScaleL { dst, s: rb, v: ra }
+                } else {
+                    let (r, k) = match ta {
+                        Ty::Mat(r, k) => (usize::from(r), usize::from(k)),
+                        _ => return unsupported("a product of these types"),
+                    };
+                    let c = tb.width() / k;
+                    Op::MatMul {
+                        dst,
+                        a: ra,
+                        b: rb,
+                        r,
+                        k,
+                        c,
+                    }
+                }
+            }
+            BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge => Op::Cmp {
+                op: match op {
+                    BinOp::Lt => Cmp::Lt,
+                    BinOp::Le => Cmp::Le,
+                    BinOp::Gt => Cmp::Gt,
+                    _ => Cmp::Ge,
+                },
+                dst,
+                a: ra,
+                b: rb,
+            },
+            BinOp::Eq | BinOp::Ne => Op::Eq {
+                ne: op == BinOp::Ne,
+                dst,
+                a: ra,
+                b: rb,
+            },
+            BinOp::And => Op::And { dst, a: ra, b: rb },
+            BinOp::Or => Op::Or { dst, a: ra, b: rb },
+        };
+        self.p.ops.push(o);
+        Ok((dst, ty))
+    }
+
+    /// A constant integer argument, if the expression is one.
+    fn const_int(e: &TExpr) -> Option<i64> {
+        match e {
+            TExpr::Const(Val::I(i)) => Some(*i),
+            _ => None,
+        }
+    }
+
+    fn call(&mut self, name: &str, args: &[TExpr]) -> Result<(R, Ty), Unsupported> {
+        // constant folding: a call on constants only is evaluated now
+        if args.iter().all(|a| matches!(a, TExpr::Const(_))) {
+            let vals: Vec<Val> = args
+                .iter()
+                .map(|a| match a {
+                    TExpr::Const(v) => v.clone(),
+                    _ => unreachable!("checked above"),
+                })
+                .collect();
+            if let Ok(v) = builtins::call(name, &vals) {
+                return self.constant(&v);
+            }
+        }
+        let mut rs = Vec::with_capacity(args.len());
+        let mut ts = Vec::with_capacity(args.len());
+        for a in args {
+            let (r, t) = self.expr(a)?;
+            rs.push(r);
+            ts.push(t);
+        }
+        let ty = builtins::call_type(name, &ts).map_err(Unsupported)?;
+        // integer results (min/max/clamp of integers...) are left to the interpreter, for its
+        // overflow checks
+        if ty == Ty::I64 {
+            return unsupported("a built-in with an integer result");
+        }
+        let width = |t: Ty| t.width();
+        // selections with constant indices
+        let pick: Option<Vec<u32>> = match (name, ts.as_slice()) {
+            ("to_f64", [Ty::F64 | Ty::I64 | Ty::Bool]) => return Ok((rs[0], Ty::F64)),
+            ("x", [_]) => Some(vec![0]),
+            ("y", [_]) => Some(vec![1]),
+            ("z", [_]) => Some(vec![2]),
+            ("vec2" | "vec3" | "mat2" | "mat3", _) if ts.iter().all(|t| *t == Ty::F64) => {
+                Some((0..ts.len() as u32).collect())
+            }
+            ("vec12" | "vec6" | "mat_from_rows2" | "mat_from_rows3", _) => {
+                Some((0..ty.width() as u32).collect())
+            }
+            ("mat_from_cols2" | "mat_from_cols3" | "mat_from_cols4", _) => {
+                // columns a, b, ... of length n: entry (i, j) is concat[j * n + i]
+                let n = width(ts[0]);
+                let m = ts.len();
+                Some(
+                    (0..n)
+                        .flat_map(|i| (0..m).map(move |j| (j * n + i) as u32))
+                        .collect(),
+                )
+            }
+            ("transpose", [Ty::Mat(r, c)]) => {
+                let (r, c) = (usize::from(*r), usize::from(*c));
+                // result (c x r): entry (i, j) = m[j][i]
+                Some(
+                    (0..c)
+                        .flat_map(|i| (0..r).map(move |j| (j * c + i) as u32))
+                        .collect(),
+                )
+            }
+            ("blockdiag3" | "blockdiag4", [Ty::Mat(k, _)]) => {
+                let k = usize::from(*k);
+                let nb = if name == "blockdiag3" { 3 } else { 4 };
+                let n = k * nb;
+                Some(
+                    (0..n * n)
+                        .map(|e| {
+                            let (i, j) = (e / n, e % n);
+                            if i / k == j / k {
+                                ((i % k) * k + j % k) as u32
+                            } else {
+                                u32::MAX
+                            }
+                        })
+                        .collect(),
+                )
+            }
+            ("vecn_get2" | "vecn_get3", [Ty::Mat(r, 1), Ty::I64]) => {
+                let k = if name == "vecn_get2" { 2 } else { 3 };
+                match Self::const_int(&args[1]) {
+                    Some(i) if i >= 0 && (i as usize + 1) * k <= usize::from(*r) => {
+                        let i = i as usize;
+                        Some((i * k..(i + 1) * k).map(|x| x as u32).collect())
+                    }
+                    _ => None,
+                }
+            }
+            ("block2" | "block3", [Ty::Mat(r, c), Ty::I64, Ty::I64]) => {
+                let k = if name == "block2" { 2 } else { 3 };
+                let (r, c) = (usize::from(*r), usize::from(*c));
+                match (Self::const_int(&args[1]), Self::const_int(&args[2])) {
+                    (Some(bi), Some(bj))
+                        if bi >= 0
+                            && bj >= 0
+                            && (bi as usize + 1) * k <= r
+                            && (bj as usize + 1) * k <= c =>
+                    {
+                        let (bi, bj) = (bi as usize * k, bj as usize * k);
+                        Some(
+                            (0..k)
+                                .flat_map(|i| (0..k).map(move |j| ((bi + i) * c + bj + j) as u32))
+                                .collect(),
+                        )
+                    }
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
+        let dst;
+        if let Some(map) = pick {
+            // the arguments that are data (not constant indices)
+            let srcs: Vec<R> = match name {
+                "vecn_get2" | "vecn_get3" | "block2" | "block3" => vec![rs[0]],
+                _ => rs.clone(),
+            };
+            debug_assert_eq!(map.len(), ty.width());
+            // resolve each entry of the concatenation to (source, offset)
+            let widths: Vec<usize> = srcs.iter().map(|&r| self.p.regs[r].width).collect();
+            let map = map
+                .into_iter()
+                .map(|m| {
+                    if m == u32::MAX {
+                        return (u16::MAX, 0);
+                    }
+                    let mut m = m as usize;
+                    for (k, &w) in widths.iter().enumerate() {
+                        if m < w {
+                            return (k as u16, m as u16);
+                        }
+                        m -= w;
+                    }
+                    unreachable!("a selection inside its sources")
+                })
+                .collect();
+            dst = self.reg(ty.width());
+            self.p.ops.push(Op::Pick { dst, srcs, map });
+            return Ok((dst, ty));
+        }
+        let fast = match (name, ts.as_slice()) {
+            ("dot", [a, b]) if a == b => Some(Fast::Dot),
+            ("norm", [_]) => Some(Fast::Norm),
+            ("norm2", [_]) => Some(Fast::Norm2),
+            ("cross", [Ty::Vec3, Ty::Vec3]) => Some(Fast::Cross3),
+            ("cross", [Ty::Vec2, Ty::Vec2]) => Some(Fast::Cross2),
+            ("normalize", [_]) => Some(Fast::Normalize),
+            ("polar", [Ty::Mat(2, 2)]) => Some(Fast::Polar2),
+            ("polar", [Ty::Mat(3, 3)]) => Some(Fast::Polar3),
+            ("trace", [Ty::Mat(..)]) => Some(Fast::Trace),
+            ("sym", [Ty::Mat(..)]) => Some(Fast::Sym),
+            _ => None,
+        };
+        dst = self.reg(ty.width());
+        if let Some(f) = fast {
+            self.p.ops.push(Op::Fast { f, dst, args: rs });
+            return Ok((dst, ty));
+        }
+        let all_f64 = ts.iter().all(|t| *t == Ty::F64);
+        let f1: Option<fn(f64) -> f64> = match name {
+            _ if !(all_f64 && ts.len() == 1) => None,
+            "abs" => Some(|x| builtins::scalar1("abs", x)),
+            "sign" => Some(|x| builtins::scalar1("sign", x)),
+            "sqrt" => Some(|x| builtins::scalar1("sqrt", x)),
+            "exp" => Some(|x| builtins::scalar1("exp", x)),
+            "log" => Some(|x| builtins::scalar1("log", x)),
+            "sin" => Some(|x| builtins::scalar1("sin", x)),
+            "cos" => Some(|x| builtins::scalar1("cos", x)),
+            "tan" => Some(|x| builtins::scalar1("tan", x)),
+            "asin" => Some(|x| builtins::scalar1("asin", x)),
+            "acos" => Some(|x| builtins::scalar1("acos", x)),
+            "atan" => Some(|x| builtins::scalar1("atan", x)),
+            "floor" => Some(|x| builtins::scalar1("floor", x)),
+            "ceil" => Some(|x| builtins::scalar1("ceil", x)),
+            _ => None,
+        };
+        if let Some(f) = f1 {
+            self.p.ops.push(Op::F1 { f, dst, a: rs[0] });
+            return Ok((dst, ty));
+        }
+        let f2: Option<fn(f64, f64) -> f64> = match name {
+            _ if !(all_f64 && ts.len() == 2) => None,
+            "atan2" => Some(|a, b| builtins::scalar2("atan2", a, b)),
+            "pow" => Some(|a, b| builtins::scalar2("pow", a, b)),
+            "min" => Some(|a, b| builtins::scalar2("min", a, b)),
+            "max" => Some(|a, b| builtins::scalar2("max", a, b)),
+            _ => None,
+        };
+        if let Some(f) = f2 {
+            self.p.ops.push(Op::F2 {
+                f,
+                dst,
+                a: rs[0],
+                b: rs[1],
+            });
+            return Ok((dst, ty));
+        }
+        // integer arguments are exact in f64 below 2^53 (constants are checked, counts are
+        // small): the generic call gets them back as integers
+        self.p.ops.push(Op::Generic {
+            name: name.to_string(),
+            dst,
+            args: rs.into_iter().zip(ts).collect(),
+            ty,
+        });
+        Ok((dst, ty))
+    }
+}
+
+/// Compiles a computation rule's program; `Err` says what the plan machinery does not cover.
+pub(crate) fn compile(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Unsupported> {
+    if rule.changes_topology {
+        return unsupported("a rule that changes the topology");
+    }
+    let mut c = Compiler {
+        rule,
+        embs,
+        p: Program {
+            ops: Vec::new(),
+            regs: Vec::new(),
+            stride: 0,
+            fills: Vec::new(),
+            reads: Vec::new(),
+            aggs: Vec::new(),
+            cols: Vec::new(),
+            writes: Vec::new(),
+        },
+        locals: vec![None; rule.n_locals],
+    };
+    for s in &rule.program {
+        match s {
+            TStmt::Let(k, e) => {
+                let x = c.expr(e)?;
+                c.locals[*k] = Some(x);
+            }
+            TStmt::Write {
+                node,
+                emb,
+                value,
+                uniform,
+            } => {
+                let (r, t) = c.expr(value)?;
+                if t != embs[*emb].ty || embs[*emb].derived.is_some() {
+                    return unsupported("a write of another type, or of a derived embedding");
+                }
+                c.p.writes.push((*node, *emb, r, uniform.clone()));
+            }
+        }
+    }
+    Ok(c.p)
+}
+
+/// Parameters in the units the program reads them: `None` if one cannot be represented
+/// exactly (an integer beyond 2^53).
+fn param_values(params: &[Val]) -> Option<Vec<Vec<f64>>> {
+    params
+        .iter()
+        .map(|v| {
+            if let Val::I(i) = v {
+                if (*i as f64).abs() >= INT_EXACT {
+                    return None;
+                }
+            }
+            let mut x = Vec::new();
+            v.to_reals(&mut x);
+            Some(x)
+        })
+        .collect()
+}
+
+/// A compiled plan: a program and the index arrays of one map's matches.
+#[derive(Debug)]
+pub(crate) struct Plan {
+    prog: Program,
+    matches: usize,
+    rows: usize,
+    chunk: usize,
+    gathers: Vec<Vec<u32>>,
+    /// Per aggregate: offsets (rows + 1) and slots, or per-row counts.
+    csr: Vec<(Vec<u32>, Vec<u32>)>,
+    counts: Vec<Vec<f64>>,
+    /// Per write: (domain row, slot) pairs it scatters, offset of its value in an output row.
+    targets: Vec<(Vec<(u32, u32)>, usize)>,
+    /// Writes to an orbit another write of the rule also writes: (write, row, write, row);
+    /// the values must be equal.
+    dups: Vec<(usize, u32, usize, u32)>,
+    /// Floats per output row.
+    out_width: usize,
+    out: Vec<f64>,
+    evaluations: usize,
+}
+
+/// Partition of the rows: rows joined through the orbit positions `uniform` share a class.
+/// Returns, per row, its class's first row.
+fn class_reps(m: &Match, arity: usize, uniform: &[usize], rep: &mut Vec<u32>) {
+    rep.clear();
+    rep.resize(m.rows, u32::MAX);
+    let mut stack = Vec::new();
+    for r0 in 0..m.rows {
+        if rep[r0] != u32::MAX {
+            continue;
+        }
+        rep[r0] = r0 as u32;
+        stack.push(r0);
+        while let Some(r) = stack.pop() {
+            for &t in uniform {
+                let s = m.next[r * arity + t] as usize;
+                if rep[s] == u32::MAX {
+                    rep[s] = r0 as u32;
+                    stack.push(s);
+                }
+            }
+        }
+    }
+}
+
+impl Plan {
+    /// Index arrays of `matches` on `g`, whose embeddings for the rule are `ids`.
+    pub(crate) fn build(
+        prog: Program,
+        rule: &Rule,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        matches: &[Match],
+    ) -> Plan {
+        let nw = prog.writes.len();
+        // domain rows: the class representatives of every write
+        let mut domain: Vec<(u32, u32)> = Vec::new();
+        let mut write_rows: Vec<Vec<(u32, Dart)>> = vec![Vec::new(); nw];
+        let mut rep = Vec::new();
+        let mut reps: Vec<Vec<u32>> = vec![Vec::new(); nw];
+        let mut evaluations = 0;
+        for (mi, m) in matches.iter().enumerate() {
+            for (w, (_, _, _, uniform)) in prog.writes.iter().enumerate() {
+                class_reps(m, rule.arity, uniform, &mut rep);
+                reps[w].clear();
+                reps[w].extend(
+                    rep.iter()
+                        .enumerate()
+                        .filter(|(r, x)| **x as usize == *r)
+                        .map(|(_, x)| *x),
+                );
+                evaluations += reps[w].len();
+            }
+            let mut rows: Vec<u32> = reps.iter().flatten().copied().collect();
+            rows.sort_unstable();
+            rows.dedup();
+            let base = domain.len() as u32;
+            domain.extend(rows.iter().map(|&r| (mi as u32, r)));
+            for (w, (node, _, _, _)) in prog.writes.iter().enumerate() {
+                for &r in &reps[w] {
+                    let k = rows.binary_search(&r).expect("a representative is a row");
+                    write_rows[w].push((base + k as u32, m.darts[*node][r as usize]));
+                }
+            }
+        }
+        let n = domain.len();
+        let dart = |node: usize, row: usize| {
+            let (mi, r) = domain[row];
+            matches[mi as usize].darts[node][r as usize]
+        };
+        let gathers = prog
+            .reads
+            .iter()
+            .map(|rk| {
+                let e = g.embedding(ids[rk.emb]);
+                (0..n)
+                    .map(|row| e.slot(dart(rk.node, row)) as u32)
+                    .collect()
+            })
+            .collect();
+        let mut csr = Vec::new();
+        let mut counts = Vec::new();
+        for ak in &prog.aggs {
+            let mut offs = Vec::with_capacity(n + 1);
+            let mut slots: Vec<u32> = Vec::new();
+            let mut cnt = Vec::new();
+            offs.push(0);
+            for row in 0..n {
+                let darts = g.orbit(dart(ak.node, row), ak.orbit);
+                match ak.emb {
+                    None => cnt.push(darts.len() as f64),
+                    Some(emb) => {
+                        let e = g.embedding(ids[emb]);
+                        let start = slots.len();
+                        for x in darts {
+                            let s = e.slot(x) as u32;
+                            if !slots[start..].contains(&s) {
+                                slots.push(s);
+                            }
+                        }
+                        cnt.push((slots.len() - start) as f64);
+                        offs.push(slots.len() as u32);
+                    }
+                }
+            }
+            csr.push((offs, slots));
+            counts.push(cnt);
+        }
+        // scatter targets, each slot written once; later writes of a slot are compared
+        let mut targets = Vec::with_capacity(nw);
+        let mut dups = Vec::new();
+        let mut owner: Vec<Vec<(u32, u32)>> = Vec::new();
+        let mut owner_emb: Vec<usize> = Vec::new();
+        let mut woff = 0;
+        for (w, (_, emb, reg, _)) in prog.writes.iter().enumerate() {
+            let e = g.embedding(ids[*emb]);
+            let k = if let Some(k) = owner_emb.iter().position(|x| x == emb) {
+                k
+            } else {
+                owner_emb.push(*emb);
+                owner.push(vec![(u32::MAX, 0); e.n_slots()]);
+                owner.len() - 1
+            };
+            let mut t = Vec::with_capacity(write_rows[w].len());
+            for &(row, d) in &write_rows[w] {
+                let s = e.slot(d);
+                let o = &mut owner[k][s];
+                if o.0 == u32::MAX {
+                    *o = (w as u32, row);
+                    t.push((row, s as u32));
+                } else if !(o.0 as usize == w && o.1 == row) {
+                    dups.push((o.0 as usize, o.1, w, row));
+                }
+            }
+            targets.push((t, woff));
+            woff += prog.regs[*reg].width;
+        }
+        let out_width = woff;
+        // rows per chunk: the chunk's scratch stays within a few hundred KiB
+        let chunk = (32_768 / prog.stride.max(1)).clamp(4, 256);
+        Plan {
+            prog,
+            matches: matches.len(),
+            rows: n,
+            chunk,
+            gathers,
+            csr,
+            counts,
+            targets,
+            dups,
+            out_width,
+            out: Vec::new(),
+            evaluations,
+        }
+    }
+
+    /// Bytes held by the plan's arrays.
+    pub(crate) fn memory_bytes(&self) -> usize {
+        let g: usize = self.gathers.iter().map(|x| x.capacity() * 4).sum();
+        let c: usize = self
+            .csr
+            .iter()
+            .map(|(o, s)| (o.capacity() + s.capacity()) * 4)
+            .sum::<usize>()
+            + self.counts.iter().map(|x| x.capacity() * 8).sum::<usize>();
+        let t: usize = self.targets.iter().map(|(t, _)| t.capacity() * 8).sum();
+        g + c + t + self.out.capacity() * 8
+    }
+
+    /// Number of matches.
+    pub(crate) fn matches(&self) -> usize {
+        self.matches
+    }
+
+    /// Number of write evaluations an application makes (as the interpreter counts them).
+    pub(crate) fn evaluations(&self) -> usize {
+        self.evaluations
+    }
+
+    /// Evaluates every match and writes the results into `g`. `Err` leaves `g` unchanged
+    /// and means: let the interpreter apply the rule (it reports the error precisely).
+    pub(crate) fn run(
+        &mut self,
+        g: &mut GMap,
+        ids: &[EmbeddingId],
+        params: &[Val],
+    ) -> Result<(), Unsupported> {
+        let Some(pvals) = param_values(params) else {
+            return unsupported("an integer parameter beyond 2^53");
+        };
+        let fills: Vec<&[f64]> = self
+            .prog
+            .fills
+            .iter()
+            .map(|f| match f {
+                FillSrc::Const(x) => x.as_slice(),
+                FillSrc::Param(k) => pvals[*k].as_slice(),
+            })
+            .collect();
+        let ow = self.out_width;
+        let need = self.rows * ow;
+        if self.out.len() != need {
+            self.out = vec![0.0; need];
+        }
+        {
+            let cols: Vec<ColumnRef> = self
+                .prog
+                .cols
+                .iter()
+                .map(|&e| g.embedding(ids[e]).column())
+                .collect();
+            let ctx = Ctx {
+                prog: &self.prog,
+                fills: &fills,
+                cols: &cols,
+                gathers: &self.gathers,
+                csr: &self.csr,
+                counts: &self.counts,
+                chunk: self.chunk,
+                out_offsets: &self.targets,
+            };
+            let ch = self.chunk;
+            let block = ch * ow.max(1);
+            let n_chunks = self.rows.div_ceil(ch);
+            let ok = if n_chunks >= 4 && rayon::current_num_threads() > 1 {
+                self.out
+                    .par_chunks_mut(block)
+                    .enumerate()
+                    .try_for_each(|(c, out)| ctx.chunk(c * ch, out))
+            } else {
+                self.out
+                    .chunks_mut(block)
+                    .enumerate()
+                    .try_for_each(|(c, out)| ctx.chunk(c * ch, out))
+            };
+            if ok.is_err() {
+                return unsupported("an evaluation failed");
+            }
+        }
+        // writes of one orbit by two writes must agree
+        for &(w1, r1, w2, r2) in &self.dups {
+            let (o1, o2) = (self.targets[w1].1, self.targets[w2].1);
+            let width = self.prog.regs[self.prog.writes[w1].2].width;
+            let a = &self.out[r1 as usize * ow + o1..][..width];
+            let b = &self.out[r2 as usize * ow + o2..][..width];
+            if a.iter().zip(b).any(|(x, y)| x.to_bits() != y.to_bits()) {
+                return unsupported("two writes of one orbit differ");
+            }
+        }
+        for (w, (_, emb, reg, _)) in self.prog.writes.iter().enumerate() {
+            let width = self.prog.regs[*reg].width;
+            let (t, off) = &self.targets[w];
+            let out = &self.out;
+            let col = g
+                .column_mut(ids[*emb])
+                .map_err(|e| Unsupported(e.to_string()))?;
+            match col {
+                ColumnMut::Real(v) => {
+                    for &(row, slot) in t {
+                        let src = &out[row as usize * ow + off..][..width];
+                        v[slot as usize * width..][..width].copy_from_slice(src);
+                    }
+                }
+                ColumnMut::Bool(v) => {
+                    for &(row, slot) in t {
+                        v[slot as usize] = out[row as usize * ow + off] != 0.0;
+                    }
+                }
+                ColumnMut::Int(v) => {
+                    for &(row, slot) in t {
+                        v[slot as usize] = out[row as usize * ow + off] as i64;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+struct Ctx<'a> {
+    prog: &'a Program,
+    fills: &'a [&'a [f64]],
+    cols: &'a [ColumnRef<'a>],
+    gathers: &'a [Vec<u32>],
+    csr: &'a [(Vec<u32>, Vec<u32>)],
+    counts: &'a [Vec<f64>],
+    chunk: usize,
+    out_offsets: &'a [(Vec<(u32, u32)>, usize)],
+}
+
+thread_local! {
+    /// Per-thread scratch of the evaluator, grown to the largest chunk it has seen.
+    static SCRATCH: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The scratch below register `dst` (all its operands: registers are numbered in creation
+/// order, an operation's operands before its result) and `dst`'s own rows.
+#[inline]
+fn split(s: &mut [f64], base: usize, len: usize) -> (&[f64], &mut [f64]) {
+    let (lo, hi) = s.split_at_mut(base);
+    (lo, &mut hi[..len])
+}
+
+impl Ctx<'_> {
+    /// Evaluates rows `first..` (as many as `out` holds) into `out`.
+    fn chunk(&self, first: usize, out: &mut [f64]) -> Result<(), ()> {
+        let ow = self.out_offsets_width();
+        let n = out.len().checked_div(ow).unwrap_or(self.chunk);
+        let need = self.prog.stride * self.chunk;
+        SCRATCH.with(|s| {
+            let mut s = s.borrow_mut();
+            if s.len() < need {
+                s.resize(need, 0.0);
+            }
+            self.eval(&mut s[..need], first, n)?;
+            for (w, (_, _, reg, _)) in self.prog.writes.iter().enumerate() {
+                let r = self.prog.regs[*reg];
+                let base = r.off * self.chunk;
+                let off = self.out_offsets[w].1;
+                for i in 0..n {
+                    out[i * ow + off..][..r.width]
+                        .copy_from_slice(&s[base + i * r.width..][..r.width]);
+                }
+            }
+            Ok(())
+        })
+    }
+
+    fn out_offsets_width(&self) -> usize {
+        self.prog
+            .writes
+            .iter()
+            .map(|(_, _, r, _)| self.prog.regs[*r].width)
+            .sum()
+    }
+
+    #[allow(clippy::too_many_lines)]
+    fn eval(&self, s: &mut [f64], first: usize, n: usize) -> Result<(), ()> {
+        let ch = self.chunk;
+        let regs = &self.prog.regs;
+        let at = |r: R| (regs[r].off * ch, regs[r].width);
+        for op in &self.prog.ops {
+            match op {
+                Op::Fill { dst, at: k } => {
+                    let (b, w) = at(*dst);
+                    let v = self.fills[*k];
+                    for i in 0..n {
+                        s[b + i * w..][..w].copy_from_slice(v);
+                    }
+                }
+                Op::Gather { dst, col, idx } => {
+                    let (b, w) = at(*dst);
+                    let idx = &self.gathers[*idx][first..first + n];
+                    let d = &mut s[b..b + n * w];
+                    match self.cols[*col] {
+                        ColumnRef::Real(c) => {
+                            for (i, &x) in idx.iter().enumerate() {
+                                let x = x as usize;
+                                d[i * w..][..w].copy_from_slice(&c[x * w..][..w]);
+                            }
+                        }
+                        ColumnRef::Bool(c) => {
+                            for (i, &x) in idx.iter().enumerate() {
+                                d[i] = if c[x as usize] { 1.0 } else { 0.0 };
+                            }
+                        }
+                        ColumnRef::Int(c) => {
+                            for (i, &x) in idx.iter().enumerate() {
+                                d[i] = c[x as usize] as f64;
+                            }
+                        }
+                    }
+                }
+                Op::Agg {
+                    dst,
+                    col,
+                    csr,
+                    mean,
+                } => {
+                    let (b, w) = at(*dst);
+                    let (offs, slots) = &self.csr[*csr];
+                    let ColumnRef::Real(c) = self.cols[*col] else {
+                        return Err(());
+                    };
+                    let d = &mut s[b..b + n * w];
+                    for i in 0..n {
+                        let row = first + i;
+                        let list = &slots[offs[row] as usize..offs[row + 1] as usize];
+                        let acc = &mut d[i * w..][..w];
+                        // the interpreter's order: the first value, then each next one added
+                        if let Some((&s0, rest)) = list.split_first() {
+                            acc.copy_from_slice(&c[s0 as usize * w..][..w]);
+                            for &x in rest {
+                                for (a, v) in acc.iter_mut().zip(&c[x as usize * w..][..w]) {
+                                    *a += *v;
+                                }
+                            }
+                        } else {
+                            acc.fill(0.0);
+                        }
+                        if *mean {
+                            let k = list.len().max(1) as f64;
+                            for a in acc.iter_mut() {
+                                *a /= k;
+                            }
+                        }
+                    }
+                }
+                Op::RowData { dst, data } => {
+                    let (b, _) = at(*dst);
+                    s[b..b + n].copy_from_slice(&self.counts[*data][first..first + n]);
+                }
+                Op::Ew { op, dst, a, b } => {
+                    let (bd, w) = at(*dst);
+                    let (ba, _) = at(*a);
+                    let (bb, _) = at(*b);
+                    let (lo, d) = split(s, bd, n * w);
+                    let (x, y) = (&lo[ba..ba + n * w], &lo[bb..bb + n * w]);
+                    match op {
+                        Ew::Add => {
+                            for k in 0..n * w {
+                                d[k] = x[k] + y[k];
+                            }
+                        }
+                        Ew::Sub => {
+                            for k in 0..n * w {
+                                d[k] = x[k] - y[k];
+                            }
+                        }
+                        Ew::Mul => {
+                            for k in 0..n * w {
+                                d[k] = x[k] * y[k];
+                            }
+                        }
+                        op => {
+                            for k in 0..n * w {
+                                d[k] = op.apply(x[k], y[k]);
+                            }
+                        }
+                    }
+                }
+                Op::ScaleL { dst, s: sr, v } => {
+                    let (bd, w) = at(*dst);
+                    let (bs, _) = at(*sr);
+                    let (bv, _) = at(*v);
+                    let (lo, d) = split(s, bd, n * w);
+                    let (sc, x) = (&lo[bs..bs + n], &lo[bv..bv + n * w]);
+                    for i in 0..n {
+                        let f = sc[i];
+                        for k in 0..w {
+                            d[i * w + k] = f * x[i * w + k];
+                        }
+                    }
+                }
+                Op::DivS { dst, v, s: sr } => {
+                    let (bd, w) = at(*dst);
+                    let (bs, _) = at(*sr);
+                    let (bv, _) = at(*v);
+                    let (lo, d) = split(s, bd, n * w);
+                    let (sc, x) = (&lo[bs..bs + n], &lo[bv..bv + n * w]);
+                    for i in 0..n {
+                        let f = sc[i];
+                        for k in 0..w {
+                            d[i * w + k] = x[i * w + k] / f;
+                        }
+                    }
+                }
+                Op::MatMul { dst, a, b, r, k, c } => {
+                    let (bd, w) = at(*dst);
+                    let (ba, wa) = at(*a);
+                    let (bb, wb) = at(*b);
+                    let (r, k, c) = (*r, *k, *c);
+                    let (lo, d) = split(s, bd, n * w);
+                    for i in 0..n {
+                        let x = &lo[ba + i * wa..][..wa];
+                        let y = &lo[bb + i * wb..][..wb];
+                        let z = &mut d[i * w..][..w];
+                        matmul(x, y, z, r, k, c);
+                    }
+                }
+                Op::Neg { dst, a } => {
+                    let (bd, w) = at(*dst);
+                    let (ba, _) = at(*a);
+                    let (lo, d) = split(s, bd, n * w);
+                    for k in 0..n * w {
+                        d[k] = -lo[ba + k];
+                    }
+                }
+                Op::Not { dst, a } => {
+                    let (bd, _) = at(*dst);
+                    let (ba, _) = at(*a);
+                    let (lo, d) = split(s, bd, n);
+                    for k in 0..n {
+                        d[k] = if lo[ba + k] == 0.0 { 1.0 } else { 0.0 };
+                    }
+                }
+                Op::Cmp { op, dst, a, b } => {
+                    let (bd, _) = at(*dst);
+                    let (ba, _) = at(*a);
+                    let (bb, _) = at(*b);
+                    let (lo, d) = split(s, bd, n);
+                    for k in 0..n {
+                        let (x, y) = (lo[ba + k], lo[bb + k]);
+                        let t = match op {
+                            Cmp::Lt => x < y,
+                            Cmp::Le => x <= y,
+                            Cmp::Gt => x > y,
+                            Cmp::Ge => x >= y,
+                        };
+                        d[k] = if t { 1.0 } else { 0.0 };
+                    }
+                }
+                Op::Eq { ne, dst, a, b } => {
+                    let (bd, _) = at(*dst);
+                    let (ba, w) = at(*a);
+                    let (bb, _) = at(*b);
+                    let (lo, d) = split(s, bd, n);
+                    for i in 0..n {
+                        let x = &lo[ba + i * w..][..w];
+                        let y = &lo[bb + i * w..][..w];
+                        // IEEE equality, as the interpreter's (NaN differs from itself)
+                        #[allow(clippy::float_cmp)]
+                        let eq = x.iter().zip(y).all(|(p, q)| p == q);
+                        d[i] = if eq == *ne { 0.0 } else { 1.0 };
+                    }
+                }
+                Op::And { dst, a, b } | Op::Or { dst, a, b } => {
+                    let or = matches!(op, Op::Or { .. });
+                    let (bd, _) = at(*dst);
+                    let (ba, _) = at(*a);
+                    let (bb, _) = at(*b);
+                    let (lo, d) = split(s, bd, n);
+                    for k in 0..n {
+                        let (x, y) = (lo[ba + k] != 0.0, lo[bb + k] != 0.0);
+                        d[k] = if if or { x || y } else { x && y } {
+                            1.0
+                        } else {
+                            0.0
+                        };
+                    }
+                }
+                Op::Select { dst, c, a, b } => {
+                    let (bd, w) = at(*dst);
+                    let (bc, _) = at(*c);
+                    let (ba, _) = at(*a);
+                    let (bb, _) = at(*b);
+                    let (lo, d) = split(s, bd, n * w);
+                    for i in 0..n {
+                        let src = if lo[bc + i] == 0.0 { bb } else { ba };
+                        d[i * w..][..w].copy_from_slice(&lo[src + i * w..][..w]);
+                    }
+                }
+                Op::Pick { dst, srcs, map } => {
+                    let (bd, w) = at(*dst);
+                    let (lo, d) = split(s, bd, n * w);
+                    for i in 0..n {
+                        let z = &mut d[i * w..][..w];
+                        for (zk, &(src, off)) in z.iter_mut().zip(map) {
+                            *zk = if src == u16::MAX {
+                                0.0
+                            } else {
+                                let (bs, ws) = at(srcs[src as usize]);
+                                lo[bs + i * ws + off as usize]
+                            };
+                        }
+                    }
+                }
+                Op::F1 { f, dst, a } => {
+                    let (bd, _) = at(*dst);
+                    let (ba, _) = at(*a);
+                    let (lo, d) = split(s, bd, n);
+                    for k in 0..n {
+                        d[k] = f(lo[ba + k]);
+                    }
+                }
+                Op::F2 { f, dst, a, b } => {
+                    let (bd, _) = at(*dst);
+                    let (ba, _) = at(*a);
+                    let (bb, _) = at(*b);
+                    let (lo, d) = split(s, bd, n);
+                    for k in 0..n {
+                        d[k] = f(lo[ba + k], lo[bb + k]);
+                    }
+                }
+                Op::Fast { f, dst, args } => {
+                    let (bd, w) = at(*dst);
+                    let (ba, wa) = at(args[0]);
+                    let bb = args.get(1).map(|&r| at(r).0);
+                    let (lo, d) = split(s, bd, n * w);
+                    for i in 0..n {
+                        let x = &lo[ba + i * wa..][..wa];
+                        let z = &mut d[i * w..][..w];
+                        fast(*f, x, bb.map(|bb| &lo[bb + i * wa..][..wa]), z)?;
+                    }
+                }
+                Op::Generic {
+                    name,
+                    dst,
+                    args,
+                    ty,
+                } => {
+                    let (bd, w) = at(*dst);
+                    let (lo, d) = split(s, bd, n * w);
+                    let mut vals = Vec::with_capacity(args.len());
+                    let mut buf = Vec::with_capacity(w);
+                    for i in 0..n {
+                        vals.clear();
+                        for &(r, t) in args {
+                            let (b, wr) = at(r);
+                            let x = &lo[b + i * wr..][..wr];
+                            vals.push(match t {
+                                Ty::I64 => Val::I(x[0] as i64),
+                                Ty::Bool => Val::B(x[0] != 0.0),
+                                t => Val::from_reals(t, x),
+                            });
+                        }
+                        let v = builtins::call(name, &vals).map_err(|_| ())?;
+                        if v.ty() != *ty {
+                            return Err(());
+                        }
+                        buf.clear();
+                        v.to_reals(&mut buf);
+                        d[i * w..][..w].copy_from_slice(&buf);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `z = x * y` for row-major `x` (r x k) and `y` (k x c), summing over k in order from 0 as
+/// [`crate::value::Mat::mul`] does.
+#[inline]
+fn matmul(x: &[f64], y: &[f64], z: &mut [f64], r: usize, k: usize, c: usize) {
+    for i in 0..r {
+        let xi = &x[i * k..][..k];
+        for j in 0..c {
+            let mut acc = 0.0;
+            for (t, &a) in xi.iter().enumerate() {
+                acc += a * y[t * c + j];
+            }
+            z[i * c + j] = acc;
+        }
+    }
+}
+
+/// The flat built-ins; `Err` when the built-in would refuse its argument.
+#[inline]
+fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Result<(), ()> {
+    match f {
+        Fast::Dot => z[0] = builtins::dot(x, y.ok_or(())?),
+        Fast::Norm => z[0] = builtins::norm(x),
+        Fast::Norm2 => z[0] = builtins::dot(x, x),
+        Fast::Cross3 => {
+            let y = y.ok_or(())?;
+            let c = builtins::cross(&[x[0], x[1], x[2]], &[y[0], y[1], y[2]]);
+            z.copy_from_slice(&c);
+        }
+        Fast::Cross2 => {
+            let y = y.ok_or(())?;
+            z[0] = builtins::diff_of_products(x[0], y[1], x[1], y[0]);
+        }
+        Fast::Normalize => builtins::normalize_into(x, z),
+        Fast::Polar2 => z.copy_from_slice(&builtins::polar2_data(x).map_err(|_| ())?),
+        Fast::Polar3 => z.copy_from_slice(&builtins::polar3_data(x).map_err(|_| ())?),
+        Fast::Trace => {
+            let n = (x.len() as f64).sqrt() as usize;
+            z[0] = (0..n).map(|i| x[i * n + i]).sum();
+        }
+        Fast::Sym => {
+            let n = (x.len() as f64).sqrt() as usize;
+            for i in 0..n {
+                for j in 0..n {
+                    z[i * n + j] = 0.5 * x[i * n + j] + 0.5 * x[j * n + i];
+                }
+            }
+        }
+    }
+    Ok(())
+}
