@@ -6,6 +6,8 @@
 #   make demo     run `topomech demo` (writes out/demo)
 #   make bench    kernel benchmarks, the cost of topology changes, the engine against
 #                 hand-written baselines (writes bench/results.md and bench/results.json)
+#   make bench-peers  topomech against Newton, Taichi and pyPBD in their own .venv-peers
+#                 (writes bench/peers.md and bench/peers.json)
 #   make browser  playwright into .venv, and Debian's chromium when missing (for the viewer's
 #                 browser tests; never fails: without them those tests are skipped)
 #   make docs-pictures  run every shipped scene, write its picture under docs/scenes
@@ -76,6 +78,33 @@ bench:
 	$(CARGO) bench -p topomech-physics --bench topology
 	$(CARGO) bench -p topomech-physics --bench engine
 	$(PYTHON) bench/report.py
+
+# The peers live in their own virtualenv, never in .venv: nothing in `make test` needs them.
+# Each peer's install may fail on its own; bench/peers/run.py then reports it as "not
+# installable here: <pip's last error line>" (from .venv-peers/install-status/).
+PEERS_VENV := .venv-peers
+PEERS_PY := $(PEERS_VENV)/bin/python
+PEER_PACKAGES := newton==1.8.0 taichi==1.7.4 pypbd==2.2.2
+
+.PHONY: bench-peers
+bench-peers:
+	test -x $(PEERS_PY) || $(PYTHON) -m venv $(PEERS_VENV)
+	$(PEERS_PY) -m pip install --quiet --upgrade pip
+	$(PEERS_PY) -m pip install --quiet 'maturin>=1.9.4,<2' numpy
+	VIRTUAL_ENV=$(abspath $(PEERS_VENV)) PATH=$(abspath $(PEERS_VENV))/bin:$$PATH \
+		$(PEERS_VENV)/bin/maturin develop --release --quiet
+	mkdir -p $(PEERS_VENV)/install-status
+	for spec in $(PEER_PACKAGES); do \
+		name=$${spec%%==*}; log=$(PEERS_VENV)/install-status/$$name.log; \
+		if $(PEERS_PY) -m pip install --quiet "$$spec" > $$log 2>&1; then \
+			echo ok > $(PEERS_VENV)/install-status/$$name.status; \
+		else \
+			echo "$$spec not installed, see bench/peers/run.py's report"; \
+			(grep -E '^ERROR|Error' $$log || tail -n 1 $$log) | tail -n 1 \
+				> $(PEERS_VENV)/install-status/$$name.status; \
+		fi; \
+	done
+	$(PEERS_PY) bench/peers/run.py
 
 clean:
 	$(CARGO) clean
