@@ -1,6 +1,7 @@
 """topomech itself, through its Python API (`topomech.Simulation`): `corotational` on the
 tetrahedra, `stretch_cumulated` on the cloth's triangle edges, symplectic Euler, the same dt
-and mesh as every peer. The kernel is single-threaded."""
+and mesh as every peer. The worker runs it with RAYON_NUM_THREADS=1: one thread, like every
+peer."""
 
 from __future__ import annotations
 
@@ -11,13 +12,16 @@ import numpy as np
 
 
 def setup() -> dict[str, Any]:
+    import os
+
     import topomech
 
+    threads = int(os.environ.get("RAYON_NUM_THREADS", "0")) or os.cpu_count()
     return {
         "version": topomech.__version__,
-        "threads": 1,
+        "threads": threads,
         "precision": "f64",
-        "device": "cpu (topomech.Simulation, single-threaded kernel)",
+        "device": f"cpu (topomech.Simulation, RAYON_NUM_THREADS={threads})",
     }
 
 

@@ -71,7 +71,7 @@ STATUS_DIR = ROOT / ".venv-peers" / "install-status"
 
 NOTES = {
     "topomech": "topomech.Simulation: `corotational` (tets), `stretch_cumulated` (cloth), "
-    "symplectic Euler.",
+    "symplectic Euler; RAYON_NUM_THREADS=1 (one thread, like every peer).",
     "newton": "SolverSemiImplicit on the warp CPU device, contact off; tets: its stable "
     "Neo-Hookean (Smith 2018), the only tet model it has, given the Lame parameters of "
     "(E, nu); cloth: its damped springs on the same edges; f32.",
@@ -129,6 +129,7 @@ def run_peer(peer: str, refs_path: Path, cases: list[str], timeout: float) -> li
         OMP_NUM_THREADS="1",
         OPENBLAS_NUM_THREADS="1",
         MKL_NUM_THREADS="1",
+        RAYON_NUM_THREADS="1",  # topomech's rules run in parallel chunks (rayon) otherwise
         TI_LOG_LEVEL="warn",
     )
     cmd = [sys.executable, str(HERE / "worker.py"), peer, str(refs_path), str(out_path), *cases]
