@@ -806,17 +806,14 @@ impl Simulation {
     pub fn step(&mut self) -> Result<(), PhysicsError> {
         let pos = self.id("position")?;
         let vel = self.id("velocity")?;
-        let saved: Vec<(Dart, Vec<f64>, Vec<f64>)> = self
-            .vertex_darts()
-            .into_iter()
-            .map(|d| {
-                (
-                    d,
-                    self.g.real(pos, d).to_vec(),
-                    self.g.real(vel, d).to_vec(),
-                )
-            })
-            .collect();
+        // the state before the step, flat (kept to restore it on divergence)
+        let darts = self.vertex_darts();
+        let mut saved_x = Vec::with_capacity(3 * darts.len());
+        let mut saved_v = Vec::with_capacity(3 * darts.len());
+        for &d in &darts {
+            saved_x.extend_from_slice(self.g.real(pos, d));
+            saved_v.extend_from_slice(self.g.real(vel, d));
+        }
         let result = match self.cfg.integrator {
             Integrator::ExplicitEuler => self.explicit("explicit_euler"),
             Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
@@ -825,7 +822,7 @@ impl Simulation {
         };
         let bad = match &result {
             Err(e) => Some((0, e.to_string())),
-            Ok(()) => saved.iter().enumerate().find_map(|(v, (d, _, _))| {
+            Ok(()) => darts.iter().enumerate().find_map(|(v, d)| {
                 let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
                 if p.iter().chain(u).any(|x| !x.is_finite()) {
                     return Some((v, "non-finite position or velocity".to_string()));
@@ -838,12 +835,12 @@ impl Simulation {
             }),
         };
         if let Some((vertex, why)) = bad {
-            for (d, p, u) in &saved {
+            for (k, d) in darts.iter().enumerate() {
                 self.g
-                    .set_real(pos, *d, p)
+                    .set_real(pos, *d, &saved_x[3 * k..3 * k + 3])
                     .map_err(|e| PhysicsError::Config(e.to_string()))?;
                 self.g
-                    .set_real(vel, *d, u)
+                    .set_real(vel, *d, &saved_v[3 * k..3 * k + 3])
                     .map_err(|e| PhysicsError::Config(e.to_string()))?;
             }
             return Err(match result {
