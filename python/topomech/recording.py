@@ -418,13 +418,17 @@ class Recorder:
         """Records the current state as a frame."""
         topo = self._topology()
         x = self.sim.positions()
+        # everything is computed before anything is appended: an interruption (Ctrl-C) in
+        # between must not leave a frame without its fields
+        disp = np.linalg.norm(x - topo.rest, axis=1).astype(np.float32)
+        stress = self._stress(topo, x) if "von_mises" in self.fields else None
         self.frames.append(
             {"time": self.sim.time, "step": self.sim.steps, "topology": len(self.topologies) - 1}
         )
         self.positions.append(x.astype(np.float32))
-        self.fields["displacement"].append(np.linalg.norm(x - topo.rest, axis=1).astype(np.float32))
-        if "von_mises" in self.fields:
-            self.fields["von_mises"].append(self._stress(topo, x))
+        self.fields["displacement"].append(disp)
+        if stress is not None:
+            self.fields["von_mises"].append(stress)
 
     # -------------------------------------------------------------- energy
 
