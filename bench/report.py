@@ -168,7 +168,7 @@ def engine_sections(res: dict[str, Any]) -> list[str]:
         for s in sizes:
             c = mc.get(s)
             if c is None or c.get("status") != "ok":
-                row.append("skipped" if c is not None else "-")
+                row.append(c.get("status", "skipped") if c is not None else "-")
                 continue
             e, b = c["engine_ns_per_element"], c["baseline_ns_per_element"]
             measured.append((c["elements"], e, b))
@@ -282,6 +282,92 @@ def records_table(records: list[Any]) -> list[str]:
     return table(cols, [[scalar(d.get(k, "")) for k in cols] for d in dicts])
 
 
+def peer_cell(rec: dict[str, Any] | None, value: str) -> str:
+    if rec is None:
+        return "-"
+    for key in ("error", "skipped"):
+        if key in rec:
+            text = str(rec[key])
+            return f"{key}: {text[:60]}" + ("..." if len(text) > 60 else "")
+    return value
+
+
+def peers_v1(peers: dict[str, Any]) -> list[str]:
+    """The peers' results in the `topomech-peers/1` schema (bench/peers/run.py)."""
+    out: list[str] = []
+    m = peers.get("machine", {})
+    load = m.get("load_average_at_start")
+    out.append(
+        f"From `bench/peers.json` (`make bench-peers`, {m.get('date', '?')}, commit "
+        f"{m.get('git_commit', '?')}, {m.get('cpu', '?')}, {m.get('logical_cpus', '?')} CPUs"
+        + (f", load {load[0]} at start" if load else "")
+        + "); every engine on one thread. Method and details: `bench/peers/run.py`, "
+        "`bench/peers.md`."
+    )
+    out.append("")
+    names = list(peers.get("peers", {}))
+    rows = []
+    for name, p in peers.get("peers", {}).items():
+        rows.append(
+            [
+                name,
+                str(p.get("status", "?")),
+                str(p.get("version", "-")),
+                str(p.get("precision", "-")),
+                str(p.get("threads", "-")),
+            ]
+        )
+    out += table(["peer", "status", "version", "precision", "threads"], rows)
+    out.append("")
+
+    def by_case(records: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
+        cases: dict[str, dict[str, dict[str, Any]]] = {}
+        for r in records:
+            cases.setdefault(r.get("case", "?"), {})[r.get("peer", "?")] = r
+        return cases
+
+    timing = by_case(peers.get("timing", []))
+    if timing:
+        out.append("### Time per step (ms, median, one thread)")
+        out.append("")
+        rows = []
+        for case, recs in timing.items():
+            size = next((r["size"] for r in recs.values() if "size" in r), "")
+            row = [case, size]
+            for name in names:
+                r = recs.get(name)
+                t = r.get("time_per_step_ms") if r else None
+                row.append(peer_cell(r, f"{t:.3g}" if t is not None else "-"))
+            rows.append(row)
+        out += table(["case", "size", *names], rows)
+        out.append("")
+    accuracy = by_case(peers.get("accuracy", []))
+    if accuracy:
+        out.append("### Accuracy: cantilever tip deflection against a static linear-FEM solve")
+        out.append("")
+        rows = []
+        for case, recs in accuracy.items():
+            ref = peers.get("reference", {}).get(case, {}).get("tip_deflection")
+            row = [case, f"{ref:.6f} m" if ref is not None else "-"]
+            for name in names:
+                r = recs.get(name)
+                e = r.get("rel_error") if r else None
+                tip = r.get("tip_deflection") if r else None
+                value = (
+                    f"{100 * e:.3g}% ({tip:.6f} m)" if e is not None and tip is not None else "-"
+                )
+                row.append(peer_cell(r, value))
+            rows.append(row)
+        out += table(["case", "reference", *names], rows)
+        out.append("")
+        out.append(
+            "Relative error of the tip deflection at rest; other settings of each peer (variants) "
+            "are in `bench/peers.md`."
+        )
+        out.append("")
+    return out
+
+
 def peers_section(path: Path) -> list[str]:
     out = ["## Peers", ""]
     if not path.exists():
@@ -294,6 +380,8 @@ def peers_section(path: Path) -> list[str]:
         out.append(f"`{path.name}` could not be read ({e}): run `make bench-peers` again.")
         out.append("")
         return out
+    if isinstance(peers, dict) and str(peers.get("schema", "")).startswith("topomech-peers/1"):
+        return out + peers_v1(peers)
     out.append(
         f"From `{path.name}` (written by `make bench-peers`; schema in `bench/peers/run.py`)."
     )

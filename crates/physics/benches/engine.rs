@@ -20,8 +20,8 @@
 //! - `TOPOMECH_BENCH_SIZES`: target element counts, e.g. `1e3,1e4` (default `1e3,1e4,1e5,1e6`)
 //! - `TOPOMECH_BENCH_MODELS`: any of `cloth,corotational,mass_tensor` (default all)
 //! - `TOPOMECH_BENCH_THREADS`: engine pool sizes (default `1,2`)
-//! - `TOPOMECH_BENCH_CASE_BUDGET_S`: seconds one case may take (default 75)
-//! - `TOPOMECH_BENCH_TOTAL_BUDGET_S`: seconds for the whole bench (default 400)
+//! - `TOPOMECH_BENCH_CASE_BUDGET_S`: seconds one case may take (default 120)
+//! - `TOPOMECH_BENCH_TOTAL_BUDGET_S`: seconds for the whole bench (default 360)
 //! - `TOPOMECH_BENCH_OUT`: the output directory (default `bench/` at the workspace root)
 
 mod baselines;
@@ -38,7 +38,7 @@ use topomech_physics::Simulation;
 const TOLERANCE: f64 = 1e-9;
 /// Steps both take before timing (the engine's first builds its rules' plans).
 const CHECK_STEPS: usize = 2;
-/// Samples per timing, at most.
+/// Samples per timing, at most (5 when a sample lasts over half a second).
 const MAX_SAMPLES: usize = 7;
 /// Samples a case must have time for, by the previous size's prediction, to be run at all.
 const MIN_SAMPLES: usize = 3;
@@ -269,7 +269,8 @@ fn machine() -> J {
         ),
         (
             "git_commit",
-            command_output("git", &["rev-parse", "--short", "HEAD"]).map_or(J::Null, J::Str),
+            command_output("git", &["describe", "--always", "--dirty", "--abbrev=7"])
+                .map_or(J::Null, J::Str),
         ),
         ("date", J::str(utc_now())),
     ])
@@ -329,6 +330,15 @@ fn time_steps(samples: usize, batch: usize, mut step: impl FnMut()) -> Timing {
         step_s: median(&s),
         samples: s,
         batch,
+    }
+}
+
+/// Fewer samples when one lasts long (the largest meshes).
+fn max_samples(sample_s: f64) -> usize {
+    if sample_s > 0.5 {
+        5
+    } else {
+        MAX_SAMPLES
     }
 }
 
@@ -425,7 +435,15 @@ impl Budget {
     }
 }
 
-fn skipped(model: Model, target: usize, cells: &[usize], elements: usize, why: String) -> J {
+/// A case not measured: `status` is `skipped` (over budget) or `failed` (the engine's error).
+fn not_measured(
+    model: Model,
+    target: usize,
+    cells: &[usize],
+    elements: usize,
+    status: &str,
+    why: String,
+) -> J {
     println!(
         "  {:13} {elements:>9} {}s  {why}",
         model_label(model),
@@ -441,7 +459,7 @@ fn skipped(model: Model, target: usize, cells: &[usize], elements: usize, why: S
             J::Arr(cells.iter().map(|&c| J::num(c as f64)).collect()),
         ),
         ("elements", J::num(elements as f64)),
-        ("status", J::str("skipped")),
+        ("status", J::str(status)),
         ("reason", J::str(why)),
     ])
 }
@@ -451,23 +469,37 @@ fn run_case(
     model: Model,
     target: usize,
     threads: &[usize],
-    prev: Option<Measured>,
+    prev: &[Measured],
     budget: &Budget,
 ) -> (J, Option<Measured>) {
     let (cells, elements) = model.cells(target);
     let left = budget.left().min(budget.case_s);
-    if let Some(p) = prev {
+    if let Some(p) = prev.last().copied() {
         let scale = elements as f64 / p.elements as f64;
-        let predicted = scale
-            * (p.setup_s
-                + (CHECK_STEPS + MIN_SAMPLES * threads.len()) as f64 * p.engine_step_s
-                + (CHECK_STEPS + MIN_SAMPLES) as f64 * p.baseline_step_s);
+        // a power law through the last two sizes (setup is not always linear), at least linear
+        let grow = |f: fn(&Measured) -> f64| -> f64 {
+            let e = match prev {
+                [.., a, b] if f(a) > 0.0 && f(b) > 0.0 && b.elements > a.elements => {
+                    ((f(b) / f(a)).ln() / (b.elements as f64 / a.elements as f64).ln())
+                        .clamp(1.0, 2.0)
+                }
+                _ => 1.0,
+            };
+            f(&p) * scale.powf(e)
+        };
+        let predicted = grow(|m| m.setup_s)
+            + (CHECK_STEPS + MIN_SAMPLES * threads.len()) as f64 * grow(|m| m.engine_step_s)
+            + (2 * CHECK_STEPS + MIN_SAMPLES * (1 + threads.len())) as f64
+                * grow(|m| m.baseline_step_s);
         if predicted > left {
             let why = format!(
                 "skipped: over time budget (predicted {predicted:.0} s from {} elements, {left:.0} s left)",
                 p.elements
             );
-            return (skipped(model, target, &cells, elements, why), None);
+            return (
+                not_measured(model, target, &cells, elements, "skipped", why),
+                None,
+            );
         }
         let mem = scale * p.memory_bytes * 1.5;
         if let Some(avail) = meminfo_kib("MemAvailable:") {
@@ -477,7 +509,10 @@ fn run_case(
                     mem / 1_073_741_824.0,
                     avail / 1_048_576.0
                 );
-                return (skipped(model, target, &cells, elements, why), None);
+                return (
+                    not_measured(model, target, &cells, elements, "skipped", why),
+                    None,
+                );
             }
         }
     }
@@ -494,8 +529,19 @@ fn run_case(
 
     // the same steps on both; the engine's first builds its plans
     let mut first_steps = Vec::new();
+    let failed = |e: topomech_physics::PhysicsError| {
+        let why = format!("failed: the engine's step: {e}");
+        (
+            not_measured(model, target, &cells, elements, "failed", why),
+            None,
+        )
+    };
     for _ in 0..CHECK_STEPS {
-        first_steps.push(seconds(|| sim.step().expect("the engine steps")));
+        let t = Instant::now();
+        if let Err(e) = sim.step() {
+            return failed(e);
+        }
+        first_steps.push(t.elapsed().as_secs_f64());
         check.step();
     }
     let mut engine_steps = CHECK_STEPS;
@@ -519,7 +565,7 @@ fn run_case(
     // baseline timing (on its own copy, which may run many steps)
     let one = seconds(|| timed.step());
     let bbatch = batch_for(one, 1000);
-    let baseline = time_steps(MAX_SAMPLES, bbatch, || timed.step());
+    let baseline = time_steps(max_samples(one * bbatch as f64), bbatch, || timed.step());
 
     // engine timing: the pool sizes take turns, sample by sample (drift in the machine's load
     // or in the state touches them alike), as many samples as the budget leaves
@@ -536,19 +582,22 @@ fn run_case(
         .collect();
     let round_s = est * (batch * threads.len()) as f64;
     let mut samples: Vec<Vec<f64>> = vec![Vec::new(); threads.len()];
-    for round in 0..MAX_SAMPLES {
+    for round in 0..max_samples(est * batch as f64) {
         if round > 0 && budget.case_left(started) < round_s {
             break;
         }
         for (pool, out) in pools.iter().zip(&mut samples) {
             let t = pool.install(|| {
-                seconds(|| {
-                    for _ in 0..batch {
-                        black_box(sim.step()).expect("the engine steps");
-                    }
-                })
+                let t = Instant::now();
+                for _ in 0..batch {
+                    black_box(sim.step())?;
+                }
+                Ok(t.elapsed().as_secs_f64())
             });
-            out.push(t / batch as f64);
+            match t {
+                Ok(t) => out.push(t / batch as f64),
+                Err(e) => return failed(e),
+            }
             engine_steps += batch;
         }
     }
@@ -682,8 +731,8 @@ fn main() {
         s.parse().ok().filter(|&t| t >= 1)
     });
     let budget = Budget {
-        case_s: env_f64("TOPOMECH_BENCH_CASE_BUDGET_S", 75.0),
-        total_s: env_f64("TOPOMECH_BENCH_TOTAL_BUDGET_S", 400.0),
+        case_s: env_f64("TOPOMECH_BENCH_CASE_BUDGET_S", 120.0),
+        total_s: env_f64("TOPOMECH_BENCH_TOTAL_BUDGET_S", 360.0),
         start: Instant::now(),
     };
     let out_dir = std::env::var("TOPOMECH_BENCH_OUT").map_or_else(
@@ -694,15 +743,14 @@ fn main() {
         "engine vs hand-written baselines: one full step (forces, accumulation, symplectic Euler), \
          median of up to {MAX_SAMPLES} samples; engine in rayon pools of {threads:?} threads"
     );
+    // size by size, so that a tight budget skips the largest sizes of every model alike
     let mut cases = Vec::new();
-    for &model in &models {
-        let mut prev = None;
-        for &target in &sizes {
-            let (json, measured) = run_case(model, target, &threads, prev, &budget);
+    let mut measured: Vec<Vec<Measured>> = vec![Vec::new(); models.len()];
+    for &target in &sizes {
+        for (k, &model) in models.iter().enumerate() {
+            let (json, m) = run_case(model, target, &threads, &measured[k], &budget);
             cases.push(json);
-            if measured.is_some() {
-                prev = measured;
-            }
+            measured[k].extend(m);
         }
     }
     let results = J::Obj(vec![
