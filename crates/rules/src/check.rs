@@ -1416,7 +1416,7 @@ impl ExprCheck<'_, '_> {
 }
 
 /// The embeddings an expression reads, sorted, without repeats.
-fn reads_of(e: &TExpr) -> Vec<usize> {
+pub(crate) fn reads_of(e: &TExpr) -> Vec<usize> {
     fn walk(e: &TExpr, out: &mut Vec<usize>) {
         match e {
             TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}

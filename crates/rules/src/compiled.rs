@@ -1041,6 +1041,7 @@ impl Plan {
                 csr: &self.csr,
                 counts: &self.counts,
                 chunk: self.chunk,
+                out_width: ow,
                 out_offsets: &self.targets,
             };
             let ch = self.chunk;
@@ -1109,6 +1110,8 @@ struct Ctx<'a> {
     csr: &'a [(Vec<u32>, Vec<u32>)],
     counts: &'a [Vec<f64>],
     chunk: usize,
+    /// Floats per output row.
+    out_width: usize,
     out_offsets: &'a [(Vec<(u32, u32)>, usize)],
 }
 
@@ -1128,7 +1131,7 @@ fn split(s: &mut [f64], base: usize, len: usize) -> (&[f64], &mut [f64]) {
 impl Ctx<'_> {
     /// Evaluates rows `first..` (as many as `out` holds) into `out`.
     fn chunk(&self, first: usize, out: &mut [f64]) -> Result<(), ()> {
-        let ow = self.out_offsets_width();
+        let ow = self.out_width;
         let n = out.len().checked_div(ow).unwrap_or(self.chunk);
         let need = self.prog.stride * self.chunk;
         SCRATCH.with(|s| {
@@ -1148,14 +1151,6 @@ impl Ctx<'_> {
             }
             Ok(())
         })
-    }
-
-    fn out_offsets_width(&self) -> usize {
-        self.prog
-            .writes
-            .iter()
-            .map(|(_, _, r, _)| self.prog.regs[*r].width)
-            .sum()
     }
 
     #[allow(clippy::too_many_lines)]

@@ -745,42 +745,18 @@ impl RuleSet {
 
 /// The embeddings a rule reads or writes (its program and guard), sorted.
 fn rule_embeddings(rule: &Rule) -> Vec<usize> {
-    fn walk(e: &TExpr, out: &mut Vec<usize>) {
-        match e {
-            TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
-            TExpr::Read { emb, .. } => out.push(*emb),
-            TExpr::Agg { emb, .. } => out.extend(emb.iter().copied()),
-            TExpr::Bin(_, a, b) => {
-                walk(a, out);
-                walk(b, out);
-            }
-            TExpr::Un(_, a) | TExpr::ToReal(a) => walk(a, out),
-            TExpr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
-            TExpr::If(c, a, b) => {
-                walk(c, out);
-                walk(a, out);
-                walk(b, out);
-            }
-            TExpr::Block(lets, res) => {
-                for (_, x) in lets {
-                    walk(x, out);
-                }
-                walk(res, out);
-            }
-        }
-    }
     let mut ids = Vec::new();
     for s in &rule.program {
         match s {
-            TStmt::Let(_, e) => walk(e, &mut ids),
+            TStmt::Let(_, e) => ids.extend(crate::check::reads_of(e)),
             TStmt::Write { emb, value, .. } => {
                 ids.push(*emb);
-                walk(value, &mut ids);
+                ids.extend(crate::check::reads_of(value));
             }
         }
     }
     if let Some(gd) = &rule.guard {
-        walk(gd, &mut ids);
+        ids.extend(crate::check::reads_of(gd));
     }
     ids.sort_unstable();
     ids.dedup();
