@@ -715,7 +715,46 @@ fn run_case(
     (json, Some(measured))
 }
 
+/// `TOPOMECH_BENCH_PROFILE=model:size:steps` (e.g. `cloth:1e5:200`): builds the case and
+/// takes only engine steps, single-threaded, so that a profiler (`perf record`) sees the steady
+/// step and nothing else; prints the mean time per step.
+fn profile(spec: &str) {
+    let parts: Vec<&str> = spec.split(':').collect();
+    let (Some(model), Some(size), Some(steps)) = (
+        parts.first().and_then(|m| model_named(m)),
+        parts.get(1).and_then(|s| s.parse::<f64>().ok()),
+        parts.get(2).and_then(|s| s.parse::<usize>().ok()),
+    ) else {
+        panic!(
+            "TOPOMECH_BENCH_PROFILE must be model:size:steps, e.g. cloth:1e5:200 (got {spec:?})"
+        );
+    };
+    let (cells, n) = model.cells(size as usize);
+    let mut sim = model.simulation(&cells);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
+    pool.install(|| {
+        sim.step().expect("first step");
+        let t = Instant::now();
+        for _ in 0..steps {
+            sim.step().expect("a step");
+        }
+        let dt = t.elapsed().as_secs_f64() / steps as f64;
+        println!(
+            "{} {n} elements: {:.3} ms per step",
+            model_label(model),
+            dt * 1e3
+        );
+    });
+}
+
 fn main() {
+    if let Ok(spec) = std::env::var("TOPOMECH_BENCH_PROFILE") {
+        profile(&spec);
+        return;
+    }
     let sizes: Vec<usize> = env_list("TOPOMECH_BENCH_SIZES", "1e3,1e4,1e5,1e6", |s| {
         s.parse::<f64>()
             .ok()

@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::fmt::Write as _;
 
-use topomech_gmap::{Dart, EmbeddingId, GMap, OrbitType, Value};
+use topomech_gmap::{ColumnMut, Dart, EmbeddingId, GMap, OrbitType, Value};
 use topomech_rules::{load_sources, ApplyError, Diagnostic, Params, RuleSet, Val};
 
 /// A physical model: its rule file and rules.
@@ -806,14 +806,16 @@ impl Simulation {
     pub fn step(&mut self) -> Result<(), PhysicsError> {
         let pos = self.id("position")?;
         let vel = self.id("velocity")?;
-        // the state before the step, flat (kept to restore it on divergence)
-        let darts = self.vertex_darts();
-        let mut saved_x = Vec::with_capacity(3 * darts.len());
-        let mut saved_v = Vec::with_capacity(3 * darts.len());
-        for &d in &darts {
-            saved_x.extend_from_slice(self.g.real(pos, d));
-            saved_v.extend_from_slice(self.g.real(vel, d));
-        }
+        // the state before the step: the whole position and velocity columns (kept to restore
+        // them on divergence; a step changes values only, never the slots)
+        let column = |g: &GMap, id: EmbeddingId| {
+            g.embedding(id)
+                .real_column()
+                .map(<[f64]>::to_vec)
+                .ok_or_else(|| PhysicsError::Config("position and velocity must be vec3".into()))
+        };
+        let saved_x = column(&self.g, pos)?;
+        let saved_v = column(&self.g, vel)?;
         let result = match self.cfg.integrator {
             Integrator::ExplicitEuler => self.explicit("explicit_euler"),
             Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
@@ -822,7 +824,10 @@ impl Simulation {
         };
         let bad = match &result {
             Err(e) => Some((0, e.to_string())),
-            Ok(()) => darts.iter().enumerate().find_map(|(v, d)| {
+            // every slot scanned in order first (dead slots included: they hold old, finite
+            // values), the vertices searched one by one only to name the one that fails
+            Ok(()) if self.columns_sane(pos, vel) => None,
+            Ok(()) => self.vertex_darts.iter().enumerate().find_map(|(v, d)| {
                 let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
                 if p.iter().chain(u).any(|x| !x.is_finite()) {
                     return Some((v, "non-finite position or velocity".to_string()));
@@ -835,13 +840,12 @@ impl Simulation {
             }),
         };
         if let Some((vertex, why)) = bad {
-            for (k, d) in darts.iter().enumerate() {
-                self.g
-                    .set_real(pos, *d, &saved_x[3 * k..3 * k + 3])
-                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
-                self.g
-                    .set_real(vel, *d, &saved_v[3 * k..3 * k + 3])
-                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            for (id, saved) in [(pos, &saved_x), (vel, &saved_v)] {
+                if let Ok(ColumnMut::Real(v)) = self.g.column_mut(id) {
+                    if v.len() == saved.len() {
+                        v.copy_from_slice(saved);
+                    }
+                }
             }
             return Err(match result {
                 Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
@@ -860,6 +864,24 @@ impl Simulation {
         self.steps += 1;
         self.time += self.cfg.dt;
         self.topology_events()
+    }
+
+    /// Whether every value of the position and velocity columns is finite and no velocity
+    /// moves a vertex further than the object's size in one step: the test of
+    /// [`Simulation::step`] over whole columns, in order.
+    fn columns_sane(&self, pos: EmbeddingId, vel: EmbeddingId) -> bool {
+        let (Some(p), Some(v)) = (
+            self.g.embedding(pos).real_column(),
+            self.g.embedding(vel).real_column(),
+        ) else {
+            return false;
+        };
+        p.iter().all(|x| x.is_finite())
+            && v.chunks_exact(3).all(|u| {
+                // the same expression as the vertex test, so that both agree at the limit
+                let step = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * self.cfg.dt;
+                step.is_finite() && step <= self.size
+            })
     }
 
     /// Applies the events whose time has come and the fracture criterion.

@@ -25,6 +25,7 @@
 //! reports the error precisely, with the dart.
 
 use std::cell::RefCell;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use rayon::prelude::*;
 use topomech_gmap::{ColumnMut, ColumnRef, Dart, EmbeddingId, GMap, OrbitType};
@@ -261,6 +262,11 @@ struct Compiler<'a> {
     embs: &'a [EmbDecl],
     p: Program,
     locals: Vec<Option<(R, Ty)>>,
+    /// The register of each read (index of `p.reads`) already gathered: a rule reads the
+    /// values before its writes, so a second read of a node's embedding is the same value.
+    read_regs: Vec<Option<R>>,
+    /// The register of each parameter already filled.
+    param_regs: Vec<Option<R>>,
 }
 
 const INT_EXACT: f64 = 9_007_199_254_740_992.0; // 2^53
@@ -310,7 +316,12 @@ impl Compiler<'_> {
             TExpr::Const(v) => self.constant(v)?,
             TExpr::Param(k) => {
                 let ty = self.rule.params[*k].1;
-                (self.fill(FillSrc::Param(*k), ty), ty)
+                if let Some(r) = self.param_regs[*k] {
+                    return Ok((r, ty));
+                }
+                let r = self.fill(FillSrc::Param(*k), ty);
+                self.param_regs[*k] = Some(r);
+                (r, ty)
             }
             TExpr::Local(k) => match self.locals.get(*k).copied().flatten() {
                 Some(x) => x,
@@ -329,11 +340,16 @@ impl Compiler<'_> {
                     k
                 } else {
                     self.p.reads.push(key);
+                    self.read_regs.push(None);
                     self.p.reads.len() - 1
                 };
+                if let Some(r) = self.read_regs[idx] {
+                    return Ok((r, ty));
+                }
                 let col = self.col(*emb);
                 let dst = self.reg(ty.width());
                 self.p.ops.push(Op::Gather { dst, col, idx });
+                self.read_regs[idx] = Some(dst);
                 (dst, ty)
             }
             TExpr::Agg {
@@ -759,6 +775,8 @@ pub(crate) fn compile(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Unsuppor
             writes: Vec::new(),
         },
         locals: vec![None; rule.n_locals],
+        read_regs: Vec::new(),
+        param_regs: vec![None; rule.params.len()],
     };
     for s in &rule.program {
         match s {
@@ -801,6 +819,15 @@ fn param_values(params: &[Val]) -> Option<Vec<Vec<f64>>> {
         .collect()
 }
 
+/// The largest power of two at most `x` (1 for 0).
+fn prev_power_of_two(x: usize) -> usize {
+    if x <= 1 {
+        1
+    } else {
+        1 << (usize::BITS - 1 - x.leading_zeros())
+    }
+}
+
 /// A compiled plan: a program and the index arrays of one map's matches.
 #[derive(Debug)]
 pub(crate) struct Plan {
@@ -819,6 +846,8 @@ pub(crate) struct Plan {
     dups: Vec<(usize, u32, usize, u32)>,
     /// Floats per output row.
     out_width: usize,
+    /// The values written, chunk by chunk: a chunk's block holds `chunk * out_width` floats,
+    /// each write's rows contiguous from `offset * chunk` (see [`Plan::out_index`]).
     out: Vec<f64>,
     evaluations: usize,
 }
@@ -892,7 +921,7 @@ impl Plan {
             let (mi, r) = domain[row];
             matches[mi as usize].darts[node][r as usize]
         };
-        let gathers = prog
+        let gathers: Vec<Vec<u32>> = prog
             .reads
             .iter()
             .map(|rk| {
@@ -960,8 +989,9 @@ impl Plan {
             woff += prog.regs[*reg].width;
         }
         let out_width = woff;
-        // rows per chunk: the chunk's scratch stays within a few hundred KiB
-        let chunk = (32_768 / prog.stride.max(1)).clamp(4, 256);
+        // rows per chunk: the chunk's scratch stays within a few hundred KiB; a power of two,
+        // so that a row's chunk and place in it are a shift and a mask
+        let chunk = prev_power_of_two(16_384 / prog.stride.max(1)).clamp(4, 256);
         Plan {
             prog,
             matches: matches.len(),
@@ -989,6 +1019,15 @@ impl Plan {
             + self.counts.iter().map(|x| x.capacity() * 8).sum::<usize>();
         let t: usize = self.targets.iter().map(|(t, _)| t.capacity() * 8).sum();
         g + c + t + self.out.capacity() * 8
+    }
+
+    /// Where the value of the write whose output offset is `off` and width `width` lies in
+    /// `out` for domain row `row`.
+    #[inline]
+    fn out_index(&self, row: u32, off: usize, width: usize) -> usize {
+        let row = row as usize;
+        let i = row & (self.chunk - 1);
+        (row - i) * self.out_width + off * self.chunk + i * width
     }
 
     /// Number of matches.
@@ -1022,7 +1061,10 @@ impl Plan {
             })
             .collect();
         let ow = self.out_width;
-        let need = self.rows * ow;
+        let ch = self.chunk;
+        let n_chunks = self.rows.div_ceil(ch);
+        let block = ch * ow.max(1);
+        let need = n_chunks * block;
         if self.out.len() != need {
             self.out = vec![0.0; need];
         }
@@ -1035,28 +1077,26 @@ impl Plan {
                 .collect();
             let ctx = Ctx {
                 prog: &self.prog,
+                run: RUNS.fetch_add(1, Ordering::Relaxed),
                 fills: &fills,
                 cols: &cols,
                 gathers: &self.gathers,
                 csr: &self.csr,
                 counts: &self.counts,
                 chunk: self.chunk,
-                out_width: ow,
                 out_offsets: &self.targets,
             };
-            let ch = self.chunk;
-            let block = ch * ow.max(1);
-            let n_chunks = self.rows.div_ceil(ch);
+            let rows = self.rows;
             let ok = if n_chunks >= 4 && rayon::current_num_threads() > 1 {
                 self.out
                     .par_chunks_mut(block)
                     .enumerate()
-                    .try_for_each(|(c, out)| ctx.chunk(c * ch, out))
+                    .try_for_each(|(c, out)| ctx.chunk(c * ch, (rows - c * ch).min(ch), out))
             } else {
                 self.out
                     .chunks_mut(block)
                     .enumerate()
-                    .try_for_each(|(c, out)| ctx.chunk(c * ch, out))
+                    .try_for_each(|(c, out)| ctx.chunk(c * ch, (rows - c * ch).min(ch), out))
             };
             if ok.is_err() {
                 return unsupported("an evaluation failed");
@@ -1066,8 +1106,8 @@ impl Plan {
         for &(w1, r1, w2, r2) in &self.dups {
             let (o1, o2) = (self.targets[w1].1, self.targets[w2].1);
             let width = self.prog.regs[self.prog.writes[w1].2].width;
-            let a = &self.out[r1 as usize * ow + o1..][..width];
-            let b = &self.out[r2 as usize * ow + o2..][..width];
+            let a = &self.out[self.out_index(r1, o1, width)..][..width];
+            let b = &self.out[self.out_index(r2, o2, width)..][..width];
             if a.iter().zip(b).any(|(x, y)| x.to_bits() != y.to_bits()) {
                 return unsupported("two writes of one orbit differ");
             }
@@ -1075,25 +1115,31 @@ impl Plan {
         for (w, (_, emb, reg, _)) in self.prog.writes.iter().enumerate() {
             let width = self.prog.regs[*reg].width;
             let (t, off) = &self.targets[w];
-            let out = &self.out;
+            let (out, off) = (&self.out, *off);
+            let at = |row: u32| self.out_index(row, off, width);
             let col = g
                 .column_mut(ids[*emb])
                 .map_err(|e| Unsupported(e.to_string()))?;
             match col {
-                ColumnMut::Real(v) => {
-                    for &(row, slot) in t {
-                        let src = &out[row as usize * ow + off..][..width];
-                        v[slot as usize * width..][..width].copy_from_slice(src);
+                ColumnMut::Real(v) => match width {
+                    1 => scatter_n::<1>(v, out, t, at),
+                    3 => scatter_n::<3>(v, out, t, at),
+                    9 => scatter_n::<9>(v, out, t, at),
+                    _ => {
+                        for &(row, slot) in t {
+                            v[slot as usize * width..][..width]
+                                .copy_from_slice(&out[at(row)..][..width]);
+                        }
                     }
-                }
+                },
                 ColumnMut::Bool(v) => {
                     for &(row, slot) in t {
-                        v[slot as usize] = out[row as usize * ow + off] != 0.0;
+                        v[slot as usize] = out[at(row)] != 0.0;
                     }
                 }
                 ColumnMut::Int(v) => {
                     for &(row, slot) in t {
-                        v[slot as usize] = out[row as usize * ow + off] as i64;
+                        v[slot as usize] = out[at(row)] as i64;
                     }
                 }
             }
@@ -1104,21 +1150,26 @@ impl Plan {
 
 struct Ctx<'a> {
     prog: &'a Program,
+    /// This run's number (see [`RUNS`]).
+    run: u64,
     fills: &'a [&'a [f64]],
     cols: &'a [ColumnRef<'a>],
     gathers: &'a [Vec<u32>],
     csr: &'a [(Vec<u32>, Vec<u32>)],
     counts: &'a [Vec<f64>],
     chunk: usize,
-    /// Floats per output row.
-    out_width: usize,
     out_offsets: &'a [(Vec<(u32, u32)>, usize)],
 }
 
 thread_local! {
     /// Per-thread scratch of the evaluator, grown to the largest chunk it has seen.
-    static SCRATCH: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
+    /// With the run whose fill registers it holds (0: none).
+    static SCRATCH: RefCell<(Vec<f64>, u64)> = const { RefCell::new((Vec::new(), 0)) };
 }
+
+/// Numbers the runs of plans, so that a thread's scratch knows whether its fill registers
+/// (constants and parameters, the same for every row) are already those of the current run.
+static RUNS: AtomicU64 = AtomicU64::new(1);
 
 /// The scratch below register `dst` (all its operands: registers are numbered in creation
 /// order, an operation's operands before its result) and `dst`'s own rows.
@@ -1129,42 +1180,42 @@ fn split(s: &mut [f64], base: usize, len: usize) -> (&[f64], &mut [f64]) {
 }
 
 impl Ctx<'_> {
-    /// Evaluates rows `first..` (as many as `out` holds) into `out`.
-    fn chunk(&self, first: usize, out: &mut [f64]) -> Result<(), ()> {
-        let ow = self.out_width;
-        let n = out.len().checked_div(ow).unwrap_or(self.chunk);
+    /// Evaluates rows `first..first + n` into their chunk's block `out`.
+    fn chunk(&self, first: usize, n: usize, out: &mut [f64]) -> Result<(), ()> {
         let need = self.prog.stride * self.chunk;
         SCRATCH.with(|s| {
-            let mut s = s.borrow_mut();
+            let (s, filled) = &mut *s.borrow_mut();
             if s.len() < need {
                 s.resize(need, 0.0);
             }
-            self.eval(&mut s[..need], first, n)?;
+            // registers are written by one operation each: a fill stays for the whole run
+            self.eval(&mut s[..need], first, n, *filled != self.run)?;
+            *filled = self.run;
             for (w, (_, _, reg, _)) in self.prog.writes.iter().enumerate() {
                 let r = self.prog.regs[*reg];
                 let base = r.off * self.chunk;
-                let off = self.out_offsets[w].1;
-                for i in 0..n {
-                    out[i * ow + off..][..r.width]
-                        .copy_from_slice(&s[base + i * r.width..][..r.width]);
-                }
+                let off = self.out_offsets[w].1 * self.chunk;
+                out[off..off + n * r.width].copy_from_slice(&s[base..base + n * r.width]);
             }
             Ok(())
         })
     }
 
     #[allow(clippy::too_many_lines)]
-    fn eval(&self, s: &mut [f64], first: usize, n: usize) -> Result<(), ()> {
+    fn eval(&self, s: &mut [f64], first: usize, n: usize, fill: bool) -> Result<(), ()> {
         let ch = self.chunk;
         let regs = &self.prog.regs;
         let at = |r: R| (regs[r].off * ch, regs[r].width);
         for op in &self.prog.ops {
             match op {
                 Op::Fill { dst, at: k } => {
-                    let (b, w) = at(*dst);
-                    let v = self.fills[*k];
-                    for i in 0..n {
-                        s[b + i * w..][..w].copy_from_slice(v);
+                    // every row of the chunk, for the next chunks of the run on this thread
+                    if fill {
+                        let (b, w) = at(*dst);
+                        let v = self.fills[*k];
+                        for d in s[b..b + ch * w].chunks_exact_mut(w.max(1)) {
+                            copy_w(d, v, w);
+                        }
                     }
                 }
                 Op::Gather { dst, col, idx } => {
@@ -1172,12 +1223,7 @@ impl Ctx<'_> {
                     let idx = &self.gathers[*idx][first..first + n];
                     let d = &mut s[b..b + n * w];
                     match self.cols[*col] {
-                        ColumnRef::Real(c) => {
-                            for (i, &x) in idx.iter().enumerate() {
-                                let x = x as usize;
-                                d[i * w..][..w].copy_from_slice(&c[x * w..][..w]);
-                            }
-                        }
+                        ColumnRef::Real(c) => gather(d, c, idx, w),
                         ColumnRef::Bool(c) => {
                             for (i, &x) in idx.iter().enumerate() {
                                 d[i] = if c[x as usize] { 1.0 } else { 0.0 };
@@ -1202,27 +1248,12 @@ impl Ctx<'_> {
                         return Err(());
                     };
                     let d = &mut s[b..b + n * w];
-                    for i in 0..n {
-                        let row = first + i;
-                        let list = &slots[offs[row] as usize..offs[row + 1] as usize];
-                        let acc = &mut d[i * w..][..w];
-                        // the interpreter's order: the first value, then each next one added
-                        if let Some((&s0, rest)) = list.split_first() {
-                            acc.copy_from_slice(&c[s0 as usize * w..][..w]);
-                            for &x in rest {
-                                for (a, v) in acc.iter_mut().zip(&c[x as usize * w..][..w]) {
-                                    *a += *v;
-                                }
-                            }
-                        } else {
-                            acc.fill(0.0);
-                        }
-                        if *mean {
-                            let k = list.len().max(1) as f64;
-                            for a in acc.iter_mut() {
-                                *a /= k;
-                            }
-                        }
+                    let offs = &offs[first..=first + n];
+                    match w {
+                        1 => aggregate::<1>(d, c, offs, slots, *mean),
+                        3 => aggregate::<3>(d, c, offs, slots, *mean),
+                        9 => aggregate::<9>(d, c, offs, slots, *mean),
+                        _ => aggregate_w(d, c, offs, slots, *mean, w),
                     }
                 }
                 Op::RowData { dst, data } => {
@@ -1264,10 +1295,18 @@ impl Ctx<'_> {
                     let (bv, _) = at(*v);
                     let (lo, d) = split(s, bd, n * w);
                     let (sc, x) = (&lo[bs..bs + n], &lo[bv..bv + n * w]);
-                    for i in 0..n {
-                        let f = sc[i];
-                        for k in 0..w {
-                            d[i * w + k] = f * x[i * w + k];
+                    if w == 3 {
+                        for ((z, x), f) in d.chunks_exact_mut(3).zip(x.chunks_exact(3)).zip(sc) {
+                            z[0] = f * x[0];
+                            z[1] = f * x[1];
+                            z[2] = f * x[2];
+                        }
+                    } else {
+                        for i in 0..n {
+                            let f = sc[i];
+                            for k in 0..w {
+                                d[i * w + k] = f * x[i * w + k];
+                            }
                         }
                     }
                 }
@@ -1277,10 +1316,18 @@ impl Ctx<'_> {
                     let (bv, _) = at(*v);
                     let (lo, d) = split(s, bd, n * w);
                     let (sc, x) = (&lo[bs..bs + n], &lo[bv..bv + n * w]);
-                    for i in 0..n {
-                        let f = sc[i];
-                        for k in 0..w {
-                            d[i * w + k] = x[i * w + k] / f;
+                    if w == 3 {
+                        for ((z, x), f) in d.chunks_exact_mut(3).zip(x.chunks_exact(3)).zip(sc) {
+                            z[0] = x[0] / f;
+                            z[1] = x[1] / f;
+                            z[2] = x[2] / f;
+                        }
+                    } else {
+                        for i in 0..n {
+                            let f = sc[i];
+                            for k in 0..w {
+                                d[i * w + k] = x[i * w + k] / f;
+                            }
                         }
                     }
                 }
@@ -1290,11 +1337,24 @@ impl Ctx<'_> {
                     let (bb, wb) = at(*b);
                     let (r, k, c) = (*r, *k, *c);
                     let (lo, d) = split(s, bd, n * w);
-                    for i in 0..n {
-                        let x = &lo[ba + i * wa..][..wa];
-                        let y = &lo[bb + i * wb..][..wb];
-                        let z = &mut d[i * w..][..w];
-                        matmul(x, y, z, r, k, c);
+                    let (x, y) = (&lo[ba..ba + n * wa], &lo[bb..bb + n * wb]);
+                    match (r, k, c) {
+                        (2, 2, 1) => matmul_rows::<2, 2, 1>(x, y, d),
+                        (2, 2, 2) => matmul_rows::<2, 2, 2>(x, y, d),
+                        (3, 3, 1) => matmul_rows::<3, 3, 1>(x, y, d),
+                        (3, 3, 3) => matmul_rows::<3, 3, 3>(x, y, d),
+                        (6, 6, 1) => matmul_rows::<6, 6, 1>(x, y, d),
+                        (8, 8, 1) => matmul_rows::<8, 8, 1>(x, y, d),
+                        (12, 12, 1) => matmul_rows::<12, 12, 1>(x, y, d),
+                        (24, 24, 1) => matmul_rows::<24, 24, 1>(x, y, d),
+                        _ => {
+                            for i in 0..n {
+                                let x = &x[i * wa..][..wa];
+                                let y = &y[i * wb..][..wb];
+                                let z = &mut d[i * w..][..w];
+                                matmul(x, y, z, r, k, c);
+                            }
+                        }
                     }
                 }
                 Op::Neg { dst, a } => {
@@ -1366,7 +1426,7 @@ impl Ctx<'_> {
                     let (lo, d) = split(s, bd, n * w);
                     for i in 0..n {
                         let src = if lo[bc + i] == 0.0 { bb } else { ba };
-                        d[i * w..][..w].copy_from_slice(&lo[src + i * w..][..w]);
+                        copy_w(&mut d[i * w..], &lo[src + i * w..], w);
                     }
                 }
                 Op::Pick { dst, srcs, map } => {
@@ -1445,6 +1505,137 @@ impl Ctx<'_> {
             }
         }
         Ok(())
+    }
+}
+
+/// Copies `w` floats from the start of `s` to the start of `d`. The widths of the common
+/// types get fixed-size copies: a copy of a length known only at run time is a call to
+/// `memcpy`, which costs more than the copy itself for a few floats.
+#[inline]
+fn copy_w(d: &mut [f64], s: &[f64], w: usize) {
+    match w {
+        1 => d[0] = s[0],
+        2 => copy_n::<2>(d, s),
+        3 => copy_n::<3>(d, s),
+        4 => copy_n::<4>(d, s),
+        9 => copy_n::<9>(d, s),
+        _ => d[..w].copy_from_slice(&s[..w]),
+    }
+}
+
+#[inline]
+fn copy_n<const N: usize>(d: &mut [f64], s: &[f64]) {
+    let s: &[f64; N] = s[..N].try_into().expect("N floats");
+    let d: &mut [f64; N] = (&mut d[..N]).try_into().expect("N floats");
+    *d = *s;
+}
+
+/// `d[i] = c[idx[i]]` for values of `w` floats.
+fn gather(d: &mut [f64], c: &[f64], idx: &[u32], w: usize) {
+    fn fixed<const W: usize>(d: &mut [f64], c: &[f64], idx: &[u32]) {
+        for (z, &x) in d.chunks_exact_mut(W).zip(idx) {
+            copy_n::<W>(z, &c[x as usize * W..]);
+        }
+    }
+    match w {
+        1 => {
+            for (z, &x) in d.iter_mut().zip(idx) {
+                *z = c[x as usize];
+            }
+        }
+        3 => fixed::<3>(d, c, idx),
+        9 => fixed::<9>(d, c, idx),
+        _ => {
+            for (i, &x) in idx.iter().enumerate() {
+                let x = x as usize;
+                d[i * w..][..w].copy_from_slice(&c[x * w..][..w]);
+            }
+        }
+    }
+}
+
+/// `v[slot] = out[at(row)]` for every target, values of `N` floats.
+fn scatter_n<const N: usize>(
+    v: &mut [f64],
+    out: &[f64],
+    targets: &[(u32, u32)],
+    at: impl Fn(u32) -> usize,
+) {
+    for &(row, slot) in targets {
+        copy_n::<N>(&mut v[slot as usize * N..], &out[at(row)..]);
+    }
+}
+
+/// Row `i` of `d`: the sum (or mean) of the values of `c` at the slots
+/// `slots[offs[i]..offs[i + 1]]`, in the interpreter's order: the first value, then each next
+/// one added; zero for no slot.
+fn aggregate<const W: usize>(d: &mut [f64], c: &[f64], offs: &[u32], slots: &[u32], mean: bool) {
+    for (acc, o) in d.chunks_exact_mut(W).zip(offs.windows(2)) {
+        let list = &slots[o[0] as usize..o[1] as usize];
+        let mut a = [0.0; W];
+        if let Some((&s0, rest)) = list.split_first() {
+            copy_n::<W>(&mut a, &c[s0 as usize * W..]);
+            for &x in rest {
+                let v: &[f64; W] = c[x as usize * W..][..W].try_into().expect("W floats");
+                for k in 0..W {
+                    a[k] += v[k];
+                }
+            }
+        }
+        if mean {
+            let k = list.len().max(1) as f64;
+            for x in &mut a {
+                *x /= k;
+            }
+        }
+        copy_n::<W>(acc, &a);
+    }
+}
+
+/// [`aggregate`] for any width.
+fn aggregate_w(d: &mut [f64], c: &[f64], offs: &[u32], slots: &[u32], mean: bool, w: usize) {
+    for (acc, o) in d.chunks_exact_mut(w).zip(offs.windows(2)) {
+        let list = &slots[o[0] as usize..o[1] as usize];
+        if let Some((&s0, rest)) = list.split_first() {
+            acc.copy_from_slice(&c[s0 as usize * w..][..w]);
+            for &x in rest {
+                for (a, v) in acc.iter_mut().zip(&c[x as usize * w..][..w]) {
+                    *a += *v;
+                }
+            }
+        } else {
+            acc.fill(0.0);
+        }
+        if mean {
+            let k = list.len().max(1) as f64;
+            for a in acc.iter_mut() {
+                *a /= k;
+            }
+        }
+    }
+}
+
+/// [`matmul`] of each row's `R x K` and `K x C` matrices, sizes known at compile time (the
+/// same sums in the same order: the same bits).
+fn matmul_rows<const R: usize, const K: usize, const C: usize>(
+    x: &[f64],
+    y: &[f64],
+    z: &mut [f64],
+) {
+    for ((x, y), z) in x
+        .chunks_exact(R * K)
+        .zip(y.chunks_exact(K * C))
+        .zip(z.chunks_exact_mut(R * C))
+    {
+        for i in 0..R {
+            for j in 0..C {
+                let mut acc = 0.0;
+                for t in 0..K {
+                    acc += x[i * K + t] * y[t * C + j];
+                }
+                z[i * C + j] = acc;
+            }
+        }
     }
 }
 
