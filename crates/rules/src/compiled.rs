@@ -90,6 +90,21 @@ enum Fast {
 
 #[derive(Clone, Debug)]
 enum Op {
+    /// [`Op::MatMul`] whose left matrix has zeros by construction (a block-diagonal matrix, its
+    /// transpose): row `i` sums only over the columns `terms[offs[i]..offs[i + 1]]`, in
+    /// increasing order. The same bits as the dense product for finite values: the skipped
+    /// terms are `0 * y`, a signed zero, and adding a zero to a sum that started at +0 changes
+    /// nothing. (A non-finite `y` facing a structural zero would make the dense product NaN;
+    /// here that entry's row stays finite. A step with non-finite positions fails either way.)
+    MatMulSparse {
+        dst: R,
+        a: R,
+        b: R,
+        k: usize,
+        c: usize,
+        offs: Vec<u32>,
+        terms: Vec<u16>,
+    },
     /// A constant or parameter, from the run's fill values at `at`.
     Fill {
         dst: R,
@@ -267,6 +282,9 @@ struct Compiler<'a> {
     read_regs: Vec<Option<R>>,
     /// The register of each parameter already filled.
     param_regs: Vec<Option<R>>,
+    /// Per register, which of its floats are zero by construction (the zeros of
+    /// `blockdiag`, and where they are selected again, as by `transpose`), if any.
+    zeros: Vec<Option<Vec<bool>>>,
 }
 
 const INT_EXACT: f64 = 9_007_199_254_740_992.0; // 2^53
@@ -280,6 +298,7 @@ impl Compiler<'_> {
         let off = self.p.stride;
         self.p.stride += width;
         self.p.regs.push(Reg { off, width });
+        self.zeros.push(None);
         self.p.regs.len() - 1
     }
 
@@ -507,13 +526,33 @@ impl Compiler<'_> {
                         _ => return unsupported("a product of these types"),
                     };
                     let c = tb.width() / k;
-                    Op::MatMul {
-                        dst,
-                        a: ra,
-                        b: rb,
-                        r,
-                        k,
-                        c,
+                    match &self.zeros[ra] {
+                        // a matrix with zeros by construction: the products with them skipped
+                        Some(z) if z.iter().filter(|&&x| x).count() * 2 >= z.len() => {
+                            let mut offs = vec![0u32];
+                            let mut terms = Vec::new();
+                            for i in 0..r {
+                                terms.extend((0..k).filter(|t| !z[i * k + t]).map(|t| t as u16));
+                                offs.push(terms.len() as u32);
+                            }
+                            Op::MatMulSparse {
+                                dst,
+                                a: ra,
+                                b: rb,
+                                k,
+                                c,
+                                offs,
+                                terms,
+                            }
+                        }
+                        _ => Op::MatMul {
+                            dst,
+                            a: ra,
+                            b: rb,
+                            r,
+                            k,
+                            c,
+                        },
                     }
                 }
             }
@@ -667,7 +706,7 @@ impl Compiler<'_> {
             debug_assert_eq!(map.len(), ty.width());
             // resolve each entry of the concatenation to (source, offset)
             let widths: Vec<usize> = srcs.iter().map(|&r| self.p.regs[r].width).collect();
-            let map = map
+            let map: Vec<(u16, u16)> = map
                 .into_iter()
                 .map(|m| {
                     if m == u32::MAX {
@@ -683,7 +722,19 @@ impl Compiler<'_> {
                     unreachable!("a selection inside its sources")
                 })
                 .collect();
+            let zeros: Vec<bool> = map
+                .iter()
+                .map(|&(src, off): &(u16, u16)| {
+                    src == u16::MAX
+                        || self.zeros[srcs[src as usize]]
+                            .as_ref()
+                            .is_some_and(|z| z[off as usize])
+                })
+                .collect();
             dst = self.reg(ty.width());
+            if zeros.iter().any(|&z| z) {
+                self.zeros[dst] = Some(zeros);
+            }
             self.p.ops.push(Op::Pick { dst, srcs, map });
             return Ok((dst, ty));
         }
@@ -777,6 +828,7 @@ pub(crate) fn compile(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Unsuppor
         locals: vec![None; rule.n_locals],
         read_regs: Vec::new(),
         param_regs: vec![None; rule.params.len()],
+        zeros: Vec::new(),
     };
     for s in &rule.program {
         match s {
@@ -1432,15 +1484,49 @@ impl Ctx<'_> {
                 Op::Pick { dst, srcs, map } => {
                     let (bd, w) = at(*dst);
                     let (lo, d) = split(s, bd, n * w);
+                    // entry by entry, its source resolved once for all rows
+                    for (k, &(src, off)) in map.iter().enumerate() {
+                        if src == u16::MAX {
+                            for i in 0..n {
+                                d[i * w + k] = 0.0;
+                            }
+                        } else {
+                            let (bs, ws) = at(srcs[src as usize]);
+                            let x = &lo[bs + off as usize..];
+                            for i in 0..n {
+                                d[i * w + k] = x[i * ws];
+                            }
+                        }
+                    }
+                }
+                Op::MatMulSparse {
+                    dst,
+                    a,
+                    b,
+                    k,
+                    c,
+                    offs,
+                    terms,
+                } => {
+                    let (bd, w) = at(*dst);
+                    let (ba, wa) = at(*a);
+                    let (bb, wb) = at(*b);
+                    let (k, c) = (*k, *c);
+                    let (lo, d) = split(s, bd, n * w);
                     for i in 0..n {
+                        let x = &lo[ba + i * wa..][..wa];
+                        let y = &lo[bb + i * wb..][..wb];
                         let z = &mut d[i * w..][..w];
-                        for (zk, &(src, off)) in z.iter_mut().zip(map) {
-                            *zk = if src == u16::MAX {
-                                0.0
-                            } else {
-                                let (bs, ws) = at(srcs[src as usize]);
-                                lo[bs + i * ws + off as usize]
-                            };
+                        for (ri, o) in offs.windows(2).enumerate() {
+                            let ts = &terms[o[0] as usize..o[1] as usize];
+                            let xi = &x[ri * k..][..k];
+                            for j in 0..c {
+                                let mut acc = 0.0;
+                                for &t in ts {
+                                    acc += xi[t as usize] * y[t as usize * c + j];
+                                }
+                                z[ri * c + j] = acc;
+                            }
                         }
                     }
                 }
