@@ -33,6 +33,8 @@ use std::time::Instant;
 use baselines::{disagreement, Baseline, Model};
 use topomech_gmap::EmbeddingType;
 use topomech_physics::Simulation;
+use topomech_rules::check::check_sources;
+use topomech_rules::{Params, RuleSet, Val};
 
 /// Largest disagreement accepted between engine and baseline, relative to the motion.
 const TOLERANCE: f64 = 1e-9;
@@ -50,6 +52,7 @@ const SAMPLE_S: f64 = 0.02;
 /// A JSON value, written by hand (the bench has no dependencies beyond the workspace's).
 enum J {
     Null,
+    Bool(bool),
     Num(f64),
     Str(String),
     Arr(Vec<J>),
@@ -71,6 +74,7 @@ impl J {
         let pad = |out: &mut String, n: usize| out.extend(std::iter::repeat_n(' ', n));
         match self {
             J::Null => out.push_str("null"),
+            J::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
             J::Num(x) => {
                 if x.fract() == 0.0 && x.abs() < 1e15 {
                     let _ = write!(out, "{}", *x as i64);
@@ -715,6 +719,135 @@ fn run_case(
     (json, Some(measured))
 }
 
+/// The co-rotational rule file as a user would copy it into a file of their own, every rule
+/// and embedding of the model renamed, against the shipped file: the time of one application
+/// of the force rule on the same mesh (median of alternated samples, one thread), whether the
+/// forces are the same bits, and the plans' sizes. The engine knows no rule by name: the two
+/// must run at the same speed within the machine's noise.
+fn renamed_copy(target: usize) -> J {
+    use topomech_gmap::generators::{cuboid, BoxElement};
+    use topomech_gmap::mesh::{build, BuildOptions};
+    let common = include_str!("../models/common3d.tmr");
+    let fem = include_str!("../models/fem3d.tmr");
+    let renamed = fem
+        .replace("corotational", "my_warped_tets")
+        .replace("f_corot", "my_force")
+        .replace("k_elem", "my_stiffness")
+        .replace("dm_inv", "my_shape")
+        .replace("x_rest", "my_rest_vector")
+        .replace("fem_init", "my_init");
+    let load = |text: &str, file: &str| {
+        let (checked, diags) = check_sources(&[
+            ("common3d.tmr".to_string(), common.to_string()),
+            (file.to_string(), text.to_string()),
+        ]);
+        RuleSet::new(checked.unwrap_or_else(|| panic!("{file} checks: {diags:?}")))
+    };
+    let shipped = load(fem, "fem3d.tmr");
+    let user = load(&renamed, "mine.tmr");
+    let (cells, n) = Model::Corotational.cells(target);
+    let (g0, _) = build(
+        &cuboid(
+            [cells[0], cells[1], cells[2]],
+            [cells[0] as f64 / cells[1] as f64, 1.0, 1.0],
+            BoxElement::Tetra,
+        ),
+        &BuildOptions::default(),
+    )
+    .expect("a valid mesh");
+    let prepare = |rules: &RuleSet, init: &str| {
+        let mut g = g0.clone();
+        rules.prepare(&mut g).expect("prepare");
+        let none = Params::new();
+        rules
+            .apply_everywhere(&mut g, "init_rest", &none)
+            .expect("init_rest");
+        let mat: Params = [
+            ("density".to_string(), Val::F(1000.0)),
+            ("young".to_string(), Val::F(1e6)),
+            ("poisson".to_string(), Val::F(0.3)),
+        ]
+        .into();
+        rules
+            .apply_everywhere(&mut g, "set_material", &mat)
+            .expect("set_material");
+        let v0 = g.embedding_id("vertex0").expect("vertex0");
+        let volume = topomech_gmap::OrbitType::new(&[0, 1, 2]).expect("an orbit");
+        for d in g.orbit_representatives(volume) {
+            g.set_value(v0, d, &topomech_gmap::Value::Bool(true))
+                .expect("vertex0");
+        }
+        rules.apply_everywhere(&mut g, init, &none).expect(init);
+        // the bench's deformation: stretched and twisted
+        let pos = g.embedding_id("position").expect("position");
+        for d in g.darts().collect::<Vec<_>>() {
+            let p = g.real(pos, d).to_vec();
+            let x = Model::Corotational.deformed([p[0], p[1], p[2]]);
+            g.set_real(pos, d, &x).expect("position");
+        }
+        g
+    };
+    let mut a = prepare(&shipped, "fem_init");
+    let mut b = prepare(&user, "my_init");
+    let none = Params::new();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
+    let (ta, tb) = pool.install(|| {
+        // the first application builds the plan
+        shipped
+            .apply_everywhere(&mut a, "corotational", &none)
+            .expect("corotational");
+        user.apply_everywhere(&mut b, "my_warped_tets", &none)
+            .expect("my_warped_tets");
+        let time = |rules: &RuleSet, g: &mut topomech_gmap::GMap, rule: &str| {
+            let t = Instant::now();
+            let mut k = 0;
+            while k == 0 || t.elapsed().as_secs_f64() < SAMPLE_S {
+                black_box(rules.apply_everywhere(g, rule, &none).expect("a rule"));
+                k += 1;
+            }
+            t.elapsed().as_secs_f64() / f64::from(k)
+        };
+        let (mut ta, mut tb) = (Vec::new(), Vec::new());
+        for _ in 0..MAX_SAMPLES {
+            ta.push(time(&shipped, &mut a, "corotational"));
+            tb.push(time(&user, &mut b, "my_warped_tets"));
+        }
+        (median(&ta), median(&tb))
+    });
+    let (fa, fb) = (
+        a.embedding_id("f_corot").expect("f_corot"),
+        b.embedding_id("my_force").expect("my_force"),
+    );
+    let identical = a.darts().all(|d| {
+        a.real(fa, d)
+            .iter()
+            .map(|x| x.to_bits())
+            .eq(b.real(fb, d).iter().map(|x| x.to_bits()))
+    });
+    println!(
+        "  renamed copy of fem3d.tmr, {n} tets: shipped {:.3} ms, renamed {:.3} ms, ratio {:.3}, forces identical: {identical}",
+        ta * 1e3,
+        tb * 1e3,
+        tb / ta
+    );
+    J::Obj(vec![
+        ("model", J::str("corotational")),
+        ("rule", J::str("corotational")),
+        ("renamed_rule", J::str("my_warped_tets")),
+        ("elements", J::num(n as f64)),
+        ("element", J::str("tet")),
+        ("shipped_s", J::num(ta)),
+        ("renamed_s", J::num(tb)),
+        ("ratio", J::num(tb / ta)),
+        ("identical_forces", J::Bool(identical)),
+        ("shipped_plan_bytes", J::num(shipped.plan_bytes() as f64)),
+        ("renamed_plan_bytes", J::num(user.plan_bytes() as f64)),
+    ])
+}
+
 /// `TOPOMECH_BENCH_PROFILE=model:size:steps` (e.g. `cloth:1e5:200`): builds the case and
 /// takes only engine steps, single-threaded, so that a profiler (`perf record`) sees the steady
 /// step and nothing else; prints the mean time per step.
@@ -828,6 +961,7 @@ fn main() {
             ]),
         ),
         ("cases", J::Arr(cases)),
+        ("renamed_copy", renamed_copy(20_000)),
     ]);
     let mut s = String::new();
     results.write(&mut s, 0);

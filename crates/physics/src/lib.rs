@@ -419,6 +419,9 @@ pub struct Simulation {
     events_done: Vec<bool>,
     /// The topology changes so far.
     changes: Vec<TopologyChange>,
+    /// The position and velocity columns before the step being taken (kept between steps so
+    /// that a step allocates nothing).
+    saved: [Vec<f64>; 2],
 }
 
 fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
@@ -785,6 +788,7 @@ impl Simulation {
             size,
             events_done: vec![false; cfg_events],
             changes: Vec::new(),
+            saved: [Vec::new(), Vec::new()],
         };
         // every free vertex needs a mass
         let masses = sim.vertex_scalar("mass")?;
@@ -808,14 +812,14 @@ impl Simulation {
         let vel = self.id("velocity")?;
         // the state before the step: the whole position and velocity columns (kept to restore
         // them on divergence; a step changes values only, never the slots)
-        let column = |g: &GMap, id: EmbeddingId| {
-            g.embedding(id)
-                .real_column()
-                .map(<[f64]>::to_vec)
-                .ok_or_else(|| PhysicsError::Config("position and velocity must be vec3".into()))
-        };
-        let saved_x = column(&self.g, pos)?;
-        let saved_v = column(&self.g, vel)?;
+        for (id, saved) in [pos, vel].into_iter().zip(&mut self.saved) {
+            let column =
+                self.g.embedding(id).real_column().ok_or_else(|| {
+                    PhysicsError::Config("position and velocity must be vec3".into())
+                })?;
+            saved.clear();
+            saved.extend_from_slice(column);
+        }
         let result = match self.cfg.integrator {
             Integrator::ExplicitEuler => self.explicit("explicit_euler"),
             Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
@@ -840,7 +844,7 @@ impl Simulation {
             }),
         };
         if let Some((vertex, why)) = bad {
-            for (id, saved) in [(pos, &saved_x), (vel, &saved_v)] {
+            for (id, saved) in [pos, vel].into_iter().zip(&self.saved) {
                 if let Ok(ColumnMut::Real(v)) = self.g.column_mut(id) {
                     if v.len() == saved.len() {
                         v.copy_from_slice(saved);

@@ -235,7 +235,7 @@ fn mark_vertex0(g: &mut GMap) {
 /// chunks are evaluated in any order on any thread, with one scratch per thread whose constant
 /// registers are filled once per run (and refilled when a thread moves to another plan). The
 /// positions must still be the interpreter's, bit for bit. (Parameters that change between
-/// runs: `crates/rules/tests/modeling.rs`.)
+/// runs: `crates/rules/tests/plans.rs`.)
 #[test]
 fn many_chunks_on_several_threads_match_the_interpreter_bit_for_bit() {
     for &(kind, cells) in &[

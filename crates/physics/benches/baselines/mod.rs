@@ -656,7 +656,7 @@ impl Model {
     }
 
     /// The initial deformation (none at `x = 0`, where vertices are fixed).
-    fn deformed(self, p: V3) -> V3 {
+    pub fn deformed(self, p: V3) -> V3 {
         let pi = std::f64::consts::PI;
         match self {
             Model::Cloth => [p[0], p[1], 0.05 * (pi * p[0]).sin() * (pi * p[1]).sin()],
