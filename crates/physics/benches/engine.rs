@@ -25,6 +25,8 @@
 //! - `TOPOMECH_BENCH_OUT`: the output directory (default `bench/` at the workspace root)
 
 mod baselines;
+#[path = "../tests/common/renamed.rs"]
+mod renamed;
 
 use std::fmt::Write as _;
 use std::hint::black_box;
@@ -33,7 +35,6 @@ use std::time::Instant;
 use baselines::{disagreement, Baseline, Model};
 use topomech_gmap::EmbeddingType;
 use topomech_physics::Simulation;
-use topomech_rules::check::check_sources;
 use topomech_rules::{Params, RuleSet, Val};
 
 /// Largest disagreement accepted between engine and baseline, relative to the motion.
@@ -727,24 +728,10 @@ fn run_case(
 fn renamed_copy(target: usize) -> J {
     use topomech_gmap::generators::{cuboid, BoxElement};
     use topomech_gmap::mesh::{build, BuildOptions};
-    let common = include_str!("../models/common3d.tmr");
-    let fem = include_str!("../models/fem3d.tmr");
-    let renamed = fem
-        .replace("corotational", "my_warped_tets")
-        .replace("f_corot", "my_force")
-        .replace("k_elem", "my_stiffness")
-        .replace("dm_inv", "my_shape")
-        .replace("x_rest", "my_rest_vector")
-        .replace("fem_init", "my_init");
-    let load = |text: &str, file: &str| {
-        let (checked, diags) = check_sources(&[
-            ("common3d.tmr".to_string(), common.to_string()),
-            (file.to_string(), text.to_string()),
-        ]);
-        RuleSet::new(checked.unwrap_or_else(|| panic!("{file} checks: {diags:?}")))
-    };
-    let shipped = load(fem, "fem3d.tmr");
-    let user = load(&renamed, "mine.tmr");
+    let copy = renamed::renamed_fem3d();
+    let load = renamed::load_with_common3d;
+    let shipped = load(renamed::FEM3D, "fem3d.tmr");
+    let user = load(&copy, "mine.tmr");
     let (cells, n) = Model::Corotational.cells(target);
     let (g0, _) = build(
         &cuboid(

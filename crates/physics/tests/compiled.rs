@@ -7,12 +7,11 @@
 #![allow(clippy::float_cmp, clippy::needless_range_loop)]
 mod common;
 
-use common::model;
+use common::{model, renamed};
 use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions, Mesh};
 use topomech_gmap::GMap;
 use topomech_physics::{Config, Integrator, Simulation};
-use topomech_rules::check::check_sources;
 use topomech_rules::{Params, RuleSet};
 
 fn config(kind: &str, integrator: Integrator) -> Config {
@@ -134,25 +133,11 @@ fn jacobian_vector_products_and_other_integrators_match_too() {
 /// to a plan of the same size and give the same forces.
 #[test]
 fn a_renamed_copy_of_a_shipped_rule_file_gets_the_same_plan_and_results() {
-    let common = include_str!("../models/common3d.tmr");
-    let fem = include_str!("../models/fem3d.tmr");
-    let renamed = fem
-        .replace("corotational", "my_warped_tets")
-        .replace("f_corot", "my_force")
-        .replace("k_elem", "my_stiffness")
-        .replace("dm_inv", "my_shape")
-        .replace("x_rest", "my_rest_vector")
-        .replace("fem_init", "my_init");
-    assert!(renamed.contains("rule my_warped_tets {"));
-    let load = |text: &str, file: &str| {
-        let (checked, diags) = check_sources(&[
-            ("common3d.tmr".to_string(), common.to_string()),
-            (file.to_string(), text.to_string()),
-        ]);
-        RuleSet::new(checked.unwrap_or_else(|| panic!("{file} checks: {diags:?}")))
-    };
-    let shipped = load(fem, "fem3d.tmr");
-    let user = load(&renamed, "mine.tmr");
+    let copy = renamed::renamed_fem3d();
+    assert!(copy.contains("rule my_warped_tets {"));
+    let load = renamed::load_with_common3d;
+    let shipped = load(renamed::FEM3D, "fem3d.tmr");
+    let user = load(&copy, "mine.tmr");
     let (g0, _) = build(
         &cuboid([3, 2, 2], [1.5, 1.0, 1.0], BoxElement::Tetra),
         &BuildOptions::default(),

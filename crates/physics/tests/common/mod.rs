@@ -2,6 +2,8 @@
 //! (independent of the crates under test).
 #![allow(dead_code, missing_docs)]
 
+pub mod renamed;
+
 use topomech_physics::ModelSpec;
 
 pub type V3 = [f64; 3];
