@@ -15,7 +15,8 @@
 //!
 //! Evaluation runs the program over chunks of rows (each operation a tight loop over the
 //! chunk), in parallel on rayon's pool when there are enough rows, with one scratch buffer per
-//! thread: no orbit walk, no hash map and no allocation per step. The plan is a cache derived
+//! thread: no orbit walk, no hash map and no allocation per row (a run allocates only a few
+//! short lists: its parameters and columns). The plan is a cache derived
 //! from the map: it is rebuilt when the topology version changes (see [`crate::RuleSet`]).
 //!
 //! Nothing here knows any model: any rule compiles the same way. A rule using what the plan
