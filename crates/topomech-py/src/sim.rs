@@ -637,6 +637,12 @@ impl PySimulation {
                     rows.len()
                 )));
             }
+            if let Some(k) = rows.iter().position(|r| r.iter().any(|x| !x.is_finite())) {
+                return Err(value_error(format!(
+                    "forces must be finite: row {k} is {:?}",
+                    rows[k]
+                )));
+            }
             Ok(rows)
         })?;
         self.run(py, |sim| Ok(sim.set_external_forces(&rows)?))
