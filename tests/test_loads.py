@@ -175,9 +175,9 @@ def test_external_forces_are_kept_and_balanced() -> None:
     np.testing.assert_allclose(
         sim.momentum(), [sim.n_vertices * 1.0 * 10e-3, 0, 0], rtol=1e-9, atol=1e-15
     )
+    bad = f.copy()
+    bad[2, 1] = math.nan
     with pytest.raises(ValueError, match="row 2"):
-        bad = f.copy()
-        bad[2, 1] = math.nan
         sim.set_external_forces(bad)
     with pytest.raises(ValueError, match="shape"):
         sim.set_external_forces(f[:-1])
@@ -328,7 +328,7 @@ def test_initial_displacement_moves_positions_not_rest() -> None:
     not their rest positions (the body starts deformed); fixed vertices stay."""
     text = BAR.format(element="tet", n=4) + (
         '[[initial]]\ndisplacement = [0.0, 0.0, 0.01]\nwhere = "x > 0.5"\n'
-        '[[initial]]\nvelocity = [0.0, 1.0, 0.0]\npoints = [0, 1]\n'
+        "[[initial]]\nvelocity = [0.0, 1.0, 0.0]\npoints = [0, 1]\n"
     )
     sim = parse_scene(text).build()
     rest = sim.rest_positions()
@@ -339,7 +339,8 @@ def test_initial_displacement_moves_positions_not_rest() -> None:
     np.testing.assert_array_equal(d[~moved], 0.0)
     # point 0 is on the fixed end x = 0 (held: it keeps zero velocity), point 1 is free
     fixed = sim.fixed()
-    assert fixed[0] and not fixed[1]
+    assert fixed[0]
+    assert not fixed[1]
     expected = np.zeros((sim.n_vertices, 3))
     expected[1] = [0.0, 1.0, 0.0]
     np.testing.assert_array_equal(sim.velocities(), expected)
@@ -352,18 +353,46 @@ def test_initial_displacement_moves_positions_not_rest() -> None:
     ("extra", "key", "words"),
     [
         ('[[load]]\nkind = "twist"\nwhere = "true"\n', "load[0].kind", "unknown load kind"),
-        ('[[load]]\nkind = "traction"\nforce = [1.0, 0.0, 0.0]\nwhere = "true"\n', "load[0].force", "takes traction"),
+        (
+            '[[load]]\nkind = "traction"\nforce = [1.0, 0.0, 0.0]\nwhere = "true"\n',
+            "load[0].force",
+            "takes traction",
+        ),
         ('[[load]]\nkind = "pressure"\nwhere = "true"\n', "load[0].pressure", "missing"),
         ('[[load]]\nkind = "point"\nforce = [1.0, 0.0, 0.0]\n', "load[0]", "missing the selection"),
-        ('[[load]]\nkind = "point"\nforce = [1.0, 0.0]\nwhere = "true"\n', "load[0].force", "array of 3"),
-        ('[[load]]\nkind = "point"\nforce = [1.0, 0.0, 0.0]\nwhere = "true"\npoints = [1]\n', "load[0].points", "not both"),
-        ('[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "x >"\n', "load[0].where", "bad predicate"),
-        ('[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "true"\nsize = 2\n', "load[0].size", "unknown key"),
+        (
+            '[[load]]\nkind = "point"\nforce = [1.0, 0.0]\nwhere = "true"\n',
+            "load[0].force",
+            "array of 3",
+        ),
+        (
+            '[[load]]\nkind = "point"\nforce = [1.0, 0.0, 0.0]\nwhere = "true"\npoints = [1]\n',
+            "load[0].points",
+            "not both",
+        ),
+        (
+            '[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "x >"\n',
+            "load[0].where",
+            "bad predicate",
+        ),
+        (
+            '[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "true"\nsize = 2\n',
+            "load[0].size",
+            "unknown key",
+        ),
         ("[initial]\nspeed = [1.0, 0.0, 0.0]\n", "initial.speed", "unknown key"),
         ("[initial]\nwhere = 'x > 0'\n", "initial", "velocity"),
         ("[world.ground]\nnormal = [0.0, 0.0, 1.0]\n", "world.ground.point", "missing"),
-        ("[world.ground]\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 0.0]\n", "world.ground.normal", "zero"),
-        ("[world.ground]\npoint = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\n", "world.ground.up", "unknown key"),
+        (
+            "[world.ground]\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 0.0]\n",
+            "world.ground.normal",
+            "zero",
+        ),
+        (
+            "[world.ground]\npoint = [0.0, 0.0, 0.0]\nup = [0.0, 0.0, 1.0]\n",
+            "world.ground.up",
+            "unknown key",
+        ),
     ],
 )
 def test_bad_keys_are_named(extra: str, key: str, words: str) -> None:
@@ -378,7 +407,10 @@ def test_bad_keys_are_named(extra: str, key: str, words: str) -> None:
 def test_load_that_selects_nothing_names_its_key() -> None:
     """A surface load whose predicate selects no boundary face is refused when the scene is
     built, naming the load's key."""
-    sc = parse_scene(BAR.format(element="tet", n=2) + '[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "x > 5"\n')
+    sc = parse_scene(
+        BAR.format(element="tet", n=2)
+        + '[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "x > 5"\n'
+    )
     with pytest.raises(topomech.SceneError) as e:
         sc.build()
     assert e.value.key == "load[0]"

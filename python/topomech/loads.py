@@ -160,7 +160,7 @@ def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDAr
         else:
             op = m.group("op")
             out.append({"&&": " and ", "||": " or ", "!": " not "}.get(op, op))
-    src = " ".join(out)
+    src = " ".join(out).strip()
     namespace: dict[str, Any] = {f"_f_{k}": v for k, v in _FUNCTIONS.items()}
     namespace["__builtins__"] = {}
     try:
@@ -196,6 +196,9 @@ class MeshGroups:
     point_sets: dict[str, npt.NDArray[np.int64]] = field(default_factory=dict)
     cell_sets: dict[str, npt.NDArray[np.int64]] = field(default_factory=dict)
     facet_sets: dict[str, list[tuple[str, npt.NDArray[np.int64]]]] = field(default_factory=dict)
+    #: The file's points ``(N, 2 or 3)``, when known: rows are matched to input points by
+    #: their rest coordinates when the simulation does not say which point each row is.
+    points: npt.NDArray[np.float64] | None = None
 
     @classmethod
     def from_meshio(cls, mesh: Any) -> MeshGroups:
@@ -216,7 +219,9 @@ class MeshGroups:
             str(k): [(str(t), np.asarray(a, dtype=np.int64).reshape(len(a), -1)) for t, a in v]
             for k, v in (getattr(mesh, "facet_sets", None) or {}).items()
         }
-        return cls(point_sets, cell_sets, facet_sets)
+        points = getattr(mesh, "points", None)
+        pts = None if points is None else np.asarray(points, dtype=np.float64)
+        return cls(point_sets, cell_sets, facet_sets, pts)
 
     def names(self) -> list[str]:
         """Every group name, sorted."""
@@ -261,11 +266,21 @@ class BoundaryFace:
     element: int
 
 
-def _point_ids(sim: Simulation) -> npt.NDArray[np.int64]:
-    """The input point of each row (contract C5), else rows are input points."""
+def _point_ids(sim: Simulation, groups: MeshGroups | None = None) -> npt.NDArray[np.int64]:
+    """The input point of each row: the simulation's ``point_ids()`` when it has them, else
+    the input point at the row's rest position when ``groups`` knows the file's points
+    (-1 where none), else the row itself."""
     f = getattr(sim, "point_ids", None)
     if f is not None:
         return np.asarray(f(), dtype=np.int64)
+    if groups is not None and groups.points is not None and len(groups.points):
+        pts = np.zeros((len(groups.points), 3))
+        pts[:, : min(3, groups.points.shape[1])] = groups.points[:, :3]
+        index: dict[tuple[float, ...], int] = {}
+        for i, p in enumerate(pts.tolist()):
+            index.setdefault(tuple(p), i)
+        rest = sim.rest_positions().tolist()
+        return np.array([index.get(tuple(r), -1) for r in rest], dtype=np.int64)
     return np.arange(sim.n_vertices, dtype=np.int64)
 
 
@@ -319,7 +334,8 @@ def boundary_faces(sim: Simulation) -> list[BoundaryFace]:
 
 def _area_vector(p: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """The vector area of a polygon (Newell): its unit normal times its area."""
-    return 0.5 * np.sum(np.cross(p, np.roll(p, -1, axis=0)), axis=0)
+    area: npt.NDArray[np.float64] = 0.5 * np.sum(np.cross(p, np.roll(p, -1, axis=0)), axis=0)
+    return area
 
 
 def _edge_normal(
@@ -329,7 +345,7 @@ def _edge_normal(
     e = b - a
     w = centre - a
     inward = w - (np.dot(w, e) / np.dot(e, e)) * e
-    n = -inward / np.linalg.norm(inward)
+    n: npt.NDArray[np.float64] = -inward / np.linalg.norm(inward)
     return n
 
 
@@ -347,10 +363,10 @@ def _one_selection(where: str | None, points: Any, group: str | None) -> None:
         )
 
 
-def _cells_by_id(sim: Simulation) -> list[list[int]]:
+def _cells_by_id(sim: Simulation, groups: MeshGroups | None) -> list[list[int]]:
     """Each kept cell's input points, by cell_id (for cell sets)."""
     ids, rows = _elements(sim)
-    pid = _point_ids(sim)
+    pid = _point_ids(sim, groups)
     n = int(ids.max()) + 1 if len(ids) else 0
     cells: list[list[int]] = [[] for _ in range(n)]
     for cid, r in zip(ids, rows):
@@ -359,10 +375,12 @@ def _cells_by_id(sim: Simulation) -> list[list[int]]:
     return cells
 
 
-def _rows_of_points(sim: Simulation, pts: Iterable[int], what: str) -> npt.NDArray[np.bool_]:
+def _rows_of_points(
+    sim: Simulation, pts: Iterable[int], what: str, groups: MeshGroups | None
+) -> npt.NDArray[np.bool_]:
     """The rows whose input point is in ``pts``; refuses points that are not vertices of the
     mesh, listing them all."""
-    pid = _point_ids(sim)
+    pid = _point_ids(sim, groups)
     wanted = np.array(sorted({int(p) for p in pts}), dtype=np.int64)
     mask = np.isin(pid, wanted)
     missing = sorted(set(wanted.tolist()) - set(pid[mask].tolist()))
@@ -393,13 +411,13 @@ def select_vertices(
         what = f"predicate {where!r}"
     elif points is not None:
         pts = [_index(p, i) for i, p in enumerate(np.asarray(points).ravel().tolist())]
-        mask = _rows_of_points(sim, pts, "points")
+        mask = _rows_of_points(sim, pts, "points", groups)
         what = "points"
     else:
         assert group is not None
         g = groups if groups is not None else MeshGroups()
-        pts_set = g.points_of(group, _cells_by_id(sim) if group in g.cell_sets else None)
-        pid = _point_ids(sim)
+        pts_set = g.points_of(group, _cells_by_id(sim, groups) if group in g.cell_sets else None)
+        pid = _point_ids(sim, groups)
         mask = np.isin(pid, np.array(sorted(pts_set), dtype=np.int64))
         what = f"group '{group}'"
     if not mask.any():
@@ -439,17 +457,19 @@ def select_faces(
         what = f"predicate {where!r}"
     elif points is not None:
         pts = [_index(p, i) for i, p in enumerate(np.asarray(points).ravel().tolist())]
-        mask = _rows_of_points(sim, pts, "points")
+        mask = _rows_of_points(sim, pts, "points", groups)
         chosen = [f for f in faces if all(mask[r] for r in f.rows)]
         what = "points"
     else:
         assert group is not None
         g = groups if groups is not None else MeshGroups()
         if group in g.facet_sets:
-            chosen = _facets_on_boundary(sim, faces, g.facet_sets[group], group)
+            chosen = _facets_on_boundary(sim, faces, g.facet_sets[group], group, g)
         else:
-            pts_set = g.points_of(group, _cells_by_id(sim) if group in g.cell_sets else None)
-            mask = np.isin(_point_ids(sim), np.array(sorted(pts_set), dtype=np.int64))
+            pts_set = g.points_of(
+                group, _cells_by_id(sim, groups) if group in g.cell_sets else None
+            )
+            mask = np.isin(_point_ids(sim, groups), np.array(sorted(pts_set), dtype=np.int64))
             chosen = [f for f in faces if all(mask[r] for r in f.rows)]
         what = f"group '{group}'"
     if not chosen:
@@ -462,10 +482,11 @@ def _facets_on_boundary(
     faces: list[BoundaryFace],
     facets: list[tuple[str, npt.NDArray[np.int64]]],
     group: str,
+    groups: MeshGroups | None,
 ) -> list[BoundaryFace]:
     """The boundary faces the group's facets (input point indices) are; refuses the facets
     that are not boundary faces, all of them."""
-    pid = _point_ids(sim)
+    pid = _point_ids(sim, groups)
     by_points: dict[tuple[int, ...], BoundaryFace] = {}
     for f in faces:
         by_points.setdefault(tuple(sorted(int(pid[r]) for r in f.rows)), f)

@@ -541,7 +541,8 @@ class Scene:
     def _uses_groups(self) -> bool:
         held = [sel for _, sel, _ in self.conditions.get("held", [])]
         others = [c["select"] for w in ("loads", "initial") for _, c in self.conditions.get(w, [])]
-        return any("group" in sel for sel in [*held, *others])
+        # points too: without the simulation's point_ids, rows are matched to the file's points
+        return any("group" in sel or "points" in sel for sel in [*held, *others])
 
     def mesh_groups(self) -> MeshGroups:
         """The named groups of the scene's mesh file (Gmsh physical groups, meshio point and
@@ -950,6 +951,7 @@ def _selection(t: _Table, fail: _Fail, *, required: bool) -> dict[str, Any]:
     ``where`` (a predicate on x, y, z), ``points`` (input point indices) or ``group`` (a
     group name of the mesh file); ``{}`` when none is given and none is ``required``."""
     given = [k for k in ("where", "points", "group") if t.has(k)]
+    t.known += [k for k in ("where", "points", "group") if k not in t.known]
     if len(given) > 1:
         raise fail(
             t.key(given[1]),
