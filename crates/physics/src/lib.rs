@@ -1420,10 +1420,7 @@ impl Simulation {
                 darts.len()
             )));
         }
-        if let Some(k) = forces
-            .iter()
-            .position(|f| f.iter().any(|x| !x.is_finite()))
-        {
+        if let Some(k) = forces.iter().position(|f| f.iter().any(|x| !x.is_finite())) {
             return Err(PhysicsError::Config(format!(
                 "external forces must be finite: row {k} is {:?}",
                 forces[k]
