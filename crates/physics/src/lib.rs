@@ -1175,7 +1175,7 @@ impl Simulation {
         self.contact()
     }
 
-    /// Newton iterations on f(x) + f_ext + m g = 0 with conjugate gradients on -df/dx; the
+    /// Newton iterations on f(x) + `f_ext` + m g = 0 with conjugate gradients on -df/dx; the
     /// velocity is set to zero. Stops when the residual is below 1e-10 of the load (gravity
     /// and external loads, or the first residual when prescribed displacements drive it) or
     /// after 30 solves.

@@ -655,6 +655,7 @@ impl PySimulation {
     }
 
     /// Holds the vertices where `mask` (bool `(V,)`) is true, frees the others.
+    #[allow(clippy::needless_pass_by_value)] // pyo3 extracts a Python list into an owned Vec
     fn set_fixed(&mut self, py: Python<'_>, mask: Vec<bool>) -> PyResult<()> {
         let n = self.sim()?.vertex_darts().len();
         if mask.len() != n {
