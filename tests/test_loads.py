@@ -437,3 +437,59 @@ def test_load_that_selects_nothing_names_its_key() -> None:
         sc.build()
     assert e.value.key == "load[0]"
     assert "selects no boundary face" in str(e.value)
+
+
+def test_2d_scene_edge_traction_is_balanced_by_the_reactions() -> None:
+    """A 2D scene (a 2 x 1 rectangle of triangles with springs, held at x = 0) with a shear
+    traction of 0.25 N/m on its right edge (length 1): the loads total 0.25 N, and after the
+    static solve the free vertices are in equilibrium (1e-8 N) and the reactions of the held
+    ones carry the whole load (the springs' forces add to zero)."""
+    text = """
+[mesh]
+generator = "grid"
+element = "tri"
+size = [2.0, 1.0]
+cells = [4, 2]
+
+[[model]]
+kind = "stretch_elementary"
+stiffness = 100.0
+
+[[fix]]
+where = "x < 1e-9"
+
+[[load]]
+kind = "traction"
+traction = [0.0, 0.25, 0.0]
+where = "x > 2 - 1e-9"
+
+[world]
+gravity = [0.0, 0.0, 0.0]
+
+[integrator]
+kind = "static"
+dt = 1.0
+steps = 1
+"""
+    sim = parse_scene(text).build()
+    np.testing.assert_allclose(sim.external_forces().sum(axis=0), [0.0, 0.25, 0.0], atol=1e-15)
+    sim.step()
+    f = sim.forces()
+    held = sim.fixed()
+    assert np.abs(f[~held]).max() < 1e-8
+    np.testing.assert_allclose(f[held].sum(axis=0), [0.0, 0.25, 0.0], atol=1e-8)
+    assert sim.displacements()[:, 1].max() > 1e-3
+
+
+def test_ground_from_python_and_bad_ground_keys() -> None:
+    """Python takes the ground as a dict; an unknown key of it is a TypeError naming it, a
+    missing point a ValueError, a zero normal a SimulationError naming the ground."""
+    g = topomech.GMap.from_flat(*topomech._core.box(1, 1, 1, 1.0, 1.0, 1.0, "tetra"))
+    kw: dict[str, Any] = {"models": ["stretch_elementary"], "gravity": [0.0, 0.0, -1.0]}
+    topomech.Simulation(g, ground={"point": [0.0, 0.0, -1.0]}, **kw)
+    with pytest.raises(TypeError, match=r"ground\.up: unknown key"):
+        topomech.Simulation(g, ground={"point": [0.0, 0.0, 0.0], "up": [0, 0, 1]}, **kw)
+    with pytest.raises(ValueError, match=r"ground\.point: missing"):
+        topomech.Simulation(g, ground={"normal": [0.0, 0.0, 1.0]}, **kw)
+    with pytest.raises(topomech.SimulationError, match="ground: the normal"):
+        topomech.Simulation(g, ground={"point": [0.0, 0.0, 0.0], "normal": [0, 0, 0]}, **kw)
