@@ -204,6 +204,20 @@ def test_predicate_language_in_python_matches_the_kernel() -> None:
         np.testing.assert_array_equal(mine, sim.fixed(), err_msg=pred)
 
 
+def test_fix_predicates_keep_the_whole_rule_language() -> None:
+    """A fix's predicate is compiled by the kernel, so it may use vector functions; a load's
+    predicate is evaluated on face centroids in Python, which reads the scalar functions
+    only: a vector function there is refused naming the key and the name."""
+    sim = parse_scene(BOX + '[[fix]]\nwhere = "norm(vec3(x, y, z)) < 0.1"\n').build()
+    assert sim.fixed().sum() == 1
+    with pytest.raises(topomech.SceneError) as e:
+        parse_scene(
+            BOX + '[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "norm(vec3(x, y, z)) < 2"\n'
+        )
+    assert e.value.key == "load[0].where"
+    assert "unknown name 'norm'" in str(e.value)
+
+
 # ------------------------------------------------------------------ a Gmsh file with groups
 
 

@@ -155,7 +155,8 @@ def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDAr
                 out.append(f"_f_{name}")
             else:
                 raise LoadError(
-                    f"bad predicate {pred!r}: unknown name '{name}' (a predicate reads x, y, z)"
+                    f"bad predicate {pred!r}: unknown name '{name}' (this predicate reads "
+                    f"x, y, z, true, false and {', '.join(sorted(_FUNCTIONS))})"
                 )
         else:
             op = m.group("op")

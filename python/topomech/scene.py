@@ -880,7 +880,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     prescribed: list[tuple[str, tuple[float, ...]]] = []
     held: list[tuple[str, dict[str, Any], list[float] | None]] = []
     for f in top.tables("fix"):
-        sel = _selection(f, fail, required=True)
+        sel = _selection(f, fail, required=True, in_python=False)
         disp = f.vector("displacement", 3)
         f.done()
         if "where" not in sel:
@@ -946,10 +946,13 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     return scene
 
 
-def _selection(t: _Table, fail: _Fail, *, required: bool) -> dict[str, Any]:
+def _selection(t: _Table, fail: _Fail, *, required: bool, in_python: bool = True) -> dict[str, Any]:
     """The selection of a ``[[fix]]``, ``[[load]]`` or ``[initial]`` table: exactly one of
     ``where`` (a predicate on x, y, z), ``points`` (input point indices) or ``group`` (a
-    group name of the mesh file); ``{}`` when none is given and none is ``required``."""
+    group name of the mesh file); ``{}`` when none is given and none is ``required``.
+    ``in_python``: the predicate is evaluated by :mod:`topomech.loads` (on face centroids,
+    or vertices of an initial field), which reads the scalar part of the rule language
+    only; a fix's predicate is compiled by the kernel."""
     given = [k for k in ("where", "points", "group") if t.has(k)]
     t.known += [k for k in ("where", "points", "group") if k not in t.known]
     if len(given) > 1:
@@ -968,10 +971,11 @@ def _selection(t: _Table, fail: _Fail, *, required: bool) -> dict[str, Any]:
     k = given[0]
     if k == "where":
         pred = _check_predicate(_required_str(t, "where", fail), t.key("where"), fail)
-        try:
-            compile_predicate(pred)
-        except LoadError as e:
-            raise fail(t.key("where"), str(e)) from None
+        if in_python:
+            try:
+                compile_predicate(pred)
+            except LoadError as e:
+                raise fail(t.key("where"), str(e)) from None
         return {"where": pred}
     if k == "group":
         name = _required_str(t, "group", fail)
