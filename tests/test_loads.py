@@ -112,6 +112,61 @@ def test_pressure_on_a_trapezoid_is_consistent() -> None:
 
 
 @pytest.mark.parametrize("element", ["tetra", "hexahedron", "wedge", "pyramid"])
+def test_linearly_varying_pressure_moments(element: str) -> None:
+    """A hydrostatic-like pressure p = 1 + 10 z on the face x = 1 (y in [0, 0.2], z in
+    [0, 0.3]): the total force is -e_x times the integral of p dA, and the first moment
+    sum_a x_a (x) f_a equals the integral of x (x) (-p e_x) dA (degree 2: the 3-point
+    triangle rule and 2x2 Gauss on the quads are exact), computed here by hand:
+    int dA = 0.06, int z dA = 0.009, int y dA = 0.006, int z^2 dA = 0.0018,
+    int y z dA = 0.0009, int y^2 dA = 0.0008 (1e-12)."""
+    sim = _box(element)
+    f = loads.surface_load(sim, pressure="1 + 10 * z", where="x > 1 - 1e-9")
+    i1, iz, iy, izz, iyz = 0.06, 0.009, 0.006, 0.0018, 0.0009
+    total = i1 + 10 * iz
+    np.testing.assert_allclose(f.sum(axis=0), [-total, 0.0, 0.0], rtol=1e-12, atol=1e-14)
+    moment = np.einsum("vi,vj->ij", sim.rest_positions(), f)
+    expected = np.zeros((3, 3))
+    expected[0, 0] = -total  # x = 1 on the face
+    expected[1, 0] = -(iy + 10 * iyz)
+    expected[2, 0] = -(iz + 10 * izz)
+    np.testing.assert_allclose(moment, expected, rtol=1e-12, atol=1e-14)
+    # the same load as a Python function of the points, and a varying traction
+    g = loads.surface_load(sim, pressure=lambda q: 1 + 10 * q[:, 2], where="x > 1 - 1e-9")
+    np.testing.assert_allclose(g, f, rtol=1e-12, atol=1e-15)
+    t = loads.surface_load(sim, traction=["-1 - 10 * z", 0.0, 0.0], where="x > 1 - 1e-9")
+    np.testing.assert_allclose(t, f, rtol=1e-12, atol=1e-15)
+
+
+def test_linearly_varying_edge_traction_2d() -> None:
+    """2D: a shear traction t_y = y (N/m) on the edge x = 2 (y in [0, 1]): total 1/2, first
+    moment int y^2 dy = 1/3 (2-point Gauss is exact to degree 3; 1e-12)."""
+    g = topomech.GMap.from_flat(*topomech._core.grid(4, 3, 2.0, 1.0, "triangle"))
+    sim = topomech.Simulation(g, models=["stretch_elementary"], gravity=[0.0, 0.0, 0.0])
+    f = loads.surface_load(sim, traction=[0.0, "y", 0.0], where="x > 2 - 1e-9")
+    np.testing.assert_allclose(f.sum(axis=0), [0.0, 0.5, 0.0], atol=1e-14)
+    np.testing.assert_allclose((sim.rest_positions()[:, 1] * f[:, 1]).sum(), 1 / 3, rtol=1e-12)
+
+
+def test_hydrostatic_pressure_in_a_scene() -> None:
+    """A scene's pressure may be an expression of the rest x, y, z: the loads equal those of
+    the Python call (bit for bit), and a bad expression is refused naming its key."""
+    text = BAR.format(element="tet", n=2) + (
+        '[[load]]\nkind = "pressure"\npressure = "1e3 * (0.3 - z)"\nwhere = "y < 1e-9"\n'
+    )
+    sim = parse_scene(text).build()
+    ref = loads.surface_load(sim, pressure="1e3 * (0.3 - z)", where="y < 1e-9")
+    np.testing.assert_array_equal(sim.external_forces(), ref)
+    assert sim.external_forces()[:, 1].sum() > 0  # pushes into the face y = 0: along +y
+    with pytest.raises(topomech.SceneError) as e:
+        parse_scene(text.replace("(0.3 - z)", "(0.3 - depth)"))
+    assert e.value.key == "load[0].pressure"
+    assert "unknown name 'depth'" in str(e.value)
+    with pytest.raises(topomech.SceneError) as e:
+        parse_scene(text.replace('pressure = "1e3 * (0.3 - z)"', 'traction = ["x", "y"]'))
+    assert e.value.key == "load[0].traction"
+
+
+@pytest.mark.parametrize("element", ["tetra", "hexahedron", "wedge", "pyramid"])
 def test_pressure_on_a_closed_surface_adds_to_zero(element: str) -> None:
     """A uniform pressure on every boundary face of a box: the integral of n dA over a closed
     surface is zero, so the loads add up to zero (1e-12 of p A); on the face x = 1 alone it

@@ -48,6 +48,7 @@ __all__ = [
     "LoadError",
     "MeshGroups",
     "boundary_faces",
+    "compile_expression",
     "compile_predicate",
     "point_load",
     "select_faces",
@@ -125,23 +126,19 @@ _FUNCTIONS: dict[str, Callable[..., Any]] = {
 }
 
 
-def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.bool_]]:
-    """A predicate of the rule language over ``x``, ``y``, ``z`` as a function of points
-    ``(n, 3)`` returning a bool mask ``(n,)``. It accepts what the kernel's ``where`` guards
-    accept over these names: numbers, ``+ - * / %``, comparisons, ``&&``, ``||``, ``!``,
-    parentheses, ``true``/``false`` and the scalar built-ins (``abs``, ``sqrt``, ``min``,
-    ``max``, ``clamp``, ``sin``, ...). Raises :class:`LoadError` naming the unknown name or
-    the unreadable character."""
+def _translate(text: str, what: str) -> Any:
+    """Compiles an expression of the rule language over ``x``, ``y``, ``z`` to Python code;
+    ``what`` names it in errors ("predicate", "expression")."""
     out: list[str] = []
     pos = 0
-    text = pred.strip()
-    while pos < len(text):
-        m = _TOKEN.match(text, pos)
+    src_text = text.strip()
+    while pos < len(src_text):
+        m = _TOKEN.match(src_text, pos)
         if m is None or m.end() == pos:
-            rest = text[pos:].lstrip()
+            rest = src_text[pos:].lstrip()
             if not rest:
                 break
-            raise LoadError(f"bad predicate {pred!r}: cannot read {rest[:10]!r}")
+            raise LoadError(f"bad {what} {text!r}: cannot read {rest[:10]!r}")
         pos = m.end()
         if m.group("num") is not None:
             out.append(m.group("num"))
@@ -155,19 +152,32 @@ def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDAr
                 out.append(f"_f_{name}")
             else:
                 raise LoadError(
-                    f"bad predicate {pred!r}: unknown name '{name}' (this predicate reads "
+                    f"bad {what} {text!r}: unknown name '{name}' (this {what} reads "
                     f"x, y, z, true, false and {', '.join(sorted(_FUNCTIONS))})"
                 )
         else:
             op = m.group("op")
             out.append({"&&": " and ", "||": " or ", "!": " not "}.get(op, op))
     src = " ".join(out).strip()
-    namespace: dict[str, Any] = {f"_f_{k}": v for k, v in _FUNCTIONS.items()}
-    namespace["__builtins__"] = {}
     try:
-        code = compile(src, "<predicate>", "eval")
+        return compile(src, f"<{what}>", "eval")
     except SyntaxError:
-        raise LoadError(f"bad predicate {pred!r}: not an expression") from None
+        raise LoadError(f"bad {what} {text!r}: not an expression") from None
+
+
+_NAMESPACE: dict[str, Any] = {f"_f_{k}": v for k, v in _FUNCTIONS.items()}
+_NAMESPACE["__builtins__"] = {}
+
+
+def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.bool_]]:
+    """A predicate of the rule language over ``x``, ``y``, ``z`` as a function of points
+    ``(n, 3)`` returning a bool mask ``(n,)``. It accepts what the kernel's ``where`` guards
+    accept over these names: numbers, ``+ - * / %``, comparisons, ``&&``, ``||``, ``!``,
+    parentheses, ``true``/``false`` and the scalar built-ins (``abs``, ``sqrt``, ``min``,
+    ``max``, ``clamp``, ``sin``, ...). Raises :class:`LoadError` naming the unknown name or
+    the unreadable character. A point where it cannot be evaluated (a division by zero) is
+    not selected."""
+    code = _translate(pred, "predicate")
 
     def evaluate(points: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -175,10 +185,34 @@ def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDAr
         for i, (x, y, z) in enumerate(pts.tolist()):
             local = {"x": x, "y": y, "z": z}
             try:
-                mask[i] = bool(eval(code, namespace, local))  # a checked expression
+                mask[i] = bool(eval(code, _NAMESPACE, local))  # a checked expression
             except (ArithmeticError, ValueError, TypeError):
                 mask[i] = False
         return mask
+
+    return evaluate
+
+
+def compile_expression(expr: str) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]:
+    """A number-valued expression of the rule language over ``x``, ``y``, ``z`` (the same
+    syntax as :func:`compile_predicate`: ``"1e4 * (0.2 - z)"``) as a function of points
+    ``(n, 3)`` returning values ``(n,)``. Raises :class:`LoadError` naming an unknown name;
+    evaluating it where it is not a finite number raises :class:`LoadError` naming the
+    point."""
+    code = _translate(expr, "expression")
+
+    def evaluate(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        out = np.zeros(len(pts))
+        for i, (x, y, z) in enumerate(pts.tolist()):
+            try:
+                v = eval(code, _NAMESPACE, {"x": x, "y": y, "z": z})  # a checked expression
+                out[i] = float(v)
+            except (ArithmeticError, ValueError, TypeError) as e:
+                raise LoadError(f"expression {expr!r} at ({x:g}, {y:g}, {z:g}): {e}") from None
+            if not math.isfinite(out[i]):
+                raise LoadError(f"expression {expr!r} is {out[i]} at ({x:g}, {y:g}, {z:g})")
+        return out
 
     return evaluate
 
@@ -514,95 +548,162 @@ def _facets_on_boundary(
 # 2x2 Gauss points on [-1, 1]^2, weight 1 each
 _G = 1.0 / math.sqrt(3.0)
 _GAUSS = ((-_G, -_G), (_G, -_G), (_G, _G), (-_G, _G))
+# the triangle's edge midpoints (barycentric), weight 1/3 of the area each: exact to degree 2
+_TRI = ((0.5, 0.5, 0.0), (0.0, 0.5, 0.5), (0.5, 0.0, 0.5))
+
+#: A load's density at points ``(n, 3)``: tractions ``(n, 3)`` or pressures ``(n,)``.
+Density = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
 
 
 def _face_nodal(
-    p: npt.NDArray[np.float64], traction: npt.NDArray[np.float64] | None, pressure: float
+    p: npt.NDArray[np.float64], load: Density, pressure: bool
 ) -> npt.NDArray[np.float64]:
-    """Consistent nodal forces ``(k, 3)`` of a constant traction or pressure on the face
-    with corners ``p`` (outward-ordered)."""
+    """Consistent nodal forces ``(k, 3)`` of a traction or pressure density ``load`` on the
+    face with corners ``p`` (outward-ordered): exact for a density linear in x on triangles
+    and parallelograms (3-point and 2x2 Gauss rules)."""
     k = len(p)
     if k == 3:
         area = _area_vector(p)
-        f = traction * np.linalg.norm(area) if traction is not None else -pressure * area
-        return np.tile(f / 3.0, (3, 1))
+        shape = np.array(_TRI)
+        q = shape @ p
+        f = -np.outer(load(q), area) / 3.0 if pressure else load(q) * (np.linalg.norm(area) / 3.0)
+        tri: npt.NDArray[np.float64] = shape.T @ f
+        return tri
     if k == 4:
-        out = np.zeros((4, 3))
+        shapes, vectors = [], []
         for xi, eta in _GAUSS:
-            n = 0.25 * np.array(
-                [
-                    (1 - xi) * (1 - eta),
-                    (1 + xi) * (1 - eta),
-                    (1 + xi) * (1 + eta),
-                    (1 - xi) * (1 + eta),
-                ]
+            shapes.append(
+                0.25
+                * np.array(
+                    [
+                        (1 - xi) * (1 - eta),
+                        (1 + xi) * (1 - eta),
+                        (1 + xi) * (1 + eta),
+                        (1 - xi) * (1 + eta),
+                    ]
+                )
             )
             dxi = 0.25 * np.array([-(1 - eta), (1 - eta), (1 + eta), -(1 + eta)]) @ p
             deta = 0.25 * np.array([-(1 - xi), -(1 + xi), (1 + xi), (1 - xi)]) @ p
-            da = np.cross(dxi, deta)
-            f = traction * np.linalg.norm(da) if traction is not None else -pressure * da
-            out += np.outer(n, f)
-        return out
+            vectors.append(np.cross(dxi, deta))
+        shape, da = np.array(shapes), np.array(vectors)
+        q = shape @ p
+        f = -load(q)[:, None] * da if pressure else load(q) * np.linalg.norm(da, axis=1)[:, None]
+        quad: npt.NDArray[np.float64] = shape.T @ f
+        return quad
     # a polygon: a triangle per edge from its centroid (its share split evenly over the corners)
     c = p.mean(axis=0)
     out = np.zeros((k, 3))
     for i in range(k):
         j = (i + 1) % k
-        tri = np.array([p[i], p[j], c])
-        f = _face_nodal(tri, traction, pressure)
+        f = _face_nodal(np.array([p[i], p[j], c]), load, pressure)
         out[i] += f[0]
         out[j] += f[1]
         out += f[2] / k
     return out
 
 
+def _constant(c: float) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]:
+    return lambda q: np.full(len(q), c)
+
+
+def _density(value: Any, what: str, size: int) -> Density:
+    """A load's density from a constant, a callable, or rule-language expressions."""
+    if callable(value):
+        fn = value
+
+        def checked(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+            v = np.asarray(fn(q), dtype=np.float64)
+            want = (len(q), 3) if size == 3 else (len(q),)
+            if v.shape != want or not np.all(np.isfinite(v)):
+                raise LoadError(f"{what}: the function must return finite values of shape {want}")
+            return v
+
+        return checked
+    if size == 1:
+        if isinstance(value, str):
+            return compile_expression(value)
+        try:
+            c = float(value)
+        except (TypeError, ValueError):
+            raise LoadError(f"{what}: expected a number or an expression, got {value!r}") from None
+        if not math.isfinite(c):
+            raise LoadError(f"{what}: expected a finite number, got {value!r}")
+        return _constant(c)
+    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else None
+    if items is None or len(items) != 3:
+        raise LoadError(f"{what}: expected 3 numbers or expressions, got {value!r}")
+    parts: list[Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]] = []
+    for v in items:
+        if isinstance(v, str):
+            parts.append(compile_expression(v))
+        else:
+            try:
+                c = float(v)
+            except (TypeError, ValueError):
+                raise LoadError(
+                    f"{what}: expected 3 numbers or expressions, got {value!r}"
+                ) from None
+            if not math.isfinite(c):
+                raise LoadError(f"{what}: expected finite numbers, got {value!r}")
+            parts.append(_constant(c))
+    return lambda q: np.stack([f(q) for f in parts], axis=1)
+
+
 def surface_load(
     sim: Simulation,
     *,
-    traction: Sequence[float] | npt.NDArray[np.float64] | None = None,
-    pressure: float | None = None,
+    traction: Any = None,
+    pressure: Any = None,
     where: str | None = None,
     points: Sequence[int] | npt.NDArray[np.integer[Any]] | None = None,
     group: str | None = None,
     groups: MeshGroups | None = None,
 ) -> npt.NDArray[np.float64]:
-    """The consistent nodal loads ``(V, 3)`` (N) of a uniform ``traction`` (3 numbers; Pa on
-    faces in 3D, N/m on edges in 2D) or ``pressure`` (a number, same units, pushing along the
-    inward normal: ``-p n dA``) on the boundary faces (3D) or edges (2D) of one selection
-    (see :func:`select_faces`), integrated over the rest configuration. Add it to the
-    simulation's loads with ``sim.set_external_forces(sim.external_forces() + f)``. Raises
-    :class:`LoadError` for a bad selection, or when both or neither of ``traction`` and
-    ``pressure`` are given."""
+    """The consistent nodal loads ``(V, 3)`` (N) of a ``traction`` (a force per area, Pa,
+    on faces in 3D; per length, N/m, on edges in 2D) or a ``pressure`` (same units, pushing
+    along the inward normal: ``-p n dA``) on the boundary faces (3D) or edges (2D) of one
+    selection (see :func:`select_faces`), integrated over the rest configuration. Each may
+    be uniform (3 numbers, a number) or vary over the surface: a rule-language expression of
+    ``x``, ``y``, ``z`` (per component for a traction: ``["0", "-1e3 * x", "0"]``;
+    ``"1e4 * (0.2 - z)"`` for a hydrostatic pressure), or a Python function of the rest
+    points ``(n, 3)`` returning ``(n, 3)`` tractions or ``(n,)`` pressures. The integration
+    is exact for loads linear in x on triangles, edges and parallelograms. Add the result
+    to the simulation's loads with ``sim.set_external_forces(sim.external_forces() + f)``.
+    Raises :class:`LoadError` for a bad selection or value, or when both or neither of
+    ``traction`` and ``pressure`` are given."""
     if (traction is None) == (pressure is None):
         raise LoadError("give exactly one of traction (a vector) and pressure (a number)")
-    t = None
-    if traction is not None:
-        t = np.asarray(traction, dtype=np.float64).reshape(-1)
-        if t.shape != (3,) or not np.all(np.isfinite(t)):
-            raise LoadError(f"traction: expected 3 finite numbers, got {traction!r}")
-    p = 0.0 if pressure is None else float(pressure)
-    if not math.isfinite(p):
-        raise LoadError(f"pressure: expected a finite number, got {pressure!r}")
+    is_pressure = pressure is not None
+    density = (
+        _density(pressure, "pressure", 1) if is_pressure else _density(traction, "traction", 3)
+    )
     faces = select_faces(sim, where=where, points=points, group=group, groups=groups)
     rest = sim.rest_positions()
     out = np.zeros((sim.n_vertices, 3))
     if sim.dimension == 3:
         for f in faces:
-            nodal = _face_nodal(rest[list(f.rows)], t, p)
+            nodal = _face_nodal(rest[list(f.rows)], density, is_pressure)
             for r, fr in zip(f.rows, nodal):
                 out[r] += fr
-    else:
-        _, elements = _elements(sim)
-        for f in faces:
-            a, b = rest[f.rows[0]], rest[f.rows[1]]
-            length = float(np.linalg.norm(b - a))
-            if t is not None:
-                force = t * length
-            else:
-                centre = rest[elements[f.element]].mean(axis=0)
-                force = -p * _edge_normal(a, b, centre) * length
-            out[f.rows[0]] += force / 2.0
-            out[f.rows[1]] += force / 2.0
+        return out
+    _, elements = _elements(sim)
+    # 2-point Gauss on each edge: exact to degree 3
+    s = np.array([(1 - _G) / 2, (1 + _G) / 2])
+    shape = np.stack([1 - s, s], axis=1)
+    for f in faces:
+        ends = rest[list(f.rows)]
+        length = float(np.linalg.norm(ends[1] - ends[0]))
+        q = shape @ ends
+        if is_pressure:
+            centre = rest[elements[f.element]].mean(axis=0)
+            n = _edge_normal(ends[0], ends[1], centre)
+            forces = -np.outer(density(q), n) * (length / 2)
+        else:
+            forces = density(q) * (length / 2)
+        nodal = shape.T @ forces
+        out[f.rows[0]] += nodal[0]
+        out[f.rows[1]] += nodal[1]
     return out
 
 

@@ -35,6 +35,7 @@ the fixed vertices, gravity, the integrator and how often to write frames::
                                        # centroid satisfies it; or points = [...] (faces
                                        # whose vertices are all these points), group = "..."
     # kind = "pressure", pressure = 1e3   # along the inward normal: force -p n dA
+    # pressure = "1e4 * (0.2 - z)"     # a value may vary: an expression of the rest x, y, z
     # kind = "point", force = [0, 0, -10] # N on each selected vertex (where/points/group)
 
     [initial]                          # or [[initial]] tables, each with its selection
@@ -103,7 +104,14 @@ from typing import TYPE_CHECKING, Any, overload
 from topomech import _core
 from topomech._core import MeshError, MeshReadError, RuleError, SceneError, SimulationError
 from topomech._gmap import GMap
-from topomech.loads import LOAD_KINDS, LoadError, MeshGroups, apply_conditions, compile_predicate
+from topomech.loads import (
+    LOAD_KINDS,
+    LoadError,
+    MeshGroups,
+    apply_conditions,
+    compile_expression,
+    compile_predicate,
+)
 from topomech.simulation import ModelInfo, Simulation, available_models
 
 if sys.version_info >= (3, 11):
@@ -1016,7 +1024,19 @@ def _loads(tables: list[_Table], fail: _Fail) -> list[tuple[str, dict[str, Any]]
                     f"a {kind} load takes {want}, not {other}",
                 )
         value: Any
-        if kind == "pressure":
+        raw = t.data.get(want)
+        if kind == "pressure" and isinstance(raw, str):
+            value = _expression(t, want, raw, t.key(want), fail)
+        elif kind == "traction" and isinstance(raw, list) and any(isinstance(v, str) for v in raw):
+            if len(raw) != 3:
+                raise fail(t.key(want), f"expected an array of 3 numbers, got {_show(raw)}")
+            value = [
+                _expression(t, want, v, f"{t.key(want)}[{i}]", fail)
+                if isinstance(v, str)
+                else _number(v, f"{t.key(want)}[{i}]", fail)
+                for i, v in enumerate(raw)
+            ]
+        elif kind == "pressure":
             value = t.number("pressure")
         else:
             vec = t.vector(want, 3)
@@ -1032,6 +1052,17 @@ def _loads(tables: list[_Table], fail: _Fail) -> list[tuple[str, dict[str, Any]]
         t.done()
         loads.append((t.path, {"kind": kind, want: value, "select": sel}))
     return loads
+
+
+def _expression(t: _Table, k: str, text: str, key: str, fail: _Fail) -> str:
+    """A load's value given as an expression of x, y, z (checked now, evaluated on the rest
+    faces when the scene is built)."""
+    t.known.append(k)
+    try:
+        compile_expression(text)
+    except LoadError as e:
+        raise fail(key, str(e)) from None
+    return text
 
 
 def _initial(top: _Table, fail: _Fail) -> list[tuple[str, dict[str, Any]]]:
