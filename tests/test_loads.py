@@ -548,3 +548,18 @@ def test_ground_from_python_and_bad_ground_keys() -> None:
         topomech.Simulation(g, ground={"normal": [0.0, 0.0, 1.0]}, **kw)
     with pytest.raises(topomech.SimulationError, match="ground: the normal"):
         topomech.Simulation(g, ground={"point": [0.0, 0.0, 0.0], "normal": [0, 0, 0]}, **kw)
+
+
+def test_a_cut_keeps_the_total_load() -> None:
+    """A vertex split by a cut divides its load equally between its copies (policy sum of
+    f_ext): the number of rows grows, the total load does not (1e-12)."""
+    g = topomech.GMap.from_flat(*topomech._core.box(2, 1, 1, 1.0, 1.0, 1.0, "tetra"))
+    sim = topomech.Simulation(g, models=["linear_fem"], gravity=[0.0, 0.0, 0.0])
+    n = sim.n_vertices
+    f = np.tile([0.0, 0.0, 1.0], (n, 1))
+    sim.set_external_forces(f)
+    result = sim.cut([1.0, 0.0, 0.0], 0.5)
+    unsewn = result if isinstance(result, int) else result.unsewn
+    assert unsewn > 0
+    assert sim.n_vertices > n
+    np.testing.assert_allclose(sim.external_forces().sum(axis=0), [0.0, 0.0, n], rtol=1e-12)
