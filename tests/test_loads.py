@@ -8,6 +8,7 @@ elasticity solve by scikit-fem on the same tetrahedral mesh.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -563,3 +564,25 @@ def test_a_cut_keeps_the_total_load() -> None:
     assert unsewn > 0
     assert sim.n_vertices > n
     np.testing.assert_allclose(sim.external_forces().sum(axis=0), [0.0, 0.0, n], rtol=1e-12)
+
+
+def test_energy_of_a_loaded_run_counts_the_load_as_a_potential(tmp_path: Path) -> None:
+    """A run's energy.csv counts the external loads' work as a potential beside gravity
+    (-f_ext . u), not as elastic energy: after the static solve of the pressure-loaded
+    cantilever (linear FEM), the elastic energy is u . K u / 2 = f_ext . u / 2 (Clapeyron;
+    the trapezoid rule is exact for linear forces: 1e-9 relative), the load's potential is
+    -f_ext . u, and the total is -f_ext . u / 2."""
+    from topomech import cli
+
+    out = tmp_path / "out"
+    assert cli.main(["run", "pressure_cantilever", "--out", str(out), "--quiet"]) == 0
+    rows = (out / "energy.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    last = dict(zip(head, map(float, rows[-1].split(","))))
+    sim = topomech.load_scene("pressure_cantilever").build()
+    sim.step()
+    work = float((sim.external_forces() * sim.displacements()).sum())
+    assert work > 0
+    assert last["elastic"] == pytest.approx(work / 2, rel=1e-9)
+    assert last["gravitational"] == pytest.approx(-work, rel=1e-9)
+    assert last["total"] == pytest.approx(-work / 2, rel=1e-9)

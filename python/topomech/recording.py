@@ -10,7 +10,9 @@
   :meth:`Recorder.write_view` writes them as ``view.json`` (the description) and
   ``view.bin`` (the arrays, little-endian, 4 bytes per value) — see :func:`read_view`.
 - **energies** (:meth:`Recorder.after_step`), at every step: kinetic ``sum m |v|^2 / 2``;
-  gravitational ``-sum m g . (x - X)`` (zero at the rest positions ``X``); elastic, the work
+  gravitational ``-sum m g . (x - X)`` (zero at the rest positions ``X``), with the
+  potential ``-sum f_ext . (x - X)`` of the external loads (constant forces, like gravity:
+  :meth:`Simulation.set_external_forces`) added to it; elastic, the work
   done against the models' conservative forces since the rest state: ``E(x_0)`` is the
   integral of ``-f . dx`` along the straight path from the rest positions to the initial
   ones (3-point Gauss-Legendre; zero when the run starts at rest), then every step adds
@@ -432,14 +434,23 @@ class Recorder:
 
     # -------------------------------------------------------------- energy
 
+    def _external(self) -> F64:
+        """The external loads ``f_ext`` (constant: their work is a potential, counted with
+        gravity), zeros for a simulation without them."""
+        f = getattr(self.sim, "external_forces", None)
+        if f is None:
+            return np.zeros((self.sim.n_vertices, 3))
+        return np.asarray(f(), dtype=np.float64)
+
     def _elastic_forces(self) -> F64:
-        """The models' forces at the current positions and zero velocity."""
+        """The models' forces at the current positions and zero velocity (without the
+        external loads, which the kernel's ``force`` includes)."""
         if not self.damped:
-            return self.sim.forces()
+            return self.sim.forces() - self._external()
         v = self.sim.velocities()
         self.sim.set_velocities(np.zeros_like(v))
         try:
-            return self.sim.forces()
+            return self.sim.forces() - self._external()
         finally:
             self.sim.set_velocities(v)
 
@@ -457,7 +468,8 @@ class Recorder:
         e["step"].append(float(self.sim.steps))
         e["time"].append(self.sim.time)
         e["kinetic"].append(self.sim.kinetic_energy())
-        e["gravitational"].append(float(-(m[:, None] * (x - rest)).sum(axis=0) @ self.gravity))
+        gravity = float(-(m[:, None] * (x - rest)).sum(axis=0) @ self.gravity)
+        e["gravitational"].append(gravity - float((self._external() * (x - rest)).sum()))
 
     def _complete(self, x: F64, rest: F64, version: int, f: F64) -> None:
         """Adds the work from the last state whose force is known to ``x`` (force ``f``)."""
@@ -514,7 +526,7 @@ class Recorder:
         if self.lagged:
             if self._pending is not None:
                 # the step's forces were those of the state before it, at zero damping
-                self._complete(*self._pending, self.sim.embedding("force"))
+                self._complete(*self._pending, self.sim.embedding("force") - self._external())
             self._pending = (x, rest, version)
             self._record_state(x, rest)
         else:
