@@ -277,3 +277,24 @@ def test_gmsh_physical_groups_select_fixes_and_loads(tmp_path: Path) -> None:
     wrong.write_text(scene.read_text().replace('group = "clamp"', 'group = "clmap"'))
     with pytest.raises(topomech.SceneError, match=r"unknown group 'clmap'.*body, clamp, end"):
         topomech.load_scene(wrong).build()
+
+
+def test_mesh_groups_from_a_meshio_mesh() -> None:
+    """MeshGroups reads the groups read_mesh attaches to its mesh (contract C4), and a plain
+    meshio mesh's own point sets; names are listed sorted, across the three kinds."""
+    import meshio
+
+    mesh = meshio.Mesh(
+        np.zeros((4, 3)), [("tetra", np.array([[0, 1, 2, 3]]))], point_sets={"tip": [3]}
+    )
+    plain = MeshGroups.from_meshio(mesh)
+    assert plain.names() == ["tip"]
+    np.testing.assert_array_equal(plain.point_sets["tip"], [3])
+    mesh.cell_sets_kept = {"body": np.array([0])}
+    mesh.facet_sets = {"7": [("triangle", np.array([[0, 1, 2]]))]}
+    groups = MeshGroups.from_meshio(mesh)
+    assert groups.names() == ["7", "body", "tip"]
+    assert groups.points_of("7") == {0, 1, 2}
+    assert groups.points_of("body", [[0, 1, 2, 3]]) == {0, 1, 2, 3}
+    with pytest.raises(LoadError, match=r"unknown group 'x' \(the mesh has: 7, body, tip\)"):
+        groups.points_of("x")
