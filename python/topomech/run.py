@@ -35,18 +35,18 @@ import os
 import re
 import sys
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+import warnings
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
-import numpy.typing as npt
 
 from topomech import __version__
-from topomech._cells import flat_to_blocks
-from topomech._core import DivergenceError, SimulationError
+from topomech._cells import FlatMesh, to_flat
+from topomech._core import DivergenceError, SimulationError, TopomechError
+from topomech._output import OutputCells, check_fields, field_values
 from topomech.recording import Recorder
 from topomech.scene import Scene, load_scene
 
@@ -125,48 +125,56 @@ class Progress:
         self.stream.flush()
 
 
-@dataclass
 class _Writer:
-    """Writes VTU files of the simulation's current state on the cells of its map (extracted
-    again when a topology change relinked the map)."""
+    """Writes VTU files of the simulation's current state: points in row order, point data
+    ``displacement``, ``velocity``, ``fixed``, ``point_id`` and the scene's
+    ``output.fields``, cells in the user's orientation with cell data ``cell_id`` (see
+    :mod:`topomech._output`)."""
 
-    sim: Simulation
-    cells: list[tuple[str, npt.NDArray[np.int64]]]
-    version: int
-
-    @classmethod
-    def of(cls, sim: Simulation) -> _Writer:
-        w = cls(sim, [], -1)
-        w.refresh()
-        return w
-
-    def refresh(self) -> None:
-        if self.version == self.sim.topology_version:
-            return
-        _, kinds, offsets, connectivity = self.sim.core.gmap().to_flat()
-        blocks = flat_to_blocks(kinds, offsets, connectivity)
-        self.cells = [(b.type, np.asarray(b.data, dtype=np.int64)) for b in blocks]
-        self.version = self.sim.topology_version
+    def __init__(self, sim: Simulation, cells: OutputCells, fields: Sequence[str] = ()) -> None:
+        self.sim = sim
+        self.cells = cells
+        self.fields = tuple(fields)
 
     def mesh(self) -> meshio.Mesh:
         import meshio
 
-        self.refresh()
+        blocks, ids = self.cells.blocks()
         x = self.sim.positions()
-        return meshio.Mesh(
-            x,
-            self.cells,
-            point_data={
-                "displacement": x - self.sim.rest_positions(),
-                "velocity": self.sim.velocities(),
-                "fixed": self.sim.fixed().astype(np.uint8),
-            },
-        )
+        point_data: dict[str, Any] = {
+            "displacement": x - self.sim.rest_positions(),
+            "velocity": self.sim.velocities(),
+            "fixed": self.sim.fixed().astype(np.uint8),
+            "point_id": self.cells.point_ids(),
+        }
+        for name in self.fields:
+            point_data[name] = field_values(self.sim, name)
+        return meshio.Mesh(x, blocks, point_data=point_data, cell_data={"cell_id": ids})
 
     def write(self, path: Path) -> None:
         import meshio
 
         meshio.write(os.fspath(path), self.mesh(), file_format="vtu")
+
+
+def _input_cells(sc: Scene) -> FlatMesh | None:
+    """The cells of the scene's mesh file as the map was built from them (``cell_id``
+    numbers them), or None for a generated mesh, a saved map or a file that cannot be read
+    again (the output then orients the cells at rest without them)."""
+    m = sc.mesh
+    if m.file is None or m.file.suffix.lower() == ".tmg":
+        return None
+    from topomech.io import read_mesh
+
+    linear = bool(getattr(m, "linear", False)) or getattr(m, "order", None) == "linear"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            read: Any = read_mesh
+            mesh, _ = read(m.file, linear=True) if linear else read(m.file)
+        return to_flat(mesh.points, mesh.cells)
+    except (TopomechError, ValueError, TypeError, OSError):
+        return None
 
 
 def write_pvd(path: Path, frames: list[tuple[float, str]]) -> None:
@@ -281,6 +289,7 @@ def run_scene(
         sc = sc.with_steps(steps, every)
     out_dir = Path(out) if out is not None else Path("out") / sc.name
     sim = sc.build()
+    fields = check_fields(sim, getattr(sc, "fields", ()), sc.path)
 
     out_dir.mkdir(parents=True, exist_ok=True)
     frames_dir = out_dir / "frames"
@@ -299,8 +308,9 @@ def run_scene(
         "preview.mp4",
     ):
         (out_dir / stale).unlink(missing_ok=True)
-    writer = _Writer.of(sim)
-    recorder = Recorder(sim, sc, energy=preview)
+    cells = OutputCells(sim, _input_cells(sc))
+    writer = _Writer(sim, cells, fields)
+    recorder = Recorder(sim, sc, energy=preview, cells=cells)
     frames: list[tuple[float, str]] = []
 
     def frame() -> None:
