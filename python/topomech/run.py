@@ -3,8 +3,12 @@
 :func:`run_scene` writes, under the output directory:
 
 - ``summary.json``: what ran and how it ended (see :func:`run_scene` for the keys);
-- ``final.vtu``: the last state, points at the current positions, point data
-  ``displacement``, ``velocity`` and ``fixed`` (1 for held vertices), cells from the map;
+- ``final.vtu``: the last state, points at the current positions in the simulation's row
+  order (the input point order), point data ``displacement``, ``velocity``, ``fixed`` (1 for
+  held vertices), ``point_id`` (the input point index of each row) and the scene's
+  ``output.fields`` (``mass``, ``force``, vertex embeddings), cells in the input's order and
+  orientation at rest with cell data ``cell_id`` (the input cell index; see
+  :mod:`topomech._output`);
 - ``frames/frame_NNNNN.vtu``: a frame every ``every`` steps, frame 0 being the initial state
   (and the last state as a last frame when the step count is not a multiple of ``every``),
   with ``animation.pvd``, the ParaView collection of the frames and their times;
@@ -281,7 +285,8 @@ def run_scene(
     (``view.json``) are written either way. ``outputs`` names each file written (None for
     those that were not).
     Raises :class:`SceneError` for a scene that is refused (nothing is written then), an
-    event after the end of the run included (with ``steps`` too).
+    event after the end of the run included (with ``steps`` too), and an unknown name in
+    ``output.fields`` (naming ``output.fields[i]`` and the available names).
     """
     t0 = time.perf_counter()
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
