@@ -452,3 +452,38 @@ def test_view_data_follows_the_rows(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     view = read_view(tmp_path / "out")
     m = meshio.read(tmp_path / "out" / "final.vtu")
     np.testing.assert_allclose(view.world_positions(len(view.frames) - 1), m.points, atol=1e-6)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_cells_the_import_turned_over_are_written_as_it_turned_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dimension: int
+) -> None:
+    """A mesh with some cells listed the other way round (mixed triangle orientations,
+    inverted tetrahedra), imported with reorient: each output cell is its input cell,
+    reversed exactly where the import's report says it turned it, and the written mesh is
+    consistently oriented (read back without reorienting, nothing to turn)."""
+    points, ctype, cells = _user_mesh(dimension)
+    flip = np.arange(len(cells)) % 3 == 1
+    listed = cells.copy()
+    if dimension == 3:
+        listed[flip] = listed[flip][:, [0, 2, 1, 3]]
+    else:
+        listed[flip] = listed[flip][:, ::-1]
+    meshio.write(tmp_path / "mixed.vtu", meshio.Mesh(points, [(ctype, listed)]))
+    turned = set(GMap.from_mesh(points, [(ctype, listed)], reorient=True).report.reoriented)
+    assert turned  # the import turns some over (which ones is the import's choice)
+    model = COROTATIONAL if dimension == 3 else 'kind = "stretch_elementary"\nstiffness = 1e3'
+    text = _scene_text('file = "mixed.vtu"\nreorient = true', steps=5, model=model)
+    (tmp_path / "mixed.toml").write_text(text)
+    _contract(monkeypatch, points, list(listed))
+    assert "error" not in run_scene(tmp_path / "mixed.toml", tmp_path / "out", preview=False)
+    m = meshio.read(tmp_path / "out" / "final.vtu")
+    pid = np.asarray(m.point_data["point_id"], dtype=np.int64)
+    out_cells, ids = _cells_of(m)
+    assert ids.tolist() == list(range(len(listed)))
+    reversal = [0, 2, 1, 3] if dimension == 3 else [2, 1, 0]
+    for c, k in zip(out_cells, ids):
+        expected = listed[k][reversal] if k in turned else listed[k]
+        assert pid[c].tolist() == expected.tolist(), k
+    g = GMap.from_meshio(m, reorient=False)
+    assert g.report.reoriented == []

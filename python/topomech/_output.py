@@ -170,6 +170,7 @@ class OutputCells:
         self._version: int | None = None
         self._elements: Elements | None = None
         self._point_ids: I64 | None = None
+        self._blocks: tuple[int, list[tuple[str, I64]], list[I64]] | None = None
 
     def point_ids(self) -> I64:
         """``(V,)`` input point index of each row (see :func:`point_ids`)."""
@@ -254,6 +255,9 @@ class OutputCells:
         """meshio cell blocks (consecutive elements of one type and size) and the
         ``cell_id`` of each block's cells."""
         el = self.elements()
+        assert self._version is not None
+        if self._blocks is not None and self._blocks[0] == self._version:
+            return self._blocks[1], self._blocks[2]
         blocks: list[tuple[str, I64]] = []
         ids: list[I64] = []
         start = 0
@@ -266,6 +270,7 @@ class OutputCells:
             blocks.append((kind, np.stack(el.rows[start:end]).astype(np.int64)))
             ids.append(el.cell_ids[start:end])
             start = end
+        self._blocks = (self._version, blocks, ids)
         return blocks, ids
 
 

@@ -33,6 +33,8 @@ index and a message naming ``event[i]``.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import os
@@ -172,7 +174,8 @@ def _input_cells(sc: Scene) -> FlatMesh | None:
 
     linear = bool(getattr(m, "linear", False)) or getattr(m, "order", None) == "linear"
     try:
-        with warnings.catch_warnings():
+        # read again: what it had to say was said the first time
+        with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):
             warnings.simplefilter("ignore")
             read: Any = read_mesh
             mesh, _ = read(m.file, linear=True) if linear else read(m.file)
