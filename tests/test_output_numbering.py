@@ -27,7 +27,7 @@ import pytest
 
 from topomech import GMap, _core
 from topomech._output import signed_volumes
-from topomech.recording import read_view
+from topomech.recording import Recorder, read_view
 from topomech.run import run_scene
 from topomech.scene import Scene, SceneError, load_scene, parse_scene
 from topomech.simulation import Simulation
@@ -487,3 +487,27 @@ def test_cells_the_import_turned_over_are_written_as_it_turned_them(
         assert pid[c].tolist() == expected.tolist(), k
     g = GMap.from_meshio(m, reorient=False)
     assert g.report.reoriented == []
+
+
+def test_the_dart_view_puts_each_dart_at_its_vertex_row(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The view's dart table names each dart's vertex by its row in the recorded positions:
+    the row's position is the position the map gives the dart's vertex (exactly, after a cut
+    has split vertices and the pieces moved apart)."""
+    scene, points, cells = _write_scene(tmp_path, 3, cut=True)
+    _contract(monkeypatch, points, cells)
+    sim = load_scene(scene).build()
+    sim.step(12)  # past the cut at t = 0.01
+    assert sim.topology_changes()
+    rec = Recorder(sim)
+    rec.frame()
+    table = rec.topologies[-1].darts
+    assert table is not None
+    g = sim.core.gmap()
+    labels = np.asarray(g.vertex_labels())
+    live = labels >= 0
+    x = sim.positions()
+    np.testing.assert_array_equal(x[table["vertex"][live]], g.positions()[labels[live]])
+    # the recording put the positions back exactly
+    np.testing.assert_array_equal(sim.positions(), x)

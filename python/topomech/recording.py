@@ -140,10 +140,14 @@ def _components(n: int, links: list[I64], live: npt.NDArray[np.bool_]) -> I64:
         label = np.where(live, new, label)
 
 
-def _dart_table(gmap: Any, dimension: int) -> dict[str, I64]:
+def _dart_table(gmap: Any, dimension: int, row_of_label: I64 | None = None) -> dict[str, I64]:
+    """Per dart: its vertex row (``row_of_label`` maps the map's vertex labels to the
+    simulation's rows; None when they are the same), alpha links, face and volume."""
     labels = np.asarray(gmap.vertex_labels(), dtype=np.int64)
     n = len(labels)
     live = labels >= 0
+    if row_of_label is not None:
+        labels = np.where(live, row_of_label[np.maximum(labels, 0)], -1)
     alpha = np.tile(np.arange(n, dtype=np.int64), (4, 1))
     for i in range(dimension + 1):
         for d in np.flatnonzero(live):
@@ -396,7 +400,11 @@ class Recorder:
         f_off[1:] = np.cumsum([len(f) for f in faces])
         f_idx = np.array([v for f in faces for v in f], dtype=np.int64)
         n_darts = int(gmap.n_darts)
-        darts = _dart_table(gmap, self.sim.dimension) if n_darts <= self.dart_limit else None
+        darts = (
+            _dart_table(gmap, self.sim.dimension, self._row_of_label())
+            if n_darts <= self.dart_limit
+            else None
+        )
         topo = Topology(
             step=self.sim.steps,
             n_vertices=self.sim.n_vertices,
@@ -411,6 +419,22 @@ class Recorder:
         self.topologies.append(topo)
         self._topo_version = version
         return topo
+
+    def _row_of_label(self) -> I64:
+        """The simulation's row of each vertex label of its map (they differ when rows
+        follow the input numbering): read by writing each row's index as its x coordinate,
+        taking a copy of the map, and putting the positions back exactly."""
+        x = self.sim.positions()
+        if not np.isfinite(x).all():  # could not be put back: assume the same numbering
+            return np.arange(len(x), dtype=np.int64)
+        code = np.zeros_like(x)
+        code[:, 0] = np.arange(len(x), dtype=np.float64)
+        self.sim.set_positions(code)
+        try:
+            by_label = self.sim.core.gmap().positions()
+        finally:
+            self.sim.set_positions(x)
+        return np.asarray(np.rint(by_label[:, 0]), dtype=np.int64)
 
     def _stress(self, topo: Topology, x: F64) -> npt.NDArray[np.float32]:
         """Von Mises per vertex: the mean of its elements'."""
