@@ -9,7 +9,12 @@ untranslated one, to float32 precision of the mesh's own size.
 
 from __future__ import annotations
 
+import io
+import os
+import shutil
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import meshio
 import numpy as np
@@ -20,6 +25,7 @@ from topomech import _core
 from topomech.recording import View, read_view
 from topomech.render import render_frames
 from topomech.run import run_scene
+from topomech.viewer import write_viewer
 
 SHIFT = 5e6
 #: float32 spacing near 1 m is 1.2e-7: 8 of them, plus the float64 round-off of the
@@ -119,3 +125,61 @@ def test_previews_at_5e6_m_are_the_previews_at_the_origin(tmp_path: Path) -> Non
         assert (diff > 8).mean() < 1e-3, (diff > 8).sum()
         # the picture is not blank: the mesh covers a good part of it
         assert (x.min(axis=2) < 200).mean() > 0.05
+
+
+# ---------------------------------------------------------------------------------- browser
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """Headless Chromium, as in test_viewer.py (skipped, saying why, without it)."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.skip("browser test skipped: the playwright package is not installed")
+    exe = os.environ.get("TOPOMECH_CHROMIUM", "/usr/bin/chromium")
+    if not Path(exe).is_file():
+        found = shutil.which("chromium") or shutil.which("chromium-browser")
+        if found is None:
+            pytest.skip("browser test skipped: no Chromium (make browser installs it)")
+        exe = found
+    with sync_playwright() as p:
+        try:
+            b = p.chromium.launch(executable_path=exe, args=["--no-sandbox"])
+        except Exception as e:
+            pytest.skip(f"browser test skipped: {exe} does not start headless: {e}")
+        yield b
+        b.close()
+
+
+def _viewer_pixels(browser: Any, out: Path, frame: int) -> npt.NDArray[np.int64]:
+    from PIL import Image
+
+    pg = browser.new_page(viewport={"width": 640, "height": 480})
+    errors: list[str] = []
+    pg.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        pg.goto(write_viewer(out).resolve().as_uri())
+        pg.eval_on_selector(
+            "#scrub", f"e => {{ e.value = '{frame}'; e.dispatchEvent(new Event('input')); }}"
+        )
+        png = pg.locator("#view").screenshot()
+    finally:
+        pg.close()
+    assert errors == []
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int64)
+
+
+def test_the_viewer_draws_the_run_at_5e6_m_as_the_run_at_the_origin(
+    tmp_path: Path, browser: Any
+) -> None:
+    """The viewer page (its float32 buffers, its camera fitted to the recorded bounds) draws
+    the translated run as the untranslated one: at most a few edge pixels differ."""
+    near = _run(tmp_path, 3, 0.0)
+    far = _run(tmp_path, 3, SHIFT)
+    last = len(near.frames) - 1
+    x = _viewer_pixels(browser, near.directory, last)
+    y = _viewer_pixels(browser, far.directory, last)
+    assert (x.min(axis=2) < 200).mean() > 0.02  # something is drawn
+    diff = np.abs(x - y).max(axis=2)
+    assert (diff > 8).mean() < 1e-3, (diff > 8).sum()
