@@ -16,6 +16,7 @@ with them. With the real methods, they also check that rows follow the input ord
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from topomech import GMap, _core
+from topomech import GMap, _core, cli
 from topomech._output import signed_volumes
 from topomech.recording import Recorder, read_view
 from topomech.run import run_scene
@@ -268,7 +269,10 @@ def _volumes(m: meshio.Mesh) -> npt.NDArray[np.float64]:
 
 @pytest.mark.parametrize("source", ["file", "generator"])
 def test_a_run_that_recovers_from_an_inverted_start_writes_cells_topomech_accepts(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, source: str
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    source: str,
 ) -> None:
     """Start with every tetrahedron inverted (mirrored); the co-rotational model turns them
     back. final.vtu's cells have the rest orientation: positive now, and read back without
@@ -301,12 +305,21 @@ def test_a_run_that_recovers_from_an_inverted_start_writes_cells_topomech_accept
     assert (_volumes(first) < 0).all()  # written as it is: inverted
     final = meshio.read(out / "final.vtu")
     vols = _volumes(final)
-    # recovered: every volume back to its rest value (0.125 x 0.5 x 0.5 / 6 per tet, to the
-    # solver's convergence), positive
+    rest = final.points - final.point_data["displacement"]
+    at_rest = np.concatenate(
+        [signed_volumes(b.type, np.asarray(b.data, dtype=np.int64), rest) for b in final.cells]
+    )
+    # recovered: every volume positive and back to its rest value (viscous damping 20/s
+    # for 1.5 s, implicit Euler; 1e-3 is far tighter than an inverted cell's -200 %)
     assert (vols > 0).all()
+    np.testing.assert_allclose(vols, at_rest, rtol=1e-3)
     g = GMap.from_meshio(final, reorient=False)
     assert g.report.reoriented == []
     assert g.cell_counts()["volumes"] == len(vols)
+    # and `topomech info` reads it (exit 0: a valid map), turning nothing over
+    assert cli.main(["info", "--json", str(out / "final.vtu")]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info.get("reoriented", 0) in (0, [])
 
 
 def test_generated_cells_are_oriented_at_rest(
