@@ -27,7 +27,7 @@ import numpy.typing as npt
 import pytest
 
 from topomech import GMap, _core, cli
-from topomech._output import signed_volumes
+from topomech._output import reversed_cells, signed_volumes
 from topomech.recording import Recorder, read_view
 from topomech.run import run_scene
 from topomech.scene import Scene, SceneError, load_scene, parse_scene
@@ -524,3 +524,30 @@ def test_the_dart_view_puts_each_dart_at_its_vertex_row(
     np.testing.assert_array_equal(x[table["vertex"][live]], g.positions()[labels[live]])
     # the recording put the positions back exactly
     np.testing.assert_array_equal(sim.positions(), x)
+
+
+def test_signed_volumes_and_reversal_against_closed_forms() -> None:
+    """The orientation test the writer uses: signed volumes of the unit cube's cells in VTK
+    order are the closed forms (tetra 1/6, pyramid 1/3, wedge 1/2, hexahedron 1; exact in
+    binary up to round-off, 1e-15), the reversed cells' are their negatives, and a translation
+    by 5e6 m changes them by less than 1e-9 (differences are taken inside each cell)."""
+    cube = np.array(
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
+        dtype=np.float64,
+    )
+    apex = np.vstack([cube, [[0.5, 0.5, 1.0]]])
+    cases = {
+        "tetra": ([0, 1, 3, 4], 1 / 6),
+        "pyramid": ([0, 1, 2, 3, 8], 1 / 3),
+        # VTK's wedge lists its first triangle clockwise seen from the second
+        "wedge": ([0, 3, 1, 4, 7, 5], 1 / 2),
+        "hexahedron": (list(range(8)), 1.0),
+    }
+    for kind, (cell, volume) in cases.items():
+        c = np.array([cell], dtype=np.int64)
+        for shift in (0.0, 5e6):
+            v = signed_volumes(kind, c, apex + shift)
+            np.testing.assert_allclose(v, [volume], rtol=0, atol=1e-15 if shift == 0 else 1e-9)
+            r = signed_volumes(kind, reversed_cells(kind, c), apex + shift)
+            np.testing.assert_allclose(r, [-volume], rtol=0, atol=1e-15 if shift == 0 else 1e-9)
+        assert sorted(reversed_cells(kind, c)[0].tolist()) == sorted(cell)
