@@ -409,13 +409,13 @@ class Scene:
     description: str = ""
     #: Whether the file gives ``output.every`` (else it follows the step count).
     every_given: bool = False
-    #: ``(what, value, key)`` for each predicate and model kind (``what``: ``fix``,
-    #: ``prescribed``, ``region`` or ``model``), to name the key of a kernel refusal.
-    origins: tuple[tuple[str, str, str], ...] = ()
     #: ``output.fields``: the extra point data of the output meshes (``mass``, ``force`` or
     #: a vertex embedding's name; checked against the simulation by
     #: :func:`topomech.run.run_scene`).
     fields: tuple[str, ...] = ()
+    #: ``(what, value, key)`` for each predicate and model kind (``what``: ``fix``,
+    #: ``prescribed``, ``region`` or ``model``), to name the key of a kernel refusal.
+    origins: tuple[tuple[str, str, str], ...] = ()
 
     @property
     def integrator(self) -> str:
@@ -619,6 +619,25 @@ def _fracture(top: _Table, fail: _Fail) -> dict[str, Any] | None:
 
 def _default_every(steps: int) -> int:
     return max(1, steps // 50)
+
+
+def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
+    """``output.fields``: a list of distinct names (which names exist is known once the
+    simulation is built)."""
+    v = t._get("fields")
+    if v is None:
+        return ()
+    key = t.key("fields")
+    if not isinstance(v, list):
+        raise fail(key, f"expected an array of field names, got {_show(v)}")
+    seen: dict[str, int] = {}
+    for i, name in enumerate(v):
+        if not isinstance(name, str):
+            raise fail(f"{key}[{i}]", f"expected a field name (a string), got {_show(name)}")
+        if name in seen:
+            raise fail(f"{key}[{i}]", f"{_show(name)} is already {key}[{seen[name]}]")
+        seen[name] = i
+    return tuple(v)
 
 
 def _mesh(t: _Table, base: Path | None, fail: _Fail) -> MeshSpec:
@@ -884,30 +903,11 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         every=every_v if every_v is not None else _default_every(steps),
         description=description,
         every_given=every_v is not None,
-        origins=tuple(origins),
         fields=fields,
+        origins=tuple(origins),
     )
     scene.check_events()
     return scene
-
-
-def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
-    """``output.fields``: a list of distinct names (which names exist is known once the
-    simulation is built)."""
-    v = t._get("fields")
-    if v is None:
-        return ()
-    key = t.key("fields")
-    if not isinstance(v, list):
-        raise fail(key, f"expected an array of field names, got {_show(v)}")
-    seen: dict[str, int] = {}
-    for i, name in enumerate(v):
-        if not isinstance(name, str):
-            raise fail(f"{key}[{i}]", f"expected a field name (a string), got {_show(name)}")
-        if name in seen:
-            raise fail(f"{key}[{i}]", f"{_show(name)} is already {key}[{seen[name]}]")
-        seen[name] = i
-    return tuple(v)
 
 
 def _required_str(t: _Table, k: str, fail: _Fail) -> str:
