@@ -621,25 +621,6 @@ def _default_every(steps: int) -> int:
     return max(1, steps // 50)
 
 
-def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
-    """``output.fields``: a list of distinct names (which names exist is known once the
-    simulation is built)."""
-    v = t._get("fields")
-    if v is None:
-        return ()
-    key = t.key("fields")
-    if not isinstance(v, list):
-        raise fail(key, f"expected an array of field names, got {_show(v)}")
-    seen: dict[str, int] = {}
-    for i, name in enumerate(v):
-        if not isinstance(name, str):
-            raise fail(f"{key}[{i}]", f"expected a field name (a string), got {_show(name)}")
-        if name in seen:
-            raise fail(f"{key}[{i}]", f"{_show(name)} is already {key}[{seen[name]}]")
-        seen[name] = i
-    return tuple(v)
-
-
 def _mesh(t: _Table, base: Path | None, fail: _Fail) -> MeshSpec:
     file = t.string("file")
     generator = t.string("generator")
@@ -767,6 +748,25 @@ def _models(
             set_by.setdefault(p, (t.key(p), v))
         models.append(spec)
     return models, set_by
+
+
+def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
+    """``output.fields``: a list of distinct names (which names exist is known once the
+    simulation is built)."""
+    v = t._get("fields")
+    if v is None:
+        return ()
+    key = t.key("fields")
+    if not isinstance(v, list):
+        raise fail(key, f"expected an array of field names, got {_show(v)}")
+    seen: dict[str, int] = {}
+    for i, name in enumerate(v):
+        if not isinstance(name, str):
+            raise fail(f"{key}[{i}]", f"expected a field name (a string), got {_show(name)}")
+        if name in seen:
+            raise fail(f"{key}[{i}]", f"{_show(name)} is already {key}[{seen[name]}]")
+        seen[name] = i
+    return tuple(v)
 
 
 class _Renumber(_Fail):
