@@ -58,6 +58,8 @@ the fixed vertices, gravity, the integrator and how often to write frames::
 
     [output]
     every = 10                         # a frame every N steps (0: none); default steps / 50
+    fields = ["mass", "force"]         # more point data in final.vtu and the frames: mass,
+                                       # force, or any vertex embedding (vec3, f64, bool, i64)
 
     [[event]]                          # a topology change at a time (one table per event)
     time = 0.5                         # s, >= 0, at most the end of the run (steps x dt)
@@ -436,6 +438,10 @@ class Scene:
     description: str = ""
     #: Whether the file gives ``output.every`` (else it follows the step count).
     every_given: bool = False
+    #: ``output.fields``: the extra point data of the output meshes (``mass``, ``force`` or
+    #: a vertex embedding's name; checked against the simulation by
+    #: :func:`topomech.run.run_scene`).
+    fields: tuple[str, ...] = ()
     #: ``(what, value, key)`` for each predicate and model kind (``what``: ``fix``,
     #: ``prescribed``, ``region`` or ``model``), to name the key of a kernel refusal.
     origins: tuple[tuple[str, str, str], ...] = ()
@@ -807,6 +813,25 @@ def _models(
     return models, set_by
 
 
+def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
+    """``output.fields``: a list of distinct names (which names exist is known once the
+    simulation is built)."""
+    v = t._get("fields")
+    if v is None:
+        return ()
+    key = t.key("fields")
+    if not isinstance(v, list):
+        raise fail(key, f"expected an array of field names, got {_show(v)}")
+    seen: dict[str, int] = {}
+    for i, name in enumerate(v):
+        if not isinstance(name, str):
+            raise fail(f"{key}[{i}]", f"expected a field name (a string), got {_show(name)}")
+        if name in seen:
+            raise fail(f"{key}[{i}]", f"{_show(name)} is already {key}[{seen[name]}]")
+        seen[name] = i
+    return tuple(v)
+
+
 class _Renumber(_Fail):
     """A :class:`_Fail` that reads ``model[0]`` as ``model[i]`` (checking one model alone)."""
 
@@ -917,6 +942,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
 
     out = top.table("output")
     every_v = out.integer("every", None, minimum=0)
+    fields = _output_fields(out, fail)
     out.done()
     events = _events(top.tables("event"), fail)
     fracture = _fracture(top, fail)
@@ -947,6 +973,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         every=every_v if every_v is not None else _default_every(steps),
         description=description,
         every_given=every_v is not None,
+        fields=fields,
         origins=tuple(origins),
         conditions={"held": held, "loads": loads, "initial": initial},
     )
