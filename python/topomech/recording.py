@@ -371,11 +371,10 @@ class Recorder:
         if self.topologies and self._topo_version == version:
             return self.topologies[-1]
         gmap = self.sim.core.gmap()
-        _, kinds, offsets, conn = gmap.to_flat()
-        cells = [
-            (str(k), np.asarray(conn[offsets[c] : offsets[c + 1]], dtype=np.int64))
-            for c, k in enumerate(kinds)
-        ]
+        # the kinds from the map, the vertices as simulation rows (same element order)
+        _, kinds, _, _ = gmap.to_flat()
+        _, rows = self.sim.core.elements()
+        cells = [(str(k), np.asarray(r, dtype=np.int64)) for k, r in zip(kinds, rows)]
         faces, edges = _surface(cells, self.sim.dimension)
         f_off = np.zeros(len(faces) + 1, dtype=np.int64)
         f_off[1:] = np.cumsum([len(f) for f in faces])

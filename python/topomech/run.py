@@ -143,7 +143,14 @@ class _Writer:
     def refresh(self) -> None:
         if self.version == self.sim.topology_version:
             return
-        _, kinds, offsets, connectivity = self.sim.core.gmap().to_flat()
+        # the kinds from the map, the vertices as simulation rows (same element order)
+        _, kinds, _, _ = self.sim.core.gmap().to_flat()
+        _, rows = self.sim.core.elements()
+        offsets = np.zeros(len(rows) + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum([len(r) for r in rows])
+        connectivity = (
+            np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, dtype=np.int64)
+        )
         blocks = flat_to_blocks(kinds, offsets, connectivity)
         self.cells = [(b.type, np.asarray(b.data, dtype=np.int64)) for b in blocks]
         self.version = self.sim.topology_version

@@ -98,9 +98,7 @@ class TopologyResult:
     #: The rows appended for the vertices the change split off, int64 ``(k,)``, increasing;
     #: each new row's :meth:`Simulation.point_ids` entry is the input point it was split from.
     #: Existing rows never change meaning.
-    added_rows: npt.NDArray[np.int64] = field(
-        default_factory=lambda: np.zeros(0, dtype=np.int64)
-    )
+    added_rows: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def available_models() -> list[ModelInfo]:
