@@ -16,7 +16,9 @@
     clippy::cast_sign_loss,
     clippy::cast_possible_truncation,
     clippy::cast_precision_loss,
-    clippy::float_cmp
+    clippy::float_cmp,
+    // BuildOptions gains fields with the kernel import's options (pinched, duplicates)
+    clippy::needless_update
 )]
 
 mod common;
@@ -247,7 +249,7 @@ fn a_map_without_numbering_gets_the_vertex_orbit_order() {
     assert!(s.gmap().embedding_id("particle").is_some());
     // density x area, exactly representable
     assert_eq!(s.total_mass().unwrap(), 1.0);
-    let (ids, _) = (s.elements().unwrap(), ());
+    let ids = s.elements().unwrap();
     assert_eq!(ids.len(), 1);
     assert_eq!(ids[0].cell_id, -1, "no cell_id on this map");
 }
@@ -324,7 +326,7 @@ fn a_pinched_vertex_merged_is_one_particle_split_is_two() {
     let n = 300;
     let g = 9.81;
     let dt: f64 = 1e-3;
-    let fall = g * dt * dt * (n * (n + 1)) as f64 / 2.0;
+    let fall = g * dt * dt * f64::from(n * (n + 1)) / 2.0;
     for merged in [true, false] {
         let mut s = pinched(merged, Integrator::SymplecticEuler, &["y > 0.5"]);
         let rows = s.n_vertices();
