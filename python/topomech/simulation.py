@@ -285,7 +285,8 @@ class Simulation:
     def set_vertex_field(self, name: str, values: Any) -> None:
         """Writes the vertex embedding ``name`` from one value per row: ``(V,)`` numbers for an
         ``f64`` embedding, ``(V, 3)`` for a ``vec3`` one, ``(V,)`` bools for a ``bool`` one
-        (every orbit of a row gets the row's value). An embedding the rules declare but the map
+        (every orbit of a row gets the row's value; a force embedding, ``f_*``, is the row's
+        total and goes to its first orbit alone). An embedding the rules declare but the map
         does not hold yet is added. Raises :class:`SimulationError` for an unknown, derived or
         non-vertex embedding, a type mismatch or non-finite values (naming the rows), and
         :class:`ValueError` for a wrong shape."""
@@ -304,7 +305,8 @@ class Simulation:
 
     def embedding(self, name: str) -> npt.NDArray[Any]:
         """The values of a vertex embedding, one row per vertex (``(V,)`` for scalars,
-        ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices). An embedding on another orbit
+        ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices; masses and forces, ``mass``,
+        ``force``, ``f_*``, summed over the orbits of a row). An embedding on another orbit
         raises :class:`EmbeddingError`; ``gmap().embedding_names()`` lists them all."""
         return self._core.embedding(name)
 

@@ -1554,7 +1554,8 @@ impl Simulation {
     }
 
     /// Writes a stored vertex embedding of type `f64`, `vec3` or `bool` from one value per row
-    /// (every orbit of a row gets its row's value). An embedding that the rules declare but
+    /// (every orbit of a row gets its row's value; but a force, see [`is_additive`], is the
+    /// row's total: its first orbit gets it and the others zero). An embedding that the rules declare but
     /// the map does not hold yet is added first. Refuses another orbit or type, a derived
     /// embedding, a wrong count, and non-finite values (naming every offending row, up to 20).
     pub fn set_vertex_field(&mut self, name: &str, values: &[Value]) -> Result<(), PhysicsError> {
@@ -1627,9 +1628,18 @@ impl Simulation {
                 list_some(&non_finite, 20)
             )));
         }
+        // a force is a row's total: on the row's first orbit, zero on the others (the
+        // accumulation sums them, the step shares the sum by mass)
+        let share = is_additive(name);
+        let zero = Value::Real(vec![0.0; ty.width()]);
         for (&d, &r) in self.rows.orbits.iter().zip(&self.rows.row_of) {
+            let v = if share && self.rows.darts[r] != d {
+                &zero
+            } else {
+                &values[r]
+            };
             self.g
-                .set_value(id, d, &values[r])
+                .set_value(id, d, v)
                 .map_err(|e| PhysicsError::Config(e.to_string()))?;
         }
         Ok(())
@@ -1685,6 +1695,13 @@ pub struct Element {
     pub kind: topomech_gmap::mesh::CellKind,
     /// Its vertices' rows.
     pub rows: Vec<usize>,
+}
+
+/// Whether a vertex embedding holds a share of a row's quantity (masses and forces: `mass`,
+/// `force`, `df`, `f_*`, `df_*`): read per row it is summed over the row's orbits, and written
+/// per row it goes to the row's first orbit alone.
+pub fn is_additive(name: &str) -> bool {
+    matches!(name, "mass" | "force" | "df") || name.starts_with("f_") || name.starts_with("df_")
 }
 
 /// "1, 2, 3" for the first `limit` items, then "and N more".

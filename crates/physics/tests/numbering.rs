@@ -635,8 +635,8 @@ fn a_bad_numbering_is_refused_naming_it() {
     );
 }
 
-/// `set_fixed` and `set_vertex_field` write every orbit of a row; bad values are refused
-/// naming every offending row.
+/// `set_fixed` and `set_vertex_field` write every orbit of a row (a force: the row's first
+/// orbit, its total); bad values are refused naming every offending row.
 #[test]
 fn set_fixed_and_fields_write_whole_rows() {
     let mut s = pinched(true, Integrator::SymplecticEuler, &[]);
@@ -658,6 +658,16 @@ fn set_fixed_and_fields_write_whole_rows() {
     let vel = s.gmap().require("velocity").unwrap();
     for &d in &darts {
         assert_eq!(s.gmap().real(vel, d), &[0.0, 0.0, 1.0]);
+    }
+    // a force is the row's total: the first orbit holds it, the others nothing, and the row
+    // reads back its value
+    s.set_vertex_field("force", &v).unwrap();
+    let force = s.gmap().require("force").unwrap();
+    assert_eq!(s.gmap().real(force, darts[0]), &[0.0, 0.0, 1.0]);
+    assert_eq!(s.gmap().real(force, darts[1]), &[0.0, 0.0, 0.0]);
+    let summed = s.vertex_vec3_sum("force").unwrap();
+    for r in 0..n {
+        assert_eq!(summed[r], [r as f64, 0.0, 1.0]);
     }
     let mut bad = v.clone();
     bad[2] = Value::Real(vec![f64::NAN, 0.0, 0.0]);

@@ -22,8 +22,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
 use topomech_gmap::{EmbeddingType, OrbitType, Value};
 use topomech_physics::{
-    Config, Criterion, Cut, Fracture, Integrator, MaterialRegion, ModelSpec, Simulation,
-    TimedEvent, TopologyChange, MODELS,
+    is_additive, Config, Criterion, Cut, Fracture, Integrator, MaterialRegion, ModelSpec,
+    Simulation, TimedEvent, TopologyChange, MODELS,
 };
 
 use crate::convert::{array_arg, rows3_arg, rows_to_array, shape_str, type_name};
@@ -733,7 +733,8 @@ impl PySimulation {
     }
 
     /// Writes a vertex embedding from one value per row: float64 (V,) for `f64`, float64
-    /// (V, 3) for `vec3`, bool (V,) for `bool` (every orbit of a row gets its row's value).
+    /// (V, 3) for `vec3`, bool (V,) for `bool` (every orbit of a row gets its row's value; a
+    /// force, `f_*`, goes to the row's first orbit alone: it is the row's total).
     fn set_vertex_field(
         &mut self,
         py: Python<'_>,
@@ -954,12 +955,6 @@ impl PySimulation {
             self.inner.time()
         )
     }
-}
-
-/// Whether a vertex embedding is a per-orbit share of a row's quantity (mass, forces), summed
-/// over a row's orbits when read per row.
-fn is_additive(name: &str) -> bool {
-    matches!(name, "mass" | "force" | "df") || name.starts_with("f_") || name.starts_with("df_")
 }
 
 /// Rows as int64.
