@@ -1805,6 +1805,24 @@ impl Rows {
             ..Rows::default()
         };
         rows.index(n);
+        // the orbits of one particle must start at one place: they share its position
+        let pos = g.require("position").map_err(err)?;
+        let apart: Vec<usize> = rows
+            .welded
+            .iter()
+            .filter(|(_, darts)| {
+                darts
+                    .iter()
+                    .any(|&d| g.real(pos, d) != g.real(pos, darts[0]))
+            })
+            .map(|(r, _)| *r)
+            .collect();
+        if !apart.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "vertex orbits that share a 'particle' are one particle and must be at the same position: those of rows {} are not",
+                list_some(&apart, 20)
+            )));
+        }
         Ok(rows)
     }
 

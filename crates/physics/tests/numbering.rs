@@ -616,7 +616,8 @@ fn fracture_and_tearing_append_rows() {
     }
 }
 
-/// A `particle` numbering with a gap or a negative row is refused, naming the rows or darts.
+/// A `particle` numbering with a gap, a negative row, or one particle made of vertices apart
+/// is refused, naming the rows or darts.
 #[test]
 fn a_bad_numbering_is_refused_naming_it() {
     let mesh = cuboid([1, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
@@ -625,6 +626,10 @@ fn a_bad_numbering_is_refused_naming_it() {
     let g = numbered(&mesh, |p| if p == 2 { 8 } else { p });
     let e = Simulation::new(g, cfg()).unwrap_err().to_string();
     assert!(e.contains("gaps") && e.contains("rows 2 "), "{e}");
+    // points 0 and 1 as one particle, though they are apart
+    let g = numbered(&mesh, |p| p.max(1) - 1);
+    let e = Simulation::new(g, cfg()).unwrap_err().to_string();
+    assert!(e.contains("same position") && e.contains("rows 0 "), "{e}");
     let mut g = numbered(&mesh, |p| p);
     let d = g.orbit_representatives(OrbitType::vertex(3))[0];
     set_i64(&mut g, "particle", OrbitType::vertex(3), &[(d, -1)]);
