@@ -698,3 +698,75 @@ fn set_fixed_and_fields_write_whole_rows() {
         .to_string();
     assert!(e.contains("'fixed' is a bool"), "{e}");
 }
+
+/// A welded row through a cut: a small box stands on one corner at the middle of a larger
+/// box's top face (that point is one particle of both), and the plane x = 1 cuts the large box
+/// through that point. The point's orbit in the large box splits: the part with the old
+/// representative stays in the welded row (with the small box's orbit), the other part gets a
+/// new row; everything else as after any cut, and the welded orbits keep moving as one.
+#[test]
+fn a_cut_through_a_welded_vertex_keeps_the_particle() {
+    let big = cuboid([2, 2, 2], [2.0, 2.0, 2.0], BoxElement::Tetra);
+    let small = cuboid([1, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let corner = [1.0, 2.0, 1.0];
+    let nb = big.points.len();
+    let mut mesh = big.clone();
+    mesh.points.extend(
+        small
+            .points
+            .iter()
+            .map(|p| [p[0] + corner[0], p[1] + corner[1], p[2] + corner[2]]),
+    );
+    mesh.kinds.extend(small.kinds.iter().copied());
+    mesh.cells.extend(
+        small
+            .cells
+            .iter()
+            .map(|c| c.iter().map(|v| v + nb).collect::<Vec<_>>()),
+    );
+    let shared = big.points.iter().position(|p| *p == corner).unwrap();
+    let own = small.points.iter().position(|p| *p == [0.0; 3]).unwrap() + nb;
+    let g = numbered(&mesh, |p| match p {
+        p if p == own => shared,
+        p if p > own => p - 1,
+        p => p,
+    });
+    let mut s = Simulation::new(
+        g,
+        config(
+            vec![model("stretch_cumulated", &[("stiffness", 1e4)])],
+            |c| c.gravity = [0.0; 3],
+        ),
+    )
+    .unwrap();
+    assert_eq!(s.n_vertices(), mesh.points.len() - 1);
+    assert_eq!(s.welded_rows().len(), 1);
+    assert_eq!(s.welded_rows()[0].0, shared);
+    let v: Vec<V3> = s
+        .vertex_vec3("rest")
+        .unwrap()
+        .iter()
+        .map(|p| [0.1 * p[1], -0.2 * p[0], 0.3 * p[2]])
+        .collect();
+    s.set_vertex_vec3("velocity", &v).unwrap();
+    s.step().unwrap();
+    let b = before(&s);
+    let r = s
+        .cut(&Cut::Plane {
+            normal: [1.0, 0.0, 0.0],
+            offset: 1.0,
+        })
+        .unwrap();
+    check_appended(&b, &r, &s, &mesh);
+    let ids = s.point_ids().unwrap();
+    assert!(r.added_rows.iter().any(|&k| ids[k] == shared as i64));
+    let welded = s.welded_rows().to_vec();
+    assert_eq!(welded.len(), 1);
+    assert_eq!(welded[0].0, shared);
+    assert_eq!(welded[0].1.len(), 2);
+    for _ in 0..20 {
+        s.step().unwrap();
+        let g = s.gmap();
+        assert_eq!(pos(g, welded[0].1[0]), pos(g, welded[0].1[1]));
+    }
+}
