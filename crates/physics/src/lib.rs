@@ -227,7 +227,7 @@ pub enum PhysicsError {
     Diverged {
         /// The step that failed.
         step: u64,
-        /// The vertex (index in vertex order).
+        /// The vertex (its row: index in the per-vertex arrays).
         vertex: usize,
         /// What happened.
         why: String,
@@ -773,7 +773,7 @@ impl Simulation {
             norm3([hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]).max(f64::MIN_POSITIVE)
         };
         let cfg_events = cfg.events.len();
-        let sim = Simulation {
+        let mut sim = Simulation {
             g,
             rules,
             cfg,
@@ -788,7 +788,6 @@ impl Simulation {
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
         };
-        let mut sim = sim;
         // a welded row is one particle: held when any of its orbits is
         if !sim.rows.welded.is_empty() {
             let fixed = sim.row_any("fixed")?;
