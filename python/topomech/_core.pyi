@@ -73,7 +73,7 @@ class DivergenceError(SimulationError):
 
     #: The step that failed (1-based).
     step: int
-    #: The vertex (index in vertex order) where it was found.
+    #: The vertex (its row in the per-vertex arrays) where it was found.
     vertex: int
     #: What happened.
     why: str
