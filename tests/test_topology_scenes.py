@@ -332,10 +332,13 @@ def test_cut_keeps_the_mass_and_splits_vertices() -> None:
     sim.step(3)
     m0, v0, x0 = sim.total_mass(), sim.n_vertices, sim.positions()
     version = sim.topology_version
-    n = sim.cut([1.0, 0.0, 0.0], 1.0)
-    assert n == 8  # a 2 x 2 square of the box's grid, two triangles each
+    r = sim.cut([1.0, 0.0, 0.0], 1.0)
+    assert r.unsewn == 8  # a 2 x 2 square of the box's grid, two triangles each
     assert sim.total_mass() == pytest.approx(m0, rel=1e-12)
     assert sim.n_vertices == v0 + 9  # the 3 x 3 vertices of the cut plane
+    # appended, never renumbered: the old rows are where they were
+    np.testing.assert_array_equal(r.added_rows, np.arange(v0, v0 + 9))
+    np.testing.assert_array_equal(sim.positions()[:v0], x0)
     assert sim.topology_version != version
     # every vertex, old or split, is where a vertex was
     old = {tuple(p) for p in x0}
@@ -350,7 +353,9 @@ def test_cut_keeps_the_mass_and_splits_vertices() -> None:
 def test_a_cut_that_misses_changes_nothing() -> None:
     sim = box_sim()
     version = sim.topology_version
-    assert sim.cut(np.array([0.0, 1.0, 0.0]), 10.0) == 0
+    r = sim.cut(np.array([0.0, 1.0, 0.0]), 10.0)
+    assert r.unsewn == 0
+    assert r.added_rows.shape == (0,)
     assert sim.topology_changes() == []
     assert sim.topology_version == version
 
@@ -360,8 +365,8 @@ def test_fracture_now() -> None:
     x = sim.rest_positions()
     x[:, 0] *= np.where(x[:, 0] > 1.0, 1.5, 1.0)  # stretch the right half
     sim.set_positions(x)
-    assert sim.fracture("strain", 10.0) == 0
-    n = sim.fracture("strain", 0.2)
+    assert sim.fracture("strain", 10.0).unsewn == 0
+    n = sim.fracture("strain", 0.2).unsewn
     assert n > 0
     assert sim.topology_changes()[-1]["kind"] == "fracture"
     with pytest.raises(ValueError, match="unknown criterion 'heat'"):
@@ -374,7 +379,7 @@ def test_fracture_now() -> None:
     built = box_sim(
         models=["stretch_cumulated"], fracture={"criterion": "stress", "threshold": 1e9}
     )
-    assert built.fracture("stress", 1e9) == 0
+    assert built.fracture("stress", 1e9).unsewn == 0
 
 
 def test_timed_events_in_the_config() -> None:

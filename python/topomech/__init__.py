@@ -37,7 +37,13 @@ from topomech.io import read_gmap, read_mesh, write_vtu
 from topomech.rules import ApplyReport, RuleInfo, RuleSet
 from topomech.run import run_scene
 from topomech.scene import Scene, load_scene, shipped_scenes
-from topomech.simulation import ModelInfo, Simulation, TopologyChange, available_models
+from topomech.simulation import (
+    ModelInfo,
+    Simulation,
+    TopologyChange,
+    TopologyResult,
+    available_models,
+)
 
 __all__ = [
     "ApplyError",
@@ -61,6 +67,7 @@ __all__ = [
     "SimulationError",
     "TopologyChange",
     "TopologyError",
+    "TopologyResult",
     "TopomechError",
     "__version__",
     "available_models",

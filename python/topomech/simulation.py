@@ -2,8 +2,12 @@
 
 Every model is a rule file (see ``crates/physics/models``); a step applies the models' force
 rules, sums the forces on each vertex and integrates. The state is the map's embeddings;
-per-vertex arrays come out in vertex order (row k is the vertex labelled k by
-:meth:`GMap.vertex_labels`, the order of :meth:`GMap.positions`)::
+per-vertex arrays come out in row order: row k is the particle numbered k by the map's
+``particle`` embedding, the input point order for a map built from a mesh (unused points
+left out; :meth:`Simulation.point_ids` gives each row's input point). A map without that
+numbering (generators, old ``.tmg`` files) gets the vertex orbit order, that of
+:meth:`GMap.vertex_labels`. A topology change (cut, fracture, tearing) never renumbers rows:
+the vertices it splits off are appended (:class:`TopologyResult`)::
 
     >>> import topomech
     >>> g = topomech.GMap.from_mesh(
@@ -31,6 +35,7 @@ before that step.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypedDict, Union
 
 import numpy as np
@@ -49,6 +54,7 @@ __all__ = [
     "Simulation",
     "SimulationError",
     "TopologyChange",
+    "TopologyResult",
     "available_models",
 ]
 
@@ -81,6 +87,18 @@ class TopologyChange(TypedDict):
     kind: str
     #: Faces (3D) or edges (2D) unsewn.
     unsewn: int
+
+
+@dataclass(frozen=True)
+class TopologyResult:
+    """What a topology change did (:meth:`Simulation.cut`, :meth:`Simulation.fracture`)."""
+
+    #: Faces (3D) or edges (2D) unsewn (0: nothing changed).
+    unsewn: int
+    #: The rows appended for the vertices the change split off, int64 ``(k,)``, increasing;
+    #: each new row's :meth:`Simulation.point_ids` entry is the input point it was split from.
+    #: Existing rows never change meaning.
+    added_rows: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 def available_models() -> list[ModelInfo]:
@@ -131,8 +149,13 @@ class Simulation:
       tearing).
 
     After a topology change the vertices on the opened faces or edges are split (their
-    copies keep the position and velocity), so :attr:`n_vertices` grows; the total mass
-    stays the same.
+    copies keep the position and velocity and get new rows at the end), so
+    :attr:`n_vertices` grows; existing rows keep their meaning and the total mass stays the
+    same.
+
+    Rows are particles: a pinched input vertex kept as one particle (its cells touch only at
+    it, built with ``pinched="merge"``) is one row made of several vertex orbits of the map;
+    they move together, and its mass and force are the sums over them.
 
     The kernel object is :attr:`core`.
     """
@@ -174,18 +197,24 @@ class Simulation:
 
     # ------------------------------------------------------------------ topology
 
-    def cut(self, normal: Any, offset: float) -> int:
-        """Cuts now along the plane ``normal . x = offset``: every face (3D) or edge (2D)
-        between two elements whose centroids lie on opposite sides is unsewn and the vertices
-        on it split. Returns how many faces or edges were unsewn (0 when the plane misses the
-        object; nothing changes then)."""
-        return self._core.cut(np.ascontiguousarray(normal, dtype=np.float64), offset)
+    def cut(self, normal: Any, offset: float) -> TopologyResult:
+        """Cuts now along the plane ``normal . x = offset`` (``normal``: 3 numbers, not all
+        zero; ``offset`` in the positions' unit): every face (3D) or edge (2D) between two
+        elements whose centroids lie on opposite sides is unsewn and the vertices on it split.
+        Returns a :class:`TopologyResult`: how many faces or edges were unsewn (0 when the
+        plane misses the object; nothing changes then) and the rows appended for the split
+        vertices. Raises :class:`TypeError` / :class:`ValueError` for a bad argument."""
+        unsewn, added = self._core.cut(np.ascontiguousarray(normal, dtype=np.float64), offset)
+        return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 
-    def fracture(self, criterion: str, threshold: float) -> int:
+    def fracture(self, criterion: str, threshold: float) -> TopologyResult:
         """Opens now every face (3D) or edge (2D) where ``criterion`` (``"stress"`` or
-        ``"strain"``, see the ``fracture`` setting) exceeds ``threshold``; returns how many.
-        The stress criterion needs the simulation built with a stress ``fracture``."""
-        return self._core.fracture(criterion, threshold)
+        ``"strain"``, see the ``fracture`` setting) exceeds ``threshold``; returns a
+        :class:`TopologyResult` (how many were opened, the rows appended). The stress
+        criterion needs the simulation built with a stress ``fracture``
+        (:class:`SimulationError` otherwise)."""
+        unsewn, added = self._core.fracture(criterion, threshold)
+        return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 
     def topology_changes(self) -> list[TopologyChange]:
         """The topology changes so far, in order."""
@@ -225,7 +254,7 @@ class Simulation:
     def forces(self) -> npt.NDArray[np.float64]:
         """The models' forces plus the external loads (:meth:`external_forces`) on each
         vertex at the current state ``(V, 3)``, computed now (without gravity and viscous
-        damping)."""
+        damping; summed over the orbits of a row)."""
         return self._core.forces()
 
     def set_external_forces(self, forces: Any) -> None:
@@ -242,24 +271,51 @@ class Simulation:
         return self._core.external_forces()
 
     def masses(self) -> npt.NDArray[np.float64]:
-        """Lumped vertex masses ``(V,)``."""
+        """Lumped vertex masses ``(V,)`` (summed over the orbits of a row)."""
         return self._core.masses()
 
     def fixed(self) -> npt.NDArray[np.bool_]:
         """Whether each vertex is held (fixed or at a prescribed displacement) ``(V,)``."""
         return self._core.fixed()
 
+    def point_ids(self) -> npt.NDArray[np.int64]:
+        """The input point index of each row, int64 ``(V,)`` (-1 for none). A row appended by
+        a topology change has the point it was split from."""
+        return self._core.point_ids()
+
+    def elements(self) -> tuple[npt.NDArray[np.int64], list[npt.NDArray[np.int64]]]:
+        """Every element (volume in 3D, face in 2D), in the map's order: the index of the
+        input cell each was built from, int64 ``(E,)`` (-1 when unknown), and each element's
+        vertex rows, int64 arrays (VTK order for volumes, oriented so that the rest volume is
+        positive; the face's cycle in 2D)."""
+        ids, rows = self._core.elements()
+        return ids, list(rows)
+
+    def set_fixed(self, mask: Any) -> None:
+        """Holds the rows where ``mask`` (bool ``(V,)``) is true in place, frees the others.
+        Raises :class:`ValueError` for a wrong shape and :class:`SimulationError` when it
+        would free a vertex without mass (naming them)."""
+        a = np.asarray(mask)
+        if a.dtype != np.bool_:
+            raise TypeError(f"mask must be an array of bool, got dtype {a.dtype}")
+        self._core.set_fixed(np.ascontiguousarray(a))
+
+    def set_vertex_field(self, name: str, values: Any) -> None:
+        """Writes the vertex embedding ``name`` from one value per row: ``(V,)`` numbers for an
+        ``f64`` embedding, ``(V, 3)`` for a ``vec3`` one, ``(V,)`` bools for a ``bool`` one
+        (every orbit of a row gets the row's value; a force embedding, ``f_*``, is the row's
+        total and goes to its first orbit alone). An embedding the rules declare but the map
+        does not hold yet is added. Raises :class:`SimulationError` for an unknown, derived or
+        non-vertex embedding, a type mismatch or non-finite values (naming the rows), and
+        :class:`ValueError` for a wrong shape."""
+        a = np.asarray(values)
+        if a.dtype != np.bool_:
+            a = a.astype(np.float64)
+        self._core.set_vertex_field(name, np.ascontiguousarray(a))
+
     def set_positions(self, positions: Any) -> None:
         """Sets the positions from an array-like ``(V, 3)`` of finite numbers."""
         self._core.set_positions(np.ascontiguousarray(positions, dtype=np.float64))
-
-    def set_fixed(self, mask: Any) -> None:
-        """Holds the vertices where ``mask`` (bool array-like ``(V,)``) is true, where they
-        are now, and frees the others. Raises :class:`ValueError` for a wrong length."""
-        m = np.asarray(mask)
-        if m.dtype != np.bool_:
-            raise ValueError(f"mask must be a bool array of shape (V,), got dtype {m.dtype}")
-        self._core.set_fixed([bool(b) for b in m.ravel().tolist()])
 
     def set_velocities(self, velocities: Any) -> None:
         """Sets the velocities from an array-like ``(V, 3)`` of finite numbers."""
@@ -267,7 +323,8 @@ class Simulation:
 
     def embedding(self, name: str) -> npt.NDArray[Any]:
         """The values of a vertex embedding, one row per vertex (``(V,)`` for scalars,
-        ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices). An embedding on another orbit
+        ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices; masses and forces, ``mass``,
+        ``force``, ``f_*``, summed over the orbits of a row). An embedding on another orbit
         raises :class:`EmbeddingError`; ``gmap().embedding_names()`` lists them all."""
         return self._core.embedding(name)
 
@@ -299,7 +356,7 @@ class Simulation:
 
     @property
     def n_vertices(self) -> int:
-        """The number of vertices V."""
+        """The number of vertices V: the rows of every per-vertex array (particles)."""
         return self._core.n_vertices
 
     @property

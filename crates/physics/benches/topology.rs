@@ -53,7 +53,8 @@ fn main() {
                     normal: [1.0, 0.0, 0.0],
                     offset: 1.0,
                 })
-                .expect("cuts");
+                .expect("cuts")
+                .unsewn;
         }));
         after.push(seconds(|| black_box(s.step()).expect("steps")));
         // a burst: stretch a slab x in [0.5, 0.6] by 50% along y, then open what passes 20%
@@ -76,7 +77,8 @@ fn main() {
                     criterion: Criterion::Strain,
                     threshold: 0.2,
                 })
-                .expect("fractures");
+                .expect("fractures")
+                .unsewn;
         }));
     }
     let median = |v: &mut Vec<f64>| {

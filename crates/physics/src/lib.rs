@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::fmt::Write as _;
 
-use topomech_gmap::{ColumnMut, Dart, EmbeddingId, GMap, OrbitType, Value};
+use topomech_gmap::{ColumnMut, Dart, EmbeddingId, EmbeddingType, GMap, OrbitType, Policy, Value};
 use topomech_rules::{load_sources, ApplyError, Diagnostic, Params, RuleSet, Val};
 
 /// A physical model: its rule file and rules.
@@ -227,7 +227,7 @@ pub enum PhysicsError {
     Diverged {
         /// The step that failed.
         step: u64,
-        /// The vertex (index in vertex order).
+        /// The vertex (its row: index in the per-vertex arrays).
         vertex: usize,
         /// What happened.
         why: String,
@@ -465,10 +465,8 @@ pub struct Simulation {
     step_params: Params,
     time: f64,
     steps: u64,
-    /// vertex index of each dart, and the number of vertices
-    /// One dart per vertex (the smallest of its orbit), in vertex order; derived from the map
-    /// and rebuilt when its topology version changes.
-    vertex_darts: Vec<Dart>,
+    /// The vertex numbering (rows), kept in step with the map's topology version.
+    rows: Rows,
     vertex_darts_version: u64,
     /// The diagonal of the rest bounding box: no vertex moves that far in one step.
     size: f64,
@@ -823,7 +821,7 @@ impl Simulation {
             ("damping".to_string(), Val::F(cfg.damping)),
         ]
         .into();
-        let vertex_darts = g.orbit_representatives(OrbitType::vertex(dim));
+        let rows = Rows::init(&mut g)?;
         let vertex_darts_version = g.version();
         let size = {
             let pos = g
@@ -841,7 +839,7 @@ impl Simulation {
             norm3([hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]).max(f64::MIN_POSITIVE)
         };
         let cfg_events = cfg.events.len();
-        let sim = Simulation {
+        let mut sim = Simulation {
             g,
             rules,
             cfg,
@@ -849,15 +847,20 @@ impl Simulation {
             step_params,
             time: 0.0,
             steps: 0,
-            vertex_darts,
+            rows,
             vertex_darts_version,
             size,
             events_done: vec![false; cfg_events],
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
         };
+        // a welded row is one particle: held when any of its orbits is
+        if !sim.rows.welded.is_empty() {
+            let fixed = sim.row_any("fixed")?;
+            sim.set_vertex_bool("fixed", &fixed)?;
+        }
         // every free vertex needs a mass
-        let masses = sim.vertex_scalar("mass")?;
+        let masses = sim.vertex_scalar_sum("mass")?;
         let fixed = sim.vertex_bool("fixed")?;
         if let Some(v) = (0..masses.len()).find(|&v| {
             !fixed[v] && masses[v].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
@@ -897,7 +900,7 @@ impl Simulation {
             // every slot scanned in order first (dead slots included: they hold old, finite
             // values), the vertices searched one by one only to name the one that fails
             Ok(()) if self.columns_sane(pos, vel) => None,
-            Ok(()) => self.vertex_darts.iter().enumerate().find_map(|(v, d)| {
+            Ok(()) => self.rows.darts.iter().enumerate().find_map(|(v, d)| {
                 let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
                 if p.iter().chain(u).any(|x| !x.is_finite()) {
                     return Some((v, "non-finite position or velocity".to_string()));
@@ -960,7 +963,7 @@ impl Simulation {
             if !self.events_done[k] && self.cfg.events[k].time <= self.time + 1e-9 * self.cfg.dt {
                 self.events_done[k] = true;
                 let cut = self.cfg.events[k].cut.clone();
-                let n = self.apply_cut(&cut, Some(k))?;
+                let n = self.apply_cut(&cut, Some(k))?.unsewn;
                 if n == 0 {
                     return Err(PhysicsError::Config(format!(
                         "the cut {cut:?} at t = {} separates nothing: it misses the object",
@@ -976,8 +979,9 @@ impl Simulation {
     }
 
     /// Opens now every face (3D) or edge (2D) where the criterion passes the threshold; returns
-    /// how many.
-    pub fn fracture(&mut self, f: Fracture) -> Result<usize, PhysicsError> {
+    /// how many, and the rows appended for the vertices that split (existing rows keep their
+    /// meaning).
+    pub fn fracture(&mut self, f: Fracture) -> Result<TopologyResult, PhysicsError> {
         let none = Params::new();
         let measure = match f.criterion {
             Criterion::Stress => "element_stress",
@@ -997,6 +1001,7 @@ impl Simulation {
             "fracture_strain"
         };
         let n = self.rules.apply_everywhere(&mut self.g, rule, &p)?.matches;
+        let mut added_rows = Vec::new();
         if n > 0 {
             self.changes.push(TopologyChange {
                 step: self.steps,
@@ -1004,13 +1009,17 @@ impl Simulation {
                 kind: "fracture",
                 unsewn: n,
             });
-            self.after_topology_change();
+            added_rows = self.after_topology_change()?;
         }
-        Ok(n)
+        Ok(TopologyResult {
+            unsewn: n,
+            added_rows,
+        })
     }
 
-    /// Cuts now; returns the number of faces (3D) or edges (2D) unsewn.
-    pub fn cut(&mut self, cut: &Cut) -> Result<usize, PhysicsError> {
+    /// Cuts now; returns the number of faces (3D) or edges (2D) unsewn and the rows appended
+    /// for the vertices that split (existing rows keep their meaning).
+    pub fn cut(&mut self, cut: &Cut) -> Result<TopologyResult, PhysicsError> {
         if let Cut::Where(_) = cut {
             return Err(PhysicsError::Config(
                 "a predicate cut must be declared in the configuration's events".into(),
@@ -1019,7 +1028,11 @@ impl Simulation {
         self.apply_cut(cut, None)
     }
 
-    fn apply_cut(&mut self, cut: &Cut, event: Option<usize>) -> Result<usize, PhysicsError> {
+    fn apply_cut(
+        &mut self,
+        cut: &Cut,
+        event: Option<usize>,
+    ) -> Result<TopologyResult, PhysicsError> {
         let n = match cut {
             Cut::Plane { normal, offset } => {
                 let p: Params = [
@@ -1038,6 +1051,7 @@ impl Simulation {
                     .matches
             }
         };
+        let mut added_rows = Vec::new();
         if n > 0 {
             self.changes.push(TopologyChange {
                 step: self.steps,
@@ -1045,16 +1059,19 @@ impl Simulation {
                 kind: "cut",
                 unsewn: n,
             });
-            self.after_topology_change();
+            added_rows = self.after_topology_change()?;
         }
-        Ok(n)
+        Ok(TopologyResult {
+            unsewn: n,
+            added_rows,
+        })
     }
 
-    /// After a change: vertex numbering anew (derived embeddings are refreshed by the next
-    /// rule application).
-    fn after_topology_change(&mut self) {
+    /// After a change: derived embeddings refreshed, and the new vertex orbits numbered
+    /// (appended rows); returns the rows added.
+    fn after_topology_change(&mut self) -> Result<Vec<usize>, PhysicsError> {
         self.g.refresh_derived();
-        self.refresh_vertex_darts();
+        self.sync_rows()
     }
 
     /// Refuses events that a run ending at `end_time` would never reach.
@@ -1077,6 +1094,7 @@ impl Simulation {
 
     fn explicit(&mut self, rule: &str) -> Result<(), PhysicsError> {
         self.forces()?;
+        self.share_welded_forces()?;
         self.rules
             .apply_everywhere(&mut self.g, rule, &self.step_params)?;
         self.contact()
@@ -1096,7 +1114,43 @@ impl Simulation {
         Ok(())
     }
 
-    /// `(df/dx) dx + (df/dv) dv` for vertex vectors in vertex order.
+    /// Gives every orbit of a welded row the share of the row's total force in proportion to
+    /// its mass, so that each orbit's acceleration `force / mass` (and with it gravity and
+    /// viscous damping, which act per unit mass on the shared velocity) is the row's
+    /// `F_total / M_total`: the orbits move as one particle. Nothing to do (no allocation, no
+    /// orbit walk) for maps without welded rows.
+    fn share_welded_forces(&mut self) -> Result<(), PhysicsError> {
+        if self.rows.welded.is_empty() {
+            return Ok(());
+        }
+        let force = self.id("force")?;
+        let mass = self.id("mass")?;
+        let err = |e: topomech_gmap::EmbeddingError| PhysicsError::Config(e.to_string());
+        for (_, darts) in &self.rows.welded {
+            let mut f = [0.0; 3];
+            let mut m = 0.0;
+            for &d in darts {
+                let x = self.g.real(force, d);
+                for a in 0..3 {
+                    f[a] += x[a];
+                }
+                m += self.g.real(mass, d)[0];
+            }
+            if m.is_nan() || m <= 0.0 {
+                continue;
+            }
+            for &d in darts {
+                let share = self.g.real(mass, d)[0] / m;
+                self.g
+                    .set_real(force, d, &[f[0] * share, f[1] * share, f[2] * share])
+                    .map_err(err)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// `(df/dx) dx + (df/dv) dv` for vertex vectors in row order (a welded row's result is the
+    /// sum over its orbits).
     pub fn jvp(&mut self, dx: &[[f64; 3]], dv: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, PhysicsError> {
         self.set_vertex_vec3("dx", dx)?;
         self.set_vertex_vec3("dv", dv)?;
@@ -1108,14 +1162,14 @@ impl Simulation {
         }
         self.rules
             .apply_everywhere(&mut self.g, "accumulate_jvp", &none)?;
-        self.vertex_vec3("df")
+        self.vertex_vec3_sum("df")
     }
 
     /// The total force on each vertex: the models' forces, gravity and viscous damping.
     fn total_force(&mut self) -> Result<VertexForces, PhysicsError> {
         self.forces()?;
-        let f = self.vertex_vec3("force")?;
-        let m = self.vertex_scalar("mass")?;
+        let f = self.vertex_vec3_sum("force")?;
+        let m = self.vertex_scalar_sum("mass")?;
         let v = self.vertex_vec3("velocity")?;
         let fixed = self.vertex_bool("fixed")?;
         let g = self.cfg.gravity;
@@ -1180,11 +1234,11 @@ impl Simulation {
     /// and external loads, or the first residual when prescribed displacements drive it) or
     /// after 30 solves.
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
-        let v0 = vec![[0.0; 3]; self.vertex_darts().len()];
+        let v0 = vec![[0.0; 3]; self.rows.darts.len()];
         self.set_vertex_vec3("velocity", &v0)?;
         let load: f64 = {
-            let m = self.vertex_scalar("mass")?;
-            let external: f64 = self.vertex_vec3("f_ext")?.into_iter().map(norm3).sum();
+            let m = self.vertex_scalar_sum("mass")?;
+            let external: f64 = self.vertex_vec3_sum("f_ext")?.into_iter().map(norm3).sum();
             m.iter().sum::<f64>() * norm3(self.cfg.gravity) + external
         };
         let mut scale = load;
@@ -1321,19 +1375,104 @@ impl Simulation {
         self.steps
     }
 
-    fn refresh_vertex_darts(&mut self) {
-        if self.vertex_darts_version != self.g.version() {
-            self.vertex_darts = self
-                .g
-                .orbit_representatives(OrbitType::vertex(self.g.dimension()));
-            self.vertex_darts_version = self.g.version();
+    /// Brings the numbering in step with the map after a topology change: an orbit that holds
+    /// a dart that represented an orbit before keeps that orbit's row; every other (new)
+    /// vertex orbit gets a new row, appended in increasing order of its smallest dart, with
+    /// its `particle` set to it (its `point_id`, copied by the split, stays the point it was
+    /// split from). Returns the rows added.
+    fn sync_rows(&mut self) -> Result<Vec<usize>, PhysicsError> {
+        if self.vertex_darts_version == self.g.version() {
+            return Ok(Vec::new());
         }
+        let added = self.rows.renumber(&mut self.g)?;
+        self.vertex_darts_version = self.g.version();
+        Ok(added)
     }
 
-    /// One dart per vertex, in vertex order: the smallest dart of each vertex orbit, in
-    /// increasing order (the numbering of [`GMap::orbit_labels`]).
+    /// One dart per row (vertex), in row order: the smallest dart of the row's first vertex
+    /// orbit. Rows follow the map's `particle` embedding (the input point order for a map
+    /// built from a mesh); a welded row (several vertex orbits sharing one `particle`: a
+    /// pinched input vertex kept as one particle) is represented by its first orbit.
     pub fn vertex_darts(&self) -> Vec<Dart> {
-        self.vertex_darts.clone()
+        self.rows.darts.clone()
+    }
+
+    /// The number of rows (particles, V).
+    pub fn n_vertices(&self) -> usize {
+        self.rows.darts.len()
+    }
+
+    /// Every vertex orbit (its smallest dart, in increasing order) with its row.
+    pub fn vertex_orbits(&self) -> (&[Dart], &[usize]) {
+        (&self.rows.orbits, &self.rows.row_of)
+    }
+
+    /// The rows made of several vertex orbits, each with the smallest dart of every orbit.
+    pub fn welded_rows(&self) -> &[(usize, Vec<Dart>)] {
+        &self.rows.welded
+    }
+
+    /// The input point index (`point_id`) of each row, in row order.
+    pub fn point_ids(&self) -> Result<Vec<i64>, PhysicsError> {
+        let id = self.id("point_id")?;
+        self.rows
+            .darts
+            .iter()
+            .map(|&d| match self.g.value(id, d) {
+                Ok(Value::Int(x)) => Ok(x),
+                Ok(v) => Err(PhysicsError::Config(format!(
+                    "'point_id' is not an i64: {v:?}"
+                ))),
+                Err(e) => Err(PhysicsError::Config(e.to_string())),
+            })
+            .collect()
+    }
+
+    /// Every element (volume in 3D, face in 2D), in increasing order of its smallest dart:
+    /// its `cell_id` (the index of the input cell, -1 when the map has no `cell_id`), its
+    /// kind and its vertex rows in the order of [`topomech_gmap::mesh::extract`] (VTK order
+    /// for volumes, oriented so that the rest volume is positive; the face's cycle in 2D).
+    pub fn elements(&self) -> Result<Vec<Element>, PhysicsError> {
+        let err = |e: topomech_gmap::mesh::MeshError| PhysicsError::Config(e.to_string());
+        let mesh = topomech_gmap::mesh::extract(&self.g).map_err(err)?;
+        let dim = self.g.dimension();
+        let elem = if dim == 3 {
+            OrbitType::volume()
+        } else {
+            OrbitType::face(2)
+        };
+        let reps = self.g.orbit_representatives(elem);
+        let cell_id = self.g.embedding_id("cell_id").filter(|&id| {
+            let e = self.g.embedding(id);
+            e.orbit() == elem && e.ty() == EmbeddingType::I64
+        });
+        let rest = self.rest_points()?;
+        let mut out = Vec::with_capacity(reps.len());
+        for ((d, kind), verts) in reps.iter().zip(&mesh.kinds).zip(&mesh.cells) {
+            // extract numbers points by vertex orbit (in the order of orbits)
+            let mut verts: Vec<usize> = verts.iter().map(|&o| self.rows.row_of[o]).collect();
+            if dim == 3 && topomech_gmap::mesh::signed_volume(*kind, &verts, &rest) < 0.0 {
+                verts = topomech_gmap::mesh::reversed(*kind, &verts);
+            }
+            let cell = match cell_id {
+                Some(id) => match self.g.value(id, *d) {
+                    Ok(Value::Int(x)) => x,
+                    _ => -1,
+                },
+                None => -1,
+            };
+            out.push(Element {
+                cell_id: cell,
+                kind: *kind,
+                rows: verts,
+            });
+        }
+        Ok(out)
+    }
+
+    /// The rest position of each row.
+    fn rest_points(&self) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        self.vertex_vec3("rest")
     }
 
     fn id(&self, name: &str) -> Result<EmbeddingId, PhysicsError> {
@@ -1342,25 +1481,48 @@ impl Simulation {
             .map_err(|e| PhysicsError::Config(e.to_string()))
     }
 
-    /// A vec3 vertex embedding (`position`, `velocity`, `rest`, `force`) in vertex order.
+    /// A vec3 vertex embedding (`position`, `velocity`, `rest`) in row order: the value of the
+    /// row's first orbit (the orbits of a welded row share positions and velocities).
     pub fn vertex_vec3(&self, name: &str) -> Result<Vec<[f64; 3]>, PhysicsError> {
         let id = self.id(name)?;
         Ok(self
-            .vertex_darts()
-            .into_iter()
-            .map(|d| {
+            .rows
+            .darts
+            .iter()
+            .map(|&d| {
                 let x = self.g.real(id, d);
                 [x[0], x[1], x[2]]
             })
             .collect())
     }
 
-    /// A f64 vertex embedding (`mass`) in vertex order.
+    /// A vec3 vertex embedding summed over the orbits of each row (`force`, `df`), in row
+    /// order; the same as [`Simulation::vertex_vec3`] for rows of one orbit.
+    pub fn vertex_vec3_sum(&self, name: &str) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        let mut out = self.vertex_vec3(name)?;
+        if !self.rows.welded.is_empty() {
+            let id = self.id(name)?;
+            for (row, darts) in &self.rows.welded {
+                let mut f = [0.0; 3];
+                for &d in darts {
+                    let x = self.g.real(id, d);
+                    for a in 0..3 {
+                        f[a] += x[a];
+                    }
+                }
+                out[*row] = f;
+            }
+        }
+        Ok(out)
+    }
+
+    /// A f64 vertex embedding in row order (the value of the row's first orbit).
     pub fn vertex_scalar(&self, name: &str) -> Result<Vec<f64>, PhysicsError> {
         let id = self.id(name)?;
-        self.vertex_darts()
-            .into_iter()
-            .map(|d| match self.g.value(id, d) {
+        self.rows
+            .darts
+            .iter()
+            .map(|&d| match self.g.value(id, d) {
                 Ok(Value::Real(x)) => Ok(x[0]),
                 Ok(v) => Err(PhysicsError::Config(format!(
                     "'{name}' is not a real: {v:?}"
@@ -1370,12 +1532,25 @@ impl Simulation {
             .collect()
     }
 
-    /// A bool vertex embedding (`fixed`) in vertex order.
+    /// A f64 vertex embedding summed over the orbits of each row (`mass`), in row order.
+    pub fn vertex_scalar_sum(&self, name: &str) -> Result<Vec<f64>, PhysicsError> {
+        let mut out = self.vertex_scalar(name)?;
+        if !self.rows.welded.is_empty() {
+            let id = self.id(name)?;
+            for (row, darts) in &self.rows.welded {
+                out[*row] = darts.iter().map(|&d| self.g.real(id, d)[0]).sum();
+            }
+        }
+        Ok(out)
+    }
+
+    /// A bool vertex embedding (`fixed`) in row order (the value of the row's first orbit).
     pub fn vertex_bool(&self, name: &str) -> Result<Vec<bool>, PhysicsError> {
         let id = self.id(name)?;
-        self.vertex_darts()
-            .into_iter()
-            .map(|d| match self.g.value(id, d) {
+        self.rows
+            .darts
+            .iter()
+            .map(|&d| match self.g.value(id, d) {
                 Ok(Value::Bool(b)) => Ok(b),
                 Ok(v) => Err(PhysicsError::Config(format!(
                     "'{name}' is not a bool: {v:?}"
@@ -1385,89 +1560,188 @@ impl Simulation {
             .collect()
     }
 
-    /// Sets a vec3 vertex embedding from values in vertex order.
+    /// A bool vertex embedding, true for a row when it is true on any of its orbits.
+    fn row_any(&self, name: &str) -> Result<Vec<bool>, PhysicsError> {
+        let id = self.id(name)?;
+        let mut out = vec![false; self.rows.darts.len()];
+        for (&d, &r) in self.rows.orbits.iter().zip(&self.rows.row_of) {
+            if let Ok(Value::Bool(true)) = self.g.value(id, d) {
+                out[r] = true;
+            }
+        }
+        Ok(out)
+    }
+
+    fn check_rows<T>(&self, values: &[T]) -> Result<(), PhysicsError> {
+        let n = self.rows.darts.len();
+        if values.len() != n {
+            return Err(PhysicsError::Config(format!(
+                "{} values given for {n} vertices",
+                values.len()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Sets a vec3 vertex embedding from values in row order (every orbit of a row).
     pub fn set_vertex_vec3(&mut self, name: &str, values: &[[f64; 3]]) -> Result<(), PhysicsError> {
-        self.refresh_vertex_darts();
+        self.sync_rows()?;
         let id = self.id(name)?;
-        let darts = self.vertex_darts();
-        if values.len() != darts.len() {
-            return Err(PhysicsError::Config(format!(
-                "{} values given for {} vertices",
-                values.len(),
-                darts.len()
-            )));
-        }
-        for (d, v) in darts.into_iter().zip(values) {
+        self.check_rows(values)?;
+        for (&d, &r) in self.rows.orbits.iter().zip(&self.rows.row_of) {
             self.g
-                .set_real(id, d, v)
+                .set_real(id, d, &values[r])
                 .map_err(|e| PhysicsError::Config(e.to_string()))?;
         }
         Ok(())
     }
 
-    /// Sets the external loads `f_ext` (N, one row per vertex, in vertex order): constant
-    /// forces the accumulation adds into `force` every step and the static solve balances.
-    /// Each row's load is written on one vertex orbit (its representative dart's), the other
-    /// orbits of the row, if any, get zero, so that the row's total is the value given.
-    /// Errors: a wrong row count, a non-finite value (naming the row).
-    pub fn set_external_forces(&mut self, forces: &[[f64; 3]]) -> Result<(), PhysicsError> {
-        self.refresh_vertex_darts();
-        let darts = self.vertex_darts();
-        if forces.len() != darts.len() {
-            return Err(PhysicsError::Config(format!(
-                "external forces: {} rows given for {} vertices",
-                forces.len(),
-                darts.len()
-            )));
-        }
-        if let Some(k) = forces.iter().position(|f| f.iter().any(|x| !x.is_finite())) {
-            return Err(PhysicsError::Config(format!(
-                "external forces must be finite: row {k} is {:?}",
-                forces[k]
-            )));
-        }
-        let id = self.id("f_ext")?;
-        let err = |e: topomech_gmap::EmbeddingError| PhysicsError::Config(e.to_string());
-        self.g.reset_values(id).map_err(err)?;
-        for (d, f) in darts.into_iter().zip(forces) {
-            self.g.set_real(id, d, f).map_err(err)?;
-        }
-        Ok(())
-    }
-
-    /// The external loads `f_ext` (N) in vertex order.
-    pub fn external_forces(&self) -> Result<Vec<[f64; 3]>, PhysicsError> {
-        self.vertex_vec3("f_ext")
-    }
-
-    /// Sets the bool vertex embedding `name` (e.g. `fixed`) from values in vertex order.
+    /// Sets a bool vertex embedding from values in row order (every orbit of a row).
     pub fn set_vertex_bool(&mut self, name: &str, values: &[bool]) -> Result<(), PhysicsError> {
-        self.refresh_vertex_darts();
+        self.sync_rows()?;
         let id = self.id(name)?;
-        let darts = self.vertex_darts();
-        if values.len() != darts.len() {
-            return Err(PhysicsError::Config(format!(
-                "{} values given for {} vertices",
-                values.len(),
-                darts.len()
-            )));
-        }
-        for (d, b) in darts.into_iter().zip(values) {
+        self.check_rows(values)?;
+        for (&d, &r) in self.rows.orbits.iter().zip(&self.rows.row_of) {
             self.g
-                .set_value(id, d, &Value::Bool(*b))
+                .set_value(id, d, &Value::Bool(values[r]))
                 .map_err(|e| PhysicsError::Config(e.to_string()))?;
         }
         Ok(())
+    }
+
+    /// Holds the rows where `mask` is true in place (and frees the others). Refuses, naming
+    /// them, to free rows without mass (they could not move).
+    pub fn set_fixed(&mut self, mask: &[bool]) -> Result<(), PhysicsError> {
+        self.check_rows(mask)?;
+        let m = self.vertex_scalar_sum("mass")?;
+        let bad: Vec<usize> = (0..mask.len())
+            .filter(|&v| !mask[v] && m[v].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater))
+            .collect();
+        if !bad.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "cannot free vertices without mass (they must stay fixed): {}",
+                list_some(&bad, 20)
+            )));
+        }
+        self.set_vertex_bool("fixed", mask)
+    }
+
+    /// Writes a stored vertex embedding of type `f64`, `vec3` or `bool` from one value per row
+    /// (every orbit of a row gets its row's value; but a force, see [`is_additive`], is the
+    /// row's total: its first orbit gets it and the others zero). An embedding that the rules declare but
+    /// the map does not hold yet is added first. Refuses another orbit or type, a derived
+    /// embedding, a wrong count, and non-finite values (naming every offending row, up to 20).
+    pub fn set_vertex_field(&mut self, name: &str, values: &[Value]) -> Result<(), PhysicsError> {
+        self.sync_rows()?;
+        if self.g.embedding_id(name).is_none()
+            && self.rules.embeddings().iter().any(|e| e.name == name)
+        {
+            self.rules.prepare_named(&mut self.g, &[name])?;
+        }
+        let vertex = OrbitType::vertex(self.g.dimension());
+        let Some(id) = self.g.embedding_id(name) else {
+            let names: Vec<&str> = self
+                .g
+                .embeddings()
+                .iter()
+                .filter(|e| e.orbit() == vertex && e.derived().is_none())
+                .map(topomech_gmap::Embedding::name)
+                .collect();
+            return Err(PhysicsError::Config(format!(
+                "no vertex embedding '{name}' (the map's stored vertex embeddings: {})",
+                names.join(", ")
+            )));
+        };
+        let e = self.g.embedding(id);
+        if e.orbit() != vertex {
+            return Err(PhysicsError::Config(format!(
+                "embedding '{name}' is on the orbit {}, not on the vertex orbit {vertex}",
+                e.orbit()
+            )));
+        }
+        if e.derived().is_some() {
+            return Err(PhysicsError::Config(format!(
+                "embedding '{name}' is derived (computed from another one): it cannot be written"
+            )));
+        }
+        let ty = e.ty();
+        if !matches!(
+            ty,
+            EmbeddingType::F64 | EmbeddingType::Vec3 | EmbeddingType::Bool
+        ) {
+            return Err(PhysicsError::Config(format!(
+                "embedding '{name}' has type {ty}: only f64, vec3 and bool vertex embeddings can be set per vertex"
+            )));
+        }
+        self.check_rows(values)?;
+        let mut bad_type = Vec::new();
+        let mut non_finite = Vec::new();
+        for (k, v) in values.iter().enumerate() {
+            match (ty, v) {
+                (EmbeddingType::Bool, Value::Bool(_)) => {}
+                (EmbeddingType::F64, Value::Real(x)) if x.len() == 1 => {}
+                (EmbeddingType::Vec3, Value::Real(x)) if x.len() == 3 => {}
+                _ => bad_type.push(k),
+            }
+            if let Value::Real(x) = v {
+                if x.iter().any(|x| !x.is_finite()) {
+                    non_finite.push(k);
+                }
+            }
+        }
+        if !bad_type.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "'{name}' is a {ty}: the values of vertices {} are not",
+                list_some(&bad_type, 20)
+            )));
+        }
+        if !non_finite.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "'{name}' must be finite: vertices {} are not",
+                list_some(&non_finite, 20)
+            )));
+        }
+        // a force is a row's total: on the row's first orbit, zero on the others (the
+        // accumulation sums them, the step shares the sum by mass)
+        let share = is_additive(name);
+        let zero = Value::Real(vec![0.0; ty.width()]);
+        for (&d, &r) in self.rows.orbits.iter().zip(&self.rows.row_of) {
+            let v = if share && self.rows.darts[r] != d {
+                &zero
+            } else {
+                &values[r]
+            };
+            self.g
+                .set_value(id, d, v)
+                .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Sets the external loads `f_ext` (N, one row per vertex, in row order): constant
+    /// forces the accumulation adds into `force` every step and the static solve balances.
+    /// Each row's load is written on one vertex orbit of the row (a welded row's other orbits
+    /// get zero), so that the row's total is the value given.
+    /// Errors: a wrong row count, a non-finite value (naming the rows).
+    pub fn set_external_forces(&mut self, forces: &[[f64; 3]]) -> Result<(), PhysicsError> {
+        let values: Vec<Value> = forces.iter().map(|f| Value::Real(f.to_vec())).collect();
+        self.set_vertex_field("f_ext", &values)
+    }
+
+    /// The external loads `f_ext` (N) in row order (a welded row's total).
+    pub fn external_forces(&self) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        self.vertex_vec3_sum("f_ext")
     }
 
     /// Total mass (sum of the vertex masses).
     pub fn total_mass(&self) -> Result<f64, PhysicsError> {
-        Ok(self.vertex_scalar("mass")?.iter().sum())
+        Ok(self.vertex_scalar_sum("mass")?.iter().sum())
     }
 
-    /// Kinetic energy, sum of m |v|^2 / 2.
+    /// Kinetic energy, sum over rows of m |v|^2 / 2 (a welded row counts once, with its
+    /// whole mass).
     pub fn kinetic_energy(&self) -> Result<f64, PhysicsError> {
-        let m = self.vertex_scalar("mass")?;
+        let m = self.vertex_scalar_sum("mass")?;
         let v = self.vertex_vec3("velocity")?;
         Ok(m.iter()
             .zip(&v)
@@ -1475,9 +1749,9 @@ impl Simulation {
             .sum())
     }
 
-    /// Linear momentum, sum of m v.
+    /// Linear momentum, sum over rows of m v.
     pub fn momentum(&self) -> Result<[f64; 3], PhysicsError> {
-        let m = self.vertex_scalar("mass")?;
+        let m = self.vertex_scalar_sum("mass")?;
         let v = self.vertex_vec3("velocity")?;
         let mut p = [0.0; 3];
         for (m, v) in m.iter().zip(&v) {
@@ -1486,6 +1760,234 @@ impl Simulation {
             }
         }
         Ok(p)
+    }
+}
+
+/// What a topology change did ([`Simulation::cut`], [`Simulation::fracture`]).
+#[derive(Clone, Debug, PartialEq, Eq, Default)]
+pub struct TopologyResult {
+    /// Faces (3D) or edges (2D) unsewn.
+    pub unsewn: usize,
+    /// The rows appended for the vertex orbits the change split off, in increasing order;
+    /// each has the `point_id` of the vertex it was split from. Existing rows keep their
+    /// meaning.
+    pub added_rows: Vec<usize>,
+}
+
+/// An element (volume in 3D, face in 2D) as [`Simulation::elements`] lists it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Element {
+    /// The index of the input cell it was built from (-1 when unknown).
+    pub cell_id: i64,
+    /// Its kind.
+    pub kind: topomech_gmap::mesh::CellKind,
+    /// Its vertices' rows.
+    pub rows: Vec<usize>,
+}
+
+/// Whether a vertex embedding holds a share of a row's quantity (masses and forces: `mass`,
+/// `force`, `df`, `f_*`, `df_*`): read per row it is summed over the row's orbits, and written
+/// per row it goes to the row's first orbit alone.
+pub fn is_additive(name: &str) -> bool {
+    matches!(name, "mass" | "force" | "df") || name.starts_with("f_") || name.starts_with("df_")
+}
+
+/// "1, 2, 3" for the first `limit` items, then "and N more".
+fn list_some(items: &[usize], limit: usize) -> String {
+    let mut s = items
+        .iter()
+        .take(limit)
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(", ");
+    if items.len() > limit {
+        let _ = write!(s, " and {} more", items.len() - limit);
+    }
+    s
+}
+
+/// The simulation's vertex numbering: rows (particles) from the map's `particle` embedding.
+#[derive(Debug, Clone, Default)]
+struct Rows {
+    /// One dart per row: the smallest dart of the row's first vertex orbit.
+    darts: Vec<Dart>,
+    /// One dart per vertex orbit (its smallest), in increasing order.
+    orbits: Vec<Dart>,
+    /// The row of each orbit of `orbits`.
+    row_of: Vec<usize>,
+    /// Rows of several orbits, with each orbit's smallest dart.
+    welded: Vec<(usize, Vec<Dart>)>,
+}
+
+impl Rows {
+    /// The numbering of a new simulation's map: from its `particle` embedding, created (with
+    /// `point_id`) from the vertex orbit order when the map has none.
+    fn init(g: &mut GMap) -> Result<Self, PhysicsError> {
+        let vertex = OrbitType::vertex(g.dimension());
+        let err = |e: topomech_gmap::EmbeddingError| PhysicsError::Config(e.to_string());
+        let orbits = g.orbit_representatives(vertex);
+        for name in ["particle", "point_id"] {
+            if let Some(id) = g.embedding_id(name) {
+                let e = g.embedding(id);
+                if e.orbit() != vertex || e.ty() != EmbeddingType::I64 {
+                    return Err(PhysicsError::Config(format!(
+                        "the map's '{name}' must be an i64 on the vertex orbit {vertex}, it is a {} on {}",
+                        e.ty(),
+                        e.orbit()
+                    )));
+                }
+            }
+        }
+        let particle = if let Some(id) = g.embedding_id("particle") {
+            id
+        } else {
+            let id = g
+                .add_embedding("particle", EmbeddingType::I64, vertex, Policy::Copy)
+                .map_err(err)?;
+            for (k, &d) in orbits.iter().enumerate() {
+                g.set_value(id, d, &Value::Int(k as i64)).map_err(err)?;
+            }
+            id
+        };
+        let mut row_of = Vec::with_capacity(orbits.len());
+        let mut negative = Vec::new();
+        for &d in &orbits {
+            match g.value(particle, d).map_err(err)? {
+                Value::Int(x) if x >= 0 => row_of.push(x as usize),
+                _ => {
+                    negative.push(d.index());
+                    row_of.push(0);
+                }
+            }
+        }
+        if !negative.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "the map's 'particle' is negative on the vertices of darts {}",
+                list_some(&negative, 20)
+            )));
+        }
+        let n = row_of.iter().max().map_or(0, |m| m + 1);
+        let mut used = vec![false; n];
+        for &r in &row_of {
+            used[r] = true;
+        }
+        let missing: Vec<usize> = (0..n).filter(|&r| !used[r]).collect();
+        if !missing.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "the map's 'particle' numbering has gaps: no vertex has rows {} (rows must be 0..{})",
+                list_some(&missing, 20),
+                n
+            )));
+        }
+        if g.embedding_id("point_id").is_none() {
+            let id = g
+                .add_embedding("point_id", EmbeddingType::I64, vertex, Policy::Copy)
+                .map_err(err)?;
+            for (&d, &r) in orbits.iter().zip(&row_of) {
+                g.set_value(id, d, &Value::Int(r as i64)).map_err(err)?;
+            }
+        }
+        let mut rows = Rows {
+            orbits,
+            row_of,
+            ..Rows::default()
+        };
+        rows.index(n);
+        // the orbits of one particle must start at one place: they share its position
+        let pos = g.require("position").map_err(err)?;
+        let apart: Vec<usize> = rows
+            .welded
+            .iter()
+            .filter(|(_, darts)| {
+                darts
+                    .iter()
+                    .any(|&d| g.real(pos, d) != g.real(pos, darts[0]))
+            })
+            .map(|(r, _)| *r)
+            .collect();
+        if !apart.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "vertex orbits that share a 'particle' are one particle and must be at the same position: those of rows {} are not",
+                list_some(&apart, 20)
+            )));
+        }
+        Ok(rows)
+    }
+
+    /// Rebuilds `darts` and `welded` from `orbits` and `row_of` (`n` rows).
+    fn index(&mut self, n: usize) {
+        let mut count = vec![0usize; n];
+        self.darts = vec![Dart(0); n];
+        for (&d, &r) in self.orbits.iter().zip(&self.row_of).rev() {
+            // reversed: the smallest orbit dart of the row is written last
+            self.darts[r] = d;
+            count[r] += 1;
+        }
+        self.welded.clear();
+        if count.iter().any(|&c| c > 1) {
+            let mut welded: Vec<(usize, Vec<Dart>)> = Vec::new();
+            let mut slot = vec![usize::MAX; n];
+            for (&d, &r) in self.orbits.iter().zip(&self.row_of) {
+                if count[r] > 1 {
+                    if slot[r] == usize::MAX {
+                        slot[r] = welded.len();
+                        welded.push((r, Vec::new()));
+                    }
+                    welded[slot[r]].1.push(d);
+                }
+            }
+            welded.sort_by_key(|w| w.0);
+            self.welded = welded;
+        }
+    }
+
+    /// The numbering after a topology change of `g` (see [`Simulation::sync_rows`]); returns
+    /// the rows added.
+    fn renumber(&mut self, g: &mut GMap) -> Result<Vec<usize>, PhysicsError> {
+        let vertex = OrbitType::vertex(g.dimension());
+        let (labels, n_orbits) = g.orbit_labels(vertex);
+        let orbits = g.orbit_representatives(vertex);
+        let mut row_of = vec![usize::MAX; n_orbits];
+        let n_rows = self.darts.len();
+        let mut kept = vec![false; n_rows];
+        for (&d, &r) in self.orbits.iter().zip(&self.row_of) {
+            if !g.is_alive(d) {
+                continue;
+            }
+            let l = labels[d.index()] as usize;
+            if row_of[l] != usize::MAX && row_of[l] != r {
+                return Err(PhysicsError::Config(format!(
+                    "a topology change merged the vertices of rows {} and {r}: only splits are supported",
+                    row_of[l]
+                )));
+            }
+            row_of[l] = r;
+            kept[r] = true;
+        }
+        let lost: Vec<usize> = (0..n_rows).filter(|&r| !kept[r]).collect();
+        if !lost.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "a topology change removed the vertices of rows {}: only splits are supported",
+                list_some(&lost, 20)
+            )));
+        }
+        let particle = g
+            .require("particle")
+            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        let mut added = Vec::new();
+        for (l, &d) in orbits.iter().enumerate() {
+            if row_of[l] == usize::MAX {
+                let r = n_rows + added.len();
+                row_of[l] = r;
+                added.push(r);
+                g.set_value(particle, d, &Value::Int(r as i64))
+                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            }
+        }
+        self.orbits = orbits;
+        self.row_of = row_of;
+        self.index(n_rows + added.len());
+        Ok(added)
     }
 }
 

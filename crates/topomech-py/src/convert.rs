@@ -46,7 +46,7 @@ pub(crate) fn type_name(obj: &Bound<'_, PyAny>) -> String {
 }
 
 /// A numpy array of element type `T`, or a `TypeError` naming the argument.
-fn array_arg<'py, T: numpy::Element>(
+pub(crate) fn array_arg<'py, T: numpy::Element>(
     obj: &Bound<'py, PyAny>,
     name: &str,
     dtype: &str,

@@ -103,7 +103,7 @@ pyo3::create_exception!(
     SimulationError,
     "A step that produced a non-finite position or velocity, or a linear system that is not\n\
      positive definite. The simulation keeps the state before the step; `step` is the step\n\
-     that failed (1-based), `vertex` the vertex (index in vertex order) and `why` what happened."
+     that failed (1-based), `vertex` the vertex (its row in the per-vertex arrays) and `why` what happened."
 );
 pyo3::create_exception!(
     topomech._core,

@@ -8,22 +8,25 @@
 //! that selects nothing, a model that matches nothing on the mesh) is a `SimulationError`, and
 //! a diverging step a `DivergenceError` naming the step and the vertex.
 //!
-//! Per-vertex arrays are in vertex order: row k is the vertex orbit labelled k by
-//! `GMap.vertex_labels`, the order of `GMap.positions` and of the points of `GMap.to_flat`.
+//! Per-vertex arrays are in row order: row k is the particle numbered k by the map's
+//! `particle` embedding (the input point order for a map built from a mesh; the vertex orbit
+//! order, as `GMap.vertex_labels` numbers it, for a map without one). A row may be made of
+//! several vertex orbits (a pinched input vertex kept as one particle): they share positions
+//! and velocities, and masses and forces are summed over them. Topology changes append rows.
 
 use std::collections::HashMap;
 
 use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
 use topomech_gmap::{EmbeddingType, OrbitType, Value};
 use topomech_physics::{
-    Config, Criterion, Cut, Fracture, Ground, Integrator, MaterialRegion, ModelSpec, Simulation,
-    TimedEvent, TopologyChange, MODELS,
+    is_additive, Config, Criterion, Cut, Fracture, Ground, Integrator, MaterialRegion, ModelSpec,
+    Simulation, TimedEvent, TopologyChange, MODELS,
 };
 
-use crate::convert::{rows3_arg, rows_to_array, type_name};
+use crate::convert::{array_arg, rows3_arg, rows_to_array, shape_str, type_name};
 use crate::errors::{guard, type_error, value_error, Error, InternalError, Result};
 use crate::gmap::PyGMap;
 
@@ -567,7 +570,7 @@ impl PySimulation {
         what: &str,
         values: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
-        let n = self.sim()?.vertex_darts().len();
+        let n = self.sim()?.n_vertices();
         let rows = guard(|| {
             let rows = rows3_arg(values, what, "V")?;
             if rows.len() != n {
@@ -654,19 +657,6 @@ impl PySimulation {
         guard(|| rows_to_array(py, &rows))
     }
 
-    /// Holds the vertices where `mask` (bool `(V,)`) is true, frees the others.
-    #[allow(clippy::needless_pass_by_value)] // pyo3 extracts a Python list into an owned Vec
-    fn set_fixed(&mut self, py: Python<'_>, mask: Vec<bool>) -> PyResult<()> {
-        let n = self.sim()?.vertex_darts().len();
-        if mask.len() != n {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "mask must have shape (V,) = ({n},), got ({},)",
-                mask.len()
-            )));
-        }
-        self.run(py, |sim| Ok(sim.set_vertex_bool("fixed", &mask)?))
-    }
-
     /// Runs `n` time steps. On divergence raises `DivergenceError` (with `step`, `vertex` and
     /// `why`); the state is then the one before the failed step. Ctrl-C stops between steps.
     #[pyo3(signature = (n = 1))]
@@ -683,31 +673,34 @@ impl PySimulation {
     /// Cuts now along the plane `normal . x = offset`: every face (3D) or edge (2D) between
     /// two elements whose centroids lie on opposite sides is unsewn, and the vertices on it
     /// split. Returns how many faces or edges were unsewn (0 when the plane misses the object:
-    /// nothing changes then).
-    fn cut(
+    /// nothing changes then) and the rows appended, int64 (k,) (existing rows keep their
+    /// meaning).
+    fn cut<'py>(
         &mut self,
-        py: Python<'_>,
+        py: Python<'py>,
         normal: &Bound<'_, PyAny>,
         offset: &Bound<'_, PyAny>,
-    ) -> PyResult<usize> {
+    ) -> PyResult<(usize, Bound<'py, PyArray1<i64>>)> {
         let cut = guard(|| {
             let normal = vec3_arg(normal, "normal")?;
             let offset = real_arg(offset, "offset")?;
             plane_cut(normal, offset, "normal")
         })?;
-        self.run(py, move |sim| Ok(sim.cut(&cut)?))
+        let r = self.run(py, move |sim| Ok(sim.cut(&cut)?))?;
+        Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
     }
 
     /// Opens now every face (3D) or edge (2D) where the criterion exceeds the threshold:
     /// `stress` (the mean largest principal stress of the two tetrahedra, Pa; 3D, and only
     /// when the simulation was built with a stress `fracture`) or `strain` (spring strain
-    /// l / l0 - 1). Returns how many faces or edges were opened.
-    fn fracture(
+    /// l / l0 - 1). Returns how many faces or edges were opened and the rows appended, int64
+    /// (k,).
+    fn fracture<'py>(
         &mut self,
-        py: Python<'_>,
+        py: Python<'py>,
         criterion: &Bound<'_, PyAny>,
         threshold: &Bound<'_, PyAny>,
-    ) -> PyResult<usize> {
+    ) -> PyResult<(usize, Bound<'py, PyArray1<i64>>)> {
         let f = guard(|| {
             let criterion = criterion_arg(&str_arg(criterion, "criterion")?, "criterion")?;
             let threshold = real_arg(threshold, "threshold")?;
@@ -716,7 +709,8 @@ impl PySimulation {
                 threshold,
             })
         })?;
-        self.run(py, move |sim| Ok(sim.fracture(f)?))
+        let r = self.run(py, move |sim| Ok(sim.fracture(f)?))?;
+        Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
     }
 
     /// The topology changes so far, in order: dicts `{"step": after which step, "time",
@@ -745,20 +739,95 @@ impl PySimulation {
     }
 
     /// The models' forces on each vertex at the current state (without gravity and viscous
-    /// damping), float64 (V, 3). Computes them now.
+    /// damping), float64 (V, 3), summed over a row's orbits. Computes them now.
     fn forces<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let rows = self.run(py, |s| {
             s.forces()?;
-            Ok(s.vertex_vec3("force")?)
+            Ok(s.vertex_vec3_sum("force")?)
         })?;
         guard(|| rows_to_array(py, &rows))
     }
 
-    /// Lumped vertex masses, float64 (V,).
+    /// Lumped vertex masses, float64 (V,), summed over a row's orbits.
     fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         Ok(self
-            .read(|s| Ok(s.vertex_scalar("mass")?))?
+            .read(|s| Ok(s.vertex_scalar_sum("mass")?))?
             .into_pyarray(py))
+    }
+
+    /// The input point index of each row, int64 (V,) (-1 for none).
+    fn point_ids<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        Ok(self.read(|s| Ok(s.point_ids()?))?.into_pyarray(py))
+    }
+
+    /// Every element (volume in 3D, face in 2D), in the order of its smallest dart: the
+    /// `cell_id`s, int64 (E,) (-1 when unknown), and each element's vertex rows, int64 arrays.
+    #[allow(clippy::type_complexity)]
+    fn elements<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyArray1<i64>>, Vec<Bound<'py, PyArray1<i64>>>)> {
+        let elements = self.read(|s| Ok(s.elements()?))?;
+        let ids: Vec<i64> = elements.iter().map(|e| e.cell_id).collect();
+        let rows = elements
+            .iter()
+            .map(|e| rows_i64(&e.rows).into_pyarray(py))
+            .collect();
+        Ok((ids.into_pyarray(py), rows))
+    }
+
+    /// Holds the rows where `mask` (bool (V,)) is true, frees the others.
+    fn set_fixed(&mut self, py: Python<'_>, mask: &Bound<'_, PyAny>) -> PyResult<()> {
+        let n = self.sim()?.n_vertices();
+        let mask = guard(|| {
+            let a = array_arg::<bool>(mask, "mask", "bool")?;
+            if a.shape() != [n] {
+                return Err(value_error(format!(
+                    "mask must have shape (V,) = ({n},), got {}",
+                    shape_str(a.shape())
+                )));
+            }
+            Ok(a.as_array().iter().copied().collect::<Vec<bool>>())
+        })?;
+        self.run(py, move |sim| Ok(sim.set_fixed(&mask)?))
+    }
+
+    /// Writes a vertex embedding from one value per row: float64 (V,) for `f64`, float64
+    /// (V, 3) for `vec3`, bool (V,) for `bool` (every orbit of a row gets its row's value; a
+    /// force, `f_*`, goes to the row's first orbit alone: it is the row's total).
+    fn set_vertex_field(
+        &mut self,
+        py: Python<'_>,
+        name: &str,
+        values: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let n = self.sim()?.n_vertices();
+        let values = guard(|| {
+            let shape_err = |shape: &[usize]| {
+                value_error(format!(
+                    "values for '{name}' must have shape (V,) or (V, 3) with V = {n}, got {}",
+                    shape_str(shape)
+                ))
+            };
+            if let Ok(a) = array_arg::<bool>(values, "values", "bool") {
+                if a.shape() != [n] {
+                    return Err(shape_err(a.shape()));
+                }
+                return Ok(a.as_array().iter().map(|&b| Value::Bool(b)).collect());
+            }
+            let a = array_arg::<f64>(values, "values", "float64 or bool")?;
+            match a.shape() {
+                [m] if *m == n => Ok(a.as_array().iter().map(|&x| Value::Real(vec![x])).collect()),
+                [m, 3] if *m == n => Ok(a
+                    .as_array()
+                    .rows()
+                    .into_iter()
+                    .map(|r| Value::Real(r.to_vec()))
+                    .collect::<Vec<Value>>()),
+                s => Err(shape_err(s)),
+            }
+        })?;
+        self.run(py, move |sim| Ok(sim.set_vertex_field(name, &values)?))
     }
 
     /// Whether each vertex is fixed (held in place or at a prescribed displacement), bool (V,).
@@ -794,7 +863,9 @@ impl PySimulation {
 
     /// The values of a vertex embedding, one row per vertex: shape (V,) for `f64` (float64),
     /// `i64` (int64) and `bool`; (V, 2) and (V, 3) for `vec2` and `vec3`; (V, R, C) for a
-    /// matrix. An embedding on another orbit raises `EmbeddingError`.
+    /// matrix. An embedding on another orbit raises `EmbeddingError`. For a row of several
+    /// orbits, masses and forces (`mass`, `force`, `df`, `f_*`, `df_*`) are summed over them;
+    /// other values are the first orbit's.
     fn embedding<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
         enum Column {
             Real(Vec<usize>, Vec<f64>),
@@ -852,6 +923,20 @@ impl PySimulation {
                             v => return Err(Error::EmbeddingInput(format!("'{name}': {v:?}"))),
                         }
                     }
+                    // additive quantities (masses, forces) of a welded row: the sum over its
+                    // orbits; the others are shared by them
+                    if is_additive(name) {
+                        let w = ty.width();
+                        for (row, orbits) in s.welded_rows() {
+                            let out = &mut flat[row * w..(row + 1) * w];
+                            out.fill(0.0);
+                            for &d in orbits {
+                                for (o, x) in out.iter_mut().zip(g.real(id, d)) {
+                                    *o += x;
+                                }
+                            }
+                        }
+                    }
                     Column::Real(shape, flat)
                 }
             })
@@ -887,10 +972,10 @@ impl PySimulation {
         Ok(self.sim()?.steps())
     }
 
-    /// The number of vertices (V, the rows of the per-vertex arrays).
+    /// The number of vertices (V, the rows of the per-vertex arrays: particles).
     #[getter]
     fn n_vertices(&self) -> PyResult<usize> {
-        Ok(self.sim()?.vertex_darts().len())
+        Ok(self.sim()?.n_vertices())
     }
 
     /// The dimension of the map: 2 (surface) or 3 (volume).
@@ -925,11 +1010,18 @@ impl PySimulation {
         format!(
             "<topomech._core.Simulation dimension={} vertices={} steps={} time={}>",
             self.inner.gmap().dimension(),
-            self.inner.vertex_darts().len(),
+            self.inner.n_vertices(),
             self.inner.steps(),
             self.inner.time()
         )
     }
+}
+
+/// Rows as int64.
+fn rows_i64(rows: &[usize]) -> Vec<i64> {
+    rows.iter()
+        .map(|&r| i64::try_from(r).unwrap_or(i64::MAX))
+        .collect()
 }
 
 /// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "needs"}]`.

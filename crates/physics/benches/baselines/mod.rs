@@ -21,7 +21,7 @@
 //! Initialisation (rest lengths, stiffness matrices, masses, cumulated tensors) is read from
 //! the engine's map after `Simulation::new`, so that both start from identical numbers; the
 //! per-step kernels are this file's own code. Vertices are numbered as the engine numbers them
-//! (`GMap::orbit_labels` of the vertex orbit), so positions compare index by index.
+//! (its rows: the `particle` embedding), so positions compare index by index.
 
 // Numeric kernels: index loops over fixed-size blocks mirror the math, and the sums are written
 // in the engine's order (no fused multiply-add), so results agree to rounding.
@@ -127,9 +127,19 @@ impl State {
     }
 }
 
-/// The engine's vertex number of every dart.
+/// The engine's vertex number (row) of every dart: its `particle` (the simulation creates it
+/// from the vertex orbit order when the map has none).
 fn vertex_labels(g: &GMap) -> Vec<u32> {
-    g.orbit_labels(OrbitType::vertex(g.dimension())).0
+    let Some(id) = g.embedding_id("particle") else {
+        return g.orbit_labels(OrbitType::vertex(g.dimension())).0;
+    };
+    let mut label = vec![u32::MAX; g.capacity()];
+    for d in g.darts() {
+        if let Ok(topomech_gmap::Value::Int(x)) = g.value(id, d) {
+            label[d.index()] = u32::try_from(x).unwrap_or(u32::MAX);
+        }
+    }
+    label
 }
 
 fn read<const N: usize>(g: &GMap, name: &str, d: Dart) -> [f64; N] {
