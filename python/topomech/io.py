@@ -259,6 +259,14 @@ class _GmshTags:
         self.entities: tuple[dict[int, list[int]], ...] | None = None
 
 
+class _Untagged(dict):  # type: ignore[type-arg]
+    """Physical tags by entity; an entity the file does not declare (meshio's own 4.1 writer
+    leaves some out) has none."""
+
+    def __missing__(self, key: Any) -> list[int]:
+        return [0]
+
+
 @contextlib.contextmanager
 def _gmsh41_partial_tags(tags: _GmshTags) -> Iterator[None]:
     """meshio's Gmsh 4.1 reader builds its ``gmsh:physical`` cell data from the element
@@ -280,7 +288,9 @@ def _gmsh41_partial_tags(tags: _GmshTags) -> Iterator[None]:
     def read_entities(*args: Any, **kwargs: Any) -> Any:
         physical, bounding = original(*args, **kwargs)
         tags.entities = tuple({int(t): [int(x) for x in v] for t, v in d.items()} for d in physical)
-        padded = tuple({t: (list(v) if len(v) else [0]) for t, v in d.items()} for d in physical)
+        padded = tuple(
+            _Untagged({t: (list(v) if len(v) else [0]) for t, v in d.items()}) for d in physical
+        )
         return padded, bounding
 
     g41._read_entities = read_entities
@@ -630,7 +640,9 @@ def read_mesh(
     blocks = [_block(b) for b in raw.cells]
     groups = _gmsh_groups(raw, tags)
     for name, members in _meshio_cell_sets(raw).items():
-        groups.setdefault(name, []).extend(members)
+        # meshio's Gmsh 4 reader makes cell sets of the named physical groups: same cells.
+        if name not in groups:
+            groups[name] = members
     kept, dropped = _select(blocks)
     blocks = _linearize(blocks, kept, linear, notes, _style)
     sets = _named_sets(raw, blocks, kept, groups)
@@ -639,7 +651,15 @@ def read_mesh(
     out.cell_sets_kept = sets.cell_sets_kept
     out.facet_sets = sets.facet_sets
     out.notes = notes
-    return out, [_dropped(blocks[k]) for k in dropped]
+    return out, _merge_dropped([_dropped(blocks[k]) for k in dropped])
+
+
+def _merge_dropped(dropped: Sequence[DroppedBlock]) -> list[DroppedBlock]:
+    """One entry per cell type (Gmsh 4 writes a block per entity), in first-seen order."""
+    counts: dict[tuple[str, int], int] = {}
+    for d in dropped:
+        counts[(d.type, d.dimension)] = counts.get((d.type, d.dimension), 0) + d.n_cells
+    return [DroppedBlock(t, n, dim) for (t, dim), n in counts.items()]
 
 
 def _linearize(
@@ -782,9 +802,12 @@ def build_gmap(
         if styled or _style == "python":
             raise
         # A kernel without the styled hint words it in Python: say it the user's way.
+        option = getattr(e, "option", None)
+        if option is None and "reorient=True" in str(e):
+            option = ("reorient", "true")
         text = str(e).replace("reorient=True", format_option("reorient", "true", _style))
         err = MeshError(text)
-        err.option = getattr(e, "option", None)  # type: ignore[attr-defined]
+        err.option = option  # type: ignore[attr-defined]
         raise err from None
 
 
