@@ -10,6 +10,7 @@ except where a file stores coordinates in text with fewer digits: those say thei
 
 from __future__ import annotations
 
+import inspect
 import json
 import subprocess
 import sys
@@ -589,3 +590,109 @@ def test_scene_mesh_options(inverted: Path, quadratic: Path, tmp_path: Path) -> 
     text = '[mesh]\ngenerator = "box"\norder = "linear"\n[[model]]\nkind = "corotational"\n'
     with pytest.raises(topomech.SceneError, match=r"mesh.order: only for a mesh file"):
         parse_scene(text)
+
+
+# ------------------------------------------------------------------------- pinched, duplicates
+
+_KERNEL_OPTIONS = {"pinched", "duplicates"} <= set(
+    inspect.signature(topomech.GMap.from_mesh).parameters
+)
+needs_kernel_options = pytest.mark.skipif(
+    not _KERNEL_OPTIONS, reason="the kernel build has no pinched/duplicates options yet (H1)"
+)
+
+
+def _gmsh2_duplicated_element(tmp_path: Path) -> Path:
+    """What Gmsh 2 writes for an element in two physical groups: the element twice, once per
+    group (here the second tetrahedron, in groups 1 and 2)."""
+    path = tmp_path / "twice.msh"
+    path.write_text(
+        "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n5\n"
+        "1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n$EndNodes\n$Elements\n3\n"
+        "1 4 2 1 1 1 2 3 4\n2 4 2 1 1 2 3 4 5\n3 4 2 2 1 2 3 4 5\n$EndElements\n"
+    )
+    return path
+
+
+def _pinched(tmp_path: Path) -> Path:
+    """Two tetrahedra touching only at point 0."""
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]])
+    path = tmp_path / "pinched.vtu"
+    meshio.write(
+        path, meshio.Mesh(pts.astype(float), [("tetra", np.array([[0, 1, 2, 3], [0, 4, 6, 5]]))])
+    )
+    return path
+
+
+def test_duplicated_gmsh2_element_groups_point_at_both_copies(tmp_path: Path) -> None:
+    # Both copies are kept cells (cell 1 in group "1", cell 2 in group "2"): the sets index
+    # the cells as given, whatever the duplicates option later makes of them.
+    m, _ = read_mesh(_gmsh2_duplicated_element(tmp_path))
+    np.testing.assert_array_equal(m.cell_sets_kept["1"], [0, 1])
+    np.testing.assert_array_equal(m.cell_sets_kept["2"], [2])
+
+
+@needs_kernel_options
+def test_duplicates_option_in_each_front_end(tmp_path: Path) -> None:
+    path = _gmsh2_duplicated_element(tmp_path)
+    with pytest.raises(topomech.MeshError, match='duplicates="merge"'):
+        import_mesh(path)
+    m = import_mesh(path, duplicates="merge")
+    assert m.gmap.cell_counts()["volumes"] == 2
+    assert any("merged 1 duplicate cell" in n for n in m.notes)
+    r = run("info", str(path))
+    assert r.returncode == 2
+    assert "--duplicates merge" in r.stderr
+    assert 'duplicates="merge"' not in r.stderr
+    r = run("info", str(path), "--duplicates", "merge", "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["merged_duplicates"] == [[2, 1]]
+    sc = load_scene(_scene(tmp_path, path, ""))
+    with pytest.raises(topomech.SceneError, match=r'mesh.duplicates: .*mesh.duplicates = "merge"'):
+        sc.load_gmap()
+
+
+@needs_kernel_options
+def test_pinched_option_in_each_front_end(tmp_path: Path) -> None:
+    path = _pinched(tmp_path)
+    m = import_mesh(path)
+    assert m.gmap.report.pinched == [0]
+    assert any("1 pinched point(s)" in n and "one particle" in n for n in m.notes)
+    m = import_mesh(path, pinched="split")
+    assert any("split into one vertex per side" in n for n in m.notes)
+    r = run("info", str(path), "--pinched", "refuse")
+    assert r.returncode == 2
+    assert "--pinched" in r.stderr
+    assert "pinched=" not in r.stderr
+    sc = load_scene(_scene(tmp_path, path, 'pinched = "refuse"'))
+    with pytest.raises(topomech.SceneError, match=r"mesh.pinched: .*mesh.pinched = "):
+        sc.load_gmap()
+
+
+def test_build_notes_wording() -> None:
+    # The notes from a build report, for every field the kernel reports (the fields H1 adds
+    # are read with getattr, so a report without them gives no note about them).
+    from types import SimpleNamespace
+
+    from topomech.io import build_notes
+
+    report = SimpleNamespace(
+        reoriented=list(range(25)),
+        unused_points=[7],
+        pinched=[3, 9],
+        merged_duplicates=[(5, 2)],
+        non_orientable=True,
+    )
+    g = SimpleNamespace(report=report)
+    notes = build_notes(g, "split")  # type: ignore[arg-type]
+    assert notes[0].startswith("reoriented 25 cell(s)")
+    assert notes[0].endswith("19 and 5 more")
+    assert "not orientable" in notes[1]
+    assert notes[2] == (
+        "2 pinched point(s) (cells touch only there), split into one vertex per side: 3, 9"
+    )
+    assert notes[3] == "merged 1 duplicate cell(s), dropped: 5 (= 2)"
+    assert notes[4].startswith("1 point(s) used by no cell left out: 7")
+    assert (
+        build_notes(SimpleNamespace(report=SimpleNamespace(reoriented=[], unused_points=[]))) == []
+    )  # type: ignore[arg-type]

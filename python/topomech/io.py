@@ -53,8 +53,11 @@ __all__ = [
     "PINCHED",
     "DroppedBlock",
     "ImportedMesh",
+    "build_gmap",
+    "build_notes",
     "format_option",
     "import_mesh",
+    "linear_type",
     "read_gmap",
     "read_mesh",
     "select_cells",
@@ -811,8 +814,9 @@ def build_gmap(
         raise err from None
 
 
-def build_notes(g: GMap, style: str = "python") -> list[str]:
-    """What building the map changed, from its :attr:`GMap.report`, one sentence each."""
+def build_notes(g: GMap, pinched_option: str = "merge") -> list[str]:
+    """What building the map changed, from its :attr:`GMap.report`, one sentence each
+    (``pinched_option``: the ``pinched`` option it was built with)."""
     r = g.report
     notes: list[str] = []
     reoriented = list(getattr(r, "reoriented", []))
@@ -828,8 +832,14 @@ def build_notes(g: GMap, style: str = "python") -> list[str]:
         )
     pinched = list(getattr(r, "pinched", []))
     if pinched:
+        done = (
+            "split into one vertex per side"
+            if pinched_option == "split"
+            else "each kept as one particle"
+        )
         notes.append(
-            f"{len(pinched)} pinched point(s) (cells touching only there): {_listed(pinched)}"
+            f"{len(pinched)} pinched point(s) (cells touch only there), {done}: "
+            f"{_listed(pinched)}"
         )
     merged = list(getattr(r, "merged_duplicates", []))
     if merged:
@@ -880,7 +890,7 @@ def import_mesh(
     if dropped:
         what = ", ".join(map(str, dropped))
         notes.append(f"dropped {what}: lower-dimensional than the {g.dimension}D cells")
-    return ImportedMesh(g, mesh, dropped, notes + build_notes(g, _style))
+    return ImportedMesh(g, mesh, dropped, notes + build_notes(g, pinched))
 
 
 def read_gmap(
