@@ -202,7 +202,8 @@ def test_reorient_flag(tmp_path: Path) -> None:
     # --no-reorient refuses them, and the refusal names the CLI flag, not a Python keyword.
     r = run("info", str(path), "--no-reorient")
     assert r.returncode == 2
-    assert "cell 0 (tetra) is inverted" in r.stderr
+    assert "inverted" in r.stderr
+    assert "cell 0" in r.stderr
     assert "--reorient" in r.stderr
     assert "reorient=True" not in r.stderr
     assert "Traceback" not in r.stderr

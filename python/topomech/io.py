@@ -222,7 +222,7 @@ def _sniff(head: bytes) -> str | None:
     text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
     if text.startswith((b"$MeshFormat", b"$Comments")):
         return "gmsh"
-    if text.startswith((b"$NOD", b"$NOE")):
+    if text.startswith(b"$NOD"):
         return "gmsh1"
     if text.startswith((b"<?xml", b"<VTKFile", b"<Xdmf")):
         if b"<Xdmf" in text:
@@ -838,8 +838,7 @@ def build_notes(g: GMap, pinched_option: str = "merge") -> list[str]:
             else "each kept as one particle"
         )
         notes.append(
-            f"{len(pinched)} pinched point(s) (cells touch only there), {done}: "
-            f"{_listed(pinched)}"
+            f"{len(pinched)} pinched point(s) (cells touch only there), {done}: {_listed(pinched)}"
         )
     merged = list(getattr(r, "merged_duplicates", []))
     if merged:
