@@ -595,6 +595,17 @@ def test_scene_mesh_options(inverted: Path, quadratic: Path, tmp_path: Path) -> 
         with pytest.raises(topomech.SceneError, match=rf"{key}: "):
             load_scene(_scene(tmp_path, quadratic, extra))
     text = '[mesh]\ngenerator = "box"\norder = "linear"\n[[model]]\nkind = "corotational"\n'
+    # load_mesh gives the mesh read with its sets (for loads and selections), None for a
+    # generated mesh.
+    gmsh1 = tmp_path / "old.msh"
+    gmsh1.write_text(GMSH1)
+    imported = load_scene(_scene(tmp_path, gmsh1, "")).load_mesh()
+    assert imported.mesh is not None
+    np.testing.assert_array_equal(imported.mesh.point_sets["5"], [0, 1, 2])
+    assert any("Gmsh 1" in n for n in imported.notes)
+    generated = parse_scene(text.replace('order = "linear"\n', "")).load_mesh()
+    assert generated.mesh is None
+    assert generated.gmap.cell_counts()["volumes"] > 0
     with pytest.raises(topomech.SceneError, match=r"mesh.order: only for a mesh file"):
         parse_scene(text)
 

@@ -96,6 +96,7 @@ else:  # pragma: no cover - exercised on Python 3.9 and 3.10 only
 
 if TYPE_CHECKING:
     from topomech._gmap import PathLike
+    from topomech.io import ImportedMesh
 
 __all__ = [
     "EVENT_KINDS",
@@ -481,11 +482,20 @@ class Scene:
 
     def load_gmap(self) -> GMap:
         """The scene's G-map: the mesh file read, or the generated mesh."""
+        return self.load_mesh().gmap
+
+    def load_mesh(self) -> ImportedMesh:
+        """The scene's mesh file read and its map built with the ``mesh.*`` options
+        (``reorient``, ``pinched``, ``duplicates``, ``order``): the map, the mesh read with
+        its named sets (``.mesh``, see :func:`topomech.io.read_mesh`), the dropped blocks and
+        the notes, which are also printed to stderr. For a generated mesh ``.mesh`` is None.
+        Raises :class:`SceneError` naming ``mesh.file``, or the ``mesh.*`` key of the option
+        that would accept a refused mesh."""
+        from topomech.io import ImportedMesh, import_mesh
+
         fail = self._fail()
         m = self.mesh
         if m.file is not None:
-            from topomech.io import import_mesh
-
             if not m.file.exists():
                 raise fail("mesh.file", f"no such file: {m.file}")
             try:
@@ -503,7 +513,7 @@ class Scene:
                 raise fail(key, str(e)) from e
             for note in imported.notes:
                 print(f"topomech: note: {m.file.name}: {note}", file=sys.stderr)
-            return imported.gmap
+            return imported
         try:
             if m.generator == "box":
                 (nx, ny, nz), (sx, sy, sz) = m.cells, m.size
@@ -511,7 +521,7 @@ class Scene:
             else:
                 (nx, ny), (sx, sy) = m.cells, m.size
                 flat = _core.grid(nx, ny, sx, sy, m.element or "quad")
-            return GMap.from_flat(*flat)
+            return ImportedMesh(GMap.from_flat(*flat), None, [], [])
         except (ValueError, MeshError) as e:
             raise fail("mesh", str(e)) from e
 
