@@ -271,36 +271,73 @@ class _Untagged(dict):  # type: ignore[type-arg]
 
 
 @contextlib.contextmanager
-def _gmsh41_partial_tags(tags: _GmshTags) -> Iterator[None]:
-    """meshio's Gmsh 4.1 reader builds its ``gmsh:physical`` cell data from the element
-    blocks whose entity has physical tags only, so a file where some entities have none (what
-    Gmsh writes with ``Mesh.SaveAll = 1`` and physical groups on part of the model) ends with
-    fewer tag arrays than cell blocks, and meshio refuses it ("Incompatible cell data").
-    While reading, give untagged entities the tag 0 (Gmsh's tags are positive, so 0 means
-    none) and catch every entity's real tags for the groups."""
+def _gmsh4_partial_tags(tags: _GmshTags) -> Iterator[None]:
+    """meshio's Gmsh 4.0 and 4.1 readers build their ``gmsh:physical`` cell data from the
+    element blocks whose entity has physical tags only, so a file where some entities have
+    none (what Gmsh writes with ``Mesh.SaveAll = 1`` and physical groups on part of the
+    model) ends with fewer tag arrays than cell blocks, and meshio refuses it ("Incompatible
+    cell data"). While reading, give untagged entities the tag 0 (Gmsh's tags are positive,
+    so 0 means none) and catch every entity's real tags for the groups."""
     try:
-        from meshio.gmsh import _gmsh41 as g41
+        from meshio.gmsh import _gmsh40, _gmsh41
     except ImportError:  # another meshio layout: read as meshio does
         yield
         return
-    original = getattr(g41, "_read_entities", None)
-    if original is None:
-        yield
-        return
+    patched: list[tuple[Any, Any]] = []
+    for module in (_gmsh40, _gmsh41):
+        original = getattr(module, "_read_entities", None)
+        if original is None:
+            continue
 
-    def read_entities(*args: Any, **kwargs: Any) -> Any:
-        physical, bounding = original(*args, **kwargs)
-        tags.entities = tuple({int(t): [int(x) for x in v] for t, v in d.items()} for d in physical)
-        padded = tuple(
-            _Untagged({t: (list(v) if len(v) else [0]) for t, v in d.items()}) for d in physical
-        )
-        return padded, bounding
+        def read_entities(*args: Any, _original: Any = original, **kwargs: Any) -> Any:
+            result = _original(*args, **kwargs)
+            # 4.1 returns (physical tags, bounding entities), 4.0 the physical tags alone
+            physical = result[0] if isinstance(result, tuple) and len(result) == 2 else result
+            tags.entities = tuple(
+                {int(t): [int(x) for x in v] for t, v in d.items()} for d in physical
+            )
+            padded = tuple(
+                _Untagged({t: (list(v) if len(v) else [0]) for t, v in d.items()}) for d in physical
+            )
+            return (padded, result[1]) if physical is not result else padded
 
-    g41._read_entities = read_entities
+        patched.append((module, original))
+        module._read_entities = read_entities
     try:
         yield
     finally:
-        g41._read_entities = original
+        for module, original in patched:
+            module._read_entities = original
+
+
+def _gmsh_version(p: Path) -> str | None:
+    """The version a Gmsh file's header gives (``"4"``, ``"4.1"``, ``"2.2"``), None if none."""
+    with contextlib.suppress(OSError), p.open("rb") as f:
+        lines = f.read(4096).splitlines()
+        for k, line in enumerate(lines[:-1]):
+            if line.strip() == b"$MeshFormat":
+                fields = lines[k + 1].split()
+                return fields[0].decode("ascii", "replace") if fields else None
+    return None
+
+
+def _read_gmsh40(p: Path, tags: _GmshTags) -> tuple[meshio.Mesh | None, str, str]:
+    """A Gmsh file whose header says version "4" read as 4.0: Gmsh writes "4" for 4.0, but
+    meshio takes "4" for 4.1."""
+    try:
+        from meshio.gmsh import _gmsh40
+        from meshio.gmsh import main as gmsh_main
+    except ImportError:
+        return None, "", "no Gmsh 4.0 reader"
+    readers = getattr(gmsh_main, "_readers", None)
+    if not isinstance(readers, dict):
+        return None, "", "no Gmsh 4.0 reader"
+    saved = readers.get("4")
+    readers["4"] = _gmsh40
+    try:
+        return _quiet_read(p, "gmsh", tags)
+    finally:
+        readers["4"] = saved
 
 
 def _quiet_read(
@@ -312,7 +349,7 @@ def _quiet_read(
     import meshio
 
     out = io.StringIO()
-    guard = _gmsh41_partial_tags(tags) if tags is not None else contextlib.nullcontext()
+    guard = _gmsh4_partial_tags(tags) if tags is not None else contextlib.nullcontext()
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out), guard:
             mesh = meshio.read(p, file_format=fmt)
@@ -437,6 +474,12 @@ def _read_raw(p: Path) -> tuple[meshio.Mesh, str | None, _GmshTags, list[str]]:
     for fmt in formats or []:
         tried.add(fmt)
         mesh, printed, reason = _quiet_read(p, fmt, tags if fmt == "gmsh" else None)
+        if mesh is None and fmt == "gmsh" and _gmsh_version(p) == "4":
+            mesh, printed, reason40 = _read_gmsh40(p, tags)
+            if mesh is not None:
+                notes.append(f"read {p.name} as Gmsh 4.0 (its header says version 4)")
+            else:
+                reason = f"{reason}; as Gmsh 4.0: {reason40}"
         if mesh is not None and (len(mesh.cells) or len(mesh.points)):
             if printed.strip():
                 print(f"meshio: {_clean(printed)}", file=sys.stderr)
