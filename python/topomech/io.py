@@ -10,8 +10,9 @@ What is read beyond meshio's own readers, each with a note:
 
 - a file whose extension lies (a ``.vtk`` holding VTU XML, a ``.msh`` holding legacy VTK) is
   read by its content once the extension's readers fail;
-- Gmsh 4.1 files with physical tags on only some entities (meshio refuses them): the tags
-  that exist are kept;
+- Gmsh 4.1 and 4.0 files with physical tags on only some entities (meshio refuses them): the
+  tags that exist are kept; a Gmsh 4.0 file (header "4", which meshio takes for 4.1) is read
+  as 4.0;
 - Gmsh 1 files (``$NOD``/``$ELM``);
 - second-order cells (``tetra10``, ``hexahedron20``/``27``, ``wedge15``/``18``,
   ``pyramid13``/``14``, ``triangle6``/``7``, ``quad8``/``9``, ``line3``, VTK Lagrange cells)
