@@ -464,6 +464,22 @@ def _read_gmsh1(p: Path, tags: _GmshTags) -> meshio.Mesh:
     return mesh
 
 
+def _read_as(
+    p: Path, fmt: str, tags: _GmshTags, notes: list[str]
+) -> tuple[meshio.Mesh | None, str, str]:
+    """:func:`_quiet_read` in one format, Gmsh files with the partial-tags workaround and, for
+    a header saying "4", a second try as Gmsh 4.0."""
+    if fmt != "gmsh":
+        return _quiet_read(p, fmt)
+    mesh, printed, reason = _quiet_read(p, fmt, tags)
+    if mesh is None and _gmsh_version(p) == "4":
+        mesh, printed, reason40 = _read_gmsh40(p, tags)
+        if mesh is None:
+            return None, printed, f"{reason}; as Gmsh 4.0: {reason40}"
+        notes.append(f"read {p.name} as Gmsh 4.0 (its header says version 4)")
+    return mesh, printed, reason
+
+
 def _read_raw(p: Path) -> tuple[meshio.Mesh, str | None, _GmshTags, list[str]]:
     """The whole file as meshio reads it, the format it was read as (None when meshio's own
     choice), the Gmsh entity tags, and notes."""
@@ -474,13 +490,7 @@ def _read_raw(p: Path) -> tuple[meshio.Mesh, str | None, _GmshTags, list[str]]:
     tried: set[str] = set()
     for fmt in formats or []:
         tried.add(fmt)
-        mesh, printed, reason = _quiet_read(p, fmt, tags if fmt == "gmsh" else None)
-        if mesh is None and fmt == "gmsh" and _gmsh_version(p) == "4":
-            mesh, printed, reason40 = _read_gmsh40(p, tags)
-            if mesh is not None:
-                notes.append(f"read {p.name} as Gmsh 4.0 (its header says version 4)")
-            else:
-                reason = f"{reason}; as Gmsh 4.0: {reason40}"
+        mesh, printed, reason = _read_as(p, fmt, tags, notes)
         if mesh is not None and (len(mesh.cells) or len(mesh.points)):
             if printed.strip():
                 print(f"meshio: {_clean(printed)}", file=sys.stderr)
@@ -500,7 +510,7 @@ def _read_raw(p: Path) -> tuple[meshio.Mesh, str | None, _GmshTags, list[str]]:
         mesh = _read_gmsh1(p, tags)
         notes.append(f"read {p.name} as a Gmsh 1 file ($NOD/$ELM), by its content ({why})")
         return mesh, "gmsh", tags, notes
-    mesh, printed, reason = _quiet_read(p, sniffed, tags if sniffed == "gmsh" else None)
+    mesh, printed, reason = _read_as(p, sniffed, tags, notes)
     if mesh is None:
         reasons.append(f"as {sniffed} (by its content): {reason}")
         raise MeshReadError(f"{p}: cannot read this file as a mesh ({'; '.join(reasons)})")
