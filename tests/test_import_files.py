@@ -165,6 +165,20 @@ def test_meshio_point_and_cell_sets_are_kept(tmp_path: Path) -> None:
     assert [(k, a.tolist()) for k, a in m.facet_sets["bottom"]] == [("triangle", [[0, 1, 2]])]
 
 
+def test_tetgen_files_numbered_from_one(tmp_path: Path) -> None:
+    # TetGen's .node/.ele pair, numbered from 1, the first tetrahedron listed with the
+    # opposite orientation (TetGen-style tools disagree on it): read with the points in file
+    # order, turned over by default, and counted.
+    (tmp_path / "tg.node").write_text("5 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n")
+    (tmp_path / "tg.ele").write_text("2 4 0\n1 1 3 2 4\n2 2 3 4 5\n")
+    m = import_mesh(tmp_path / "tg.ele")
+    assert m.mesh is not None
+    np.testing.assert_array_equal(m.mesh.points, TWO_TETS_POINTS)
+    assert rows(m.mesh.cells) == [("tetra", (0, 2, 1, 3)), ("tetra", (1, 2, 3, 4))]
+    assert m.gmap.report.reoriented == [0]
+    assert m.gmap.cell_counts() == independent_counts([("tetra", TWO_TETS)])
+
+
 # ------------------------------------------------------------------------- lying extensions
 
 
