@@ -279,6 +279,20 @@ def test_a_broken_gmsh1_file_names_the_line(tmp_path: Path) -> None:
         read_mesh(path)
 
 
+def test_an_element_on_an_undefined_node_names_the_file(tmp_path: Path) -> None:
+    # Gmsh 4.1 refers to nodes by tag: an element on a tag the file never defines is a broken
+    # file, said as such, whether meshio fails on it or maps the unknown tag to -1.
+    from topomech.io import _check_indices
+
+    path = tmp_path / "undefined.msh"
+    path.write_text(GMSH41_PARTIAL.replace("2 2 3 4 5\n", "2 2 3 4 9\n"))
+    with pytest.raises(topomech.MeshReadError, match=r"undefined\.msh: cannot read this file"):
+        read_mesh(path)
+    mapped = meshio.Mesh(TWO_TETS_POINTS, [("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, -1]]))])
+    with pytest.raises(topomech.MeshReadError, match=r"1 tetra cell\(s\) .*cells 1 of the block"):
+        _check_indices(path, mapped)
+
+
 # ------------------------------------------------------------------------- Gmsh 4.1, gmsh itself
 
 

@@ -785,6 +785,13 @@ def _check_indices(p: Path, mesh: meshio.Mesh) -> None:
     for b in mesh.cells:
         data = b.data
         if isinstance(data, np.ndarray) and data.size and data.dtype.kind in "iu":
+            if int(data.min()) < 0:
+                bad = np.flatnonzero((np.atleast_2d(data) < 0).any(axis=1)).tolist()
+                raise MeshReadError(
+                    f"{p}: cannot read this file as a mesh: {len(bad)} {b.type} cell(s) of "
+                    f"its block refer to nodes the file does not define (cells {_listed(bad)} "
+                    "of the block; truncated or corrupt file?)"
+                )
             hi = int(data.max())
             if hi >= n:
                 raise MeshReadError(
