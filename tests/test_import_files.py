@@ -508,6 +508,49 @@ def test_second_order_2d_gmsh(tmp_path: Path) -> None:
     assert [(k, a.tolist()) for k, a in m.facet_sets["4"]] == [("line", [[0, 1]])]
 
 
+CORNERS = {
+    "hexahedron": np.array(
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
+    ),
+    "wedge": np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]]),
+    "pyramid": np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]]),
+    "quad": np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
+}
+
+
+@pytest.mark.parametrize(
+    ("cell_type", "n_nodes"),
+    [
+        ("hexahedron20", 20),
+        ("hexahedron27", 27),
+        # (meshio 5.3 cannot hold wedge15 or pyramid13/14 cells at all: no file gives them)
+        ("wedge18", 18),
+        ("quad8", 8),
+        ("quad9", 9),
+    ],
+)
+def test_every_second_order_kind_keeps_its_corners(
+    cell_type: str, n_nodes: int, tmp_path: Path
+) -> None:
+    # One cell of each kind in a VTU (meshio's VTK cell numbers): its corners are the first
+    # nodes (VTK's order), the others are left out as unused points.
+    kind = linear_type(cell_type)
+    assert kind is not None
+    corners = CORNERS[kind].astype(float)
+    extra = np.random.default_rng(0).random((n_nodes - len(corners), 3)) * 0.5 + 0.25
+    if kind == "quad":
+        extra[:, 2] = 0.0
+    path = tmp_path / f"{cell_type}.vtu"
+    cell = np.arange(n_nodes).reshape(1, -1)
+    meshio.write(path, meshio.Mesh(np.vstack([corners, extra]), [(cell_type, cell)]))
+    with pytest.raises(topomech.MeshError, match=rf"1 {cell_type} \(cell 0\)"):
+        read_mesh(path)
+    m = import_mesh(path, linear=True)
+    assert m.mesh is not None
+    assert rows(m.mesh.cells) == [(kind, tuple(range(len(corners))))]
+    assert m.gmap.report.unused_points == list(range(len(corners), n_nodes))
+
+
 def test_linear_type_names() -> None:
     assert linear_type("tetra10") == "tetra"
     assert linear_type("hexahedron27") == "hexahedron"
