@@ -741,7 +741,7 @@ def _linearize(
             f"the mesh has second-order cells: {_listed(found)}; topomech builds linear "
             f"cells: to keep their corner nodes and leave the other nodes out, pass {hint}"
         )
-        err.option = ("linear", "true")  # type: ignore[attr-defined]
+        err.option = ("linear", "true")  # type: ignore[attr-defined, unused-ignore]
         raise err
     out = list(blocks)
     corner_nodes: list[npt.NDArray[np.int64]] = []
@@ -871,7 +871,7 @@ def build_gmap(
             option = ("reorient", "true")
         text = str(e).replace("reorient=True", format_option("reorient", "true", _style))
         err = MeshError(text)
-        err.option = option  # type: ignore[attr-defined]
+        err.option = option  # type: ignore[attr-defined, unused-ignore]
         raise err from None
 
 
