@@ -3,14 +3,21 @@
 :class:`Recorder` follows a :class:`Simulation` during :func:`topomech.run.run_scene`:
 
 - **frames** (:meth:`Recorder.frame`): the positions, the fields (displacement magnitude,
-  and von Mises stress for the continuous 3D models) and the topology they are drawn on. A
-  topology is recorded again only when the map's darts were relinked (a cut, a fracture): its
-  surface polygons, its edges and, for maps of at most :data:`DART_LIMIT` darts, the darts
-  themselves with their alpha links, so that the viewer's dart view shows links disappearing.
+  and von Mises stress for the continuous 3D models) and the topology they are drawn on
+  (the elements as :mod:`topomech._output` writes them, vertex rows in the simulation's
+  order). Positions are float32 relative to a local origin, :attr:`Recorder.origin` (the
+  centre of the rest positions' bounding box, float64, recorded as ``origin`` in
+  ``view.json``, with the ``bounds`` relative to it): a mesh placed far away — at 5e6 m,
+  say — keeps float32's precision of its own size. A topology is recorded again only when
+  the map's darts were relinked (a cut, a fracture): its surface polygons, its edges and,
+  for maps of at most :data:`DART_LIMIT` darts, the darts themselves with their alpha
+  links, so that the viewer's dart view shows links disappearing.
   :meth:`Recorder.write_view` writes them as ``view.json`` (the description) and
   ``view.bin`` (the arrays, little-endian, 4 bytes per value) — see :func:`read_view`.
 - **energies** (:meth:`Recorder.after_step`), at every step: kinetic ``sum m |v|^2 / 2``;
-  gravitational ``-sum m g . (x - X)`` (zero at the rest positions ``X``); elastic, the work
+  gravitational ``-sum m g . (x - X)`` (zero at the rest positions ``X``), with the
+  potential ``-sum f_ext . (x - X)`` of the external loads (constant forces, like gravity:
+  :meth:`Simulation.set_external_forces`) added to it; elastic, the work
   done against the models' conservative forces since the rest state: ``E(x_0)`` is the
   integral of ``-f . dx`` along the straight path from the rest positions to the initial
   ones (3-point Gauss-Legendre; zero when the run starts at rest), then every step adds
@@ -34,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech._core import TopomechError
+from topomech._output import OutputCells
 
 if TYPE_CHECKING:
     from topomech.scene import Scene
@@ -52,7 +60,9 @@ __all__ = [
 DART_LIMIT = 12000
 #: The ``format`` of ``view.json``.
 VIEW_FORMAT = "topomech-view"
-VIEW_VERSION = 1
+VIEW_VERSION = 2
+#: The view format versions :func:`read_view` reads (1: positions absolute, no origin).
+VIEW_VERSIONS = (1, 2)
 #: The models whose stress is the linear-elastic one (von Mises is computed for them).
 FEM_MODELS = {"linear_fem": "linear", "mass_tensor": "linear", "corotational": "corotated"}
 #: ``energy.csv``'s columns.
@@ -132,10 +142,14 @@ def _components(n: int, links: list[I64], live: npt.NDArray[np.bool_]) -> I64:
         label = np.where(live, new, label)
 
 
-def _dart_table(gmap: Any, dimension: int) -> dict[str, I64]:
+def _dart_table(gmap: Any, dimension: int, row_of_label: I64 | None = None) -> dict[str, I64]:
+    """Per dart: its vertex row (``row_of_label`` maps the map's vertex labels to the
+    simulation's rows; None when they are the same), alpha links, face and volume."""
     labels = np.asarray(gmap.vertex_labels(), dtype=np.int64)
     n = len(labels)
     live = labels >= 0
+    if row_of_label is not None:
+        labels = np.where(live, row_of_label[np.maximum(labels, 0)], -1)
     alpha = np.tile(np.arange(n, dtype=np.int64), (4, 1))
     for i in range(dimension + 1):
         for d in np.flatnonzero(live):
@@ -313,8 +327,18 @@ class Recorder:
         *,
         energy: bool = True,
         dart_limit: int = DART_LIMIT,
+        cells: OutputCells | None = None,
     ) -> None:
         self.sim = sim
+        #: The elements drawn (shared with the run's VTU writer).
+        self.cells = cells if cells is not None else OutputCells(sim)
+        #: The local origin (m, float64) the recorded float32 positions are relative to:
+        #: the centre of the rest positions' bounding box.
+        self.origin = np.zeros(3)
+        rest = sim.rest_positions()
+        finite = rest[np.isfinite(rest).all(axis=1)]
+        if len(finite):
+            self.origin = (finite.min(axis=0) + finite.max(axis=0)) / 2
         self.dart_limit = dart_limit
         cfg = scene.config if scene is not None else {}
         self.name = scene.name if scene is not None else "simulation"
@@ -371,17 +395,18 @@ class Recorder:
         if self.topologies and self._topo_version == version:
             return self.topologies[-1]
         gmap = self.sim.core.gmap()
-        _, kinds, offsets, conn = gmap.to_flat()
-        cells = [
-            (str(k), np.asarray(conn[offsets[c] : offsets[c + 1]], dtype=np.int64))
-            for c, k in enumerate(kinds)
-        ]
+        el = self.cells.elements()
+        cells = list(zip(el.kinds, el.rows))
         faces, edges = _surface(cells, self.sim.dimension)
         f_off = np.zeros(len(faces) + 1, dtype=np.int64)
         f_off[1:] = np.cumsum([len(f) for f in faces])
         f_idx = np.array([v for f in faces for v in f], dtype=np.int64)
         n_darts = int(gmap.n_darts)
-        darts = _dart_table(gmap, self.sim.dimension) if n_darts <= self.dart_limit else None
+        darts = (
+            _dart_table(gmap, self.sim.dimension, self._row_of_label())
+            if n_darts <= self.dart_limit
+            else None
+        )
         topo = Topology(
             step=self.sim.steps,
             n_vertices=self.sim.n_vertices,
@@ -396,6 +421,22 @@ class Recorder:
         self.topologies.append(topo)
         self._topo_version = version
         return topo
+
+    def _row_of_label(self) -> I64:
+        """The simulation's row of each vertex label of its map (they differ when rows
+        follow the input numbering): read by writing each row's index as its x coordinate,
+        taking a copy of the map, and putting the positions back exactly."""
+        x = self.sim.positions()
+        if not np.isfinite(x).all():  # could not be put back: assume the same numbering
+            return np.arange(len(x), dtype=np.int64)
+        code = np.zeros_like(x)
+        code[:, 0] = np.arange(len(x), dtype=np.float64)
+        self.sim.set_positions(code)
+        try:
+            by_label = self.sim.core.gmap().positions()
+        finally:
+            self.sim.set_positions(x)
+        return np.asarray(np.rint(by_label[:, 0]), dtype=np.int64)
 
     def _stress(self, topo: Topology, x: F64) -> npt.NDArray[np.float32]:
         """Von Mises per vertex: the mean of its elements'."""
@@ -425,21 +466,30 @@ class Recorder:
         self.frames.append(
             {"time": self.sim.time, "step": self.sim.steps, "topology": len(self.topologies) - 1}
         )
-        self.positions.append(x.astype(np.float32))
+        self.positions.append((x - self.origin).astype(np.float32))
         self.fields["displacement"].append(disp)
         if stress is not None:
             self.fields["von_mises"].append(stress)
 
     # -------------------------------------------------------------- energy
 
+    def _external(self) -> F64:
+        """The external loads ``f_ext`` (constant: their work is a potential, counted with
+        gravity), zeros for a simulation without them."""
+        f = getattr(self.sim, "external_forces", None)
+        if f is None:
+            return np.zeros((self.sim.n_vertices, 3))
+        return np.asarray(f(), dtype=np.float64)
+
     def _elastic_forces(self) -> F64:
-        """The models' forces at the current positions and zero velocity."""
+        """The models' forces at the current positions and zero velocity (without the
+        external loads, which the kernel's ``force`` includes)."""
         if not self.damped:
-            return self.sim.forces()
+            return self.sim.forces() - self._external()
         v = self.sim.velocities()
         self.sim.set_velocities(np.zeros_like(v))
         try:
-            return self.sim.forces()
+            return self.sim.forces() - self._external()
         finally:
             self.sim.set_velocities(v)
 
@@ -457,7 +507,8 @@ class Recorder:
         e["step"].append(float(self.sim.steps))
         e["time"].append(self.sim.time)
         e["kinetic"].append(self.sim.kinetic_energy())
-        e["gravitational"].append(float(-(m[:, None] * (x - rest)).sum(axis=0) @ self.gravity))
+        gravity = float(-(m[:, None] * (x - rest)).sum(axis=0) @ self.gravity)
+        e["gravitational"].append(gravity - float((self._external() * (x - rest)).sum()))
 
     def _complete(self, x: F64, rest: F64, version: int, f: F64) -> None:
         """Adds the work from the last state whose force is known to ``x`` (force ``f``)."""
@@ -514,7 +565,7 @@ class Recorder:
         if self.lagged:
             if self._pending is not None:
                 # the step's forces were those of the state before it, at zero damping
-                self._complete(*self._pending, self.sim.embedding("force"))
+                self._complete(*self._pending, self.sim.embedding("force") - self._external())
             self._pending = (x, rest, version)
             self._record_state(x, rest)
         else:
@@ -603,6 +654,7 @@ class Recorder:
                     "fields": {n: put(v[k], "f4") for n, v in self.fields.items()},
                 }
             )
+        # relative to the origin, like the positions
         allx = np.concatenate([p[np.isfinite(p).all(axis=1)] for p in self.positions])
         low = allx.min(axis=0) if len(allx) else np.zeros(3)
         high = allx.max(axis=0) if len(allx) else np.ones(3)
@@ -614,6 +666,7 @@ class Recorder:
             "name": self.name,
             "dimension": self.sim.dimension,
             "up": [float(v) for v in up],
+            "origin": [float(v) for v in self.origin],
             "bounds": {"min": [float(v) for v in low], "max": [float(v) for v in high]},
             "fields": fields_meta,
             "default_field": "von_mises" if "von_mises" in self.fields else "displacement",
@@ -651,8 +704,20 @@ class View:
         frames: list[dict[str, Any]] = self.meta["frames"]
         return frames
 
+    @property
+    def origin(self) -> F64:
+        """The local origin ``(3,)`` (m) the recorded positions are relative to (zero for
+        view data of format version 1)."""
+        return np.asarray(self.meta.get("origin", [0.0, 0.0, 0.0]), dtype=np.float64)
+
     def positions(self, k: int) -> npt.NDArray[np.float32]:
+        """Frame ``k``'s positions ``(V, 3)`` float32, relative to :attr:`origin`."""
         return self.array(self.frames[k]["positions"])
+
+    def world_positions(self, k: int) -> F64:
+        """Frame ``k``'s positions ``(V, 3)`` in the simulation's frame (float64:
+        :meth:`positions` plus :attr:`origin`)."""
+        return np.asarray(self.positions(k), dtype=np.float64) + self.origin
 
     def field(self, k: int, name: str) -> npt.NDArray[np.float32]:
         return self.array(self.frames[k]["fields"][name])
@@ -692,10 +757,10 @@ def read_view(out_dir: Path) -> View:
         raise ViewError(f"{jpath}: cannot read the view description: {e}") from None
     if not isinstance(meta, dict) or meta.get("format") != VIEW_FORMAT:
         raise ViewError(f"{jpath}: not a topomech view description")
-    if meta.get("version") != VIEW_VERSION:
+    if meta.get("version") not in VIEW_VERSIONS:
         raise ViewError(
             f"{jpath}: view format version {meta.get('version')!r}, this topomech reads "
-            f"{VIEW_VERSION}"
+            f"{' and '.join(map(str, VIEW_VERSIONS))}"
         )
     bpath = out_dir / str(meta.get("bin", "view.bin"))
     try:

@@ -3,8 +3,12 @@
 :func:`run_scene` writes, under the output directory:
 
 - ``summary.json``: what ran and how it ended (see :func:`run_scene` for the keys);
-- ``final.vtu``: the last state, points at the current positions, point data
-  ``displacement``, ``velocity`` and ``fixed`` (1 for held vertices), cells from the map;
+- ``final.vtu``: the last state, points at the current positions in the simulation's row
+  order (the input point order), point data ``displacement``, ``velocity``, ``fixed`` (1 for
+  held vertices), ``point_id`` (the input point index of each row) and the scene's
+  ``output.fields`` (``mass``, ``force``, vertex embeddings), cells in the input's order and
+  orientation at rest with cell data ``cell_id`` (the input cell index; see
+  :mod:`topomech._output`);
 - ``frames/frame_NNNNN.vtu``: a frame every ``every`` steps, frame 0 being the initial state
   (and the last state as a last frame when the step count is not a multiple of ``every``),
   with ``animation.pvd``, the ParaView collection of the frames and their times;
@@ -29,24 +33,26 @@ index and a message naming ``event[i]``.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import os
 import re
 import sys
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+import warnings
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
-import numpy.typing as npt
 
 from topomech import __version__
-from topomech._cells import flat_to_blocks
-from topomech._core import DivergenceError, SimulationError
+from topomech._cells import FlatMesh, to_flat
+from topomech._core import DivergenceError, SimulationError, TopomechError
+from topomech._output import OutputCells, check_fields, field_values
 from topomech.recording import Recorder
 from topomech.scene import Scene, load_scene
 
@@ -125,48 +131,57 @@ class Progress:
         self.stream.flush()
 
 
-@dataclass
 class _Writer:
-    """Writes VTU files of the simulation's current state on the cells of its map (extracted
-    again when a topology change relinked the map)."""
+    """Writes VTU files of the simulation's current state: points in row order, point data
+    ``displacement``, ``velocity``, ``fixed``, ``point_id`` and the scene's
+    ``output.fields``, cells in the user's orientation with cell data ``cell_id`` (see
+    :mod:`topomech._output`)."""
 
-    sim: Simulation
-    cells: list[tuple[str, npt.NDArray[np.int64]]]
-    version: int
-
-    @classmethod
-    def of(cls, sim: Simulation) -> _Writer:
-        w = cls(sim, [], -1)
-        w.refresh()
-        return w
-
-    def refresh(self) -> None:
-        if self.version == self.sim.topology_version:
-            return
-        _, kinds, offsets, connectivity = self.sim.core.gmap().to_flat()
-        blocks = flat_to_blocks(kinds, offsets, connectivity)
-        self.cells = [(b.type, np.asarray(b.data, dtype=np.int64)) for b in blocks]
-        self.version = self.sim.topology_version
+    def __init__(self, sim: Simulation, cells: OutputCells, fields: Sequence[str] = ()) -> None:
+        self.sim = sim
+        self.cells = cells
+        self.fields = tuple(fields)
 
     def mesh(self) -> meshio.Mesh:
         import meshio
 
-        self.refresh()
+        blocks, ids = self.cells.blocks()
         x = self.sim.positions()
-        return meshio.Mesh(
-            x,
-            self.cells,
-            point_data={
-                "displacement": x - self.sim.rest_positions(),
-                "velocity": self.sim.velocities(),
-                "fixed": self.sim.fixed().astype(np.uint8),
-            },
-        )
+        point_data: dict[str, Any] = {
+            "displacement": x - self.sim.rest_positions(),
+            "velocity": self.sim.velocities(),
+            "fixed": self.sim.fixed().astype(np.uint8),
+            "point_id": self.cells.point_ids(),
+        }
+        for name in self.fields:
+            point_data[name] = field_values(self.sim, name)
+        return meshio.Mesh(x, blocks, point_data=point_data, cell_data={"cell_id": ids})
 
     def write(self, path: Path) -> None:
         import meshio
 
         meshio.write(os.fspath(path), self.mesh(), file_format="vtu")
+
+
+def _input_cells(sc: Scene) -> FlatMesh | None:
+    """The cells of the scene's mesh file as the map was built from them (``cell_id``
+    numbers them), or None for a generated mesh, a saved map or a file that cannot be read
+    again (the output then orients the cells at rest without them)."""
+    m = sc.mesh
+    if m.file is None or m.file.suffix.lower() == ".tmg":
+        return None
+    from topomech.io import read_mesh
+
+    linear = bool(getattr(m, "linear", False)) or getattr(m, "order", None) == "linear"
+    try:
+        # read again: what it had to say was said the first time
+        with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):
+            warnings.simplefilter("ignore")
+            read: Any = read_mesh
+            mesh, _ = read(m.file, linear=True) if linear else read(m.file)
+        return to_flat(mesh.points, mesh.cells)
+    except (TopomechError, ValueError, TypeError, OSError):
+        return None
 
 
 def write_pvd(path: Path, frames: list[tuple[float, str]]) -> None:
@@ -273,7 +288,8 @@ def run_scene(
     (``view.json``) are written either way. ``outputs`` names each file written (None for
     those that were not).
     Raises :class:`SceneError` for a scene that is refused (nothing is written then), an
-    event after the end of the run included (with ``steps`` too).
+    event after the end of the run included (with ``steps`` too), and an unknown name in
+    ``output.fields`` (naming ``output.fields[i]`` and the available names).
     """
     t0 = time.perf_counter()
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
@@ -281,6 +297,7 @@ def run_scene(
         sc = sc.with_steps(steps, every)
     out_dir = Path(out) if out is not None else Path("out") / sc.name
     sim = sc.build()
+    fields = check_fields(sim, getattr(sc, "fields", ()), sc.path)
 
     out_dir.mkdir(parents=True, exist_ok=True)
     frames_dir = out_dir / "frames"
@@ -299,8 +316,9 @@ def run_scene(
         "preview.mp4",
     ):
         (out_dir / stale).unlink(missing_ok=True)
-    writer = _Writer.of(sim)
-    recorder = Recorder(sim, sc, energy=preview)
+    cells = OutputCells(sim, _input_cells(sc))
+    writer = _Writer(sim, cells, fields)
+    recorder = Recorder(sim, sc, energy=preview, cells=cells)
     frames: list[tuple[float, str]] = []
 
     def frame() -> None:

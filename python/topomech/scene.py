@@ -26,13 +26,34 @@ the fixed vertices, gravity, the integrator and how often to write frames::
     where = "x > 0.5"
     young = 2e6
 
-    [[fix]]
-    where = "x < 1e-9"                 # predicate on the rest position x, y, z
+    [[fix]]                            # vertices held in place; select them by one of:
+    where = "x < 1e-9"                 # a predicate on the rest position x, y, z,
+    # points = [0, 5, 7]               # input point indices (the mesh file's numbering),
+    # group = "clamp"                  # a Gmsh physical group or meshio point/cell set
     # displacement = [0.0, 0.1, 0.0]   # held at this displacement instead of in place
+
+    [[load]]                           # dead loads, integrated once over the rest shape
+    kind = "traction"                  # point | traction | pressure
+    traction = [0.0, -1e3, 0.0]        # Pa on faces (3D), N/m on edges (2D)
+    where = "x > 1 - 1e-9"             # on the boundary faces (3D) or edges (2D) whose rest
+                                       # centroid satisfies it; or points = [...] (faces
+                                       # whose vertices are all these points), group = "..."
+    # kind = "pressure", pressure = 1e3   # along the inward normal: force -p n dA
+    # pressure = "1e4 * (0.2 - z)"     # a value may vary: an expression of the rest x, y, z
+    # kind = "point", force = [0, 0, -10] # N on each selected vertex (where/points/group)
+
+    [initial]                          # or [[initial]] tables, each with its selection
+    velocity = [1.0, 0.0, 0.0]         # m/s (free vertices)
+    displacement = [0.0, 0.0, 0.01]    # m, moves the positions (the rest shape stays)
+    # where = "x > 0.5"                # optional selection (where/points/group): default all
 
     [world]
     gravity = [0.0, -9.81, 0.0]
-    # ground = -0.5                    # a ground plane y = ground
+    # ground = { point = [0.0, 0.0, -0.5], normal = [0.0, 0.0, 1.0] }   # a ground plane; the
+                                       # normal (the side bodies stay on) defaults to the
+                                       # opposite of gravity
+    # ground = -0.5                    # or the plane at this height along that default
+                                       # normal (y = -0.5 under gravity along -y)
 
     [integrator]
     kind = "symplectic_euler"          # explicit_euler | symplectic_euler | implicit_euler | static
@@ -41,6 +62,8 @@ the fixed vertices, gravity, the integrator and how often to write frames::
 
     [output]
     every = 10                         # a frame every N steps (0: none); default steps / 50
+    fields = ["mass", "force"]         # more point data in final.vtu and the frames: mass,
+                                       # force, or any vertex embedding (vec3, f64, bool, i64)
 
     [[event]]                          # a topology change at a time (one table per event)
     time = 0.5                         # s, >= 0, at most the end of the run (steps x dt)
@@ -80,13 +103,21 @@ import math
 import re
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, overload
 
 from topomech import _core
 from topomech._core import MeshError, MeshReadError, RuleError, SceneError, SimulationError
 from topomech._gmap import GMap
+from topomech.loads import (
+    LOAD_KINDS,
+    LoadError,
+    MeshGroups,
+    apply_conditions,
+    compile_expression,
+    compile_predicate,
+)
 from topomech.simulation import ModelInfo, Simulation, available_models
 
 if sys.version_info >= (3, 11):
@@ -421,9 +452,17 @@ class Scene:
     description: str = ""
     #: Whether the file gives ``output.every`` (else it follows the step count).
     every_given: bool = False
+    #: ``output.fields``: the extra point data of the output meshes (``mass``, ``force`` or
+    #: a vertex embedding's name; checked against the simulation by
+    #: :func:`topomech.run.run_scene`).
+    fields: tuple[str, ...] = ()
     #: ``(what, value, key)`` for each predicate and model kind (``what``: ``fix``,
     #: ``prescribed``, ``region`` or ``model``), to name the key of a kernel refusal.
     origins: tuple[tuple[str, str, str], ...] = ()
+    #: What :meth:`build` applies after the kernel's configuration (see
+    #: :func:`topomech.loads.apply_conditions`): ``held`` (fixes by points or group),
+    #: ``loads`` and ``initial``, each entry with its scene key.
+    conditions: dict[str, Any] = field(default_factory=dict)
 
     @property
     def integrator(self) -> str:
@@ -536,9 +575,39 @@ class Scene:
         _check_models(self.config["models"], g.dimension, fail)
         _check_fracture(self.config.get("fracture"), g, fail)
         try:
-            return Simulation(g, self.config)
+            sim = Simulation(g, self.config)
         except SimulationError as e:
             raise fail(self._key_of(str(e)), f"cannot build the simulation: {e}") from e
+        if any(self.conditions.get(k) for k in ("held", "loads", "initial")):
+            groups = self.mesh_groups() if self._uses_groups() else None
+            try:
+                apply_conditions(sim, self.conditions, groups)
+            except LoadError as e:
+                raise fail(e.key, str(e)) from e
+        return sim
+
+    def _uses_groups(self) -> bool:
+        held = [sel for _, sel, _ in self.conditions.get("held", [])]
+        others = [c["select"] for w in ("loads", "initial") for _, c in self.conditions.get(w, [])]
+        # points too: without the simulation's point_ids, rows are matched to the file's points
+        return any("group" in sel or "points" in sel for sel in [*held, *others])
+
+    def mesh_groups(self) -> MeshGroups:
+        """The named groups of the scene's mesh file (Gmsh physical groups, meshio point and
+        cell sets; see :func:`topomech.io.read_mesh`); none for a generated mesh."""
+        m = self.mesh
+        if m.file is None:
+            return MeshGroups()
+        from topomech.io import read_mesh
+
+        kwargs: dict[str, Any] = {}
+        if getattr(m, "linear", False):
+            kwargs["linear"] = True
+        try:
+            mesh, _ = read_mesh(m.file, **kwargs)
+        except (MeshReadError, MeshError, OSError) as e:
+            raise self._fail()("mesh.file", str(e)) from e
+        return MeshGroups.from_meshio(mesh)
 
     def _key_of(self, message: str) -> str | None:
         """The key a kernel refusal is about: the first predicate or model kind it quotes."""
@@ -798,6 +867,25 @@ def _models(
     return models, set_by
 
 
+def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
+    """``output.fields``: a list of distinct names (which names exist is known once the
+    simulation is built)."""
+    v = t._get("fields")
+    if v is None:
+        return ()
+    key = t.key("fields")
+    if not isinstance(v, list):
+        raise fail(key, f"expected an array of field names, got {_show(v)}")
+    seen: dict[str, int] = {}
+    for i, name in enumerate(v):
+        if not isinstance(name, str):
+            raise fail(f"{key}[{i}]", f"expected a field name (a string), got {_show(name)}")
+        if name in seen:
+            raise fail(f"{key}[{i}]", f"{_show(name)} is already {key}[{seen[name]}]")
+        seen[name] = i
+    return tuple(v)
+
+
 class _Renumber(_Fail):
     """A :class:`_Fail` that reads ``model[0]`` as ``model[i]`` (checking one model alone)."""
 
@@ -877,20 +965,27 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
 
     fixed: list[str] = []
     prescribed: list[tuple[str, tuple[float, ...]]] = []
+    held: list[tuple[str, dict[str, Any], list[float] | None]] = []
     for f in top.tables("fix"):
-        pred = _check_predicate(_required_str(f, "where", fail), f.key("where"), fail)
+        sel = _selection(f, fail, required=True, in_python=False)
         disp = f.vector("displacement", 3)
         f.done()
+        if "where" not in sel:
+            held.append((f.path, sel, None if disp is None else list(disp)))
+            continue
+        pred = sel["where"]
         if disp is None:
             fixed.append(pred)
             origins.append(("fix", pred, f.key("where")))
         else:
             prescribed.append((pred, disp))
             origins.append(("prescribed", pred, f.key("where")))
+    loads = _loads(top.tables("load"), fail)
+    initial = _initial(top, fail)
 
     world = top.table("world")
     gravity = world.vector("gravity", 3, (0.0, -9.81, 0.0))
-    ground = world.number("ground")
+    ground = _ground(world, fail)
     world.done()
 
     integ = top.table("integrator")
@@ -901,6 +996,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
 
     out = top.table("output")
     every_v = out.integer("every", None, minimum=0)
+    fields = _output_fields(out, fail)
     out.done()
     events = _events(top.tables("event"), fail)
     fracture = _fracture(top, fail)
@@ -931,10 +1027,171 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         every=every_v if every_v is not None else _default_every(steps),
         description=description,
         every_given=every_v is not None,
+        fields=fields,
         origins=tuple(origins),
+        conditions={"held": held, "loads": loads, "initial": initial},
     )
     scene.check_events()
     return scene
+
+
+def _selection(t: _Table, fail: _Fail, *, required: bool, in_python: bool = True) -> dict[str, Any]:
+    """The selection of a ``[[fix]]``, ``[[load]]`` or ``[initial]`` table: exactly one of
+    ``where`` (a predicate on x, y, z), ``points`` (input point indices) or ``group`` (a
+    group name of the mesh file); ``{}`` when none is given and none is ``required``.
+    ``in_python``: the predicate is evaluated by :mod:`topomech.loads` (on face centroids,
+    or vertices of an initial field), which reads the scalar part of the rule language
+    only; a fix's predicate is compiled by the kernel."""
+    given = [k for k in ("where", "points", "group") if t.has(k)]
+    t.known += [k for k in ("where", "points", "group") if k not in t.known]
+    if len(given) > 1:
+        raise fail(
+            t.key(given[1]),
+            f"give one selection: {t.key(given[0])} or {t.key(given[1])}, not both",
+        )
+    if not given:
+        if required:
+            raise fail(
+                t.path,
+                'missing the selection: where = "predicate on x, y, z", points = [input '
+                'point indices] or group = "a group of the mesh file"',
+            )
+        return {}
+    k = given[0]
+    if k == "where":
+        pred = _check_predicate(_required_str(t, "where", fail), t.key("where"), fail)
+        if in_python:
+            try:
+                compile_predicate(pred)
+            except LoadError as e:
+                raise fail(t.key("where"), str(e)) from None
+        return {"where": pred}
+    if k == "group":
+        name = _required_str(t, "group", fail)
+        if not name:
+            raise fail(t.key("group"), "the group name is empty")
+        return {"group": name}
+    v = t._get("points")
+    if not isinstance(v, list) or not v:
+        raise fail(t.key("points"), f"expected a non-empty array of point indices, got {_show(v)}")
+    for i, x in enumerate(v):
+        if isinstance(x, bool) or not isinstance(x, int):
+            raise fail(f"{t.key('points')}[{i}]", f"expected an integer, got {_show(x)}")
+        if x < 0:
+            raise fail(f"{t.key('points')}[{i}]", f"point indices are >= 0, got {x}")
+    return {"points": list(v)}
+
+
+#: The key holding each load kind's value.
+_LOAD_VALUE = {"point": "force", "traction": "traction", "pressure": "pressure"}
+
+
+def _loads(tables: list[_Table], fail: _Fail) -> list[tuple[str, dict[str, Any]]]:
+    """The ``[[load]]`` tables: ``(key, {"kind", value, "select"})``."""
+    loads: list[tuple[str, dict[str, Any]]] = []
+    for t in tables:
+        kind = t.string("kind")
+        if kind is None:
+            raise fail(t.key("kind"), f"missing: the load's kind ({_or(LOAD_KINDS)})")
+        if kind not in LOAD_KINDS:
+            raise fail(
+                t.key("kind"), f"unknown load kind {_show(kind)} (expected {_or(LOAD_KINDS)})"
+            )
+        want = _LOAD_VALUE[kind]
+        for other in _LOAD_VALUE.values():
+            if other != want and t.has(other):
+                raise fail(
+                    t.key(other),
+                    f"a {kind} load takes {want}, not {other}",
+                )
+        value: Any
+        raw = t.data.get(want)
+        if kind == "pressure" and isinstance(raw, str):
+            value = _expression(t, want, raw, t.key(want), fail)
+        elif kind == "traction" and isinstance(raw, list) and any(isinstance(v, str) for v in raw):
+            if len(raw) != 3:
+                raise fail(t.key(want), f"expected an array of 3 numbers, got {_show(raw)}")
+            value = [
+                _expression(t, want, v, f"{t.key(want)}[{i}]", fail)
+                if isinstance(v, str)
+                else _number(v, f"{t.key(want)}[{i}]", fail)
+                for i, v in enumerate(raw)
+            ]
+        elif kind == "pressure":
+            value = t.number("pressure")
+        else:
+            vec = t.vector(want, 3)
+            value = None if vec is None else list(vec)
+        if value is None:
+            unit = {
+                "force": "[fx, fy, fz] in N on each selected vertex",
+                "traction": "[tx, ty, tz] in Pa (3D faces) or N/m (2D edges)",
+                "pressure": "a number in Pa (3D faces) or N/m (2D edges), along the inward normal",
+            }[want]
+            raise fail(t.key(want), f"missing: {unit}")
+        sel = _selection(t, fail, required=True)
+        t.done()
+        loads.append((t.path, {"kind": kind, want: value, "select": sel}))
+    return loads
+
+
+def _expression(t: _Table, k: str, text: str, key: str, fail: _Fail) -> str:
+    """A load's value given as an expression of x, y, z (checked now, evaluated on the rest
+    faces when the scene is built)."""
+    t.known.append(k)
+    try:
+        compile_expression(text)
+    except LoadError as e:
+        raise fail(key, str(e)) from None
+    return text
+
+
+def _initial(top: _Table, fail: _Fail) -> list[tuple[str, dict[str, Any]]]:
+    """The ``[initial]`` table (or ``[[initial]]`` tables): ``(key, {"velocity",
+    "displacement", "select"})``."""
+    if not top.has("initial"):
+        return []
+    tables = (
+        [top.table("initial")] if isinstance(top.data["initial"], dict) else top.tables("initial")
+    )
+    out: list[tuple[str, dict[str, Any]]] = []
+    for t in tables:
+        velocity = t.vector("velocity", 3)
+        displacement = t.vector("displacement", 3)
+        sel = _selection(t, fail, required=False)
+        t.done()
+        if velocity is None and displacement is None:
+            raise fail(t.path, "give velocity = [vx, vy, vz] or displacement = [dx, dy, dz]")
+        out.append(
+            (
+                t.path,
+                {
+                    "velocity": None if velocity is None else list(velocity),
+                    "displacement": None if displacement is None else list(displacement),
+                    "select": sel,
+                },
+            )
+        )
+    return out
+
+
+def _ground(world: _Table, fail: _Fail) -> float | dict[str, list[float]] | None:
+    """``world.ground``: a number (a height along the opposite of gravity), or a table
+    ``{ point = [..], normal = [..] }`` (normal optional: the opposite of gravity)."""
+    if isinstance(world.data.get("ground"), dict):
+        g = world.table("ground")
+        point = g.vector("point", 3)
+        normal = g.vector("normal", 3)
+        g.done()
+        if point is None:
+            raise fail(g.key("point"), "missing: a point [x, y, z] of the ground plane")
+        out: dict[str, list[float]] = {"point": list(point)}
+        if normal is not None:
+            if all(x == 0.0 for x in normal):
+                raise fail(g.key("normal"), "must not be zero")
+            out["normal"] = list(normal)
+        return out
+    return world.number("ground")
 
 
 def _required_str(t: _Table, k: str, fail: _Fail) -> str:

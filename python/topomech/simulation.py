@@ -110,7 +110,11 @@ class Simulation:
       from their rest position;
     - ``regions``: dicts ``{"where": predicate on the element's rest centroid, "density":
       ..., "young": ..., "poisson": ...}`` giving some elements another material;
-    - ``ground``: the height of a ground plane ``y = ground``, or None;
+    - ``ground``: a ground plane, or None: ``{"point": [x, y, z], "normal": [nx, ny, nz]}``
+      (the normal points to the side bodies stay on; without it, the opposite of gravity, or
+      +y without gravity), or a number ``h``: the plane at height ``h`` along that default
+      normal (``y = h`` under gravity along -y, ``z = h`` under gravity along -z). A free
+      vertex that goes below it is put back onto it and loses its velocity into it;
     - ``integrator``: ``explicit_euler``, ``symplectic_euler``, ``implicit_euler`` or
       ``static`` (each step solves for the equilibrium); ``dt``: the time step;
     - ``events``: topology changes at given times, dicts ``{"time": t, "kind": "cut",
@@ -219,9 +223,23 @@ class Simulation:
         return self._core.positions() - self._core.rest_positions()
 
     def forces(self) -> npt.NDArray[np.float64]:
-        """The models' forces on each vertex at the current state ``(V, 3)``, computed now
-        (without gravity and viscous damping)."""
+        """The models' forces plus the external loads (:meth:`external_forces`) on each
+        vertex at the current state ``(V, 3)``, computed now (without gravity and viscous
+        damping)."""
         return self._core.forces()
+
+    def set_external_forces(self, forces: Any) -> None:
+        """Sets the external loads ``f_ext`` (N), an array-like ``(V, 3)`` of finite numbers:
+        constant (dead) forces added to the models' forces at every step, and balanced by the
+        ``static`` integrator. They replace the loads set before. :mod:`topomech.loads` makes
+        them from point forces, tractions and pressures. When a cut or fracture splits a
+        vertex, its load is divided equally between the copies (the total is kept). Raises
+        :class:`ValueError` for a wrong shape or a non-finite value (naming the row)."""
+        self._core.set_external_forces(np.ascontiguousarray(forces, dtype=np.float64))
+
+    def external_forces(self) -> npt.NDArray[np.float64]:
+        """The external loads ``f_ext`` ``(V, 3)`` (N); zeros unless set."""
+        return self._core.external_forces()
 
     def masses(self) -> npt.NDArray[np.float64]:
         """Lumped vertex masses ``(V,)``."""
@@ -234,6 +252,14 @@ class Simulation:
     def set_positions(self, positions: Any) -> None:
         """Sets the positions from an array-like ``(V, 3)`` of finite numbers."""
         self._core.set_positions(np.ascontiguousarray(positions, dtype=np.float64))
+
+    def set_fixed(self, mask: Any) -> None:
+        """Holds the vertices where ``mask`` (bool array-like ``(V,)``) is true, where they
+        are now, and frees the others. Raises :class:`ValueError` for a wrong length."""
+        m = np.asarray(mask)
+        if m.dtype != np.bool_:
+            raise ValueError(f"mask must be a bool array of shape (V,), got dtype {m.dtype}")
+        self._core.set_fixed([bool(b) for b in m.ravel().tolist()])
 
     def set_velocities(self, velocities: Any) -> None:
         """Sets the velocities from an array-like ``(V, 3)`` of finite numbers."""

@@ -295,9 +295,9 @@ pub struct Config {
     /// Elements whose material differs: predicates on the element's rest centroid (`x`, `y`,
     /// `z`), applied in order after the defaults.
     pub regions: Vec<MaterialRegion>,
-    /// A ground plane `y = ground` (normal +y): vertices below it are put back on it and lose
-    /// their downward velocity.
-    pub ground: Option<f64>,
+    /// A ground plane: vertices below it (on the side its normal points away from) are
+    /// projected back onto it and lose the velocity component into it.
+    pub ground: Option<Ground>,
     /// Topology changes at given times.
     pub events: Vec<TimedEvent>,
     /// Fracture (or tearing), tested after every step.
@@ -326,6 +326,63 @@ impl Default for Config {
             integrator: Integrator::SymplecticEuler,
             dt: 1e-3,
         }
+    }
+}
+
+/// A ground plane. Its normal (the side the bodies stay on) defaults to the opposite of
+/// gravity, or +y without gravity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Ground {
+    /// The plane `up . x = h`, `up` the default normal (a height above the origin along it;
+    /// with gravity along -y, the plane `y = h`).
+    Height(f64),
+    /// The plane through `point` with `normal` (None: the default normal).
+    Plane {
+        /// A point of the plane (m).
+        point: [f64; 3],
+        /// Its normal, pointing to the side bodies stay on (any length but zero).
+        normal: Option<[f64; 3]>,
+    },
+}
+
+impl Ground {
+    /// The default normal: the opposite of `gravity`, normalized; +y when gravity is zero.
+    pub fn up(gravity: [f64; 3]) -> [f64; 3] {
+        let n = norm3(gravity);
+        if n > 0.0 && n.is_finite() {
+            gravity.map(|g| -g / n)
+        } else {
+            [0.0, 1.0, 0.0]
+        }
+    }
+
+    /// A point of the plane and its unit normal, for a simulation with this `gravity`.
+    /// Errors name what is wrong: a non-finite value, a zero normal.
+    pub fn plane(&self, gravity: [f64; 3]) -> Result<([f64; 3], [f64; 3]), PhysicsError> {
+        let bad = |what: &str| PhysicsError::Config(format!("ground: {what}"));
+        let (point, normal) = match *self {
+            Ground::Height(h) => {
+                if !h.is_finite() {
+                    return Err(bad(&format!("the height must be finite, got {h}")));
+                }
+                let up = Ground::up(gravity);
+                (up.map(|u| h * u), up)
+            }
+            Ground::Plane { point, normal } => {
+                if point.iter().any(|x| !x.is_finite()) {
+                    return Err(bad(&format!("the point must be finite, got {point:?}")));
+                }
+                let n = normal.unwrap_or_else(|| Ground::up(gravity));
+                let len = norm3(n);
+                if !(len > 0.0 && len.is_finite()) {
+                    return Err(bad(&format!(
+                        "the normal must be finite and not zero, got {n:?}"
+                    )));
+                }
+                (point, n.map(|x| x / len))
+            }
+        };
+        Ok((point, normal))
     }
 }
 
@@ -465,6 +522,10 @@ fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], cfg: &Config) -> S
         for f in parts {
             let _ = write!(s, " + sum{v}(v.{f})");
         }
+        if rule == "accumulate" {
+            // the external loads: constant, so nothing in the Jacobian
+            s.push_str(" + v.f_ext");
+        }
         s.push_str(" }\n}\n");
     }
     for (k, p) in fixed.iter().enumerate() {
@@ -510,9 +571,11 @@ fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], cfg: &Config) -> S
             r.predicate
         );
     }
+    // the ground plane through p with unit normal n: a free vertex below it is projected onto
+    // it and loses its velocity into it (the tangential velocity is kept)
     let _ = write!(
         s,
-        "\nrule ground(h: f64) {{\n  left {{ v : {v} hook }}\n  where y(v.position) < h\n  compute {{\n    v.position = vec3(x(v.position), h, z(v.position))\n    v.velocity = vec3(x(v.velocity), max(y(v.velocity), 0.0), z(v.velocity))\n  }}\n}}\n"
+        "\nrule ground(p: vec3, n: vec3) {{\n  left {{ v : {v} hook }}\n  where !v.fixed && dot(v.position - p, n) < 0.0\n  compute {{\n    v.position = v.position - dot(v.position - p, n) * n\n    v.velocity = v.velocity - min(dot(v.velocity, n), 0.0) * n\n  }}\n}}\n"
     );
     s
 }
@@ -650,6 +713,9 @@ impl Simulation {
                 PhysicsError::Rules(diags)
             }
         })?;
+        if let Some(ground) = &cfg.ground {
+            ground.plane(cfg.gravity)?;
+        }
         if g.embedding_id("position").is_none() {
             return Err(PhysicsError::Config(
                 "the map has no 'position' embedding".into(),
@@ -660,7 +726,7 @@ impl Simulation {
             &mut g,
             &[
                 "position", "rest", "velocity", "force", "fixed", "mass", "dx", "dv", "df",
-                "vertex0", "face0",
+                "vertex0", "face0", "f_ext",
             ],
         )?;
         mark_vertex0(&mut g)?;
@@ -1018,8 +1084,13 @@ impl Simulation {
 
     /// The ground plane, if any.
     fn contact(&mut self) -> Result<(), PhysicsError> {
-        if let Some(h) = self.cfg.ground {
-            let p: Params = [("h".to_string(), Val::F(h))].into();
+        if let Some(ground) = &self.cfg.ground {
+            let (point, normal) = ground.plane(self.cfg.gravity)?;
+            let p: Params = [
+                ("p".to_string(), Val::V3(point)),
+                ("n".to_string(), Val::V3(normal)),
+            ]
+            .into();
             self.rules.apply_everywhere(&mut self.g, "ground", &p)?;
         }
         Ok(())
@@ -1104,15 +1175,17 @@ impl Simulation {
         self.contact()
     }
 
-    /// Newton iterations on f(x) + m g = 0 with conjugate gradients on -df/dx; the velocity
-    /// is set to zero. Stops when the residual is below 1e-10 of the load (gravity, or the
-    /// first residual when prescribed displacements drive it) or after 30 solves.
+    /// Newton iterations on f(x) + `f_ext` + m g = 0 with conjugate gradients on -df/dx; the
+    /// velocity is set to zero. Stops when the residual is below 1e-10 of the load (gravity
+    /// and external loads, or the first residual when prescribed displacements drive it) or
+    /// after 30 solves.
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
         let v0 = vec![[0.0; 3]; self.vertex_darts().len()];
         self.set_vertex_vec3("velocity", &v0)?;
         let load: f64 = {
             let m = self.vertex_scalar("mass")?;
-            m.iter().sum::<f64>() * norm3(self.cfg.gravity)
+            let external: f64 = self.vertex_vec3("f_ext")?.into_iter().map(norm3).sum();
+            m.iter().sum::<f64>() * norm3(self.cfg.gravity) + external
         };
         let mut scale = load;
         for _ in 0..30 {
@@ -1198,7 +1271,8 @@ impl Simulation {
         // matches after a topology change must not leave a stale force behind
         for k in 0..self.g.embeddings().len() {
             let e = &self.g.embeddings()[k];
-            if e.name().starts_with("f_") && e.derived().is_none() {
+            // (but not the external loads, which the user sets once)
+            if e.name().starts_with("f_") && e.name() != "f_ext" && e.derived().is_none() {
                 let id = topomech_gmap::EmbeddingId(k as u32);
                 self.g
                     .reset_values(id)
@@ -1326,6 +1400,61 @@ impl Simulation {
         for (d, v) in darts.into_iter().zip(values) {
             self.g
                 .set_real(id, d, v)
+                .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Sets the external loads `f_ext` (N, one row per vertex, in vertex order): constant
+    /// forces the accumulation adds into `force` every step and the static solve balances.
+    /// Each row's load is written on one vertex orbit (its representative dart's), the other
+    /// orbits of the row, if any, get zero, so that the row's total is the value given.
+    /// Errors: a wrong row count, a non-finite value (naming the row).
+    pub fn set_external_forces(&mut self, forces: &[[f64; 3]]) -> Result<(), PhysicsError> {
+        self.refresh_vertex_darts();
+        let darts = self.vertex_darts();
+        if forces.len() != darts.len() {
+            return Err(PhysicsError::Config(format!(
+                "external forces: {} rows given for {} vertices",
+                forces.len(),
+                darts.len()
+            )));
+        }
+        if let Some(k) = forces.iter().position(|f| f.iter().any(|x| !x.is_finite())) {
+            return Err(PhysicsError::Config(format!(
+                "external forces must be finite: row {k} is {:?}",
+                forces[k]
+            )));
+        }
+        let id = self.id("f_ext")?;
+        let err = |e: topomech_gmap::EmbeddingError| PhysicsError::Config(e.to_string());
+        self.g.reset_values(id).map_err(err)?;
+        for (d, f) in darts.into_iter().zip(forces) {
+            self.g.set_real(id, d, f).map_err(err)?;
+        }
+        Ok(())
+    }
+
+    /// The external loads `f_ext` (N) in vertex order.
+    pub fn external_forces(&self) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        self.vertex_vec3("f_ext")
+    }
+
+    /// Sets the bool vertex embedding `name` (e.g. `fixed`) from values in vertex order.
+    pub fn set_vertex_bool(&mut self, name: &str, values: &[bool]) -> Result<(), PhysicsError> {
+        self.refresh_vertex_darts();
+        let id = self.id(name)?;
+        let darts = self.vertex_darts();
+        if values.len() != darts.len() {
+            return Err(PhysicsError::Config(format!(
+                "{} values given for {} vertices",
+                values.len(),
+                darts.len()
+            )));
+        }
+        for (d, b) in darts.into_iter().zip(values) {
+            self.g
+                .set_value(id, d, &Value::Bool(*b))
                 .map_err(|e| PhysicsError::Config(e.to_string()))?;
         }
         Ok(())

@@ -351,7 +351,7 @@ fn regions_prescribed_displacements_and_ground() {
     let mut s = sim(
         &mesh,
         vec![model("stretch_elementary", &[("stiffness", 1e5)])],
-        |c| c.ground = Some(-0.05),
+        |c| c.ground = Some(topomech_physics::Ground::Height(-0.05)),
     )
     .unwrap();
     for _ in 0..300 {

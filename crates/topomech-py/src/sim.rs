@@ -19,7 +19,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
 use topomech_gmap::{EmbeddingType, OrbitType, Value};
 use topomech_physics::{
-    Config, Criterion, Cut, Fracture, Integrator, MaterialRegion, ModelSpec, Simulation,
+    Config, Criterion, Cut, Fracture, Ground, Integrator, MaterialRegion, ModelSpec, Simulation,
     TimedEvent, TopologyChange, MODELS,
 };
 
@@ -383,6 +383,40 @@ fn change_dict<'py>(py: Python<'py>, c: &TopologyChange) -> PyResult<Bound<'py, 
     Ok(d)
 }
 
+/// `ground`: None, a height along the up direction (a number), or `{"point": [x, y, z],
+/// "normal": [nx, ny, nz]}` (`normal` optional: the opposite of gravity).
+fn ground_arg(v: &Bound<'_, PyAny>) -> Result<Option<Ground>> {
+    if v.is_none() {
+        return Ok(None);
+    }
+    if !v.is_instance_of::<PyDict>() {
+        return Ok(Some(Ground::Height(real_arg(v, "ground")?)));
+    }
+    let mut point = None;
+    let mut normal = None;
+    for (key, x) in dict_items(v, "ground")? {
+        match key.as_str() {
+            "point" => point = Some(vec3_arg(&x, "ground.point")?),
+            "normal" => {
+                normal = if x.is_none() {
+                    None
+                } else {
+                    Some(vec3_arg(&x, "ground.normal")?)
+                }
+            }
+            other => {
+                return Err(type_error(format!(
+                    "ground.{other}: unknown key (known: point, normal)"
+                )))
+            }
+        }
+    }
+    let point = point.ok_or_else(|| {
+        value_error("ground.point: missing (a point [x, y, z] of the ground plane)".to_string())
+    })?;
+    Ok(Some(Ground::Plane { point, normal }))
+}
+
 /// A [`Config`] from `{key: value}` entries (unset keys keep [`Config::default`]).
 fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
     let mut cfg = Config::default();
@@ -402,13 +436,7 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
             "damping" => cfg.damping = real_arg(v, k)?,
             "dt" => cfg.dt = real_arg(v, k)?,
             "gravity" => cfg.gravity = vec3_arg(v, k)?,
-            "ground" => {
-                cfg.ground = if v.is_none() {
-                    None
-                } else {
-                    Some(real_arg(v, k)?)
-                }
-            }
+            "ground" => cfg.ground = ground_arg(v)?,
             "fixed" => {
                 cfg.fixed = if v.is_instance_of::<PyString>() {
                     vec![str_arg(v, k)?]
@@ -482,7 +510,9 @@ fn gmap_copy_arg(obj: &Bound<'_, PyAny>) -> PyResult<topomech_gmap::GMap> {
 /// dicts `{"kind": ..., param: value}`), `density`, `young`, `poisson`, `damping`, `dt`
 /// (numbers), `gravity` (3 numbers), `fixed` (predicates on the rest position `x`, `y`, `z`),
 /// `prescribed` (`(predicate, [dx, dy, dz])` pairs), `regions` (dicts with `where` and any of
-/// `density`, `young`, `poisson`), `ground` (a height, or None), `integrator`
+/// `density`, `young`, `poisson`), `ground` (None, a height along the opposite of gravity, or
+/// `{"point": [x, y, z], "normal": [nx, ny, nz]}`, the normal defaulting to the opposite of
+/// gravity), `integrator`
 /// (`explicit_euler`, `symplectic_euler`, `implicit_euler` or `static`), `events` (timed
 /// topology changes: dicts `{"time": t, "kind": "cut", "plane": {"normal": [..], "offset":
 /// o}}` or `{"time": t, "kind": "cut", "where": predicate on the centroid of the shared face
@@ -592,6 +622,49 @@ impl PySimulation {
             inner,
             poisoned: false,
         })
+    }
+
+    /// Sets the external loads `f_ext` from a float64 `(V, 3)` array of finite values (N, in
+    /// vertex order): constant forces added to the models' forces every step and balanced by
+    /// the static solve.
+    fn set_external_forces(&mut self, py: Python<'_>, forces: &Bound<'_, PyAny>) -> PyResult<()> {
+        let n = self.sim()?.vertex_darts().len();
+        let rows = guard(|| {
+            let rows = rows3_arg(forces, "forces", "V")?;
+            if rows.len() != n {
+                return Err(value_error(format!(
+                    "forces must have shape (V, 3) = ({n}, 3), got ({}, 3)",
+                    rows.len()
+                )));
+            }
+            if let Some(k) = rows.iter().position(|r| r.iter().any(|x| !x.is_finite())) {
+                return Err(value_error(format!(
+                    "forces must be finite: row {k} is {:?}",
+                    rows[k]
+                )));
+            }
+            Ok(rows)
+        })?;
+        self.run(py, |sim| Ok(sim.set_external_forces(&rows)?))
+    }
+
+    /// The external loads `f_ext` `(V, 3)` (N).
+    fn external_forces<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let rows = self.read(|s| Ok(s.external_forces()?))?;
+        guard(|| rows_to_array(py, &rows))
+    }
+
+    /// Holds the vertices where `mask` (bool `(V,)`) is true, frees the others.
+    #[allow(clippy::needless_pass_by_value)] // pyo3 extracts a Python list into an owned Vec
+    fn set_fixed(&mut self, py: Python<'_>, mask: Vec<bool>) -> PyResult<()> {
+        let n = self.sim()?.vertex_darts().len();
+        if mask.len() != n {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "mask must have shape (V,) = ({n},), got ({},)",
+                mask.len()
+            )));
+        }
+        self.run(py, |sim| Ok(sim.set_vertex_bool("fixed", &mask)?))
     }
 
     /// Runs `n` time steps. On divergence raises `DivergenceError` (with `step`, `vertex` and

@@ -1,0 +1,797 @@
+"""Boundary conditions and loads: selecting vertices and boundary faces, and turning point
+forces, tractions and pressures into the constant per-vertex loads ``f_ext`` of a
+:class:`~topomech.simulation.Simulation`.
+
+Selections (every function takes exactly one):
+
+- ``where``: a predicate of the rule language over ``x``, ``y``, ``z`` (``"x < 1e-9"``,
+  ``"abs(z - 1) < 1e-6 && y > 0.5"``), on the rest position of a vertex, or on the rest
+  centroid of a boundary face (3D) or edge (2D);
+- ``points``: input point indices (the rows of the mesh's points array as read);
+- ``group``: the name of a Gmsh physical group or a meshio point or cell set of the mesh
+  (see :class:`MeshGroups`).
+
+Loads are dead loads: they are integrated once, over the faces in the reference (rest)
+configuration, and keep their direction and size whatever the body does. Units: point forces
+in N; tractions and pressures in Pa (N/m^2) on the faces of a volume mesh (3D); on the
+boundary edges of a surface mesh (2D) they are forces per unit length of edge (N/m): the
+thickness of a plane-stress model is already in them (a total force ``F`` spread over an edge
+of length ``L`` is a traction ``F / L``). A pressure ``p`` pushes on a face along its inward
+normal: the force is ``-p n dA`` with ``n`` the outward unit normal (in 2D, the outward normal
+of the edge in the plane of its face).
+
+Consistent nodal loads (``f_a = integral of N_a t dA``): linear triangles and edges exactly
+(each vertex gets a third, or a half, of the face's or edge's force), bilinear quadrilaterals
+by 2x2 Gauss quadrature on the bilinear map (exact for a pressure on any quadrilateral and for
+a traction on a plane parallelogram).
+
+Boundary faces (edges in 2D) are the faces of the elements that belong to exactly one element.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from topomech.simulation import Simulation
+
+__all__ = [
+    "LOAD_KINDS",
+    "BoundaryFace",
+    "LoadError",
+    "MeshGroups",
+    "apply_conditions",
+    "boundary_faces",
+    "compile_expression",
+    "compile_predicate",
+    "held_positions",
+    "point_load",
+    "select_faces",
+    "select_vertices",
+    "surface_load",
+]
+
+#: The kinds of load a scene's ``[[load]]`` table names.
+LOAD_KINDS = ("point", "traction", "pressure")
+
+#: How many offenders a message lists before "and N more".
+LIST_LIMIT = 20
+
+# The faces of each element kind, in the kernel's (VTK's) vertex order. Their orientation does
+# not matter: boundary faces are turned to face away from their element's centroid.
+_FACES: dict[str, tuple[tuple[int, ...], ...]] = {
+    "tetra": ((0, 1, 2), (0, 1, 3), (1, 2, 3), (0, 2, 3)),
+    "hexahedron": (
+        (0, 1, 2, 3),
+        (4, 5, 6, 7),
+        (0, 1, 5, 4),
+        (1, 2, 6, 5),
+        (2, 3, 7, 6),
+        (3, 0, 4, 7),
+    ),
+    "wedge": ((0, 1, 2), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)),
+    "pyramid": ((0, 1, 2, 3), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
+}
+_KIND_BY_SIZE = {4: "tetra", 8: "hexahedron", 6: "wedge", 5: "pyramid"}
+
+
+class LoadError(ValueError):
+    """A selection or a load that cannot be applied: an unknown group, a selection that
+    selects nothing, a facet that is not on the boundary. The message names the offenders
+    (the first :data:`LIST_LIMIT`, then how many more); ``key`` is the scene key at fault
+    when a scene's condition raised it (else None)."""
+
+    def __init__(self, message: str, key: str | None = None) -> None:
+        super().__init__(message)
+        self.key = key
+
+
+def _listed(items: Sequence[Any]) -> str:
+    shown = ", ".join(str(x) for x in items[:LIST_LIMIT])
+    more = len(items) - LIST_LIMIT
+    return f"{shown} and {more} more" if more > 0 else shown
+
+
+# ---------------------------------------------------------------------------- predicates
+
+_TOKEN = re.compile(
+    r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)|(?P<name>[A-Za-z_]\w*)"
+    r"|(?P<op>&&|\|\||==|!=|<=|>=|[-+*/%(),<>!]))"
+)
+_FUNCTIONS: dict[str, Callable[..., Any]] = {
+    "abs": abs,
+    "sign": lambda v: float(np.sign(v)),
+    "sqrt": lambda v: math.sqrt(v) if v >= 0 else math.nan,
+    "exp": math.exp,
+    "log": lambda v: math.log(v) if v > 0 else math.nan,
+    "sin": math.sin,
+    "cos": math.cos,
+    "tan": math.tan,
+    "asin": math.asin,
+    "acos": math.acos,
+    "atan": math.atan,
+    "atan2": math.atan2,
+    "pow": math.pow,
+    "floor": math.floor,
+    "ceil": math.ceil,
+    "min": min,
+    "max": max,
+    "clamp": lambda v, lo, hi: min(max(v, lo), hi),
+    "to_f64": float,
+}
+
+
+def _translate(text: str, what: str) -> Any:
+    """Compiles an expression of the rule language over ``x``, ``y``, ``z`` to Python code;
+    ``what`` names it in errors ("predicate", "expression")."""
+    out: list[str] = []
+    pos = 0
+    src_text = text.strip()
+    while pos < len(src_text):
+        m = _TOKEN.match(src_text, pos)
+        if m is None or m.end() == pos:
+            rest = src_text[pos:].lstrip()
+            if not rest:
+                break
+            raise LoadError(f"bad {what} {text!r}: cannot read {rest[:10]!r}")
+        pos = m.end()
+        if m.group("num") is not None:
+            out.append(m.group("num"))
+        elif m.group("name") is not None:
+            name = m.group("name")
+            if name in ("x", "y", "z"):
+                out.append(name)
+            elif name in ("true", "false"):
+                out.append(name.capitalize())
+            elif name in _FUNCTIONS:
+                out.append(f"_f_{name}")
+            else:
+                raise LoadError(
+                    f"bad {what} {text!r}: unknown name '{name}' (this {what} reads "
+                    f"x, y, z, true, false and {', '.join(sorted(_FUNCTIONS))})"
+                )
+        else:
+            op = m.group("op")
+            out.append({"&&": " and ", "||": " or ", "!": " not "}.get(op, op))
+    src = " ".join(out).strip()
+    try:
+        return compile(src, f"<{what}>", "eval")
+    except SyntaxError:
+        raise LoadError(f"bad {what} {text!r}: not an expression") from None
+
+
+_NAMESPACE: dict[str, Any] = {f"_f_{k}": v for k, v in _FUNCTIONS.items()}
+_NAMESPACE["__builtins__"] = {}
+
+
+def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.bool_]]:
+    """A predicate of the rule language over ``x``, ``y``, ``z`` as a function of points
+    ``(n, 3)`` returning a bool mask ``(n,)``. It accepts what the kernel's ``where`` guards
+    accept over these names: numbers, ``+ - * / %``, comparisons, ``&&``, ``||``, ``!``,
+    parentheses, ``true``/``false`` and the scalar built-ins (``abs``, ``sqrt``, ``min``,
+    ``max``, ``clamp``, ``sin``, ...). Raises :class:`LoadError` naming the unknown name or
+    the unreadable character. A point where it cannot be evaluated (a division by zero) is
+    not selected."""
+    code = _translate(pred, "predicate")
+
+    def evaluate(points: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        mask = np.zeros(len(pts), dtype=bool)
+        for i, (x, y, z) in enumerate(pts.tolist()):
+            local = {"x": x, "y": y, "z": z}
+            try:
+                mask[i] = bool(eval(code, _NAMESPACE, local))  # a checked expression
+            except (ArithmeticError, ValueError, TypeError):
+                mask[i] = False
+        return mask
+
+    return evaluate
+
+
+def compile_expression(expr: str) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]:
+    """A number-valued expression of the rule language over ``x``, ``y``, ``z`` (the same
+    syntax as :func:`compile_predicate`: ``"1e4 * (0.2 - z)"``) as a function of points
+    ``(n, 3)`` returning values ``(n,)``. Raises :class:`LoadError` naming an unknown name;
+    evaluating it where it is not a finite number raises :class:`LoadError` naming the
+    point."""
+    code = _translate(expr, "expression")
+
+    def evaluate(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        out = np.zeros(len(pts))
+        for i, (x, y, z) in enumerate(pts.tolist()):
+            try:
+                v = eval(code, _NAMESPACE, {"x": x, "y": y, "z": z})  # a checked expression
+                out[i] = float(v)
+            except (ArithmeticError, ValueError, TypeError) as e:
+                raise LoadError(f"expression {expr!r} at ({x:g}, {y:g}, {z:g}): {e}") from None
+            if not math.isfinite(out[i]):
+                raise LoadError(f"expression {expr!r} is {out[i]} at ({x:g}, {y:g}, {z:g})")
+        return out
+
+    return evaluate
+
+
+# ---------------------------------------------------------------------------- groups
+
+
+@dataclass
+class MeshGroups:
+    """The named groups of a mesh file (contract C4 of :func:`topomech.io.read_mesh`):
+    ``point_sets`` (name -> input point indices), ``cell_sets`` (name -> indices of the kept
+    cells, their ``cell_id``) and ``facet_sets`` (name -> lower-dimensional cells as
+    ``(meshio type, (k, n) input point indices)`` pairs, e.g. the boundary triangles of a
+    Gmsh physical surface)."""
+
+    point_sets: dict[str, npt.NDArray[np.int64]] = field(default_factory=dict)
+    cell_sets: dict[str, npt.NDArray[np.int64]] = field(default_factory=dict)
+    facet_sets: dict[str, list[tuple[str, npt.NDArray[np.int64]]]] = field(default_factory=dict)
+    #: The file's points ``(N, 2 or 3)``, when known: rows are matched to input points by
+    #: their rest coordinates when the simulation does not say which point each row is.
+    points: npt.NDArray[np.float64] | None = None
+
+    @classmethod
+    def from_meshio(cls, mesh: Any) -> MeshGroups:
+        """The groups a mesh returned by :func:`topomech.io.read_mesh` carries (its
+        ``point_sets``, ``cell_sets_kept`` and ``facet_sets`` attributes); a plain
+        ``meshio.Mesh`` gives its ``point_sets`` only."""
+        if mesh is None:
+            return cls()
+        point_sets = {
+            str(k): np.asarray(v, dtype=np.int64).ravel()
+            for k, v in (getattr(mesh, "point_sets", None) or {}).items()
+        }
+        cell_sets = {
+            str(k): np.asarray(v, dtype=np.int64).ravel()
+            for k, v in (getattr(mesh, "cell_sets_kept", None) or {}).items()
+        }
+        facet_sets = {
+            str(k): [(str(t), np.asarray(a, dtype=np.int64).reshape(len(a), -1)) for t, a in v]
+            for k, v in (getattr(mesh, "facet_sets", None) or {}).items()
+        }
+        points = getattr(mesh, "points", None)
+        pts = None if points is None else np.asarray(points, dtype=np.float64)
+        return cls(point_sets, cell_sets, facet_sets, pts)
+
+    def names(self) -> list[str]:
+        """Every group name, sorted."""
+        return sorted({*self.point_sets, *self.cell_sets, *self.facet_sets})
+
+    def _unknown(self, name: str) -> LoadError:
+        names = self.names()
+        known = f"the mesh has: {', '.join(names)}" if names else "the mesh has no named groups"
+        return LoadError(f"unknown group '{name}' ({known})")
+
+    def points_of(self, name: str, cells: Sequence[Sequence[int]] | None = None) -> set[int]:
+        """The input points of group ``name``: its point set, the nodes of its facets, the
+        vertices of its cells (``cells``: each kept cell's input points, by cell_id)."""
+        if (
+            name not in self.point_sets
+            and name not in self.cell_sets
+            and name not in self.facet_sets
+        ):
+            raise self._unknown(name)
+        pts: set[int] = set()
+        if name in self.point_sets:
+            pts.update(int(p) for p in self.point_sets[name])
+        for _, a in self.facet_sets.get(name, []):
+            pts.update(int(p) for p in a.ravel())
+        if name in self.cell_sets and cells is not None:
+            for c in self.cell_sets[name]:
+                if 0 <= c < len(cells):
+                    pts.update(int(p) for p in cells[int(c)])
+        return pts
+
+
+# ---------------------------------------------------------------------------- the mesh seen by rows
+
+
+@dataclass(frozen=True)
+class BoundaryFace:
+    """A face (3D) or edge (2D) on the boundary, at rest: ``rows`` are its vertex rows,
+    ordered so that its normal points out of its element (in 2D: the edge's two rows),
+    ``element`` the row index of its element in :func:`_elements`' order."""
+
+    rows: tuple[int, ...]
+    element: int
+
+
+def _point_ids(sim: Simulation, groups: MeshGroups | None = None) -> npt.NDArray[np.int64]:
+    """The input point of each row: the simulation's ``point_ids()`` when it has them, else
+    the input point at the row's rest position when ``groups`` knows the file's points
+    (-1 where none), else the row itself."""
+    f = getattr(sim, "point_ids", None)
+    if f is not None:
+        return np.asarray(f(), dtype=np.int64)
+    if groups is not None and groups.points is not None and len(groups.points):
+        pts = np.zeros((len(groups.points), 3))
+        pts[:, : min(3, groups.points.shape[1])] = groups.points[:, :3]
+        index: dict[tuple[float, ...], int] = {}
+        for i, p in enumerate(pts.tolist()):
+            index.setdefault(tuple(p), i)
+        rest = sim.rest_positions().tolist()
+        return np.array([index.get(tuple(r), -1) for r in rest], dtype=np.int64)
+    return np.arange(sim.n_vertices, dtype=np.int64)
+
+
+def _elements(sim: Simulation) -> tuple[npt.NDArray[np.int64], list[npt.NDArray[np.int64]]]:
+    """Each element's cell_id and vertex rows (contract C5), else from the map's flat mesh
+    (whose points are the rows)."""
+    f = getattr(sim, "elements", None)
+    if f is not None:
+        ids, rows = f()
+        return np.asarray(ids, dtype=np.int64), [np.asarray(r, dtype=np.int64) for r in rows]
+    _, _, offsets, conn = sim.gmap().to_flat()
+    offsets = np.asarray(offsets)
+    conn = np.asarray(conn)
+    rows = [conn[offsets[i] : offsets[i + 1]].astype(np.int64) for i in range(len(offsets) - 1)]
+    return np.arange(len(rows), dtype=np.int64), rows
+
+
+def _element_faces(n: int, dim: int) -> tuple[tuple[int, ...], ...]:
+    if dim == 2:
+        return tuple((i, (i + 1) % n) for i in range(n))
+    kind = _KIND_BY_SIZE.get(n)
+    if kind is None:
+        raise LoadError(f"an element of {n} vertices has no known faces")
+    return _FACES[kind]
+
+
+def boundary_faces(sim: Simulation) -> list[BoundaryFace]:
+    """The faces (3D) or edges (2D) that belong to exactly one element, at rest, each turned
+    so that its normal points out of its element."""
+    rest = sim.rest_positions()
+    dim = sim.dimension
+    _, elements = _elements(sim)
+    seen: dict[tuple[int, ...], list[tuple[tuple[int, ...], int]]] = {}
+    for e, rows in enumerate(elements):
+        for local in _element_faces(len(rows), dim):
+            face = tuple(int(rows[i]) for i in local)
+            seen.setdefault(tuple(sorted(face)), []).append((face, e))
+    out: list[BoundaryFace] = []
+    for owners in seen.values():
+        if len(owners) != 1:
+            continue
+        face, e = owners[0]
+        centre = rest[elements[e]].mean(axis=0)
+        if dim == 3:
+            area = _area_vector(rest[list(face)])
+            if float(np.dot(area, rest[list(face)].mean(axis=0) - centre)) < 0:
+                face = (face[0], *reversed(face[1:]))
+        out.append(BoundaryFace(face, e))
+    return out
+
+
+def _area_vector(p: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The vector area of a polygon (Newell): its unit normal times its area."""
+    area: npt.NDArray[np.float64] = 0.5 * np.sum(np.cross(p, np.roll(p, -1, axis=0)), axis=0)
+    return area
+
+
+def _edge_normal(
+    a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], centre: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """The outward unit normal of edge ab in the plane of its face (centroid ``centre``)."""
+    e = b - a
+    w = centre - a
+    inward = w - (np.dot(w, e) / np.dot(e, e)) * e
+    n: npt.NDArray[np.float64] = -inward / np.linalg.norm(inward)
+    return n
+
+
+# ---------------------------------------------------------------------------- selections
+
+
+def _one_selection(where: str | None, points: Any, group: str | None) -> None:
+    given = [
+        k for k, v in (("where", where), ("points", points), ("group", group)) if v is not None
+    ]
+    if len(given) != 1:
+        raise LoadError(
+            "give exactly one selection: where (a predicate), points (input point indices) "
+            f"or group (a group name); got {', '.join(given) if given else 'none'}"
+        )
+
+
+def _cells_by_id(sim: Simulation, groups: MeshGroups | None) -> list[list[int]]:
+    """Each kept cell's input points, by cell_id (for cell sets)."""
+    ids, rows = _elements(sim)
+    pid = _point_ids(sim, groups)
+    n = int(ids.max()) + 1 if len(ids) else 0
+    cells: list[list[int]] = [[] for _ in range(n)]
+    for cid, r in zip(ids, rows):
+        if cid >= 0:
+            cells[int(cid)] = [int(pid[i]) for i in r]
+    return cells
+
+
+def _rows_of_points(
+    sim: Simulation, pts: Iterable[int], what: str, groups: MeshGroups | None
+) -> npt.NDArray[np.bool_]:
+    """The rows whose input point is in ``pts``; refuses points that are not vertices of the
+    mesh, listing them all."""
+    pid = _point_ids(sim, groups)
+    wanted = np.array(sorted({int(p) for p in pts}), dtype=np.int64)
+    mask = np.isin(pid, wanted)
+    missing = sorted(set(wanted.tolist()) - set(pid[mask].tolist()))
+    if missing:
+        raise LoadError(
+            f"{what}: input points {_listed(missing)} are not vertices of the mesh "
+            f"(points are numbered from 0; {sim.n_vertices} rows; unused points are left out)"
+        )
+    return mask
+
+
+def select_vertices(
+    sim: Simulation,
+    *,
+    where: str | None = None,
+    points: Sequence[int] | npt.NDArray[np.integer[Any]] | None = None,
+    group: str | None = None,
+    groups: MeshGroups | None = None,
+) -> npt.NDArray[np.bool_]:
+    """The rows selected by one of ``where`` (a predicate on the rest position), ``points``
+    (input point indices) or ``group`` (a name in ``groups``: every vertex of the group's
+    points, facets or cells). Returns a bool mask ``(V,)``. Raises :class:`LoadError` when
+    the selection is empty, a point is not a vertex, or the group is unknown (naming the
+    groups that exist)."""
+    _one_selection(where, points, group)
+    if where is not None:
+        mask = compile_predicate(where)(sim.rest_positions())
+        what = f"predicate {where!r}"
+    elif points is not None:
+        pts = [_index(p, i) for i, p in enumerate(np.asarray(points).ravel().tolist())]
+        mask = _rows_of_points(sim, pts, "points", groups)
+        what = "points"
+    else:
+        assert group is not None
+        g = groups if groups is not None else MeshGroups()
+        pts_set = g.points_of(group, _cells_by_id(sim, groups) if group in g.cell_sets else None)
+        pid = _point_ids(sim, groups)
+        mask = np.isin(pid, np.array(sorted(pts_set), dtype=np.int64))
+        what = f"group '{group}'"
+    if not mask.any():
+        raise LoadError(f"{what} selects no vertex")
+    return mask
+
+
+def _index(p: Any, i: int) -> int:
+    if isinstance(p, bool) or not isinstance(p, int):
+        raise LoadError(f"points[{i}]: expected an integer point index, got {p!r}")
+    if p < 0:
+        raise LoadError(f"points[{i}]: point indices are >= 0, got {p}")
+    return p
+
+
+def select_faces(
+    sim: Simulation,
+    *,
+    where: str | None = None,
+    points: Sequence[int] | npt.NDArray[np.integer[Any]] | None = None,
+    group: str | None = None,
+    groups: MeshGroups | None = None,
+) -> list[BoundaryFace]:
+    """The boundary faces (3D) or edges (2D) selected by one of ``where`` (a predicate on
+    the face's rest centroid), ``points`` (faces all of whose vertices are these input
+    points) or ``group`` (the group's facets, which must lie on the boundary; or, for a
+    group of points or cells, the boundary faces all of whose vertices are in it). Raises
+    :class:`LoadError` when nothing is selected, a facet of the group is not a boundary face
+    (listing them), or the group is unknown."""
+    _one_selection(where, points, group)
+    faces = boundary_faces(sim)
+    rest = sim.rest_positions()
+    if where is not None:
+        centres = np.array([rest[list(f.rows)].mean(axis=0) for f in faces]).reshape(-1, 3)
+        keep = compile_predicate(where)(centres)
+        chosen = [f for f, k in zip(faces, keep) if k]
+        what = f"predicate {where!r}"
+    elif points is not None:
+        pts = [_index(p, i) for i, p in enumerate(np.asarray(points).ravel().tolist())]
+        mask = _rows_of_points(sim, pts, "points", groups)
+        chosen = [f for f in faces if all(mask[r] for r in f.rows)]
+        what = "points"
+    else:
+        assert group is not None
+        g = groups if groups is not None else MeshGroups()
+        if group in g.facet_sets:
+            chosen = _facets_on_boundary(sim, faces, g.facet_sets[group], group, g)
+        else:
+            pts_set = g.points_of(
+                group, _cells_by_id(sim, groups) if group in g.cell_sets else None
+            )
+            mask = np.isin(_point_ids(sim, groups), np.array(sorted(pts_set), dtype=np.int64))
+            chosen = [f for f in faces if all(mask[r] for r in f.rows)]
+        what = f"group '{group}'"
+    if not chosen:
+        raise LoadError(f"{what} selects no boundary {'face' if sim.dimension == 3 else 'edge'}")
+    return chosen
+
+
+def _facets_on_boundary(
+    sim: Simulation,
+    faces: list[BoundaryFace],
+    facets: list[tuple[str, npt.NDArray[np.int64]]],
+    group: str,
+    groups: MeshGroups | None,
+) -> list[BoundaryFace]:
+    """The boundary faces the group's facets (input point indices) are; refuses the facets
+    that are not boundary faces, all of them."""
+    pid = _point_ids(sim, groups)
+    by_points: dict[tuple[int, ...], BoundaryFace] = {}
+    for f in faces:
+        by_points.setdefault(tuple(sorted(int(pid[r]) for r in f.rows)), f)
+    chosen: list[BoundaryFace] = []
+    bad: list[str] = []
+    for kind, arr in facets:
+        for i, facet in enumerate(arr):
+            key = tuple(sorted(int(p) for p in facet))
+            if key in by_points:
+                chosen.append(by_points[key])
+            else:
+                bad.append(f"{kind} {i} (points {list(map(int, facet))})")
+    if bad:
+        what = "faces" if sim.dimension == 3 else "edges"
+        raise LoadError(
+            f"group '{group}': {len(bad)} facets are not boundary {what} of the mesh: "
+            f"{_listed(bad)}"
+        )
+    return chosen
+
+
+# ---------------------------------------------------------------------------- loads
+
+# 2x2 Gauss points on [-1, 1]^2, weight 1 each
+_G = 1.0 / math.sqrt(3.0)
+_GAUSS = ((-_G, -_G), (_G, -_G), (_G, _G), (-_G, _G))
+# the triangle's edge midpoints (barycentric), weight 1/3 of the area each: exact to degree 2
+_TRI = ((0.5, 0.5, 0.0), (0.0, 0.5, 0.5), (0.5, 0.0, 0.5))
+
+#: A load's density at points ``(n, 3)``: tractions ``(n, 3)`` or pressures ``(n,)``.
+Density = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
+
+
+def _face_nodal(
+    p: npt.NDArray[np.float64], load: Density, pressure: bool
+) -> npt.NDArray[np.float64]:
+    """Consistent nodal forces ``(k, 3)`` of a traction or pressure density ``load`` on the
+    face with corners ``p`` (outward-ordered): exact for a density linear in x on triangles
+    and parallelograms (3-point and 2x2 Gauss rules)."""
+    k = len(p)
+    if k == 3:
+        area = _area_vector(p)
+        shape = np.array(_TRI)
+        q = shape @ p
+        f = -np.outer(load(q), area) / 3.0 if pressure else load(q) * (np.linalg.norm(area) / 3.0)
+        tri: npt.NDArray[np.float64] = shape.T @ f
+        return tri
+    if k == 4:
+        shapes, vectors = [], []
+        for xi, eta in _GAUSS:
+            shapes.append(
+                0.25
+                * np.array(
+                    [
+                        (1 - xi) * (1 - eta),
+                        (1 + xi) * (1 - eta),
+                        (1 + xi) * (1 + eta),
+                        (1 - xi) * (1 + eta),
+                    ]
+                )
+            )
+            dxi = 0.25 * np.array([-(1 - eta), (1 - eta), (1 + eta), -(1 + eta)]) @ p
+            deta = 0.25 * np.array([-(1 - xi), -(1 + xi), (1 + xi), (1 - xi)]) @ p
+            vectors.append(np.cross(dxi, deta))
+        shape, da = np.array(shapes), np.array(vectors)
+        q = shape @ p
+        f = -load(q)[:, None] * da if pressure else load(q) * np.linalg.norm(da, axis=1)[:, None]
+        quad: npt.NDArray[np.float64] = shape.T @ f
+        return quad
+    # a polygon: a triangle per edge from its centroid (its share split evenly over the corners)
+    c = p.mean(axis=0)
+    out = np.zeros((k, 3))
+    for i in range(k):
+        j = (i + 1) % k
+        f = _face_nodal(np.array([p[i], p[j], c]), load, pressure)
+        out[i] += f[0]
+        out[j] += f[1]
+        out += f[2] / k
+    return out
+
+
+def _constant(c: float) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]:
+    return lambda q: np.full(len(q), c)
+
+
+def _density(value: Any, what: str, size: int) -> Density:
+    """A load's density from a constant, a callable, or rule-language expressions."""
+    if callable(value):
+        fn = value
+
+        def checked(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+            v = np.asarray(fn(q), dtype=np.float64)
+            want = (len(q), 3) if size == 3 else (len(q),)
+            if v.shape != want or not np.all(np.isfinite(v)):
+                raise LoadError(f"{what}: the function must return finite values of shape {want}")
+            return v
+
+        return checked
+    if size == 1:
+        if isinstance(value, str):
+            return compile_expression(value)
+        try:
+            c = float(value)
+        except (TypeError, ValueError):
+            raise LoadError(f"{what}: expected a number or an expression, got {value!r}") from None
+        if not math.isfinite(c):
+            raise LoadError(f"{what}: expected a finite number, got {value!r}")
+        return _constant(c)
+    items = list(value) if isinstance(value, (list, tuple, np.ndarray)) else None
+    if items is None or len(items) != 3:
+        raise LoadError(f"{what}: expected 3 numbers or expressions, got {value!r}")
+    parts: list[Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]] = []
+    for v in items:
+        if isinstance(v, str):
+            parts.append(compile_expression(v))
+        else:
+            try:
+                c = float(v)
+            except (TypeError, ValueError):
+                raise LoadError(
+                    f"{what}: expected 3 numbers or expressions, got {value!r}"
+                ) from None
+            if not math.isfinite(c):
+                raise LoadError(f"{what}: expected finite numbers, got {value!r}")
+            parts.append(_constant(c))
+    return lambda q: np.stack([f(q) for f in parts], axis=1)
+
+
+def surface_load(
+    sim: Simulation,
+    *,
+    traction: Any = None,
+    pressure: Any = None,
+    where: str | None = None,
+    points: Sequence[int] | npt.NDArray[np.integer[Any]] | None = None,
+    group: str | None = None,
+    groups: MeshGroups | None = None,
+) -> npt.NDArray[np.float64]:
+    """The consistent nodal loads ``(V, 3)`` (N) of a ``traction`` (a force per area, Pa,
+    on faces in 3D; per length, N/m, on edges in 2D) or a ``pressure`` (same units, pushing
+    along the inward normal: ``-p n dA``) on the boundary faces (3D) or edges (2D) of one
+    selection (see :func:`select_faces`), integrated over the rest configuration. Each may
+    be uniform (3 numbers, a number) or vary over the surface: a rule-language expression of
+    ``x``, ``y``, ``z`` (per component for a traction: ``["0", "-1e3 * x", "0"]``;
+    ``"1e4 * (0.2 - z)"`` for a hydrostatic pressure), or a Python function of the rest
+    points ``(n, 3)`` returning ``(n, 3)`` tractions or ``(n,)`` pressures. The integration
+    is exact for loads linear in x on triangles, edges and parallelograms. Add the result
+    to the simulation's loads with ``sim.set_external_forces(sim.external_forces() + f)``.
+    Raises :class:`LoadError` for a bad selection or value, or when both or neither of
+    ``traction`` and ``pressure`` are given."""
+    if (traction is None) == (pressure is None):
+        raise LoadError("give exactly one of traction (a vector) and pressure (a number)")
+    is_pressure = pressure is not None
+    density = (
+        _density(pressure, "pressure", 1) if is_pressure else _density(traction, "traction", 3)
+    )
+    faces = select_faces(sim, where=where, points=points, group=group, groups=groups)
+    rest = sim.rest_positions()
+    out = np.zeros((sim.n_vertices, 3))
+    if sim.dimension == 3:
+        for f in faces:
+            nodal = _face_nodal(rest[list(f.rows)], density, is_pressure)
+            for r, fr in zip(f.rows, nodal):
+                out[r] += fr
+        return out
+    _, elements = _elements(sim)
+    # 2-point Gauss on each edge: exact to degree 3
+    s = np.array([(1 - _G) / 2, (1 + _G) / 2])
+    shape = np.stack([1 - s, s], axis=1)
+    for f in faces:
+        ends = rest[list(f.rows)]
+        length = float(np.linalg.norm(ends[1] - ends[0]))
+        q = shape @ ends
+        if is_pressure:
+            centre = rest[elements[f.element]].mean(axis=0)
+            n = _edge_normal(ends[0], ends[1], centre)
+            forces = -np.outer(density(q), n) * (length / 2)
+        else:
+            forces = density(q) * (length / 2)
+        nodal = shape.T @ forces
+        out[f.rows[0]] += nodal[0]
+        out[f.rows[1]] += nodal[1]
+    return out
+
+
+def point_load(
+    sim: Simulation,
+    force: Sequence[float] | npt.NDArray[np.float64],
+    *,
+    where: str | None = None,
+    points: Sequence[int] | npt.NDArray[np.integer[Any]] | None = None,
+    group: str | None = None,
+    groups: MeshGroups | None = None,
+) -> npt.NDArray[np.float64]:
+    """The loads ``(V, 3)`` (N) of ``force`` (3 numbers) applied on each selected vertex (see
+    :func:`select_vertices`). Raises :class:`LoadError` for a bad force or selection."""
+    f = np.asarray(force, dtype=np.float64).reshape(-1)
+    if f.shape != (3,) or not np.all(np.isfinite(f)):
+        raise LoadError(f"force: expected 3 finite numbers, got {force!r}")
+    mask = select_vertices(sim, where=where, points=points, group=group, groups=groups)
+    out = np.zeros((sim.n_vertices, 3))
+    out[mask] = f
+    return out
+
+
+def held_positions(
+    sim: Simulation, mask: npt.NDArray[np.bool_], displacement: Sequence[float] | None
+) -> None:
+    """Holds the rows of ``mask`` (fixed), at ``rest + displacement`` when one is given
+    (their velocity set to zero), keeping the rows already held."""
+    fixed = sim.fixed() | mask
+    if displacement is not None:
+        x = sim.positions()
+        x[mask] = sim.rest_positions()[mask] + np.asarray(displacement, dtype=np.float64)
+        sim.set_positions(x)
+        v = sim.velocities()
+        v[mask] = 0.0
+        sim.set_velocities(v)
+    sim.set_fixed(fixed)
+
+
+def apply_conditions(
+    sim: Simulation, conditions: Mapping[str, Any], groups: MeshGroups | None = None
+) -> None:
+    """Applies the conditions of a scene beyond the kernel's configuration (its
+    :attr:`~topomech.scene.Scene.conditions`): ``held`` (``(key, selection, displacement or
+    None)``: vertices held by points or group), ``loads`` (``(key, {"kind", "force" |
+    "traction" | "pressure", "select"})``) and ``initial`` (``(key, {"select", "velocity",
+    "displacement"})``: fields set on the free vertices of the selection, every vertex when
+    it is empty; a displacement moves the positions, not the rest). Raises
+    :class:`LoadError` with ``key`` the scene key at fault."""
+    bc = conditions
+    for key, sel, disp in bc.get("held", []):
+        try:
+            mask = select_vertices(sim, groups=groups, **sel)
+        except LoadError as e:
+            raise LoadError(str(e), key) from e
+        held_positions(sim, mask, disp)
+    loads = bc.get("loads", [])
+    if loads:
+        total = sim.external_forces()
+        for key, load in loads:
+            sel = load["select"]
+            try:
+                if load["kind"] == "point":
+                    total += point_load(sim, load["force"], groups=groups, **sel)
+                elif load["kind"] == "traction":
+                    total += surface_load(sim, traction=load["traction"], groups=groups, **sel)
+                else:
+                    total += surface_load(sim, pressure=load["pressure"], groups=groups, **sel)
+            except LoadError as e:
+                raise LoadError(str(e), key) from e
+        sim.set_external_forces(total)
+    for key, init in bc.get("initial", []):
+        try:
+            mask = (
+                np.ones(sim.n_vertices, dtype=bool)
+                if not init["select"]
+                else select_vertices(sim, groups=groups, **init["select"])
+            )
+        except LoadError as e:
+            raise LoadError(str(e), key) from e
+        free = mask & ~sim.fixed()
+        if init.get("displacement") is not None:
+            x = sim.positions()
+            x[free] += np.asarray(init["displacement"], dtype=np.float64)
+            sim.set_positions(x)
+        if init.get("velocity") is not None:
+            v = sim.velocities()
+            v[free] = np.asarray(init["velocity"], dtype=np.float64)
+            sim.set_velocities(v)
