@@ -427,6 +427,11 @@ class MeshSpec:
     order: str = "as-is"
 
     @property
+    def linear(self) -> bool:
+        """Whether second-order cells keep their corner nodes (``mesh.order = "linear"``)."""
+        return self.order == "linear"
+
+    @property
     def dimension(self) -> int | None:
         """3 for a box, 2 for a grid, None for a file (known once read)."""
         if self.generator is None:
