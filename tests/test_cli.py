@@ -197,14 +197,22 @@ def test_reorient_flag(tmp_path: Path) -> None:
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
     path = tmp_path / "inverted.vtu"
     meshio.write(path, meshio.Mesh(points, [("tetra", np.array([[0, 2, 1, 3]]))]))
-    r = run("info", str(path))
+    # Issue 12: cells listed with the opposite orientation are ordinary input, turned over by
+    # default (and counted: `reoriented` is the count, `reoriented_cells` the list);
+    # --no-reorient refuses them, and the refusal names the CLI flag, not a Python keyword.
+    r = run("info", str(path), "--no-reorient")
     assert r.returncode == 2
-    assert "cell 0 (tetra) is inverted" in r.stderr
+    assert "inverted" in r.stderr
+    assert "cell 0" in r.stderr
+    assert "--reorient" in r.stderr
+    assert "reorient=True" not in r.stderr
     assert "Traceback" not in r.stderr
-    r = run("info", str(path), "--reorient", "--json")
-    assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["reoriented"] == [0]
-    assert "reoriented 1 inverted cell(s): 0" in r.stderr
+    for flags in ([], ["--reorient"]):
+        r = run("info", str(path), *flags, "--json")
+        assert r.returncode == 0, r.stderr
+        data = json.loads(r.stdout)
+        assert (data["reoriented"], data["reoriented_cells"]) == (1, [0])
+        assert "reoriented 1 cell(s) listed with the opposite orientation" in r.stderr
 
 
 @pytest.mark.parametrize("case", ["missing", "garbage", "truncated", "directory", "refused"])

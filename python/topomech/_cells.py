@@ -24,6 +24,7 @@ __all__ = [
     "FlatMesh",
     "cell_dimension",
     "flat_to_blocks",
+    "mesh_figures",
     "normalize_cells",
     "normalize_points",
     "to_flat",
@@ -152,7 +153,9 @@ def _kernel_kind(cell_type: str, first_cell: int) -> tuple[str, int | None]:
     if dim in (2, 3):
         raise MeshError(
             f"cell {first_cell} is a {cell_type}: higher-order cells are not supported, "
-            "use linear elements (triangle, quad, polygon, tetra, hexahedron, wedge, pyramid)"
+            "use linear elements (triangle, quad, polygon, tetra, hexahedron, wedge, pyramid); "
+            "topomech.io.read_mesh(path, linear=True) keeps the corner nodes of a file's "
+            "second-order cells"
         )
     if dim is not None:
         raise MeshError(
@@ -280,3 +283,162 @@ def flat_to_blocks(
         run.append(verts)
     close()
     return blocks
+
+
+# ---------------------------------------------------------------------------- quality figures
+
+#: Edges of each linear volume cell, in VTK's vertex order.
+_EDGES: dict[str, list[tuple[int, int]]] = {
+    "tetra": [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)],
+    "hexahedron": [
+        (0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4),
+        (0, 4), (1, 5), (2, 6), (3, 7),
+    ],
+    "wedge": [(0, 1), (1, 2), (2, 0), (3, 4), (4, 5), (5, 3), (0, 3), (1, 4), (2, 5)],
+    "pyramid": [(0, 1), (1, 2), (2, 3), (3, 0), (0, 4), (1, 4), (2, 4), (3, 4)],
+}  # fmt: skip
+#: Faces of each linear volume cell, all turning the same way around the cell (each edge is
+#: walked once in each direction), so that their signed volumes add up to the cell's.
+_FACES: dict[str, list[tuple[int, ...]]] = {
+    "tetra": [(0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)],
+    "hexahedron": [
+        (0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7),
+    ],
+    "wedge": [(0, 2, 1), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)],
+    "pyramid": [(0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)],
+}  # fmt: skip
+_POLYGON_TYPES = ("triangle", "quad", "polygon")
+
+
+def _polygon_vector_area(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The vector area ``(M, 3)`` of polygons ``x`` ``(M, k, 3)`` (vertices in order)."""
+    c = x.mean(axis=1, keepdims=True)
+    d = x - c
+    area: npt.NDArray[np.float64] = 0.5 * np.cross(d, np.roll(d, -1, axis=1)).sum(axis=1)
+    return area
+
+
+def _volume(kind: str, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The volume ``(M,)`` of volume cells ``x`` ``(M, k, 3)``: the sum over the faces (each
+    split into triangles about its centroid) of the signed volumes of the tetrahedra they
+    make with the cell's centroid; positions are taken relative to that centroid."""
+    x = x - x.mean(axis=1, keepdims=True)
+    total = np.zeros(len(x))
+    for face in _FACES[kind]:
+        f = x[:, list(face), :]
+        fc = f.mean(axis=1)
+        nxt = np.roll(f, -1, axis=1)
+        for i in range(len(face)):
+            a, b = f[:, i, :] - fc, nxt[:, i, :] - fc
+            total += np.einsum("ij,ij->i", fc, np.cross(a, b)) / 6.0
+    return np.abs(total)
+
+
+def _edge_lengths(x: npt.NDArray[np.float64], edges: Sequence[tuple[int, int]]) -> Any:
+    a = np.array([e[0] for e in edges])
+    b = np.array([e[1] for e in edges])
+    return np.linalg.norm(x[:, b, :] - x[:, a, :], axis=2)
+
+
+def _figures_of(
+    kind: str, x: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """``(size, aspect)`` of cells ``x`` ``(M, k, 3)`` of one kind: volume or area, and the
+    aspect ratio (see :func:`mesh_figures`)."""
+    k = x.shape[1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if kind in _POLYGON_TYPES:
+            size = np.linalg.norm(_polygon_vector_area(x), axis=1)
+            lengths = np.linalg.norm(np.roll(x, -1, axis=1) - x, axis=2)
+            if k == 3:
+                # longest edge / inradius (2 A / perimeter), over 2 sqrt(3) (equilateral)
+                aspect = lengths.max(axis=1) * lengths.sum(axis=1) / (4.0 * np.sqrt(3.0) * size)
+            else:
+                aspect = lengths.max(axis=1) / lengths.min(axis=1)
+        else:
+            size = _volume(kind, x)
+            lengths = _edge_lengths(x, _EDGES[kind])
+            if kind == "tetra":
+                faces = np.stack(
+                    [
+                        np.linalg.norm(_polygon_vector_area(x[:, list(f), :]), axis=1)
+                        for f in _FACES["tetra"]
+                    ],
+                    axis=1,
+                ).sum(axis=1)
+                # longest edge / inradius (3 V / surface), over 2 sqrt(6) (regular)
+                aspect = lengths.max(axis=1) * faces / (6.0 * np.sqrt(6.0) * size)
+            else:
+                aspect = lengths.max(axis=1) / lengths.min(axis=1)
+    aspect = np.where(np.isnan(aspect), np.inf, aspect)
+    return size, aspect
+
+
+def mesh_figures(points: Any, cells: Sequence[tuple[str, Any]], dimension: int) -> dict[str, Any]:
+    """The bounding box, cells by kind and quality figures of a mesh of linear cells, as
+    ``topomech info`` prints them::
+
+        {"bounding_box": {"min": [x, y, z], "max": [x, y, z]},   # of the points cells use
+         "cells_by_kind": {meshio type: count},
+         "quality": {"min_volume" | "min_area": float, "max_volume" | "max_area": float,
+                     "worst_aspect_ratio": float | None, "worst_aspect_cell": int | None}}
+
+    Volumes in 3D, areas in 2D (units of the points cubed or squared). The aspect ratio of a
+    triangle or tetrahedron is its longest edge over its inradius, divided by that of the
+    equilateral triangle (2 sqrt 3) or regular tetrahedron (2 sqrt 6): 1 for the best cell,
+    unbounded for a flat one (a sliver tetrahedron included, whose edges can all be alike).
+    For quads, polygons, hexahedra, wedges and pyramids it is the longest edge over the
+    shortest. ``worst_aspect_cell`` is the cell's index in ``cells`` concatenated (the
+    ``cell_id``); a degenerate cell (zero size) has an infinite ratio, written as None.
+    Cells of other types are counted but not measured."""
+    pts = normalize_points(points)
+    by_kind: dict[str, int] = {}
+    sizes: list[npt.NDArray[np.float64]] = []
+    aspects: list[npt.NDArray[np.float64]] = []
+    ids: list[npt.NDArray[np.int64]] = []
+    used: list[npt.NDArray[np.int64]] = []
+    first = 0
+    for cell_type, data in cells:
+        if _ragged(data) or (isinstance(data, (list, tuple)) and cell_type == "polygon"):
+            rows = [np.asarray(c, dtype=np.int64) for c in data]
+            groups: dict[int, list[int]] = {}
+            for i, r in enumerate(rows):
+                groups.setdefault(len(r), []).append(i)
+            parts = [(np.array(idx), np.stack([rows[i] for i in idx])) for idx in groups.values()]
+        else:
+            a = np.asarray(data, dtype=np.int64)
+            parts = [(np.arange(len(a)), a.reshape(len(a), -1))]
+        n = sum(len(idx) for idx, _ in parts)
+        if n == 0:
+            continue
+        by_kind[cell_type] = by_kind.get(cell_type, 0) + n
+        for idx, conn in parts:
+            used.append(conn.ravel())
+            kind = "polygon" if cell_type in _POLYGON_TYPES else cell_type
+            if kind not in _EDGES and kind != "polygon":
+                continue
+            size, aspect = _figures_of(cell_type if kind != "polygon" else "polygon", pts[conn])
+            sizes.append(size)
+            aspects.append(aspect)
+            ids.append(first + idx)
+        first += n
+    if used:
+        u = pts[np.unique(np.concatenate(used))]
+        box = {"min": u.min(axis=0).tolist(), "max": u.max(axis=0).tolist()}
+    else:
+        box = {"min": [0.0, 0.0, 0.0], "max": [0.0, 0.0, 0.0]}
+    what = "volume" if dimension == 3 else "area"
+    quality: dict[str, Any] = {
+        f"min_{what}": None,
+        f"max_{what}": None,
+        "worst_aspect_ratio": None,
+        "worst_aspect_cell": None,
+    }
+    if sizes:
+        s, asp, cid = np.concatenate(sizes), np.concatenate(aspects), np.concatenate(ids)
+        quality[f"min_{what}"] = float(s.min())
+        quality[f"max_{what}"] = float(s.max())
+        worst = int(np.argmax(asp))
+        quality["worst_aspect_ratio"] = float(asp[worst]) if np.isfinite(asp[worst]) else None
+        quality["worst_aspect_cell"] = int(cid[worst])
+    return {"bounding_box": box, "cells_by_kind": by_kind, "quality": quality}

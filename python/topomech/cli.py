@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from topomech import __version__
+from topomech._cells import flat_to_blocks, mesh_figures
 from topomech._core import ApplyError, RuleError, SceneError, TopomechError
-from topomech._gmap import GMap
-from topomech.io import DroppedBlock, read_gmap, write_format, write_gmap
+from topomech.io import DUPLICATES, PINCHED, ImportedMesh, import_mesh, write_format, write_gmap
 from topomech.rules import ParamValue, RuleSet
 
 __all__ = ["build_parser", "main"]
@@ -47,31 +47,98 @@ def _error(msg: str) -> None:
 # ---------------------------------------------------------------------------------- info
 
 
+def _add_import_options(p: argparse.ArgumentParser) -> None:
+    """The options of every command that reads a mesh file."""
+    g = p.add_argument_group(
+        "import options", "how a mesh file becomes a G-map (ignored for a saved .tmg)"
+    )
+    g.add_argument(
+        "--reorient",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help=(
+            "turn cells listed with the opposite orientation over, so that all agree "
+            "(default); --no-reorient refuses them"
+        ),
+    )
+    g.add_argument(
+        "--pinched",
+        choices=PINCHED,
+        default=PINCHED[0],
+        help=(
+            "points where cells touch only at that point: merge (default: one particle), "
+            "split (one vertex per side), refuse"
+        ),
+    )
+    g.add_argument(
+        "--duplicates",
+        choices=DUPLICATES,
+        default=DUPLICATES[0],
+        help="cells listed twice (same vertices): refuse (default) or merge",
+    )
+    g.add_argument(
+        "--linear",
+        action="store_true",
+        help=(
+            "keep the corner nodes of second-order cells (tetra10, hexahedron20, triangle6, "
+            "...); the other nodes are left out"
+        ),
+    )
+
+
+def _import(path: Path, args: argparse.Namespace) -> ImportedMesh:
+    """The mesh file read and built with the command's import options; the notes go to
+    stderr."""
+    m = import_mesh(
+        path,
+        reorient=args.reorient,
+        pinched=args.pinched,
+        duplicates=args.duplicates,
+        linear=args.linear,
+        _style="cli",
+    )
+    for n in m.notes:
+        _note(n)
+    return m
+
+
 def _add_info(sub: Any) -> None:
     p = sub.add_parser(
         "info",
-        help="build the G-map of a mesh file and print its cell counts and validity",
+        help="build the G-map of a mesh file and print its cell counts, quality and validity",
         description=(
             "Read a mesh file (any format meshio reads, or a saved G-map .tmg), build its "
-            "G-map and print darts, dimension, cells, connected components, boundary and "
-            "validity. Exit 0 when the map is valid, 1 when it is not, 2 when the file "
-            "cannot be read or the mesh is refused."
+            "G-map and print darts, dimension, cells, connected components, boundary, "
+            "validity, the bounding box, the cells by kind and quality figures: the smallest "
+            "and largest cell volume (3D) or area (2D) and the worst aspect ratio. The aspect "
+            "ratio of a triangle or tetrahedron is its longest edge over its inradius, "
+            "divided by that of the equilateral cell (2*sqrt(3) for a triangle, 2*sqrt(6) "
+            "for a tetrahedron), so 1 for the best cell and growing without bound for a "
+            "flat one; for other cells it is the longest edge over the shortest (1 for a "
+            "square or cube). What the import did (cells reoriented, points left out, ...) "
+            "goes to stderr as notes. Exit 0 when the map is valid, 1 when it is not, 2 "
+            "when the file cannot be read or the mesh is refused."
         ),
     )
     p.add_argument("mesh_file", metavar="MESH_FILE", type=Path)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    p.add_argument(
-        "--reorient",
-        action="store_true",
-        help="turn inverted cells over instead of refusing them",
-    )
+    _add_import_options(p)
     p.set_defaults(run=_run_info)
 
 
-def _summary(path: Path, g: GMap, dropped: Sequence[DroppedBlock]) -> dict[str, Any]:
+def _summary(path: Path, m: ImportedMesh) -> dict[str, Any]:
+    g, dropped = m.gmap, m.dropped
     counts = g.cell_counts()
     valid = g.is_valid()
     violations = [] if valid else g.violations()
+    r = g.report
+    reoriented = [int(c) for c in r.reoriented]
+    if m.mesh is not None:
+        points, blocks = m.mesh.points, [(str(b.type), b.data) for b in m.mesh.cells]
+    else:
+        points, kinds, offsets, connectivity = g.to_flat()
+        blocks = [(b.type, b.data) for b in flat_to_blocks(kinds, offsets, connectivity)]
+    figures = mesh_figures(points, blocks, g.dimension)
     return {
         "file": str(path),
         "darts": counts["darts"],
@@ -87,13 +154,23 @@ def _summary(path: Path, g: GMap, dropped: Sequence[DroppedBlock]) -> dict[str, 
         "violations": violations[:MAX_VIOLATIONS_SHOWN],
         "n_violations": len(violations),
         "dropped": [d._asdict() for d in dropped],
-        "reoriented": list(g.report.reoriented),
-        "unused_points": list(g.report.unused_points),
+        "reoriented": len(reoriented),
+        "reoriented_cells": reoriented,
+        "unused_points": [int(i) for i in r.unused_points],
+        "pinched": [int(i) for i in getattr(r, "pinched", [])],
+        "merged_duplicates": [[int(a), int(b)] for a, b in getattr(r, "merged_duplicates", [])],
+        "non_orientable": bool(getattr(r, "non_orientable", False)),
+        **figures,
+        "notes": list(m.notes),
         "memory_bytes": g.memory_bytes(),
     }
 
 
 def _print_summary(s: dict[str, Any]) -> None:
+    box = s["bounding_box"]
+    q = s["quality"]
+    size = "volume" if s["dimension"] == 3 else "area"
+    aspect = q["worst_aspect_ratio"]
     rows = [
         ("file", s["file"]),
         ("dimension", s["dimension"]),
@@ -104,6 +181,18 @@ def _print_summary(s: dict[str, Any]) -> None:
         ("volumes", s["volumes"]),
         ("components", s["components"]),
         ("boundary", f"{s['boundary']} {s['boundary_kind']}"),
+        ("cells", ", ".join(f"{n} {k}" for k, n in s["cells_by_kind"].items())),
+        (
+            "bounds",
+            f"min ({', '.join(f'{x:.6g}' for x in box['min'])}), "
+            f"max ({', '.join(f'{x:.6g}' for x in box['max'])})",
+        ),
+        (size, f"min {_g(q[f'min_{size}'])}, max {_g(q[f'max_{size}'])}"),
+        (
+            "aspect",
+            "-" if aspect is None else f"worst {aspect:.4g} (cell {q['worst_aspect_cell']})",
+        ),
+        ("reoriented", s["reoriented"]),
         ("valid", "yes" if s["valid"] else f"NO ({s['n_violations']} violations)"),
         ("memory", f"{s['memory_bytes'] / 1024:.1f} KiB"),
     ]
@@ -111,16 +200,11 @@ def _print_summary(s: dict[str, Any]) -> None:
         print(f"{k:<11} {v}")
 
 
-def _report_notes(s: dict[str, Any]) -> None:
-    if s["dropped"]:
-        what = ", ".join(str(DroppedBlock(**d)) for d in s["dropped"])
-        _note(f"dropped {what}: lower-dimensional than the {s['dimension']}D cells")
-    if s["reoriented"]:
-        cells = s["reoriented"]
-        shown = ", ".join(map(str, cells[:20])) + (", ..." if len(cells) > 20 else "")
-        _note(f"reoriented {len(cells)} inverted cell(s): {shown}")
-    if s["unused_points"]:
-        _note(f"{len(s['unused_points'])} point(s) used by no cell were left out")
+def _g(x: float | None) -> str:
+    return "-" if x is None else f"{x:.6g}"
+
+
+def _report_violations(s: dict[str, Any]) -> None:
     if not s["valid"]:
         for v in s["violations"]:
             print(f"topomech: violation: {v}", file=sys.stderr)
@@ -130,9 +214,9 @@ def _report_notes(s: dict[str, Any]) -> None:
 
 
 def _run_info(args: argparse.Namespace) -> int:
-    g, dropped = read_gmap(args.mesh_file, reorient=args.reorient)
-    s = _summary(args.mesh_file, g, dropped)
-    _report_notes(s)
+    m = _import(args.mesh_file, args)
+    s = _summary(args.mesh_file, m)
+    _report_violations(s)
     if args.json:
         print(json.dumps(s))
     else:
@@ -565,11 +649,7 @@ def _add_apply(sub: Any) -> None:
         ),
     )
     p.add_argument("--out", metavar="OUTPUT", type=Path, required=True, help=".tmg or a mesh file")
-    p.add_argument(
-        "--reorient",
-        action="store_true",
-        help="turn inverted cells of INPUT over instead of refusing them",
-    )
+    _add_import_options(p)
     p.set_defaults(run=_run_apply)
 
 
@@ -629,10 +709,7 @@ def _run_apply(args: argparse.Namespace) -> int:
     except ValueError as e:
         _error(str(e))
         return EXIT_REFUSED
-    g, dropped = read_gmap(args.input, reorient=args.reorient)
-    if dropped:
-        what = ", ".join(map(str, dropped))
-        _note(f"dropped {what}: lower-dimensional than the {g.dimension}D cells")
+    g = _import(args.input, args).gmap
     rules = _load_rules(args.rules, g.dimension)
     if rules is None:
         return EXIT_REFUSED

@@ -9,6 +9,10 @@ the fixed vertices, gravity, the integrator and how often to write frames::
     [mesh]
     file = "beam.msh"                  # relative to the scene file; or:
     # generator = "box", element = "tet", size = [1.0, 0.2, 0.2], cells = [10, 2, 2]
+    # reorient = true                  # a file's import options: orient cells alike (default)
+    # pinched = "merge"                # cells touching at a point: merge | split | refuse
+    # duplicates = "refuse"            # cells listed twice: refuse | merge
+    # order = "as-is"                  # as-is (second order refused) | linear (corners kept)
 
     [[model]]                          # one table per model, summed
     kind = "corotational"
@@ -123,6 +127,7 @@ else:  # pragma: no cover - exercised on Python 3.9 and 3.10 only
 
 if TYPE_CHECKING:
     from topomech._gmap import PathLike
+    from topomech.io import ImportedMesh
 
 __all__ = [
     "EVENT_KINDS",
@@ -409,8 +414,22 @@ class MeshSpec:
     element: str | None = None
     size: tuple[float, ...] = ()
     cells: tuple[int, ...] = ()
-    #: Turn inverted cells of a mesh file over instead of refusing them.
-    reorient: bool = False
+    #: ``mesh.reorient``: turn the cells of a mesh file listed with the opposite orientation
+    #: over, so that all agree (default); false refuses them.
+    reorient: bool = True
+    #: ``mesh.pinched``: a point where cells touch only at it: ``"merge"`` (default: one
+    #: particle), ``"split"`` (one vertex per side) or ``"refuse"``.
+    pinched: str = "merge"
+    #: ``mesh.duplicates``: cells listed twice: ``"refuse"`` (default) or ``"merge"``.
+    duplicates: str = "refuse"
+    #: ``mesh.order``: ``"as-is"`` (default: second-order cells are refused) or ``"linear"``
+    #: (their corner nodes are kept, the other nodes left out).
+    order: str = "as-is"
+
+    @property
+    def linear(self) -> bool:
+        """Whether second-order cells keep their corner nodes (``mesh.order = "linear"``)."""
+        return self.order == "linear"
 
     @property
     def dimension(self) -> int | None:
@@ -507,18 +526,38 @@ class Scene:
 
     def load_gmap(self) -> GMap:
         """The scene's G-map: the mesh file read, or the generated mesh."""
+        return self.load_mesh().gmap
+
+    def load_mesh(self) -> ImportedMesh:
+        """The scene's mesh file read and its map built with the ``mesh.*`` options
+        (``reorient``, ``pinched``, ``duplicates``, ``order``): the map, the mesh read with
+        its named sets (``.mesh``, see :func:`topomech.io.read_mesh`), the dropped blocks and
+        the notes, which are also printed to stderr. For a generated mesh ``.mesh`` is None.
+        Raises :class:`SceneError` naming ``mesh.file``, or the ``mesh.*`` key of the option
+        that would accept a refused mesh."""
+        from topomech.io import ImportedMesh, import_mesh
+
         fail = self._fail()
         m = self.mesh
         if m.file is not None:
-            from topomech.io import read_gmap
-
             if not m.file.exists():
                 raise fail("mesh.file", f"no such file: {m.file}")
             try:
-                g, _ = read_gmap(m.file, reorient=m.reorient)
+                imported = import_mesh(
+                    m.file,
+                    reorient=m.reorient,
+                    pinched=m.pinched,
+                    duplicates=m.duplicates,
+                    linear=m.order == "linear",
+                    _style="scene",
+                )
             except (MeshReadError, MeshError) as e:
-                raise fail("mesh.file", str(e)) from e
-            return g
+                option = getattr(e, "option", None)
+                key = _MESH_OPTION_KEYS.get(option[0], "mesh.file") if option else "mesh.file"
+                raise fail(key, str(e)) from e
+            for note in imported.notes:
+                print(f"topomech: note: {m.file.name}: {note}", file=sys.stderr)
+            return imported
         try:
             if m.generator == "box":
                 (nx, ny, nz), (sx, sy, sz) = m.cells, m.size
@@ -526,7 +565,7 @@ class Scene:
             else:
                 (nx, ny), (sx, sy) = m.cells, m.size
                 flat = _core.grid(nx, ny, sx, sy, m.element or "quad")
-            return GMap.from_flat(*flat)
+            return ImportedMesh(GMap.from_flat(*flat), None, [], [])
         except (ValueError, MeshError) as e:
             raise fail("mesh", str(e)) from e
 
@@ -684,7 +723,18 @@ def _default_every(steps: int) -> int:
     return max(1, steps // 50)
 
 
+#: The scene key of each import option (a kernel refusal names the one that would accept).
+_MESH_OPTION_KEYS = {
+    "reorient": "mesh.reorient",
+    "pinched": "mesh.pinched",
+    "duplicates": "mesh.duplicates",
+    "linear": "mesh.order",
+}
+
+
 def _mesh(t: _Table, base: Path | None, fail: _Fail) -> MeshSpec:
+    from topomech.io import DUPLICATES, ORDERS, PINCHED
+
     file = t.string("file")
     generator = t.string("generator")
     if file is not None and generator is not None:
@@ -694,15 +744,24 @@ def _mesh(t: _Table, base: Path | None, fail: _Fail) -> MeshSpec:
     reorient_v = t._get("reorient")
     if reorient_v is not None and not isinstance(reorient_v, bool):
         raise fail(t.key("reorient"), f"expected true or false, got {_show(reorient_v)}")
-    reorient = bool(reorient_v)
     if file is not None:
+        pinched = t.choice("pinched", PINCHED, PINCHED[0])
+        duplicates = t.choice("duplicates", DUPLICATES, DUPLICATES[0])
+        order = t.choice("order", ORDERS, ORDERS[0])
         t.done()
         p = Path(file).expanduser()
         if not p.is_absolute() and base is not None:
             p = base / p
-        return MeshSpec(file=p, reorient=reorient)
-    if reorient_v is not None:
-        raise fail(t.key("reorient"), "only for a mesh file")
+        return MeshSpec(
+            file=p,
+            reorient=True if reorient_v is None else reorient_v,
+            pinched=pinched,
+            duplicates=duplicates,
+            order=order,
+        )
+    for k in ("reorient", "pinched", "duplicates", "order"):
+        if t._get(k) is not None:
+            raise fail(t.key(k), "only for a mesh file (mesh.file)")
     if generator not in GENERATORS:
         raise fail(
             t.key("generator"), f"unknown generator {_show(generator)} (expected {_or(GENERATORS)})"
