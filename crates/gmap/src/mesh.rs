@@ -21,6 +21,47 @@ mod conform;
 use crate::embedding::Column;
 use crate::{Dart, EmbeddingType, GMap, OrbitType, Policy};
 
+/// A fast hasher for small integer keys (the multiply-rotate hash of rustc's `FxHasher`):
+/// the maps keyed by point indices here are built from the user's own mesh, so the
+/// denial-of-service resistance of the default hasher buys nothing.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.add(u64::from(b));
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.add(u64::from(i));
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.add(i);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.add(i as u64);
+    }
+}
+
+impl FxHasher {
+    #[inline]
+    fn add(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+/// A hash map with [`FxHasher`].
+pub(crate) type FxMap<K, V> =
+    std::collections::HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
+
+fn fx_map<K, V>(capacity: usize) -> FxMap<K, V> {
+    FxMap::with_capacity_and_hasher(capacity, std::hash::BuildHasherDefault::default())
+}
+
 /// The kind of a cell, with VTK's vertex order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum CellKind {
@@ -159,7 +200,7 @@ impl Duplicates {
 }
 
 /// Options for [`build`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct BuildOptions {
     /// Turn cells listed with the opposite orientation (3D: negative signed volume; 2D: faces
     /// whose orientation disagrees with their neighbours) instead of refusing them; what
@@ -225,7 +266,9 @@ fn listed<T>(items: &[T], f: impl Fn(&T) -> String) -> String {
         .collect::<Vec<_>>()
         .join("; ");
     if items.len() > SHOWN {
-        out += &format!("; and {} more", items.len() - SHOWN);
+        out.push_str("; and ");
+        out.push_str(&(items.len() - SHOWN).to_string());
+        out.push_str(" more");
     }
     out
 }
@@ -598,19 +641,28 @@ fn dedupe(
     opts: &BuildOptions,
     report: &mut BuildReport,
 ) -> Result<Vec<usize>, MeshError> {
-    let mut seen: std::collections::HashMap<Box<[u32]>, usize> =
-        std::collections::HashMap::with_capacity(mesh.cells.len());
+    // cells of up to 8 points (every volume kind, triangles, quads) keyed without allocation
+    let mut small: FxMap<[u32; 8], usize> = fx_map(mesh.cells.len());
+    let mut large: FxMap<Vec<u32>, usize> = fx_map(0);
     let mut pairs = Vec::new();
     let mut kept = Vec::with_capacity(mesh.cells.len());
     for (c, verts) in mesh.cells.iter().enumerate() {
-        let mut key: Box<[u32]> = verts.iter().map(|&v| v as u32).collect();
-        key.sort_unstable();
-        match seen.entry(key) {
-            std::collections::hash_map::Entry::Occupied(e) => pairs.push((c, *e.get())),
-            std::collections::hash_map::Entry::Vacant(e) => {
-                e.insert(c);
-                kept.push(c);
+        let first = if verts.len() <= 8 {
+            let mut key = [u32::MAX; 8];
+            for (k, &v) in verts.iter().enumerate() {
+                key[k] = v as u32;
             }
+            key.sort_unstable();
+            *small.entry(key).or_insert(c)
+        } else {
+            let mut key: Vec<u32> = verts.iter().map(|&v| v as u32).collect();
+            key.sort_unstable();
+            *large.entry(key).or_insert(c)
+        };
+        if first == c {
+            kept.push(c);
+        } else {
+            pairs.push((c, first));
         }
     }
     if pairs.is_empty() {
@@ -725,12 +777,6 @@ fn check_geometry(
             cells.push(verts.clone());
             continue;
         }
-        let vol = signed_volume(kind, verts, points);
-        if vol.abs() <= DEGENERATE * l * l * l {
-            degenerate.push((c, "zero volume".into()));
-            cells.push(verts.clone());
-            continue;
-        }
         if kind != CellKind::Tetra {
             let jac = corner_jacobians(kind, verts, points);
             let eps = TWIST * l * l * l;
@@ -754,6 +800,12 @@ fn check_geometry(
                     continue;
                 }
             }
+        }
+        let vol = signed_volume(kind, verts, points);
+        if vol.abs() <= DEGENERATE * l * l * l {
+            degenerate.push((c, "zero volume".into()));
+            cells.push(verts.clone());
+            continue;
         }
         if vol < 0.0 {
             inverted.push((c, kind.name(), vol));
@@ -878,7 +930,6 @@ pub fn build(mesh: &Mesh, opts: &BuildOptions) -> Result<(GMap, BuildReport), Me
         build_volume(mesh, &ids, &cells, &mut report)?
     };
     g.version += 1;
-    let particle_of_dart = particles(&g, &vert_of_dart, &used, mesh, &ids, opts, &mut report)?;
     let vertex = OrbitType::vertex(dim);
     let pos = g
         .add_embedding("position", EmbeddingType::Vec3, vertex, Policy::Mean)
@@ -891,43 +942,65 @@ pub fn build(mesh: &Mesh, opts: &BuildOptions) -> Result<(GMap, BuildReport), Me
         let s = e.slot_of[d] as usize;
         col[3 * s..3 * s + 3].copy_from_slice(&mesh.points[v as usize]);
     }
+    // the vertex orbits are the slots of `position` (numbered by smallest dart): the other
+    // vertex embeddings share that table instead of walking the orbits again
+    let labels = e.slot_of.clone();
+    let n_orbits = e.slot_use.len();
+    let particle_of_slot = particles(
+        &labels,
+        n_orbits,
+        &vert_of_dart,
+        &used,
+        mesh,
+        &ids,
+        opts,
+        &mut report,
+    )?;
+    let mut point_of_slot = vec![0i64; n_orbits];
+    for (d, &v) in vert_of_dart.iter().enumerate() {
+        point_of_slot[labels[d] as usize] = i64::from(v);
+    }
+    push_int(&mut g, "point_id", vertex, labels.clone(), point_of_slot);
+    push_int(&mut g, "particle", vertex, labels, particle_of_slot);
+    // each kept cell's darts are one element orbit
     let element = if dim == 2 {
         OrbitType::face(2)
     } else {
         OrbitType::volume()
     };
-    let mut cell_of_dart = vec![0i64; vert_of_dart.len()];
-    for (k, &c) in ids.iter().enumerate() {
+    let mut cell_slot = vec![0u32; vert_of_dart.len()];
+    for k in 0..ids.len() {
         let (a, b) = (cell_first[k] as usize, cell_first[k + 1] as usize);
-        cell_of_dart[a..b].fill(c as i64);
+        cell_slot[a..b].fill(k as u32);
     }
-    let point_of_dart: Vec<i64> = vert_of_dart.iter().map(|&v| i64::from(v)).collect();
-    write_int(&mut g, "point_id", vertex, &point_of_dart);
-    write_int(&mut g, "particle", vertex, &particle_of_dart);
-    write_int(&mut g, "cell_id", element, &cell_of_dart);
+    let cell_of_slot = ids.iter().map(|&c| c as i64).collect();
+    push_int(&mut g, "cell_id", element, cell_slot, cell_of_slot);
     Ok((g, report))
 }
 
-/// Declares an i64 embedding (policy copy) and writes `value[d]` for every dart `d` (the
-/// values must agree on each orbit).
-fn write_int(g: &mut GMap, name: &str, orbit: OrbitType, value: &[i64]) {
-    let id = g
-        .add_embedding(name, EmbeddingType::I64, orbit, Policy::Copy)
-        .expect("fresh name");
-    let e = &mut g.embeddings[id.0 as usize];
-    let Column::Int(col) = &mut e.values else {
-        unreachable!("i64 is int")
-    };
-    for (d, &v) in value.iter().enumerate() {
-        col[e.slot_of[d] as usize] = v;
+/// Declares an i64 embedding (policy copy) on `orbit` whose orbits are already numbered:
+/// dart `d` is on orbit `slot_of[d]`, whose value is `values[slot_of[d]]`.
+fn push_int(g: &mut GMap, name: &str, orbit: OrbitType, slot_of: Vec<u32>, values: Vec<i64>) {
+    debug_assert!(g.embedding_id(name).is_none());
+    let mut e =
+        crate::embedding::Embedding::new(name, EmbeddingType::I64, orbit, Policy::Copy, None);
+    let mut slot_use = vec![0u32; values.len()];
+    for &s in &slot_of {
+        slot_use[s as usize] += 1;
     }
+    e.slot_of = slot_of;
+    e.slot_use = slot_use;
+    e.values = Column::Int(values);
+    g.embeddings.push(e);
 }
 
-/// The `particle` row of every dart (see [`Pinched`]); refuses pinched points with
-/// [`Pinched::Refuse`] and lists them in the report otherwise.
+/// The `particle` row of every vertex orbit (see [`Pinched`]); refuses pinched points with
+/// [`Pinched::Refuse`] and lists them in the report otherwise. `labels[d]` is the vertex
+/// orbit of dart `d`, orbits numbered by their smallest dart.
 #[allow(clippy::too_many_arguments)]
 fn particles(
-    g: &GMap,
+    labels: &[u32],
+    n: usize,
     vert_of_dart: &[u32],
     used: &[bool],
     mesh: &Mesh,
@@ -944,13 +1017,14 @@ fn particles(
             n_used += 1;
         }
     }
-    let (labels, n) = g.orbit_labels(OrbitType::vertex(g.dim));
-    let mut out: Vec<i64> = vert_of_dart.iter().map(|&v| row[v as usize]).collect();
+    let mut out = vec![-1i64; n];
+    for (d, &v) in vert_of_dart.iter().enumerate() {
+        out[labels[d] as usize] = row[v as usize];
+    }
     if n as i64 == n_used {
         return Ok(out);
     }
-    // orbits are labelled in order of their smallest dart: the first orbit met for a point
-    // keeps its row
+    // the first orbit met for a point (smallest dart) keeps its row
     let mut first_label = vec![u32::MAX; used.len()];
     let mut label_point = vec![u32::MAX; n];
     let mut extra: Vec<(u32, u32)> = Vec::new(); // (point, label) of the other orbits
@@ -989,15 +1063,8 @@ fn particles(
         // extra orbits in increasing (point, smallest dart); labels increase with the
         // smallest dart
         extra.sort_unstable();
-        let mut new_row = vec![-1i64; n];
         for (k, &(_, l)) in extra.iter().enumerate() {
-            new_row[l as usize] = n_used + k as i64;
-        }
-        for (d, r) in out.iter_mut().enumerate() {
-            let nr = new_row[labels[d] as usize];
-            if nr >= 0 {
-                *r = nr;
-            }
+            out[l as usize] = n_used + k as i64;
         }
     }
     report.pinched = pinched;
@@ -1084,8 +1151,7 @@ fn build_surface(
         check_planar_folds(points, &cells, ids, &shared)?;
     }
     // boundary sides: overlapping ones are non-conforming (hanging nodes)
-    let mut n_uses: std::collections::HashMap<(u32, u32), u32> =
-        std::collections::HashMap::with_capacity(2 * cells.len());
+    let mut n_uses: FxMap<(u32, u32), u32> = fx_map(2 * cells.len());
     for verts in &cells {
         let k = verts.len();
         for j in 0..k {
@@ -1150,7 +1216,8 @@ fn check_planar_folds(
     shared: &[SharedEdge],
 ) -> Result<(), MeshError> {
     let normals: Vec<[f64; 3]> = cells.iter().map(|c| polygon_normal(c, points)).collect();
-    let Some(big) = (0..normals.len()).max_by(|&a, &b| norm(normals[a]).total_cmp(&norm(normals[b])))
+    let Some(big) =
+        (0..normals.len()).max_by(|&a, &b| norm(normals[a]).total_cmp(&norm(normals[b])))
     else {
         return Ok(());
     };
@@ -1158,7 +1225,11 @@ fn check_planar_folds(
     if nb == 0.0 {
         return Ok(());
     }
-    let n = [normals[big][0] / nb, normals[big][1] / nb, normals[big][2] / nb];
+    let n = [
+        normals[big][0] / nb,
+        normals[big][1] / nb,
+        normals[big][2] / nb,
+    ];
     let o = points[cells[big][0]];
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
     for c in cells {
@@ -1203,8 +1274,7 @@ type SharedEdge = ((u32, u32), [Side; 2]);
 
 /// The edges shared by two faces, sorted, with the side of each face; refuses an edge on 3+.
 fn shared_edges(cells: &[Vec<usize>], ids: &[usize]) -> Result<Vec<SharedEdge>, MeshError> {
-    let mut edges: std::collections::HashMap<(u32, u32), Vec<Side>> =
-        std::collections::HashMap::with_capacity(2 * cells.len());
+    let mut edges: FxMap<(u32, u32), Vec<Side>> = fx_map(2 * cells.len());
     for (f, verts) in cells.iter().enumerate() {
         let k = verts.len();
         for j in 0..k {
@@ -1270,8 +1340,7 @@ fn build_volume(
     let mut vert_of_dart: Vec<u32> = Vec::with_capacity(n_darts);
     let mut cell_first: Vec<u32> = Vec::with_capacity(cells.len() + 1);
     // sorted face vertices -> (cell, face); cell u32::MAX once the face is matched
-    let mut face_map: std::collections::HashMap<[u32; 4], (u32, BuiltFace)> =
-        std::collections::HashMap::with_capacity(cells.len() * 3);
+    let mut face_map: FxMap<[u32; 4], (u32, BuiltFace)> = fx_map(cells.len() * 3);
     let mut local: Vec<BuiltFace> = Vec::with_capacity(6);
     let mut mismatched: Vec<FacePair> = Vec::new();
     let mut folded: Vec<(usize, usize, Vec<usize>)> = Vec::new();

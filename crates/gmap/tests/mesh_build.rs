@@ -196,7 +196,10 @@ fn degenerate_elements_are_refused() {
     ];
     let m = tet_mesh(vec![vec![0, 1, 2, 3]], flat.clone());
     let e = build(&m, &BuildOptions::default()).unwrap_err();
-    assert!(matches!(e, MeshError::Degenerate { ref cells } if cells[0].0 == 0), "{e}");
+    assert!(
+        matches!(e, MeshError::Degenerate { ref cells } if cells[0].0 == 0),
+        "{e}"
+    );
     let m = Mesh {
         kinds: vec![CellKind::Polygon],
         cells: vec![vec![0, 1, 1]],
@@ -245,7 +248,10 @@ fn inverted_tet_is_refused_or_repaired_with_a_report() {
         MeshError::Inverted { cells } => assert_eq!(cells.len(), 1, "{e}"),
         other => panic!("{other}"),
     }
-    assert!(matches!(&e, MeshError::Inverted { cells } if cells[0].0 == 1), "{e}");
+    assert!(
+        matches!(&e, MeshError::Inverted { cells } if cells[0].0 == 1),
+        "{e}"
+    );
     // the message names the cell, not an option (callers add the option in their syntax)
     assert!(e.to_string().contains("cell 1"), "{e}");
     assert!(!e.to_string().contains("reorient"), "{e}");

@@ -4,9 +4,7 @@
 //! unmatched, on the boundary, lying on top of each other: a hidden crack. Found with a
 //! uniform grid of the facets' bounding boxes, so the cost stays linear in the boundary size.
 
-use std::collections::HashMap;
-
-use super::{cross, dot, max_edge, norm, polygon_normal, sub, FacePair};
+use super::{cross, dot, fx_map, max_edge, norm, polygon_normal, sub, FacePair, FxMap};
 
 /// A boundary face (3 or 4 points) or side (2 points) of a cell.
 pub(crate) struct Facet {
@@ -55,7 +53,7 @@ pub(crate) fn overlapping(points: &[[f64; 3]], facets: &[Facet]) -> Vec<FacePair
             (lo, hi)
         })
         .collect();
-    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::with_capacity(facets.len());
+    let mut grid: FxMap<[i64; 3], Vec<u32>> = fx_map(facets.len());
     for (i, (lo, hi)) in ranges.iter().enumerate() {
         for x in lo[0]..=hi[0] {
             for y in lo[1]..=hi[1] {
@@ -81,7 +79,11 @@ pub(crate) fn overlapping(points: &[[f64; 3]], facets: &[Facet]) -> Vec<FacePair
                 }
                 let size = sizes[i as usize].max(sizes[j as usize]);
                 if let Some(why) = overlap(points, &fa.verts, &fb.verts, size) {
-                    let (a, b) = if fa.cell < fb.cell { (fa, fb) } else { (fb, fa) };
+                    let (a, b) = if fa.cell < fb.cell {
+                        (fa, fb)
+                    } else {
+                        (fb, fa)
+                    };
                     pairs.push(FacePair {
                         a: a.cell,
                         face_a: a.verts.clone(),
@@ -139,7 +141,8 @@ fn overlap(points: &[[f64; 3]], a: &[usize], b: &[usize], size: f64) -> Option<S
             .max_by(|&i, &j| n[i].abs().total_cmp(&n[j].abs()))
             .unwrap_or(2);
         let (x, y) = ((drop + 1) % 3, (drop + 2) % 3);
-        let flat = |f: &[usize]| -> Vec<[f64; 2]> { f.iter().map(|&v| [p(v)[x], p(v)[y]]).collect() };
+        let flat =
+            |f: &[usize]| -> Vec<[f64; 2]> { f.iter().map(|&v| [p(v)[x], p(v)[y]]).collect() };
         let (qa, qb) = (flat(a), flat(b));
         if separated(&qa, &qb, tol) || separated(&qb, &qa, tol) {
             return None;
