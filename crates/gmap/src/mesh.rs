@@ -323,19 +323,19 @@ pub enum MeshError {
         expected: usize,
     },
     /// Points with a NaN or infinite coordinate.
-    #[error("{} point(s) with a non-finite coordinate: {}", points.len(), listed(points, |(p, c)| format!("point {p} {c:?}")))]
+    #[error("{} point(s) with a non-finite coordinate: {}", points.len(), listed(points, |(p, c)| format!("point {p} has a non-finite coordinate {c:?}")))]
     NonFinite {
         /// Each point and its coordinates.
         points: Vec<(usize, [f64; 3])>,
     },
     /// Cells with a vertex twice, or zero area / volume.
-    #[error("{} degenerate cell(s): {}", cells.len(), listed(cells, |(c, why)| format!("cell {c} ({why})")))]
+    #[error("{} degenerate cell(s): {}", cells.len(), listed(cells, |(c, why)| format!("cell {c} is degenerate ({why})")))]
     Degenerate {
         /// Each cell and what is wrong.
         cells: Vec<(usize, String)>,
     },
     /// Cells with negative volume (3D), refused when `reorient` is off.
-    #[error("{} inverted cell(s) (negative signed volume): {}", cells.len(), listed(cells, |(c, k, v)| format!("cell {c} ({k}, volume {v:.3e})")))]
+    #[error("{} inverted cell(s) (negative signed volume): {}", cells.len(), listed(cells, |(c, k, v)| format!("cell {c} ({k}) is inverted (signed volume {v:.3e})")))]
     Inverted {
         /// Each cell, its kind's name and its signed volume.
         cells: Vec<(usize, &'static str, f64)>,
