@@ -87,7 +87,7 @@ def _with_hint(e: MeshError, style: str) -> MeshError:
         return e
     verb = {"python": "pass", "cli": "use", "scene": "set"}[style]
     err = MeshError(f"{e}; to accept it {verb} {format_option(option[0], option[1], style)}")
-    err.option = option  # type: ignore[attr-defined]
+    err.option = option
     return err
 
 
@@ -189,9 +189,7 @@ class GMap:
         """
         flat = to_flat(points, cells, kind)
         try:
-            return cls.from_flat(
-                *flat, reorient=reorient, pinched=pinched, duplicates=duplicates
-            )
+            return cls.from_flat(*flat, reorient=reorient, pinched=pinched, duplicates=duplicates)
         except MeshError as e:
             raise _with_hint(e, _style) from None
 

@@ -330,6 +330,35 @@ impl PyGMap {
         Ok(d)
     }
 
+    /// The value of the i64 embedding `name` on every dart, int64 `(n_darts,)` (0 on removed
+    /// darts), e.g. the `point_id`, `particle` and `cell_id` that a mesh build writes.
+    /// Raises `EmbeddingError` for an unknown name or an embedding of another type.
+    fn int_embedding<'py>(
+        &self,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let g = self.map()?;
+        let id = guard(|| Ok(g.require(name)?))?;
+        if g.embedding(id).ty() != EmbeddingType::I64 {
+            return Err(Error::EmbeddingInput(format!(
+                "embedding '{name}' is {}, not i64",
+                g.embedding(id).ty()
+            ))
+            .into());
+        }
+        let out: Vec<i64> = (0..g.capacity())
+            .map(|d| {
+                let d = topomech_gmap::Dart(d as u32);
+                match g.is_alive(d).then(|| g.value(id, d)) {
+                    Some(Ok(topomech_gmap::Value::Int(x))) => x,
+                    _ => 0,
+                }
+            })
+            .collect();
+        Ok(out.into_pyarray(py))
+    }
+
     /// Bytes used by the topology and every embedding.
     fn memory_bytes(&self) -> PyResult<usize> {
         Ok(self.map()?.memory_bytes())
