@@ -6,6 +6,9 @@ pinched, ...); indices are copied, never computed, so comparisons are exact."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -168,3 +171,48 @@ def test_tmg_round_trip_keeps_the_numbering() -> None:
     back = topomech.GMap.from_bytes(g.to_bytes())
     for name, orbit in [("point_id", "<1,2,3>"), ("particle", "<1,2,3>"), ("cell_id", "<0,1,2>")]:
         assert embedding_per_orbit(back, name, orbit) == embedding_per_orbit(g, name, orbit)
+
+
+SKFEM_TRIANGLES: dict[str, Callable[[Any], Any]] = {
+    "square": lambda s: s.MeshTri().refined(2),
+    "circle": lambda s: s.MeshTri.init_circle(2),
+    "lshaped": lambda s: s.MeshTri.init_lshaped().refined(1),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SKFEM_TRIANGLES))
+def test_scikit_fem_triangles_with_mixed_orientations_load(name: str) -> None:
+    """scikit-fem lists half its triangles clockwise: they load, the fewer are turned (ties:
+    the orientation of cell 0 wins), and every face then has the same signed area sign."""
+    skfem = pytest.importorskip("skfem")
+    m = SKFEM_TRIANGLES[name](skfem)
+    p, t = m.p.T, m.t.T
+    a, b = p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]
+    signs = np.sign(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    pos, neg = int((signs > 0).sum()), int((signs < 0).sum())
+    keep = signs[0] if pos == neg else (1 if pos > neg else -1)
+    g = topomech.GMap.from_mesh(p, [("triangle", t)])
+    assert g.report.reoriented == [int(i) for i in np.flatnonzero(signs != keep)]
+    pts, _, offsets, conn = g.to_flat()
+    tri = conn.reshape(-1, 3)
+    u, v = pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]]
+    out = np.sign(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    assert np.all(out == out[0])
+    with pytest.raises(topomech.MeshError, match="opposite orientations"):
+        topomech.GMap.from_mesh(p, [("triangle", t)], reorient=False)
+
+
+def test_scikit_fem_tetrahedra_negative_ones_are_turned() -> None:
+    """scikit-fem's refined tetrahedral meshes have negative tetrahedra: exactly those (by a
+    determinant computed here) are turned."""
+    skfem = pytest.importorskip("skfem")
+    m = skfem.MeshTet().refined(2)
+    p, t = m.p.T, m.t.T
+    d = np.linalg.det(np.stack([p[t[:, k]] - p[t[:, 0]] for k in (1, 2, 3)], axis=1))
+    g = topomech.GMap.from_mesh(p, [("tetra", t)])
+    assert g.report.reoriented == [int(i) for i in np.flatnonzero(d < 0)]
+    assert g.is_valid()
+    assert g.cell_counts()["volumes"] == len(t)
+    with pytest.raises(topomech.MeshError, match=r"inverted cell\(s\)") as e:
+        topomech.GMap.from_mesh(p, [("tetra", t)], reorient=False)
+    assert f"{int((d < 0).sum())} inverted cell(s)" in str(e.value)
