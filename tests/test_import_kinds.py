@@ -193,7 +193,7 @@ def test_scikit_fem_triangles_with_mixed_orientations_load(name: str) -> None:
     keep = signs[0] if pos == neg else (1 if pos > neg else -1)
     g = topomech.GMap.from_mesh(p, [("triangle", t)])
     assert g.report.reoriented == [int(i) for i in np.flatnonzero(signs != keep)]
-    pts, _, offsets, conn = g.to_flat()
+    pts, _, _offsets, conn = g.to_flat()
     tri = conn.reshape(-1, 3)
     u, v = pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]]
     out = np.sign(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
