@@ -88,9 +88,11 @@ def test_degenerate_flat_tetrahedron() -> None:
 
 
 def test_inverted_tet_is_refused_without_reorient() -> None:
+    # issue 12: reorient is the default now, so the refusal needs reorient=False
     cells = [("tetra", [[0, 1, 2, 3], [1, 3, 2, 4]])]
     with pytest.raises(topomech.MeshError, match=r"cell 1 \(tetra\) is inverted.*reorient=True"):
-        topomech.GMap.from_mesh(TET_POINTS, cells)
+        topomech.GMap.from_mesh(TET_POINTS, cells, reorient=False)
+    assert topomech.GMap.from_mesh(TET_POINTS, cells).report.reoriented == [1]
 
 
 def test_inverted_tet_is_turned_over_with_reorient() -> None:

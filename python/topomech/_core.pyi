@@ -39,7 +39,10 @@ class TopomechError(Exception):
     """Base class of every error raised by topomech."""
 
 class MeshError(TopomechError):
-    """A mesh that cannot become a G-map; the message names the cell or point."""
+    """A mesh that cannot become a G-map; the message names the cells or points. `option` is
+    the `(name, value)` of the build option that would accept the mesh, or `None`."""
+
+    option: tuple[str, str] | None
 
 class MeshReadError(TopomechError):
     """A mesh file that cannot be read: missing, unreadable, or not a mesh."""
@@ -99,8 +102,10 @@ class GMap:
         kinds: list[str],
         offsets: npt.NDArray[np.int64],
         connectivity: npt.NDArray[np.int64],
-        reorient: bool = False,
-    ) -> tuple[GMap, dict[str, list[int]]]: ...
+        reorient: bool = True,
+        pinched: str = "merge",
+        duplicates: str = "refuse",
+    ) -> tuple[GMap, dict[str, Any]]: ...
     @staticmethod
     def load(path: _Path) -> GMap: ...
     @staticmethod
@@ -125,6 +130,7 @@ class GMap:
     def unsew(self, i: int, a: int) -> None: ...
     def embedding_names(self) -> list[str]: ...
     def embedding_info(self, name: str) -> dict[str, Any]: ...
+    def int_embedding(self, name: str) -> npt.NDArray[np.int64]: ...
     def memory_bytes(self) -> int: ...
 
 class _HasCore(Protocol):

@@ -12,12 +12,12 @@ import numpy.typing as npt
 
 from topomech import _core
 from topomech._cells import FlatMesh, flat_to_blocks, to_flat
-from topomech._core import TopologyError
+from topomech._core import MeshError, TopologyError
 
 if TYPE_CHECKING:
     import meshio
 
-__all__ = ["BuildReport", "CellCounts", "GMap"]
+__all__ = ["BuildReport", "CellCounts", "GMap", "format_option"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -36,12 +36,59 @@ class CellCounts(TypedDict):
 
 @dataclass(frozen=True)
 class BuildReport:
-    """What building a map changed or noticed."""
+    """What building a map changed or noticed (input cell and point indices)."""
 
-    #: Cells whose vertex order was reversed (only with ``reorient=True``).
+    #: Cells whose vertex order was reversed (with ``reorient=True``, the default).
     reoriented: list[int] = field(default_factory=list)
     #: Points used by no cell: they are not in the map.
     unused_points: list[int] = field(default_factory=list)
+    #: Pinched points: their cells touch only at them (one particle with
+    #: ``pinched="merge"``, one per side with ``pinched="split"``).
+    pinched: list[int] = field(default_factory=list)
+    #: ``(dropped cell, kept cell)`` for each duplicate dropped with ``duplicates="merge"``.
+    merged_duplicates: list[tuple[int, int]] = field(default_factory=list)
+    #: A surface with a component that cannot be oriented (a Moebius strip), accepted.
+    non_orientable: bool = False
+
+
+#: How each caller spells an option: ``python`` keywords, ``cli`` flags, ``scene`` keys.
+STYLES = ("python", "cli", "scene")
+
+
+def format_option(name: str, value: str, style: str) -> str:
+    """The user's spelling of build option ``name`` set to ``value`` (as in
+    ``MeshError.option``): ``style`` is ``"python"`` (``pinched="split"``, ``reorient=True``,
+    ``linear=True``), ``"cli"`` (``--pinched split``, ``--reorient``, ``--linear``) or
+    ``"scene"`` (``mesh.pinched = "split"``, ``mesh.reorient = true``,
+    ``mesh.order = "linear"``). Raises ``ValueError`` for another style."""
+    flag = value in ("true", "false")
+    if style == "python":
+        if flag:
+            return f"{name}={value.capitalize()}"
+        return f'{name}="{value}"'
+    if style == "cli":
+        option = "--" + name.replace("_", "-")
+        if flag:
+            return option if value == "true" else "--no-" + name.replace("_", "-")
+        return f"{option} {value}"
+    if style == "scene":
+        if name == "linear":
+            return 'mesh.order = "linear"' if value == "true" else 'mesh.order = "keep"'
+        if flag:
+            return f"mesh.{name} = {value}"
+        return f'mesh.{name} = "{value}"'
+    raise ValueError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
+
+
+def _with_hint(e: MeshError, style: str) -> MeshError:
+    """``e`` with the option that would accept the mesh appended in ``style``."""
+    option = getattr(e, "option", None)
+    if option is None:
+        return e
+    verb = {"python": "pass", "cli": "use", "scene": "set"}[style]
+    err = MeshError(f"{e}; to accept it {verb} {format_option(option[0], option[1], style)}")
+    err.option = option
+    return err
 
 
 class GMap:
@@ -77,46 +124,102 @@ class GMap:
         kinds: list[str],
         offsets: Any,
         connectivity: Any,
-        reorient: bool = False,
+        reorient: bool = True,
+        *,
+        pinched: str = "merge",
+        duplicates: str = "refuse",
     ) -> GMap:
-        """From the kernel's flat layout (see :mod:`topomech._cells`)."""
+        """From the kernel's flat layout (see :mod:`topomech._cells`); options as
+        :meth:`from_mesh`."""
         core, report = _core.GMap.from_flat(
             np.ascontiguousarray(points, dtype=np.float64),
             list(kinds),
             np.ascontiguousarray(offsets, dtype=np.int64),
             np.ascontiguousarray(connectivity, dtype=np.int64),
             reorient,
+            pinched,
+            duplicates,
         )
-        return cls(core, BuildReport(list(report["reoriented"]), list(report["unused_points"])))
+        return cls(
+            core,
+            BuildReport(
+                reoriented=list(report["reoriented"]),
+                unused_points=list(report["unused_points"]),
+                pinched=list(report["pinched"]),
+                merged_duplicates=[(int(a), int(b)) for a, b in report["merged_duplicates"]],
+                non_orientable=bool(report["non_orientable"]),
+            ),
+        )
 
     @classmethod
     def from_mesh(
-        cls, points: Any, cells: Any, reorient: bool = False, *, kind: str | None = None
+        cls,
+        points: Any,
+        cells: Any,
+        reorient: bool = True,
+        *,
+        pinched: str = "merge",
+        duplicates: str = "refuse",
+        kind: str | None = None,
+        _style: str = "python",
     ) -> GMap:
         """From points ``(N, 2)`` or ``(N, 3)`` and cells.
 
         ``cells`` is a list of ``(meshio_type, array)`` pairs or meshio ``CellBlock`` objects,
         a ``{meshio_type: array}`` dict, or one array with ``kind="tetra"`` (say). Types:
         ``triangle``, ``quad``, ``polygon`` (a list of vertex lists), ``tetra``, ``hexahedron``,
-        ``wedge``, ``pyramid``, with VTK's vertex order. Cells are numbered in the order given;
-        a refused mesh raises :class:`MeshError` naming the cell or point. With
-        ``reorient=True``, inverted cells are turned over and listed in :attr:`report`.
+        ``wedge``, ``pyramid``, with VTK's vertex order. Cells are numbered in the order given
+        (the ``cell_id`` of the map's elements); points keep their indices (``point_id``).
+
+        Options:
+
+        - ``reorient`` (default ``True``): cells listed with the opposite orientation are
+          turned and listed in :attr:`report` ``.reoriented``; with ``False`` they are refused.
+        - ``pinched``: points where cells touch only at a point are one particle
+          (``"merge"``, default), one particle per side (``"split"``), or refused
+          (``"refuse"``); listed in ``report.pinched``.
+        - ``duplicates``: cells with the same points as an earlier cell are refused
+          (``"refuse"``, default) or dropped (``"merge"``, listed in
+          ``report.merged_duplicates``).
+
+        Raises :class:`MeshError` naming every offending cell or point (degenerate, twisted,
+        folded, duplicate cells, non-conforming interfaces, ...); when an option would accept
+        the mesh the message says which and ``MeshError.option`` holds ``(name, value)``.
+        Raises ``ValueError`` for an unknown ``pinched`` or ``duplicates`` value.
         """
         flat = to_flat(points, cells, kind)
-        return cls.from_flat(*flat, reorient=reorient)
+        try:
+            return cls.from_flat(*flat, reorient=reorient, pinched=pinched, duplicates=duplicates)
+        except MeshError as e:
+            raise _with_hint(e, _style) from None
 
     @classmethod
-    def from_meshio(cls, mesh: meshio.Mesh, reorient: bool = False) -> GMap:
+    def from_meshio(
+        cls,
+        mesh: meshio.Mesh,
+        reorient: bool = True,
+        *,
+        pinched: str = "merge",
+        duplicates: str = "refuse",
+        _style: str = "python",
+    ) -> GMap:
         """From a ``meshio.Mesh``, keeping the cells of the highest dimension (the lower
         dimensional ones, such as the boundary triangles Gmsh writes beside tetrahedra, are
-        dropped with a warning naming them)."""
+        dropped with a warning naming them). Options and errors as :meth:`from_mesh`."""
         from topomech.io import select_cells
 
         kept, dropped = select_cells(mesh.cells)
         if dropped:
             what = ", ".join(map(str, dropped))
             warnings.warn(f"dropped {what}: lower-dimensional cells", stacklevel=2)
-        return cls.from_mesh(mesh.points, kept, reorient)
+        return cls.from_mesh(
+            mesh.points,
+            kept,
+            reorient,
+            pinched=pinched,
+            duplicates=duplicates,
+            _style=_style,
+        )
 
     @classmethod
     def load(cls, path: PathLike) -> GMap:

@@ -1,11 +1,66 @@
 //! Building a G-map from points and cells, and back.
 //!
 //! Surfaces (n = 2) come from polygons of any degree; volumes (n = 3) from tetrahedra,
-//! hexahedra, wedges (prisms) and pyramids, in VTK vertex order. Vertex positions go to the
-//! `position` embedding (`vec3` on the vertex orbit).
+//! hexahedra, wedges (prisms) and pyramids, in VTK vertex order. Besides the vertex positions
+//! (`position`, `vec3` on the vertex orbit), [`build`] writes the input numbering onto the map:
+//! `point_id` (i64, vertex orbit: the input point), `particle` (i64, vertex orbit: the row of
+//! the vertex in per-vertex arrays) and `cell_id` (i64, element orbit: the input cell).
+//!
+//! What [`build`] accepts and refuses:
+//! - cells listed with the opposite orientation are turned (by default, [`BuildOptions::reorient`])
+//!   and listed in [`BuildReport::reoriented`]; a non-orientable surface is accepted;
+//! - pinched points (cells touching only at a point) become one particle by default
+//!   ([`Pinched`]);
+//! - duplicate cells are refused, or dropped with [`Duplicates::Merge`];
+//! - degenerate, twisted (Jacobian changing sign between corners, self-intersecting polygon),
+//!   folded (two cells on the same side of their shared face) cells and non-conforming
+//!   interfaces (mismatched diagonals, hanging nodes) are refused, naming every offender.
+
+mod conform;
 
 use crate::embedding::Column;
 use crate::{Dart, EmbeddingType, GMap, OrbitType, Policy};
+
+/// A fast hasher for small integer keys (the multiply-rotate hash of rustc's `FxHasher`):
+/// the maps keyed by point indices here are built from the user's own mesh, so the
+/// denial-of-service resistance of the default hasher buys nothing.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.add(u64::from(b));
+        }
+    }
+    fn write_u32(&mut self, i: u32) {
+        self.add(u64::from(i));
+    }
+    fn write_u64(&mut self, i: u64) {
+        self.add(i);
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.add(i as u64);
+    }
+}
+
+impl FxHasher {
+    #[inline]
+    fn add(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+}
+
+/// A hash map with [`FxHasher`].
+pub(crate) type FxMap<K, V> =
+    std::collections::HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
+
+fn fx_map<K, V>(capacity: usize) -> FxMap<K, V> {
+    FxMap::with_capacity_and_hasher(capacity, std::hash::BuildHasherDefault::default())
+}
 
 /// The kind of a cell, with VTK's vertex order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -77,24 +132,151 @@ pub struct Mesh {
     pub cells: Vec<Vec<usize>>,
 }
 
+/// What to do with a pinched point: one whose cells touch only at it (2D: not joined through
+/// edges; 3D: not joined through faces), so that it becomes two or more vertex orbits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Pinched {
+    /// One particle: every orbit of the point shares its `particle` row (the default, as in
+    /// peer simulators).
+    #[default]
+    Merge,
+    /// One particle per orbit: the orbit with the smallest dart keeps the point's row, the
+    /// others get new rows appended after the used points.
+    Split,
+    /// Refuse the mesh, listing every pinched point.
+    Refuse,
+}
+
+impl Pinched {
+    /// `merge`, `split`, `refuse`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Pinched::Merge => "merge",
+            Pinched::Split => "split",
+            Pinched::Refuse => "refuse",
+        }
+    }
+
+    /// Parses the names of [`Pinched::name`].
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "merge" => Pinched::Merge,
+            "split" => Pinched::Split,
+            "refuse" => Pinched::Refuse,
+            _ => return None,
+        })
+    }
+}
+
+/// What to do with duplicate cells (the same vertex set as an earlier cell, in any order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Duplicates {
+    /// Refuse the mesh, listing every duplicate pair (the default: a duplicate silently
+    /// doubles the mass).
+    #[default]
+    Refuse,
+    /// Keep the first cell of each vertex set and drop the others (listed in
+    /// [`BuildReport::merged_duplicates`]).
+    Merge,
+}
+
+impl Duplicates {
+    /// `refuse`, `merge`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Duplicates::Refuse => "refuse",
+            Duplicates::Merge => "merge",
+        }
+    }
+
+    /// Parses the names of [`Duplicates::name`].
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "refuse" => Duplicates::Refuse,
+            "merge" => Duplicates::Merge,
+            _ => return None,
+        })
+    }
+}
+
 /// Options for [`build`].
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct BuildOptions {
-    /// Re-orient inverted elements (and, in 2D, faces whose orientation disagrees with their
-    /// neighbours) instead of refusing them; what changed is in the report.
+    /// Turn cells listed with the opposite orientation (3D: negative signed volume; 2D: faces
+    /// whose orientation disagrees with their neighbours) instead of refusing them; what
+    /// changed is in the report. Default `true`.
     pub reorient: bool,
+    /// Pinched points: see [`Pinched`]. Default [`Pinched::Merge`].
+    pub pinched: Pinched,
+    /// Duplicate cells: see [`Duplicates`]. Default [`Duplicates::Refuse`].
+    pub duplicates: Duplicates,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            reorient: true,
+            pinched: Pinched::Merge,
+            duplicates: Duplicates::Refuse,
+        }
+    }
 }
 
 /// What [`build`] changed or noticed.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct BuildReport {
-    /// Cells whose vertex order was reversed (only with `reorient`).
+    /// Cells whose vertex order was reversed (input cell indices, increasing).
     pub reoriented: Vec<usize>,
     /// Points used by no cell: they are not in the map.
     pub unused_points: Vec<usize>,
+    /// Pinched points (input point indices, increasing): cells touch only at them.
+    pub pinched: Vec<usize>,
+    /// Duplicate cells dropped with [`Duplicates::Merge`]: (dropped cell, the earlier cell it
+    /// duplicated), by increasing dropped cell.
+    pub merged_duplicates: Vec<(usize, usize)>,
+    /// A surface with a component that cannot be oriented (a Moebius strip): accepted as a
+    /// G-map, with its faces' orientations left as found by a breadth-first walk.
+    pub non_orientable: bool,
 }
 
-/// Why a mesh cannot become a G-map; every variant names the element or vertex.
+/// A pair of faces of a non-conforming interface (see [`MeshError::NonConforming`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FacePair {
+    /// The first cell (input index).
+    pub a: usize,
+    /// Its face (2D: edge), as input point indices.
+    pub face_a: Vec<usize>,
+    /// The second cell (input index).
+    pub b: usize,
+    /// Its face (2D: edge), as input point indices.
+    pub face_b: Vec<usize>,
+    /// What is wrong: `faces do not match`, `overlapping faces`, `hanging node N`.
+    pub why: String,
+}
+
+/// How many offenders a message shows before "and N more".
+pub const SHOWN: usize = 20;
+
+/// The first [`SHOWN`] items formatted by `f`, joined by "; ", then "; and N more".
+fn listed<T>(items: &[T], f: impl Fn(&T) -> String) -> String {
+    let mut out = items
+        .iter()
+        .take(SHOWN)
+        .map(f)
+        .collect::<Vec<_>>()
+        .join("; ");
+    if items.len() > SHOWN {
+        out.push_str("; and ");
+        out.push_str(&(items.len() - SHOWN).to_string());
+        out.push_str(" more");
+    }
+    out
+}
+
+/// Why a mesh cannot become a G-map; every variant names the cells or points (input
+/// indices), all of them (messages show the first [`SHOWN`]). Messages name no option: the
+/// option that would accept the mesh is [`MeshError::option`], and callers spell it in their
+/// user's syntax.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum MeshError {
     /// No cells.
@@ -140,34 +322,59 @@ pub enum MeshError {
         /// Vertices expected.
         expected: usize,
     },
-    /// A point with a NaN or infinite coordinate.
-    #[error("point {point} has a non-finite coordinate {coords:?}")]
+    /// Points with a NaN or infinite coordinate.
+    #[error("{} point(s) with a non-finite coordinate: {}", points.len(), listed(points, |(p, c)| format!("point {p} has a non-finite coordinate {c:?}")))]
     NonFinite {
-        /// The point.
-        point: usize,
-        /// Its coordinates.
-        coords: [f64; 3],
+        /// Each point and its coordinates.
+        points: Vec<(usize, [f64; 3])>,
     },
-    /// A vertex twice in one cell, or zero area / volume.
-    #[error("cell {cell} is degenerate: {why}")]
+    /// Cells with a vertex twice, or zero area / volume.
+    #[error("{} degenerate cell(s): {}", cells.len(), listed(cells, |(c, why)| format!("cell {c} is degenerate ({why})")))]
     Degenerate {
-        /// The cell.
-        cell: usize,
-        /// What is wrong.
-        why: String,
+        /// Each cell and what is wrong.
+        cells: Vec<(usize, String)>,
     },
-    /// Negative volume (3D), without `reorient`.
-    #[error("cell {cell} ({kind}) is inverted (signed volume {volume:.3e}); pass reorient=True to fix it")]
+    /// Cells with negative volume (3D), refused when `reorient` is off.
+    #[error("{} inverted cell(s) (negative signed volume): {}", cells.len(), listed(cells, |(c, k, v)| format!("cell {c} ({k}) is inverted (signed volume {v:.3e})")))]
     Inverted {
-        /// The cell.
-        cell: usize,
-        /// Its kind's name.
-        kind: &'static str,
-        /// Its signed volume.
-        volume: f64,
+        /// Each cell, its kind's name and its signed volume.
+        cells: Vec<(usize, &'static str, f64)>,
     },
-    /// An edge (2D) or face (3D) shared by three or more cells, or a vertex whose cells are
-    /// not connected through edges (2D) or faces (3D).
+    /// Neighbouring faces of a surface with opposite orientations, refused when `reorient`
+    /// is off.
+    #[error("{} pair(s) of neighbouring faces with opposite orientations: {}", pairs.len(), listed(pairs, |(a, b, u, v)| format!("faces {a} and {b} across edge ({u}, {v})")))]
+    Orientation {
+        /// (face, face, edge end, edge end).
+        pairs: Vec<(usize, usize, usize, usize)>,
+    },
+    /// Cells whose Jacobian changes sign between corners (hexahedra, wedges, pyramids) or
+    /// polygons whose sides cross (a bow-tie quad).
+    #[error("{} twisted or self-intersecting cell(s): {}", cells.len(), listed(cells, |(c, k, why)| format!("cell {c} ({k}): {why}")))]
+    Twisted {
+        /// Each cell, its kind's name and what is wrong.
+        cells: Vec<(usize, &'static str, String)>,
+    },
+    /// Two cells on the same side of their shared face (3D) or edge (2D planar meshes).
+    #[error("{} folded pair(s) of cells (on the same side of their shared {what}): {}", pairs.len(), listed(pairs, |(a, b, f)| format!("cells {a} and {b} at {what} {f:?}")))]
+    Folded {
+        /// `face` or `edge`.
+        what: &'static str,
+        /// (cell, cell, shared face's or edge's points).
+        pairs: Vec<(usize, usize, Vec<usize>)>,
+    },
+    /// Cells with the same vertex set as an earlier cell.
+    #[error("{} duplicate cell(s) (the same vertices as an earlier cell): {}", pairs.len(), listed(pairs, |(d, f)| format!("cell {d} duplicates cell {f}")))]
+    Duplicate {
+        /// (duplicate cell, the earlier cell).
+        pairs: Vec<(usize, usize)>,
+    },
+    /// Pinched points, refused with [`Pinched::Refuse`].
+    #[error("{} pinched point(s) (their cells touch only at the point): {}", points.len(), listed(points, |(p, c)| format!("point {p} (cells {c:?})")))]
+    Pinched {
+        /// Each point and the cells around it.
+        points: Vec<(usize, Vec<usize>)>,
+    },
+    /// An edge (2D) or face (3D) shared by three or more cells.
     #[error("non-manifold {what} {vertices:?} in cells {cells:?}: {why}")]
     NonManifold {
         /// What the rule is.
@@ -179,31 +386,31 @@ pub enum MeshError {
         /// The cells sharing it.
         cells: Vec<usize>,
     },
-    /// Two neighbouring faces of a surface with opposite orientations, without `reorient`.
-    #[error("faces {a} and {b} have opposite orientations across edge ({u}, {v}); pass reorient=True to fix it")]
-    Orientation {
-        /// First face.
-        a: usize,
-        /// Second face.
-        b: usize,
-        /// Edge end.
-        u: usize,
-        /// Edge end.
-        v: usize,
-    },
-    /// Two cells share a face's vertices but not its edges (e.g. a quad split two ways).
-    #[error("cells {a} and {b} share vertices {vertices:?} but their faces do not match")]
+    /// Non-conforming interfaces: faces (2D: edges) of two cells that share points but do not
+    /// match, or that overlap (mismatched diagonals, hanging nodes).
+    #[error("{} non-conforming interface(s): {}", pairs.len(), listed(pairs, |p| format!("face {:?} of cell {} against face {:?} of cell {} ({})", p.face_a, p.a, p.face_b, p.b, p.why)))]
     NonConforming {
-        /// First cell.
-        a: usize,
-        /// Second cell.
-        b: usize,
-        /// The shared vertices.
-        vertices: Vec<usize>,
+        /// Each pair of faces.
+        pairs: Vec<FacePair>,
     },
     /// A map that cannot be turned back into cells.
     #[error("cannot extract cells: {0}")]
     Extract(String),
+}
+
+impl MeshError {
+    /// The option and value that would make [`build`] accept the mesh, when there is one:
+    /// `("reorient", "true")`, `("pinched", "split")`, `("duplicates", "merge")`.
+    pub fn option(&self) -> Option<(&'static str, &'static str)> {
+        match self {
+            MeshError::Inverted { .. } | MeshError::Orientation { .. } => {
+                Some(("reorient", "true"))
+            }
+            MeshError::Pinched { .. } => Some(("pinched", "split")),
+            MeshError::Duplicate { .. } => Some(("duplicates", "merge")),
+            _ => None,
+        }
+    }
 }
 
 /// The outward-oriented faces of each 3D kind, as local vertex lists (positive cells).
@@ -236,6 +443,35 @@ fn local_faces(kind: CellKind) -> &'static [&'static [usize]] {
     }
 }
 
+/// The corners of each 3D kind: (corner, a, b, c) with the triple product
+/// `(p_a - p_corner) . ((p_b - p_corner) x (p_c - p_corner))` positive at every corner of a
+/// positive, untwisted cell (the corner Jacobians). For a pyramid, the four base tetrahedra.
+fn corners(kind: CellKind) -> &'static [[usize; 4]] {
+    match kind {
+        CellKind::Hexa => &[
+            [0, 1, 3, 4],
+            [1, 2, 0, 5],
+            [2, 3, 1, 6],
+            [3, 0, 2, 7],
+            [4, 7, 5, 0],
+            [5, 4, 6, 1],
+            [6, 5, 7, 2],
+            [7, 6, 4, 3],
+        ],
+        CellKind::Wedge => &[
+            [0, 2, 1, 3],
+            [1, 0, 2, 4],
+            [2, 1, 0, 5],
+            [3, 4, 5, 0],
+            [4, 5, 3, 1],
+            [5, 3, 4, 2],
+        ],
+        CellKind::Pyramid => &[[0, 1, 3, 4], [1, 2, 0, 4], [2, 3, 1, 4], [3, 0, 2, 4]],
+        CellKind::Tetra => &[[0, 1, 2, 3]],
+        CellKind::Polygon => &[],
+    }
+}
+
 /// The vertex order of a cell of the same kind with the opposite orientation.
 fn reversal(kind: CellKind) -> &'static [usize] {
     match kind {
@@ -247,11 +483,11 @@ fn reversal(kind: CellKind) -> &'static [usize] {
     }
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
@@ -259,11 +495,11 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     ]
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-fn norm(a: [f64; 3]) -> f64 {
+pub(crate) fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
 }
 
@@ -291,8 +527,22 @@ pub fn signed_volume(kind: CellKind, verts: &[usize], points: &[[f64; 3]]) -> f6
     vol
 }
 
+/// The corner Jacobians (triple products, see [`corners`]) of a 3D cell, in corner order.
+pub fn corner_jacobians(kind: CellKind, verts: &[usize], points: &[[f64; 3]]) -> Vec<f64> {
+    corners(kind)
+        .iter()
+        .map(|&[c, a, b, d]| {
+            let o = points[verts[c]];
+            dot(
+                sub(points[verts[a]], o),
+                cross(sub(points[verts[b]], o), sub(points[verts[d]], o)),
+            )
+        })
+        .collect()
+}
+
 /// The Newell normal of a polygon (twice its vector area).
-fn polygon_normal(verts: &[usize], points: &[[f64; 3]]) -> [f64; 3] {
+pub(crate) fn polygon_normal(verts: &[usize], points: &[[f64; 3]]) -> [f64; 3] {
     let mut n = [0.0; 3];
     for k in 0..verts.len() {
         let a = points[verts[k]];
@@ -304,7 +554,7 @@ fn polygon_normal(verts: &[usize], points: &[[f64; 3]]) -> [f64; 3] {
     n
 }
 
-fn max_edge(verts: &[usize], points: &[[f64; 3]]) -> f64 {
+pub(crate) fn max_edge(verts: &[usize], points: &[[f64; 3]]) -> f64 {
     let mut m: f64 = 0.0;
     for (k, &a) in verts.iter().enumerate() {
         for &b in &verts[k + 1..] {
@@ -317,6 +567,9 @@ fn max_edge(verts: &[usize], points: &[[f64; 3]]) -> f64 {
 /// Relative size under which an area or volume counts as zero.
 const DEGENERATE: f64 = 1e-12;
 
+/// Relative size (of `l^3`) above which corner Jacobians of both signs make a twisted cell.
+const TWIST: f64 = 1e-10;
+
 /// `verts` reordered to the opposite orientation.
 pub fn reversed(kind: CellKind, verts: &[usize]) -> Vec<usize> {
     if kind == CellKind::Polygon {
@@ -326,7 +579,7 @@ pub fn reversed(kind: CellKind, verts: &[usize]) -> Vec<usize> {
     }
 }
 
-/// Checks indices, vertex counts, repeated vertices, finiteness; returns the dimension.
+/// Checks indices, vertex counts and finiteness; returns the dimension.
 fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
     if mesh.kinds.is_empty() {
         return Err(MeshError::Empty);
@@ -368,30 +621,217 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
                 });
             }
         }
-        for (k, &v) in verts.iter().enumerate() {
-            if verts[k + 1..].contains(&v) {
-                return Err(MeshError::Degenerate {
-                    cell: c,
-                    why: format!("vertex {v} appears twice"),
-                });
-            }
-        }
     }
-    for (i, p) in mesh.points.iter().enumerate() {
-        if p.iter().any(|x| !x.is_finite()) {
-            return Err(MeshError::NonFinite {
-                point: i,
-                coords: *p,
-            });
-        }
+    let bad: Vec<(usize, [f64; 3])> = mesh
+        .points
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.iter().any(|x| !x.is_finite()))
+        .map(|(i, p)| (i, *p))
+        .collect();
+    if !bad.is_empty() {
+        return Err(MeshError::NonFinite { points: bad });
     }
     Ok(dim)
 }
 
+/// The kept cells (input indices), dropping or refusing duplicate vertex sets.
+fn dedupe(
+    mesh: &Mesh,
+    opts: &BuildOptions,
+    report: &mut BuildReport,
+) -> Result<Vec<usize>, MeshError> {
+    // cells of up to 8 points (every volume kind, triangles, quads) keyed without allocation
+    let mut small: FxMap<[u32; 8], usize> = fx_map(mesh.cells.len());
+    let mut large: FxMap<Vec<u32>, usize> = fx_map(0);
+    let mut pairs = Vec::new();
+    let mut kept = Vec::with_capacity(mesh.cells.len());
+    for (c, verts) in mesh.cells.iter().enumerate() {
+        let first = if verts.len() <= 8 {
+            let mut key = [u32::MAX; 8];
+            for (k, &v) in verts.iter().enumerate() {
+                key[k] = v as u32;
+            }
+            key.sort_unstable();
+            *small.entry(key).or_insert(c)
+        } else {
+            let mut key: Vec<u32> = verts.iter().map(|&v| v as u32).collect();
+            key.sort_unstable();
+            *large.entry(key).or_insert(c)
+        };
+        if first == c {
+            kept.push(c);
+        } else {
+            pairs.push((c, first));
+        }
+    }
+    if pairs.is_empty() {
+        return Ok(kept);
+    }
+    match opts.duplicates {
+        Duplicates::Refuse => Err(MeshError::Duplicate { pairs }),
+        Duplicates::Merge => {
+            report.merged_duplicates = pairs;
+            Ok(kept)
+        }
+    }
+}
+
+/// Whether a polygon's sides cross, in its best-fit plane: the first crossing pair of
+/// non-adjacent sides, as `(i, j)` side indices (side `i` runs from vertex `i` to `i + 1`).
+fn polygon_crossing(verts: &[usize], points: &[[f64; 3]]) -> Option<(usize, usize)> {
+    let k = verts.len();
+    if k < 4 {
+        return None;
+    }
+    // the plane: the Newell normal, or for a polygon whose signed area cancels (a bow-tie)
+    // the largest fan triangle's normal
+    let l = max_edge(verts, points);
+    let mut n = polygon_normal(verts, points);
+    if norm(n) <= 1e-6 * l * l {
+        let o = points[verts[0]];
+        for j in 1..k - 1 {
+            let t = cross(sub(points[verts[j]], o), sub(points[verts[j + 1]], o));
+            if norm(t) > norm(n) {
+                n = t;
+            }
+        }
+    }
+    if norm(n) <= DEGENERATE * l * l {
+        return None;
+    }
+    let drop = (0..3)
+        .max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs()))
+        .unwrap_or(2);
+    let (x, y) = ((drop + 1) % 3, (drop + 2) % 3);
+    let q: Vec<[f64; 2]> = verts
+        .iter()
+        .map(|&v| [points[v][x], points[v][y]])
+        .collect();
+    let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    };
+    let eps = 1e-12 * l * l;
+    for i in 0..k {
+        for j in i + 2..k {
+            if i == 0 && j == k - 1 {
+                continue;
+            }
+            let (a, b) = (q[i], q[(i + 1) % k]);
+            let (c, d) = (q[j], q[(j + 1) % k]);
+            let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+            let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+            let strict = |s: f64, t: f64| (s > eps && t < -eps) || (s < -eps && t > eps);
+            if strict(o1, o2) && strict(o3, o4) {
+                return Some((i, j));
+            }
+        }
+    }
+    None
+}
+
+/// Per-cell geometry: degenerate and twisted cells are refused (all listed); 3D cells with a
+/// negative volume are turned (or refused without `reorient`). Returns the oriented cells.
+fn check_geometry(
+    mesh: &Mesh,
+    ids: &[usize],
+    dim: usize,
+    opts: &BuildOptions,
+    report: &mut BuildReport,
+) -> Result<Vec<Vec<usize>>, MeshError> {
+    let points = &mesh.points;
+    let mut degenerate = Vec::new();
+    let mut twisted = Vec::new();
+    let mut inverted = Vec::new();
+    let mut cells = Vec::with_capacity(ids.len());
+    for &c in ids {
+        let (kind, verts) = (mesh.kinds[c], &mesh.cells[c]);
+        if let Some(v) = verts
+            .iter()
+            .enumerate()
+            .find(|&(k, v)| verts[k + 1..].contains(v))
+            .map(|(_, v)| *v)
+        {
+            degenerate.push((c, format!("point {v} appears twice")));
+            cells.push(verts.clone());
+            continue;
+        }
+        let l = max_edge(verts, points);
+        if dim == 2 {
+            if let Some((i, j)) = polygon_crossing(verts, points) {
+                let k = verts.len();
+                twisted.push((
+                    c,
+                    kind.name(),
+                    format!(
+                        "sides ({}, {}) and ({}, {}) cross",
+                        verts[i],
+                        verts[(i + 1) % k],
+                        verts[j],
+                        verts[(j + 1) % k]
+                    ),
+                ));
+            } else if norm(polygon_normal(verts, points)) <= DEGENERATE * l * l {
+                degenerate.push((c, "zero area".into()));
+            }
+            cells.push(verts.clone());
+            continue;
+        }
+        if kind != CellKind::Tetra {
+            let jac = corner_jacobians(kind, verts, points);
+            let eps = TWIST * l * l * l;
+            let hi = (0..jac.len()).max_by(|&a, &b| jac[a].total_cmp(&jac[b]));
+            let lo = (0..jac.len()).min_by(|&a, &b| jac[a].total_cmp(&jac[b]));
+            if let (Some(hi), Some(lo)) = (hi, lo) {
+                if jac[hi] > eps && jac[lo] < -eps {
+                    let corner = |k: usize| verts[corners(kind)[k][0]];
+                    twisted.push((
+                        c,
+                        kind.name(),
+                        format!(
+                            "the corner Jacobian changes sign: {:.3e} at point {} and {:.3e} at point {}",
+                            jac[hi],
+                            corner(hi),
+                            jac[lo],
+                            corner(lo)
+                        ),
+                    ));
+                    cells.push(verts.clone());
+                    continue;
+                }
+            }
+        }
+        let vol = signed_volume(kind, verts, points);
+        if vol.abs() <= DEGENERATE * l * l * l {
+            degenerate.push((c, "zero volume".into()));
+            cells.push(verts.clone());
+            continue;
+        }
+        if vol < 0.0 {
+            inverted.push((c, kind.name(), vol));
+            report.reoriented.push(c);
+            cells.push(reversed(kind, verts));
+        } else {
+            cells.push(verts.clone());
+        }
+    }
+    if !degenerate.is_empty() {
+        return Err(MeshError::Degenerate { cells: degenerate });
+    }
+    if !twisted.is_empty() {
+        return Err(MeshError::Twisted { cells: twisted });
+    }
+    if !inverted.is_empty() && !opts.reorient {
+        return Err(MeshError::Inverted { cells: inverted });
+    }
+    Ok(cells)
+}
+
 /// A face of a cell being built: its global vertices in cyclic order and its first dart.
-struct BuiltFace {
-    verts: [u32; 4],
-    len: u8,
+#[derive(Clone, Copy)]
+pub(crate) struct BuiltFace {
+    pub(crate) verts: [u32; 4],
+    pub(crate) len: u8,
     first: u32,
 }
 
@@ -409,6 +849,13 @@ impl BuiltFace {
             }
         }
         None
+    }
+
+    fn points(&self) -> Vec<usize> {
+        self.verts[..self.len as usize]
+            .iter()
+            .map(|&v| v as usize)
+            .collect()
     }
 }
 
@@ -440,14 +887,31 @@ fn link_raw(g: &mut GMap, i: usize, a: u32, b: u32) {
     g.alpha[i][b as usize] = a;
 }
 
+/// The darts of the map, the point of each dart and the first dart of each kept cell (one
+/// more entry: the number of darts).
+struct Built {
+    g: GMap,
+    vert_of_dart: Vec<u32>,
+    cell_first: Vec<u32>,
+}
+
 /// Builds the G-map of a mesh: a 2-map for polygons, a 3-map for volume cells.
 ///
 /// Every cell becomes its own darts (2 per side of each face); faces of one cell are sewn by
 /// alpha2, neighbouring cells by alpha2 (surfaces) or alpha3 (volumes) across their shared
-/// edges or faces. Points used by no cell are left out and listed in the report.
+/// edges or faces. Points used by no cell are left out and listed in the report. Besides
+/// `position` (vec3, mean), the map gets `point_id`, `particle` (i64 on the vertex orbit,
+/// copy) and `cell_id` (i64 on the element orbit, copy); see the module documentation.
+///
+/// The darts of each kept cell are consecutive, cells in input order; a cell's darts follow
+/// its input vertex order, or [`reversed`] order when it was turned.
+///
+/// # Errors
+/// A [`MeshError`] naming every offending cell or point.
 pub fn build(mesh: &Mesh, opts: &BuildOptions) -> Result<(GMap, BuildReport), MeshError> {
     let dim = check_cells(mesh)?;
     let mut report = BuildReport::default();
+    let ids = dedupe(mesh, opts, &mut report)?;
     let mut used = vec![false; mesh.points.len()];
     for verts in &mesh.cells {
         for &v in verts {
@@ -455,20 +919,20 @@ pub fn build(mesh: &Mesh, opts: &BuildOptions) -> Result<(GMap, BuildReport), Me
         }
     }
     report.unused_points = (0..used.len()).filter(|&i| !used[i]).collect();
-    let (mut g, vert_of_dart) = if dim == 2 {
-        build_surface(mesh, opts, &mut report)?
+    let cells = check_geometry(mesh, &ids, dim, opts, &mut report)?;
+    let Built {
+        mut g,
+        vert_of_dart,
+        cell_first,
+    } = if dim == 2 {
+        build_surface(mesh, &ids, cells, opts, &mut report)?
     } else {
-        build_volume(mesh, opts, &mut report)?
+        build_volume(mesh, &ids, &cells, &mut report)?
     };
     g.version += 1;
-    check_manifold_vertices(&g, &vert_of_dart, used.iter().filter(|&&u| u).count(), mesh)?;
+    let vertex = OrbitType::vertex(dim);
     let pos = g
-        .add_embedding(
-            "position",
-            EmbeddingType::Vec3,
-            OrbitType::vertex(dim),
-            Policy::Mean,
-        )
+        .add_embedding("position", EmbeddingType::Vec3, vertex, Policy::Mean)
         .expect("fresh map");
     let e = &mut g.embeddings[pos.0 as usize];
     let Column::Real(col) = &mut e.values else {
@@ -478,68 +942,159 @@ pub fn build(mesh: &Mesh, opts: &BuildOptions) -> Result<(GMap, BuildReport), Me
         let s = e.slot_of[d] as usize;
         col[3 * s..3 * s + 3].copy_from_slice(&mesh.points[v as usize]);
     }
+    // the vertex orbits are the slots of `position` (numbered by smallest dart): the other
+    // vertex embeddings share that table instead of walking the orbits again
+    let labels = e.slot_of.clone();
+    let n_orbits = e.slot_use.len();
+    let particle_of_slot = particles(
+        &labels,
+        n_orbits,
+        &vert_of_dart,
+        &used,
+        mesh,
+        &ids,
+        opts,
+        &mut report,
+    )?;
+    let mut point_of_slot = vec![0i64; n_orbits];
+    for (d, &v) in vert_of_dart.iter().enumerate() {
+        point_of_slot[labels[d] as usize] = i64::from(v);
+    }
+    push_int(&mut g, "point_id", vertex, labels.clone(), point_of_slot);
+    push_int(&mut g, "particle", vertex, labels, particle_of_slot);
+    // each kept cell's darts are one element orbit
+    let element = if dim == 2 {
+        OrbitType::face(2)
+    } else {
+        OrbitType::volume()
+    };
+    let mut cell_slot = vec![0u32; vert_of_dart.len()];
+    for k in 0..ids.len() {
+        let (a, b) = (cell_first[k] as usize, cell_first[k + 1] as usize);
+        cell_slot[a..b].fill(k as u32);
+    }
+    let cell_of_slot = ids.iter().map(|&c| c as i64).collect();
+    push_int(&mut g, "cell_id", element, cell_slot, cell_of_slot);
     Ok((g, report))
 }
 
-/// A point that became two vertex orbits (two fans touching at one vertex) would be two
-/// particles at one place: refuse it.
-fn check_manifold_vertices(
-    g: &GMap,
-    vert_of_dart: &[u32],
-    n_used: usize,
-    mesh: &Mesh,
-) -> Result<(), MeshError> {
-    let (labels, n) = g.orbit_labels(OrbitType::vertex(g.dim));
-    if n == n_used {
-        return Ok(());
+/// Declares an i64 embedding (policy copy) on `orbit` whose orbits are already numbered:
+/// dart `d` is on orbit `slot_of[d]`, whose value is `values[slot_of[d]]`.
+fn push_int(g: &mut GMap, name: &str, orbit: OrbitType, slot_of: Vec<u32>, values: Vec<i64>) {
+    debug_assert!(g.embedding_id(name).is_none());
+    let mut e =
+        crate::embedding::Embedding::new(name, EmbeddingType::I64, orbit, Policy::Copy, None);
+    let mut slot_use = vec![0u32; values.len()];
+    for &s in &slot_of {
+        slot_use[s as usize] += 1;
     }
-    let mut first_label = std::collections::HashMap::new();
-    let mut split = u32::MAX;
-    for (d, &v) in vert_of_dart.iter().enumerate() {
-        let l = *first_label.entry(v).or_insert(labels[d]);
-        if l != labels[d] {
-            split = split.min(v);
+    e.slot_of = slot_of;
+    e.slot_use = slot_use;
+    e.values = Column::Int(values);
+    g.embeddings.push(e);
+}
+
+/// The `particle` row of every vertex orbit (see [`Pinched`]); refuses pinched points with
+/// [`Pinched::Refuse`] and lists them in the report otherwise. `labels[d]` is the vertex
+/// orbit of dart `d`, orbits numbered by their smallest dart.
+#[allow(clippy::too_many_arguments)]
+fn particles(
+    labels: &[u32],
+    n: usize,
+    vert_of_dart: &[u32],
+    used: &[bool],
+    mesh: &Mesh,
+    ids: &[usize],
+    opts: &BuildOptions,
+    report: &mut BuildReport,
+) -> Result<Vec<i64>, MeshError> {
+    // row of each used point: its rank among used points
+    let mut row = vec![-1i64; used.len()];
+    let mut n_used = 0i64;
+    for (p, &u) in used.iter().enumerate() {
+        if u {
+            row[p] = n_used;
+            n_used += 1;
         }
     }
-    let v = split as usize;
-    Err(MeshError::NonManifold {
-        what: "vertex",
-        why: "the cells around a vertex must be joined through edges (2D) or faces (3D)",
-        vertices: vec![v],
-        cells: (0..mesh.cells.len())
-            .filter(|&c| mesh.cells[c].contains(&v))
-            .collect(),
-    })
+    let mut out = vec![-1i64; n];
+    for (d, &v) in vert_of_dart.iter().enumerate() {
+        out[labels[d] as usize] = row[v as usize];
+    }
+    if n as i64 == n_used {
+        return Ok(out);
+    }
+    // the first orbit met for a point (smallest dart) keeps its row
+    let mut first_label = vec![u32::MAX; used.len()];
+    let mut label_point = vec![u32::MAX; n];
+    let mut extra: Vec<(u32, u32)> = Vec::new(); // (point, label) of the other orbits
+    for (d, &v) in vert_of_dart.iter().enumerate() {
+        let l = labels[d];
+        if label_point[l as usize] != u32::MAX {
+            continue;
+        }
+        label_point[l as usize] = v;
+        if first_label[v as usize] == u32::MAX {
+            first_label[v as usize] = l;
+        } else {
+            extra.push((v, l));
+        }
+    }
+    let mut pinched: Vec<usize> = extra.iter().map(|&(p, _)| p as usize).collect();
+    pinched.sort_unstable();
+    pinched.dedup();
+    if opts.pinched == Pinched::Refuse {
+        let mut around: std::collections::HashMap<usize, Vec<usize>> =
+            pinched.iter().map(|&p| (p, Vec::new())).collect();
+        for &c in ids {
+            for v in &mesh.cells[c] {
+                if let Some(list) = around.get_mut(v) {
+                    list.push(c);
+                }
+            }
+        }
+        let points = pinched
+            .iter()
+            .map(|p| (*p, around.remove(p).unwrap_or_default()))
+            .collect();
+        return Err(MeshError::Pinched { points });
+    }
+    if opts.pinched == Pinched::Split {
+        // extra orbits in increasing (point, smallest dart); labels increase with the
+        // smallest dart
+        extra.sort_unstable();
+        for (k, &(_, l)) in extra.iter().enumerate() {
+            out[l as usize] = n_used + k as i64;
+        }
+    }
+    report.pinched = pinched;
+    Ok(out)
 }
 
 fn build_surface(
     mesh: &Mesh,
+    ids: &[usize],
+    mut cells: Vec<Vec<usize>>,
     opts: &BuildOptions,
     report: &mut BuildReport,
-) -> Result<(GMap, Vec<u32>), MeshError> {
+) -> Result<Built, MeshError> {
     let points = &mesh.points;
-    for (c, verts) in mesh.cells.iter().enumerate() {
-        let n = norm(polygon_normal(verts, points));
-        let l = max_edge(verts, points);
-        if n <= DEGENERATE * l * l {
-            return Err(MeshError::Degenerate {
-                cell: c,
-                why: "zero area".into(),
-            });
-        }
-    }
-    let mut shared = shared_edges(&mesh.cells)?;
+    let mut shared = shared_edges(&cells, ids)?;
     // orientation: neighbours must run along their shared edge in opposite directions
-    let n_faces = mesh.cells.len();
+    let n_faces = cells.len();
     let mut flip = vec![false; n_faces];
-    let inconsistent = shared.iter().find(|(_, [a, b])| a.2 == b.2);
-    if let Some(((u, v), [a, b])) = inconsistent {
+    let inconsistent: Vec<(usize, usize, usize, usize)> = shared
+        .iter()
+        .filter(|(_, [a, b])| a.2 == b.2)
+        .map(|((u, v), [a, b])| {
+            let (a, b) = (ids[a.0 as usize], ids[b.0 as usize]);
+            (a.min(b), a.max(b), *u as usize, *v as usize)
+        })
+        .collect();
+    if !inconsistent.is_empty() {
         if !opts.reorient {
             return Err(MeshError::Orientation {
-                a: a.0.min(b.0) as usize,
-                b: a.0.max(b.0) as usize,
-                u: *u as usize,
-                v: *v as usize,
+                pairs: inconsistent,
             });
         }
         let mut adj: Vec<Vec<(u32, bool)>> = vec![Vec::new(); n_faces];
@@ -549,51 +1104,93 @@ fn build_surface(
             adj[b.0 as usize].push((a.0, same));
         }
         let mut seen = vec![false; n_faces];
+        let mut component = Vec::new();
         for s in 0..n_faces {
             if seen[s] {
                 continue;
             }
             seen[s] = true;
-            let mut stack = vec![s];
-            while let Some(f) = stack.pop() {
+            component.clear();
+            component.push(s);
+            let mut orientable = true;
+            let mut head = 0;
+            while head < component.len() {
+                let f = component[head];
+                head += 1;
                 for &(h, same) in &adj[f] {
+                    let want = flip[f] ^ same;
                     if !seen[h as usize] {
                         seen[h as usize] = true;
-                        flip[h as usize] = flip[f] ^ same;
-                        stack.push(h as usize);
+                        flip[h as usize] = want;
+                        component.push(h as usize);
+                    } else if flip[h as usize] != want {
+                        orientable = false;
                     }
                 }
             }
-        }
-        report.reoriented = (0..n_faces).filter(|&f| flip[f]).collect();
-    }
-    let cells: Vec<Vec<usize>> = mesh
-        .cells
-        .iter()
-        .zip(&flip)
-        .map(|(v, &fl)| {
-            if fl {
-                reversed(CellKind::Polygon, v)
-            } else {
-                v.clone()
+            if !orientable {
+                report.non_orientable = true;
+            } else if 2 * component.iter().filter(|&&f| flip[f]).count() > component.len() {
+                // turn the fewer faces
+                for &f in &component {
+                    flip[f] = !flip[f];
+                }
             }
-        })
-        .collect();
-    if !report.reoriented.is_empty() {
-        shared = shared_edges(&cells)?; // sides are numbered anew in the flipped faces
+        }
+        for f in 0..n_faces {
+            if flip[f] {
+                cells[f].reverse();
+            }
+        }
+        report.reoriented = (0..n_faces).filter(|&f| flip[f]).map(|f| ids[f]).collect();
+        if !report.reoriented.is_empty() {
+            shared = shared_edges(&cells, ids)?; // sides are numbered anew in the flipped faces
+        }
+    }
+    if !report.non_orientable {
+        check_planar_folds(points, &cells, ids, &shared)?;
+    }
+    // boundary sides: overlapping ones are non-conforming (hanging nodes)
+    let mut n_uses: FxMap<(u32, u32), u32> = fx_map(2 * cells.len());
+    for verts in &cells {
+        let k = verts.len();
+        for j in 0..k {
+            let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
+            *n_uses.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let mut boundary = Vec::new();
+    for (f, verts) in cells.iter().enumerate() {
+        let k = verts.len();
+        for j in 0..k {
+            let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
+            if n_uses[&(a.min(b), a.max(b))] == 1 {
+                boundary.push(conform::Facet {
+                    cell: ids[f],
+                    verts: vec![verts[j], verts[(j + 1) % k]],
+                });
+            }
+        }
+    }
+    let pairs = conform::overlapping(points, &boundary);
+    if !pairs.is_empty() {
+        return Err(MeshError::NonConforming { pairs });
     }
     let mut g = GMap::new(2).expect("2 is supported");
     let mut faces = Vec::with_capacity(cells.len());
     let mut vert_of_dart = Vec::new();
+    let mut cell_first = Vec::with_capacity(cells.len() + 1);
     for verts in &cells {
         let k = verts.len();
         let first = add_polygon(&mut g, k);
+        cell_first.push(first);
         for j in 0..k {
             vert_of_dart.push(verts[j] as u32);
             vert_of_dart.push(verts[(j + 1) % k] as u32);
         }
         faces.push(first);
     }
+    cell_first.push(vert_of_dart.len() as u32);
     for ((u, v), [a, b]) in &shared {
         // darts at vertex u on the shared side of each face
         for x in [*u, *v] {
@@ -602,7 +1199,71 @@ fn build_surface(
             link_raw(&mut g, 2, da, db);
         }
     }
-    Ok((g, vert_of_dart))
+    Ok(Built {
+        g,
+        vert_of_dart,
+        cell_first,
+    })
+}
+
+/// In a planar surface mesh (every point within a tiny distance of one plane), two
+/// consistently oriented neighbours whose normals point to opposite sides of the plane lie on
+/// the same side of their shared edge: a fold. Refuses every such pair.
+fn check_planar_folds(
+    points: &[[f64; 3]],
+    cells: &[Vec<usize>],
+    ids: &[usize],
+    shared: &[SharedEdge],
+) -> Result<(), MeshError> {
+    let normals: Vec<[f64; 3]> = cells.iter().map(|c| polygon_normal(c, points)).collect();
+    let Some(big) =
+        (0..normals.len()).max_by(|&a, &b| norm(normals[a]).total_cmp(&norm(normals[b])))
+    else {
+        return Ok(());
+    };
+    let nb = norm(normals[big]);
+    if nb == 0.0 {
+        return Ok(());
+    }
+    let n = [
+        normals[big][0] / nb,
+        normals[big][1] / nb,
+        normals[big][2] / nb,
+    ];
+    let o = points[cells[big][0]];
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for c in cells {
+        for &v in c {
+            for a in 0..3 {
+                lo[a] = lo[a].min(points[v][a]);
+                hi[a] = hi[a].max(points[v][a]);
+            }
+        }
+    }
+    let tol = 1e-9 * norm(sub(hi, lo));
+    let planar = cells
+        .iter()
+        .all(|c| c.iter().all(|&v| dot(sub(points[v], o), n).abs() <= tol));
+    if !planar {
+        return Ok(());
+    }
+    let mut pairs = Vec::new();
+    for ((u, v), [a, b]) in shared {
+        let (sa, sb) = (dot(normals[a.0 as usize], n), dot(normals[b.0 as usize], n));
+        if sa * sb < 0.0 {
+            let (ca, cb) = (ids[a.0 as usize], ids[b.0 as usize]);
+            pairs.push((ca.min(cb), ca.max(cb), vec![*u as usize, *v as usize]));
+        }
+    }
+    pairs.sort_unstable();
+    if pairs.is_empty() {
+        Ok(())
+    } else {
+        Err(MeshError::Folded {
+            what: "edge",
+            pairs,
+        })
+    }
 }
 
 /// A side of a face: (face, side index, whether it runs from the smaller vertex index).
@@ -612,9 +1273,8 @@ type Side = (u32, u32, bool);
 type SharedEdge = ((u32, u32), [Side; 2]);
 
 /// The edges shared by two faces, sorted, with the side of each face; refuses an edge on 3+.
-fn shared_edges(cells: &[Vec<usize>]) -> Result<Vec<SharedEdge>, MeshError> {
-    let mut edges: std::collections::HashMap<(u32, u32), Vec<Side>> =
-        std::collections::HashMap::new();
+fn shared_edges(cells: &[Vec<usize>], ids: &[usize]) -> Result<Vec<SharedEdge>, MeshError> {
+    let mut edges: FxMap<(u32, u32), Vec<Side>> = fx_map(2 * cells.len());
     for (f, verts) in cells.iter().enumerate() {
         let k = verts.len();
         for j in 0..k {
@@ -626,21 +1286,27 @@ fn shared_edges(cells: &[Vec<usize>]) -> Result<Vec<SharedEdge>, MeshError> {
         }
     }
     let mut shared = Vec::new();
+    let mut bad: Option<((u32, u32), Vec<usize>)> = None;
     for (&key, uses) in &edges {
         match uses.len() {
             1 => {}
             2 => shared.push((key, [uses[0], uses[1]])),
             _ => {
-                let mut faces: Vec<usize> = uses.iter().map(|u| u.0 as usize).collect();
+                let mut faces: Vec<usize> = uses.iter().map(|u| ids[u.0 as usize]).collect();
                 faces.sort_unstable();
-                return Err(MeshError::NonManifold {
-                    what: "edge",
-                    why: "an edge joins at most 2 faces",
-                    vertices: vec![key.0 as usize, key.1 as usize],
-                    cells: faces,
-                });
+                if bad.as_ref().is_none_or(|(k, _)| key < *k) {
+                    bad = Some((key, faces));
+                }
             }
         }
+    }
+    if let Some((key, faces)) = bad {
+        return Err(MeshError::NonManifold {
+            what: "edge",
+            why: "an edge joins at most 2 faces",
+            vertices: vec![key.0 as usize, key.1 as usize],
+            cells: faces,
+        });
     }
     shared.sort_unstable_by_key(|s| s.0);
     Ok(shared)
@@ -657,37 +1323,14 @@ fn side_dart(verts: &[usize], first: u32, j: u32, x: u32) -> u32 {
 
 fn build_volume(
     mesh: &Mesh,
-    opts: &BuildOptions,
-    report: &mut BuildReport,
-) -> Result<(GMap, Vec<u32>), MeshError> {
+    ids: &[usize],
+    cells: &[Vec<usize>],
+    _report: &mut BuildReport,
+) -> Result<Built, MeshError> {
     let points = &mesh.points;
-    let mut cells: Vec<Vec<usize>> = Vec::with_capacity(mesh.cells.len());
-    for (c, (&kind, verts)) in mesh.kinds.iter().zip(&mesh.cells).enumerate() {
-        let vol = signed_volume(kind, verts, points);
-        let l = max_edge(verts, points);
-        if vol.abs() <= DEGENERATE * l * l * l {
-            return Err(MeshError::Degenerate {
-                cell: c,
-                why: "zero volume".into(),
-            });
-        }
-        if vol < 0.0 {
-            if !opts.reorient {
-                return Err(MeshError::Inverted {
-                    cell: c,
-                    kind: kind.name(),
-                    volume: vol,
-                });
-            }
-            report.reoriented.push(c);
-            cells.push(reversed(kind, verts));
-        } else {
-            cells.push(verts.clone());
-        }
-    }
+    let kinds: Vec<CellKind> = ids.iter().map(|&c| mesh.kinds[c]).collect();
     let mut g = GMap::new(3).expect("3 is supported");
-    let n_darts: usize = mesh
-        .kinds
+    let n_darts: usize = kinds
         .iter()
         .map(|&k| local_faces(k).iter().map(|f| 2 * f.len()).sum::<usize>())
         .sum();
@@ -695,12 +1338,16 @@ fn build_volume(
         a.reserve(n_darts);
     }
     let mut vert_of_dart: Vec<u32> = Vec::with_capacity(n_darts);
-    // sorted face vertices -> (cell, face)
-    let mut face_map: std::collections::HashMap<[u32; 4], (u32, BuiltFace)> =
-        std::collections::HashMap::with_capacity(mesh.cells.len() * 3);
+    let mut cell_first: Vec<u32> = Vec::with_capacity(cells.len() + 1);
+    // sorted face vertices -> (cell, face); cell u32::MAX once the face is matched
+    let mut face_map: FxMap<[u32; 4], (u32, BuiltFace)> = fx_map(cells.len() * 3);
     let mut local: Vec<BuiltFace> = Vec::with_capacity(6);
-    for (c, (&kind, verts)) in mesh.kinds.iter().zip(&cells).enumerate() {
+    let mut mismatched: Vec<FacePair> = Vec::new();
+    let mut folded: Vec<(usize, usize, Vec<usize>)> = Vec::new();
+    let mut non_manifold: Option<[u32; 4]> = None;
+    for (c, (&kind, verts)) in kinds.iter().zip(cells).enumerate() {
         local.clear();
+        cell_first.push(vert_of_dart.len() as u32);
         for lf in local_faces(kind) {
             let k = lf.len();
             let first = add_polygon(&mut g, k);
@@ -742,21 +1389,36 @@ fn build_volume(
                 }
                 Some((other, h)) if other == u32::MAX => {
                     face_map.insert(key, (other, h));
-                    return Err(non_manifold_face(&key, &cells, &mesh.kinds));
+                    if non_manifold.is_none_or(|k| key < k) {
+                        non_manifold = Some(key);
+                    }
                 }
                 Some((other, h)) => {
                     let k = f.len as usize;
+                    let mut ok = true;
+                    let mut same_direction = false;
                     for j in 0..k {
                         let (u, w) = (f.verts[j], f.verts[(j + 1) % k]);
                         let (Some(hu), Some(hw)) = (h.dart(u, w), h.dart(w, u)) else {
-                            return Err(MeshError::NonConforming {
-                                a: other as usize,
-                                b: c,
-                                vertices: key[..k].iter().map(|&v| v as usize).collect(),
-                            });
+                            ok = false;
+                            break;
                         };
+                        same_direction = (hu - h.first) % 2 == 0;
                         link_raw(&mut g, 3, f.first + 2 * j as u32, hu);
                         link_raw(&mut g, 3, f.first + 2 * j as u32 + 1, hw);
+                    }
+                    if !ok {
+                        mismatched.push(FacePair {
+                            a: ids[other as usize],
+                            face_a: h.points(),
+                            b: ids[c],
+                            face_b: f.points(),
+                            why: "same points, different edges".into(),
+                        });
+                    } else if same_direction {
+                        // both cells positive and listing the face the same way round: both
+                        // lie on the same side of it
+                        folded.push((ids[other as usize], ids[c], f.points()));
                     }
                     // a third cell on this face is non-manifold: remember the face as used
                     face_map.insert(key, (u32::MAX, h));
@@ -764,10 +1426,46 @@ fn build_volume(
             }
         }
     }
-    Ok((g, vert_of_dart))
+    cell_first.push(vert_of_dart.len() as u32);
+    if let Some(key) = non_manifold {
+        return Err(non_manifold_face(&key, cells, &kinds, ids));
+    }
+    if !mismatched.is_empty() {
+        return Err(MeshError::NonConforming { pairs: mismatched });
+    }
+    if !folded.is_empty() {
+        folded.sort_unstable();
+        return Err(MeshError::Folded {
+            what: "face",
+            pairs: folded,
+        });
+    }
+    let mut boundary: Vec<conform::Facet> = face_map
+        .values()
+        .filter(|(c, _)| *c != u32::MAX)
+        .map(|(c, f)| conform::Facet {
+            cell: ids[*c as usize],
+            verts: f.points(),
+        })
+        .collect();
+    boundary.sort_unstable_by(|a, b| (a.cell, &a.verts).cmp(&(b.cell, &b.verts)));
+    let pairs = conform::overlapping(points, &boundary);
+    if !pairs.is_empty() {
+        return Err(MeshError::NonConforming { pairs });
+    }
+    Ok(Built {
+        g,
+        vert_of_dart,
+        cell_first,
+    })
 }
 
-fn non_manifold_face(key: &[u32; 4], cells: &[Vec<usize>], kinds: &[CellKind]) -> MeshError {
+fn non_manifold_face(
+    key: &[u32; 4],
+    cells: &[Vec<usize>],
+    kinds: &[CellKind],
+    ids: &[usize],
+) -> MeshError {
     let verts: Vec<usize> = key
         .iter()
         .filter(|&&v| v != u32::MAX)
@@ -779,7 +1477,7 @@ fn non_manifold_face(key: &[u32; 4], cells: &[Vec<usize>], kinds: &[CellKind]) -
             let mut fv: Vec<usize> = lf.iter().map(|&l| cv[l]).collect();
             fv.sort_unstable();
             if fv == verts {
-                on_face.push(c);
+                on_face.push(ids[c]);
             }
         }
     }

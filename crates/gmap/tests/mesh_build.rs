@@ -186,7 +186,7 @@ fn degenerate_elements_are_refused() {
     let m = tet_mesh(vec![vec![0, 1, 1, 3]], unit_tet_points());
     assert!(matches!(
         build(&m, &BuildOptions::default()),
-        Err(MeshError::Degenerate { cell: 0, .. })
+        Err(MeshError::Degenerate { ref cells }) if cells[0].0 == 0
     ));
     let flat = vec![
         [0.0, 0.0, 0.0],
@@ -195,8 +195,11 @@ fn degenerate_elements_are_refused() {
         [1.0, 1.0, 0.0],
     ];
     let m = tet_mesh(vec![vec![0, 1, 2, 3]], flat.clone());
-    let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
-    assert!(matches!(e, MeshError::Degenerate { cell: 0, .. }), "{e}");
+    let e = build(&m, &BuildOptions::default()).unwrap_err();
+    assert!(
+        matches!(e, MeshError::Degenerate { ref cells } if cells[0].0 == 0),
+        "{e}"
+    );
     let m = Mesh {
         kinds: vec![CellKind::Polygon],
         cells: vec![vec![0, 1, 1]],
@@ -204,7 +207,7 @@ fn degenerate_elements_are_refused() {
     };
     assert!(matches!(
         build(&m, &BuildOptions::default()),
-        Err(MeshError::Degenerate { cell: 0, .. })
+        Err(MeshError::Degenerate { ref cells }) if cells[0].0 == 0
     ));
     let line = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
     let m = Mesh {
@@ -214,7 +217,7 @@ fn degenerate_elements_are_refused() {
     };
     assert!(matches!(
         build(&m, &BuildOptions::default()),
-        Err(MeshError::Degenerate { cell: 0, .. })
+        Err(MeshError::Degenerate { ref cells }) if cells[0].0 == 0
     ));
 }
 
@@ -236,10 +239,24 @@ fn inverted_tet_is_refused_or_repaired_with_a_report() {
             + a[2] * (b[0] * e[1] - b[1] * e[0])
     };
     assert!(s(&m.cells[0]) > 0.0 && s(&m.cells[1]) < 0.0);
-    let e = build(&m, &BuildOptions::default()).unwrap_err();
-    assert!(matches!(e, MeshError::Inverted { cell: 1, .. }), "{e}");
-    assert!(e.to_string().contains("reorient"));
-    let (g, report) = build(&m, &BuildOptions { reorient: true }).unwrap();
+    let no = BuildOptions {
+        reorient: false,
+        ..BuildOptions::default()
+    };
+    let e = build(&m, &no).unwrap_err();
+    match &e {
+        MeshError::Inverted { cells } => assert_eq!(cells.len(), 1, "{e}"),
+        other => panic!("{other}"),
+    }
+    assert!(
+        matches!(&e, MeshError::Inverted { cells } if cells[0].0 == 1),
+        "{e}"
+    );
+    // the message names the cell, not an option (callers add the option in their syntax)
+    assert!(e.to_string().contains("cell 1"), "{e}");
+    assert!(!e.to_string().contains("reorient"), "{e}");
+    assert_eq!(e.option(), Some(("reorient", "true")));
+    let (g, report) = build(&m, &BuildOptions::default()).unwrap();
     assert_eq!(report.reoriented, vec![1]);
     assert!(g.is_valid());
     assert_eq!(g.cell_counts().faces, 7);
@@ -260,7 +277,7 @@ fn non_manifold_face_names_the_cells() {
         vec![vec![0, 1, 2, 3], vec![1, 3, 2, 4], vec![1, 3, 2, 6]],
         p,
     );
-    let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
+    let e = build(&m, &BuildOptions::default()).unwrap_err();
     match e {
         MeshError::NonManifold {
             what: "face",
@@ -273,14 +290,21 @@ fn non_manifold_face_names_the_cells() {
         }
         other => panic!("{other}"),
     }
-    // two tets touching at one vertex only
+    // two tets touching at one vertex only: a pinched point, accepted by default (one
+    // particle), refused with Pinched::Refuse (tests/import_kinds.rs checks the rest)
     m.points
         .extend([[2.0, 0.0, 1.0], [0.0, 2.0, 1.0], [0.0, 0.0, 3.0]]);
     m.cells = vec![vec![0, 1, 2, 3], vec![3, 7, 8, 9]];
     m.kinds.truncate(2);
-    let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
+    let (_, report) = build(&m, &BuildOptions::default()).unwrap();
+    assert_eq!(report.pinched, vec![3]);
+    let refuse = BuildOptions {
+        pinched: topomech_gmap::mesh::Pinched::Refuse,
+        ..BuildOptions::default()
+    };
+    let e = build(&m, &refuse).unwrap_err();
     assert!(
-        matches!(e, MeshError::NonManifold { what: "vertex", .. }),
+        matches!(&e, MeshError::Pinched { points } if points == &vec![(3, vec![0, 1])]),
         "{e}"
     );
 }
@@ -318,9 +342,13 @@ fn non_manifold_edge_in_2d() {
 fn surface_orientation_is_checked_and_repaired() {
     let mut m = grid([2, 2], [1.0, 1.0], GridElement::Quad);
     m.cells[3].reverse();
-    let e = build(&m, &BuildOptions::default()).unwrap_err();
+    let no = BuildOptions {
+        reorient: false,
+        ..BuildOptions::default()
+    };
+    let e = build(&m, &no).unwrap_err();
     assert!(matches!(e, MeshError::Orientation { .. }), "{e}");
-    let (g, report) = build(&m, &BuildOptions { reorient: true }).unwrap();
+    let (g, report) = build(&m, &BuildOptions::default()).unwrap();
     assert_eq!(report.reoriented, vec![3]);
     assert_eq!(
         common::actual(&g),
@@ -335,7 +363,7 @@ fn non_finite_points_and_empty_meshes_are_refused() {
     let m = tet_mesh(vec![vec![0, 1, 2, 3]], p);
     assert!(matches!(
         build(&m, &BuildOptions::default()),
-        Err(MeshError::NonFinite { point: 2, .. })
+        Err(MeshError::NonFinite { ref points }) if points.len() == 1 && points[0].0 == 2
     ));
     assert_eq!(
         build(&Mesh::default(), &BuildOptions::default()).unwrap_err(),
@@ -361,11 +389,12 @@ fn non_conforming_faces_are_refused() {
     let c1 = m.cells[1].clone();
     // VTK hex: bottom 0..3, top 4..7; swap vertices 0 and 3 on the x=1 side (a twist)
     m.cells[1] = vec![c1[3], c1[1], c1[2], c1[0], c1[4], c1[5], c1[6], c1[7]];
-    let e = build(&m, &BuildOptions { reorient: true }).unwrap_err();
+    let e = build(&m, &BuildOptions::default()).unwrap_err();
     assert!(
         matches!(
             e,
             MeshError::NonConforming { .. }
+                | MeshError::Twisted { .. }
                 | MeshError::Degenerate { .. }
                 | MeshError::NonManifold { .. }
         ),

@@ -48,7 +48,8 @@ pyo3::create_exception!(
     topomech._core,
     MeshError,
     TopomechError,
-    "A mesh that cannot become a G-map; the message names the cell or point."
+    "A mesh that cannot become a G-map; the message names the cells or points. `option` is\n\
+     the `(name, value)` of the build option that would accept the mesh, or `None`."
 );
 pyo3::create_exception!(
     topomech._core,
@@ -124,7 +125,10 @@ pyo3::create_exception!(
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("TopomechError", py.get_type::<TopomechError>())?;
-    m.add("MeshError", py.get_type::<MeshError>())?;
+    let mesh_error = py.get_type::<MeshError>();
+    // the default for a MeshError raised without one (e.g. by topomech.io)
+    mesh_error.setattr("option", py.None())?;
+    m.add("MeshError", mesh_error)?;
     m.add("MeshReadError", py.get_type::<MeshReadError>())?;
     m.add("TopologyError", py.get_type::<TopologyError>())?;
     m.add("EmbeddingError", py.get_type::<EmbeddingError>())?;
@@ -228,8 +232,8 @@ impl From<PyErr> for Error {
 impl From<Error> for PyErr {
     fn from(e: Error) -> PyErr {
         match e {
-            Error::Mesh(e) => MeshError::new_err(e.to_string()),
-            Error::MeshInput(msg) => MeshError::new_err(msg),
+            Error::Mesh(e) => mesh_error(e.to_string(), e.option()),
+            Error::MeshInput(msg) => mesh_error(msg, None),
             Error::Topology(msg) => TopologyError::new_err(msg),
             Error::Embedding(e) => EmbeddingError::new_err(e.to_string()),
             Error::EmbeddingInput(msg) => EmbeddingError::new_err(msg),
@@ -266,6 +270,17 @@ fn rule_error(diags: &[Diagnostic]) -> PyErr {
             Ok(()) => err,
             Err(e) => e,
         }
+    })
+}
+
+/// A `MeshError` with `option`: the `(name, value)` of the build option that would accept
+/// the mesh (e.g. `("pinched", "split")`), or `None`. The message names no option; the
+/// Python layer appends it in the user's syntax.
+fn mesh_error(msg: String, option: Option<(&'static str, &'static str)>) -> PyErr {
+    let err = MeshError::new_err(msg);
+    Python::attach(|py| match err.value(py).setattr("option", option) {
+        Ok(()) => err,
+        Err(e) => e,
     })
 }
 

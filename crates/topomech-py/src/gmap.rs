@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
-use topomech_gmap::mesh::{self, BuildOptions};
+use topomech_gmap::mesh::{self, BuildOptions, Duplicates, Pinched};
 use topomech_gmap::{io, EmbeddingType, GMap, OrbitType};
 
 use crate::convert::{dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, rows_to_array, FlatMesh};
-use crate::errors::{guard, Error, InternalError, Result};
+use crate::errors::{guard, value_error, Error, InternalError, Result};
 
 /// A generalized map of dimension 2 (surfaces) or 3 (volumes).
 ///
@@ -73,14 +73,38 @@ fn counts_dict<'py>(py: Python<'py>, g: &GMap) -> PyResult<Bound<'py, PyDict>> {
     Ok(d)
 }
 
+/// The build options, or a `ValueError` naming the accepted values.
+fn build_options(reorient: bool, pinched: &str, duplicates: &str) -> Result<BuildOptions> {
+    let pinched = Pinched::parse(pinched).ok_or_else(|| {
+        value_error(format!(
+            "pinched must be \"merge\", \"split\" or \"refuse\", got {pinched:?}"
+        ))
+    })?;
+    let duplicates = Duplicates::parse(duplicates).ok_or_else(|| {
+        value_error(format!(
+            "duplicates must be \"refuse\" or \"merge\", got {duplicates:?}"
+        ))
+    })?;
+    Ok(BuildOptions {
+        reorient,
+        pinched,
+        duplicates,
+    })
+}
+
 #[pymethods]
 impl PyGMap {
     /// Builds a map from a flat mesh: `points` float64 (N, 3); `kinds` the meshio name of each
     /// cell (`polygon`, `tetra`, `hexahedron`, `wedge`, `pyramid`); `offsets` int64 (M + 1,);
-    /// `connectivity` int64. Returns the map and a report
-    /// `{"reoriented": [cells], "unused_points": [points]}`.
+    /// `connectivity` int64. Options: `reorient` (turn cells listed the other way round),
+    /// `pinched` (`merge`, `split` or `refuse`), `duplicates` (`refuse` or `merge`). Returns
+    /// the map and a report `{"reoriented": [cells], "unused_points": [points], "pinched":
+    /// [points], "merged_duplicates": [(dropped, kept)], "non_orientable": bool}`. A refused
+    /// mesh raises `MeshError` whose `option` is the `(name, value)` that would accept it, or
+    /// `None`.
     #[staticmethod]
-    #[pyo3(signature = (points, kinds, offsets, connectivity, reorient = false))]
+    #[pyo3(signature = (points, kinds, offsets, connectivity, reorient = true, pinched = "merge", duplicates = "refuse"))]
+    #[allow(clippy::too_many_arguments)]
     fn from_flat<'py>(
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
@@ -88,13 +112,18 @@ impl PyGMap {
         offsets: &Bound<'py, PyAny>,
         connectivity: &Bound<'py, PyAny>,
         reorient: bool,
+        pinched: &str,
+        duplicates: &str,
     ) -> PyResult<(PyGMap, Bound<'py, PyDict>)> {
+        let opts = guard(|| build_options(reorient, pinched, duplicates))?;
         let mesh = guard(move || mesh_from_flat(points, &kinds, offsets, connectivity))?;
-        let opts = BuildOptions { reorient };
         let (g, report) = py.detach(|| guard(|| Ok(mesh::build(&mesh, &opts)?)))?;
         let d = PyDict::new(py);
         d.set_item("reoriented", report.reoriented)?;
         d.set_item("unused_points", report.unused_points)?;
+        d.set_item("pinched", report.pinched)?;
+        d.set_item("merged_duplicates", report.merged_duplicates)?;
+        d.set_item("non_orientable", report.non_orientable)?;
         Ok((PyGMap::new(g), d))
     }
 
@@ -299,6 +328,35 @@ impl PyGMap {
             }
         }
         Ok(d)
+    }
+
+    /// The value of the i64 embedding `name` on every dart, int64 `(n_darts,)` (0 on removed
+    /// darts), e.g. the `point_id`, `particle` and `cell_id` that a mesh build writes.
+    /// Raises `EmbeddingError` for an unknown name or an embedding of another type.
+    fn int_embedding<'py>(
+        &self,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let g = self.map()?;
+        let id = guard(|| Ok(g.require(name)?))?;
+        if g.embedding(id).ty() != EmbeddingType::I64 {
+            return Err(Error::EmbeddingInput(format!(
+                "embedding '{name}' is {}, not i64",
+                g.embedding(id).ty()
+            ))
+            .into());
+        }
+        let out: Vec<i64> = (0..g.capacity())
+            .map(|d| {
+                let d = topomech_gmap::Dart(d as u32);
+                match g.is_alive(d).then(|| g.value(id, d)) {
+                    Some(Ok(topomech_gmap::Value::Int(x))) => x,
+                    _ => 0,
+                }
+            })
+            .collect();
+        Ok(out.into_pyarray(py))
     }
 
     /// Bytes used by the topology and every embedding.
