@@ -309,11 +309,14 @@ class GMap:
 
     def positions(self) -> npt.NDArray[np.float64]:
         """Vertex positions ``(V, 3)``, row k for the vertex labelled k in
-        :meth:`vertex_labels`."""
+        :meth:`vertex_labels`. Rows follow the input point order for a map built from a mesh
+        (its ``particle`` embedding; unused points left out, a pinched point kept as one
+        particle is one row), else the vertex orbits by their smallest dart."""
         return self._core.positions()
 
     def vertex_labels(self) -> npt.NDArray[np.int64]:
-        """The vertex of each dart (-1 for removed darts)."""
+        """The vertex row of each dart, int64 ``(capacity,)`` (-1 for removed darts); rows as
+        in :meth:`positions`."""
         return self._core.vertex_labels()
 
     def alpha(self, i: int, dart: int) -> int:

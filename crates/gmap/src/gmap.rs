@@ -1,7 +1,7 @@
 //! The generalized map: darts, alpha links, orbits and embeddings.
 
 use crate::embedding::{
-    Column, ColumnMut, Derived, Embedding, EmbeddingId, EmbeddingType, Policy, Value,
+    Column, ColumnMut, ColumnRef, Derived, Embedding, EmbeddingId, EmbeddingType, Policy, Value,
 };
 use crate::marks::{with_marks, Marks};
 use crate::{Aggregate, Dart, EmbeddingError, GMapError, LinkError, OrbitType};
@@ -372,6 +372,43 @@ impl GMap {
             }
         }
         (label, n as usize)
+    }
+
+    /// The row of every live dart's vertex in per-vertex arrays (removed darts get
+    /// `u32::MAX`), and the number of rows. Rows follow the map's `particle` embedding (i64 on
+    /// the vertex orbit, written by the mesh import: the input point order, see
+    /// [`crate::mesh::build`]) when it is a dense numbering (every value in `0..n` used, none
+    /// negative); otherwise they are the vertex orbits numbered by their smallest dart
+    /// ([`GMap::orbit_labels`]). Several orbits share a row where the import kept a pinched
+    /// point as one particle.
+    pub fn vertex_rows(&self) -> (Vec<u32>, usize) {
+        let o = OrbitType::vertex(self.dim);
+        self.particle_rows(o)
+            .unwrap_or_else(|| self.orbit_labels(o))
+    }
+
+    fn particle_rows(&self, o: OrbitType) -> Option<(Vec<u32>, usize)> {
+        let e = self.embedding(self.embedding_id("particle")?);
+        if e.ty() != EmbeddingType::I64 || e.orbit() != o {
+            return None;
+        }
+        let ColumnRef::Int(col) = e.column() else {
+            return None;
+        };
+        let mut label = vec![u32::MAX; self.capacity()];
+        let mut n = 0usize;
+        for d in self.darts() {
+            let v = u32::try_from(*col.get(e.slot(d))?)
+                .ok()
+                .filter(|&v| v != u32::MAX)?;
+            label[d.index()] = v;
+            n = n.max(v as usize + 1);
+        }
+        let mut used = vec![false; n];
+        for d in self.darts() {
+            used[label[d.index()] as usize] = true;
+        }
+        used.iter().all(|&u| u).then_some((label, n))
     }
 
     /// Counts of vertices, edges, faces, volumes, components and boundary cells.

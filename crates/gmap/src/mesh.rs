@@ -1497,7 +1497,8 @@ pub fn extract(g: &GMap) -> Result<Mesh, MeshError> {
     let pos = g
         .embedding_id("position")
         .ok_or_else(|| MeshError::Extract("the map has no 'position' embedding".into()))?;
-    let (labels, nv) = g.orbit_labels(OrbitType::vertex(n));
+    // points in the map's row order: the input point order for an imported map
+    let (labels, nv) = g.vertex_rows();
     let mut points = vec![[0.0; 3]; nv];
     let mut done = vec![false; nv];
     for d in g.darts() {

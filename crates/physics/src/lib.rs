@@ -1449,8 +1449,9 @@ impl Simulation {
         let rest = self.rest_points()?;
         let mut out = Vec::with_capacity(reps.len());
         for ((d, kind), verts) in reps.iter().zip(&mesh.kinds).zip(&mesh.cells) {
-            // extract numbers points by vertex orbit (in the order of orbits)
-            let mut verts: Vec<usize> = verts.iter().map(|&o| self.rows.row_of[o]).collect();
+            // extract numbers points by the map's `particle` rows, which the simulation keeps
+            // equal to its rows (it writes `particle` when it numbers new vertex orbits)
+            let mut verts = verts.clone();
             if dim == 3 && topomech_gmap::mesh::signed_volume(*kind, &verts, &rest) < 0.0 {
                 verts = topomech_gmap::mesh::reversed(*kind, &verts);
             }

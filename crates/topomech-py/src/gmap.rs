@@ -190,8 +190,8 @@ impl PyGMap {
         py.detach(|| guard(|| Ok(g.validate().iter().map(ToString::to_string).collect())))
     }
 
-    /// Vertex positions, float64 (V, 3): row k is the vertex orbit labelled k by
-    /// `vertex_labels`.
+    /// Vertex positions, float64 (V, 3), in row order (`GMap::vertex_rows`: the input point
+    /// order of an imported map; row k is the vertex labelled k by `vertex_labels`).
     fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let g = self.map()?;
         let rows = guard(|| {
@@ -202,7 +202,7 @@ impl PyGMap {
                     "embedding 'position' holds {ty}, expected vec3"
                 )));
             }
-            let (labels, n) = g.orbit_labels(OrbitType::vertex(g.dimension()));
+            let (labels, n) = g.vertex_rows();
             let mut rows = vec![[0.0f64; 3]; n];
             let mut seen = vec![false; n];
             for d in g.darts() {
@@ -218,11 +218,11 @@ impl PyGMap {
         guard(|| rows_to_array(py, &rows))
     }
 
-    /// The vertex index of each dart, int64 (capacity,): -1 for removed darts.
+    /// The vertex row of each dart, int64 (capacity,): -1 for removed darts.
     fn vertex_labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let g = self.map()?;
         let labels = guard(|| {
-            let (labels, _) = g.orbit_labels(OrbitType::vertex(g.dimension()));
+            let (labels, _) = g.vertex_rows();
             Ok(labels
                 .into_iter()
                 .map(|l| if l == u32::MAX { -1 } else { i64::from(l) })
