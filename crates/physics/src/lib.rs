@@ -827,6 +827,16 @@ impl Simulation {
             Integrator::Static => self.solve_static(),
         };
         let bad = match &result {
+            // a rule computed a non-finite value (and wrote nothing): name its vertex
+            Err(PhysicsError::Apply(ApplyError::NonFinite {
+                rule,
+                embedding,
+                dart,
+                value,
+            })) => Some((
+                self.vertex_of(*dart, pos),
+                format!("rule '{rule}' computed a non-finite value {value} for '{embedding}' (dart {dart})"),
+            )),
             Err(e) => Some((0, e.to_string())),
             // every slot scanned in order first (dead slots included: they hold old, finite
             // values), the vertices searched one by one only to name the one that fails
@@ -852,6 +862,11 @@ impl Simulation {
                 }
             }
             return Err(match result {
+                Err(PhysicsError::Apply(ApplyError::NonFinite { .. })) => PhysicsError::Diverged {
+                    step: self.steps + 1,
+                    vertex,
+                    why,
+                },
                 Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
                     step: self.steps + 1,
                     vertex,
@@ -868,6 +883,20 @@ impl Simulation {
         self.steps += 1;
         self.time += self.cfg.dt;
         self.topology_events()
+    }
+
+    /// The vertex (index in vertex order) whose orbit holds `dart`, by the slot of the vertex
+    /// embedding `pos`; 0 if none does.
+    fn vertex_of(&self, dart: Dart, pos: EmbeddingId) -> usize {
+        let e = self.g.embedding(pos);
+        if !self.g.is_alive(dart) {
+            return 0;
+        }
+        let slot = e.slot(dart);
+        self.vertex_darts
+            .iter()
+            .position(|d| e.slot(*d) == slot)
+            .unwrap_or(0)
     }
 
     /// Whether every value of the position and velocity columns is finite and no velocity
