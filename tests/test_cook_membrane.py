@@ -18,9 +18,10 @@ after conjugate gradients to 1e-12, so 1e-6 relative against scikit-fem on the s
 bound with margin that an error of the model, the load or the solve would break.
 
 Two versions: the shear traction (consistent nodal loads, through ``set_external_forces``,
-skipped when ``Simulation`` lacks it), and a body load in +y (gravity: the lumped masses of
-linear triangles are the consistent loads of a uniform body force, area / 3 per corner) that
-needs nothing else, on the same panel.
+skipped when ``Simulation`` lacks it), and a body load in +y of the same total 1 (gravity 1 /
+1440 per unit area, 1440 being the panel's area: the lumped masses of linear triangles are the
+consistent loads of a uniform body force, area / 3 per corner) that needs nothing else, on the
+same panel.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ spatial = pytest.importorskip("scipy.spatial")
 E, NU, THICKNESS = 1.0, 1.0 / 3.0, 1.0
 SCALE = 1e-7  # load factor of the linear regime (see the module docstring)
 REFERENCE = 23.96  # v at (48, 52), linear plane stress (Cook's membrane)
+AREA = 1440.0  # of the panel (shoelace formula on its corners)
+BODY = 1.0 / AREA  # the body force per area of the body-load version: a total load of 1
 SIZES = (8, 16, 32)
 
 
@@ -78,8 +81,8 @@ def right_edge_loads(points: np.ndarray) -> np.ndarray:
 
 def skfem_solve(points: np.ndarray, tris: np.ndarray, load: str) -> np.ndarray:
     """scikit-fem's linear plane-stress solve with P1 triangles on the same mesh: ``(P, 2)``
-    displacements for the unit shear traction (``load="edge"``) or the unit body force in +y
-    (``load="body"``)."""
+    displacements for the unit shear traction (``load="edge"``) or the body force BODY in +y
+    (``load="body"``), each of total 1."""
     from skfem import (
         Basis,
         BilinearForm,
@@ -104,11 +107,11 @@ def skfem_solve(points: np.ndarray, tris: np.ndarray, load: str) -> np.ndarray:
 
     @LinearForm
     def traction(v: Any, _w: Any) -> Any:
-        return THICKNESS * v.value[1] / 16.0
+        return THICKNESS * v[1] / 16.0
 
     @LinearForm
     def body(v: Any, _w: Any) -> Any:
-        return v.value[1]
+        return BODY * v[1]
 
     mesh = MeshTri(points.T.copy(), tris.T.copy())
     element = ElementVector(ElementTriP1())
@@ -137,7 +140,7 @@ def topomech_solve(points: np.ndarray, tris: np.ndarray, load: str) -> np.ndarra
         "fixed": ["x < 1e-9"],
         "integrator": "static",
         "dt": 1.0,
-        "gravity": [0.0, SCALE if load == "body" else 0.0, 0.0],
+        "gravity": [0.0, SCALE * BODY if load == "body" else 0.0, 0.0],
     }
     sim = topomech.Simulation(g, config)
     rows = spatial.cKDTree(sim.rest_positions()[:, :2]).query(points)[1]
@@ -164,6 +167,7 @@ def check_against_skfem(load: str) -> list[float]:
         err = np.abs(ours - theirs).max() / scale
         assert err < 1e-6, f"{load} load, {n} x {n}: off scikit-fem by {err:.2e} relative"
         values.append(float(ours[node_at(points, 48.0, 52.0), 1]))
+        print(f"{load} {n}: v(48, 52) = {values[-1]:.6f}, off scikit-fem by {err:.1e}")
     return values
 
 
@@ -185,7 +189,7 @@ def test_cook_membrane_shear_load_converges_to_the_reference() -> None:
 
 
 def test_cook_panel_body_load_matches_scikit_fem_and_converges() -> None:
-    """The same panel under a unit body force in +y (through gravity; needs nothing but the
+    """The same panel under a body force of total 1 in +y (through gravity; needs nothing but the
     model's Jacobian rules): every size equals scikit-fem on the same mesh to 1e-6, and v(48,
     52) increases with refinement, the change at least halving with each (a converging
     sequence of too-stiff elements)."""

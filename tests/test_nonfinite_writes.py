@@ -21,7 +21,8 @@ from topomech.rules import RuleSet
 
 # On the 3 x 2 grid of [0, 3] x [0, 2] the vertices on x = 1 get an infinite or NaN position
 # (1 / 0 times their coordinates); the others a finite one. The rule writes `velocity` first,
-# finite everywhere, so "writes nothing" is checked on an embedding the rule did compute.
+# finite everywhere and different for each `at`, so "writes nothing" is checked on an
+# embedding the rule did compute.
 BLOW = """dimension 2
 embedding position : vec3 on <1,2> policy mean
 embedding velocity : vec3 on <1,2>
@@ -29,9 +30,14 @@ embedding velocity : vec3 on <1,2>
 rule blow(at: f64) {
   left { v : <1,2> hook }
   compute {
-    v.velocity = vec3(1.0, 2.0, 3.0)
+    v.velocity = vec3(at, 2.0, 3.0)
     v.position = v.position / (x(v.position) - at)
   }
+}
+
+rule still {
+  left { v : <1,2> hook }
+  compute { v.velocity = vec3(-1.0, 0.0, 0.0) }
 }
 """
 
@@ -42,8 +48,19 @@ def grid() -> topomech.GMap:
     return topomech.GMap.from_flat(*_core.grid(3, 2, 3.0, 2.0, "quad"))
 
 
+def prepared(rules: RuleSet) -> topomech.GMap:
+    """The grid with a `velocity` embedding holding values (written by `still`), so that a
+    comparison of the whole map, bit for bit, sees any write of the failing rule (an
+    application declares the embeddings its rule uses even when it fails, as when it does not
+    match: that is not a write)."""
+    g = grid()
+    assert rules.apply(g, "still")["matches"] == 12
+    return g
+
+
 def x_of_dart(g: topomech.GMap, d: int) -> float:
     return float(g.positions()[g.vertex_labels()[d]][0])
+
 
 
 def check_message(msg: str, g: topomech.GMap) -> None:
@@ -59,8 +76,8 @@ def check_message(msg: str, g: topomech.GMap) -> None:
 
 
 def test_apply_everywhere_fails_and_writes_nothing() -> None:
-    g = grid()
     rules = RuleSet.from_source(BLOW)
+    g = prepared(rules)
     before = g.to_bytes()
     with pytest.raises(topomech.ApplyError) as info:
         rules.apply(g, "blow", params={"at": 1.0})
@@ -74,8 +91,8 @@ def test_apply_everywhere_fails_and_writes_nothing() -> None:
 
 
 def test_apply_at_a_dart_fails_and_writes_nothing() -> None:
-    g = grid()
     rules = RuleSet.from_source(BLOW)
+    g = prepared(rules)
     labels, pos = g.vertex_labels(), g.positions()
     bad = next(d for d in range(g.n_darts) if pos[labels[d]][0] == 1.0)
     before = g.to_bytes()

@@ -359,3 +359,24 @@ fn implicit_euler_is_stable_and_settles_on_the_static_solution() {
         "implicit Euler settles on the static solution: off by {err:e} (deflection {umax})"
     );
 }
+
+/// The Jacobian rule runs through a compiled plan (not the interpreter), like the force rule:
+/// static and implicit solves apply it once per conjugate-gradient iteration.
+#[test]
+fn jvp_rule_runs_through_a_compiled_plan() {
+    let mesh = grid([3, 2], [1.5, 1.0], GridElement::Triangle);
+    let mut s = sim(&mesh, 0.1, |_| {});
+    let n = s.vertex_darts().len();
+    s.jvp(&vec![[0.1, 0.2, 0.3]; n], &vec![[0.0; 3]; n])
+        .unwrap();
+    s.forces().unwrap();
+    let kinds = s.rules().plan_kinds();
+    for rule in ["corotational_tri", "corotational_tri_jvp"] {
+        assert!(
+            kinds
+                .iter()
+                .any(|(name, compiled)| name == rule && *compiled),
+            "{rule} is not compiled: {kinds:?}"
+        );
+    }
+}
