@@ -862,22 +862,20 @@ impl Simulation {
                 }
             }
             return Err(match result {
-                Err(PhysicsError::Apply(ApplyError::NonFinite { .. })) => PhysicsError::Diverged {
-                    step: self.steps + 1,
-                    vertex,
-                    why,
-                },
+                // the step's own finding, or a rule's non-finite value (its why says which)
+                Ok(()) | Err(PhysicsError::Apply(ApplyError::NonFinite { .. })) => {
+                    PhysicsError::Diverged {
+                        step: self.steps + 1,
+                        vertex,
+                        why,
+                    }
+                }
                 Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
                     step: self.steps + 1,
                     vertex,
                     why: e.to_string(),
                 },
                 Err(e) => e,
-                Ok(()) => PhysicsError::Diverged {
-                    step: self.steps + 1,
-                    vertex,
-                    why,
-                },
             });
         }
         self.steps += 1;

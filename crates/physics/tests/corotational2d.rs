@@ -90,7 +90,7 @@ fn jvp_matches_central_differences_at_large_rotations() {
         for trial in 0..6 {
             let w = [rng.next(), rng.next(), rng.next()];
             let n = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-            let angle = std::f64::consts::PI * (0.2 + 0.8 * (trial as f64 / 5.0));
+            let angle = std::f64::consts::PI * (0.2 + 0.8 * (f64::from(trial) / 5.0));
             let r = rotation([angle * w[0] / n, angle * w[1] / n, angle * w[2] / n]);
             let x: Vec<[f64; 3]> = rest
                 .iter()
