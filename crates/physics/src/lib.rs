@@ -169,8 +169,8 @@ pub const MODELS: &[ModelDef] = &[
         init: &["corotational_tri_init"],
         rules: &["corotational_tri"],
         forces: &["f_corot_tri"],
-        jvp_rules: &[],
-        jvp_forces: &[],
+        jvp_rules: &["corotational_tri_jvp"],
+        jvp_forces: &["df_corot_tri"],
         params: &[("thickness", 1.0)],
         needs: "triangles",
         per_element: true,
@@ -896,6 +896,16 @@ impl Simulation {
             Integrator::Static => self.solve_static(),
         };
         let bad = match &result {
+            // a rule computed a non-finite value (and wrote nothing): name its vertex
+            Err(PhysicsError::Apply(ApplyError::NonFinite {
+                rule,
+                embedding,
+                dart,
+                value,
+            })) => Some((
+                self.vertex_of(*dart, pos),
+                format!("rule '{rule}' computed a non-finite value {value} for '{embedding}' (dart {dart})"),
+            )),
             Err(e) => Some((0, e.to_string())),
             // every slot scanned in order first (dead slots included: they hold old, finite
             // values), the vertices searched one by one only to name the one that fails
@@ -921,22 +931,41 @@ impl Simulation {
                 }
             }
             return Err(match result {
+                // the step's own finding, or a rule's non-finite value (its why says which)
+                Ok(()) | Err(PhysicsError::Apply(ApplyError::NonFinite { .. })) => {
+                    PhysicsError::Diverged {
+                        step: self.steps + 1,
+                        vertex,
+                        why,
+                    }
+                }
                 Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
                     step: self.steps + 1,
                     vertex,
                     why: e.to_string(),
                 },
                 Err(e) => e,
-                Ok(()) => PhysicsError::Diverged {
-                    step: self.steps + 1,
-                    vertex,
-                    why,
-                },
             });
         }
         self.steps += 1;
         self.time += self.cfg.dt;
         self.topology_events()
+    }
+
+    /// The row of the vertex whose orbit holds `dart`, by the slot of the vertex
+    /// embedding `pos`; 0 if none does.
+    fn vertex_of(&self, dart: Dart, pos: EmbeddingId) -> usize {
+        let e = self.g.embedding(pos);
+        if !self.g.is_alive(dart) {
+            return 0;
+        }
+        let slot = e.slot(dart);
+        self.rows
+            .orbits
+            .iter()
+            .zip(&self.rows.row_of)
+            .find(|(d, _)| e.slot(**d) == slot)
+            .map_or(0, |(_, &r)| r)
     }
 
     /// Whether every value of the position and velocity columns is finite and no velocity

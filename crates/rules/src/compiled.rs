@@ -1155,6 +1155,11 @@ impl Plan {
                 return unsupported("an evaluation failed");
             }
         }
+        // a non-finite value is never written: one pass over the outputs (no early exit, so
+        // that it vectorizes), the interpreter then names the rule, embedding and dart
+        if self.out.iter().fold(false, |bad, x| bad | !x.is_finite()) {
+            return unsupported("a non-finite value");
+        }
         // writes of one orbit by two writes must agree
         for &(w1, r1, w2, r2) in &self.dups {
             let (o1, o2) = (self.targets[w1].1, self.targets[w2].1);

@@ -77,6 +77,19 @@ pub enum ApplyError {
         /// A dart of the orbit.
         dart: Dart,
     },
+    /// A write of a non-finite value (NaN or an infinity) to an embedding: the application
+    /// writes nothing (every value is checked before the first write).
+    #[error("rule '{rule}' writes a non-finite value {value} to '{embedding}' at dart {dart}; nothing was written")]
+    NonFinite {
+        /// The rule.
+        rule: String,
+        /// The embedding.
+        embedding: String,
+        /// The dart of the orbit written (the hook's dart for a node the rule creates).
+        dart: Dart,
+        /// The value, as the language prints it.
+        value: String,
+    },
     /// The rewrite was refused by the kernel (should not happen for checked rules; reported,
     /// never a panic).
     #[error("rule '{rule}': {source}")]
@@ -1019,6 +1032,20 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
                     let v = ev
                         .run_to(value, s, r)
                         .map_err(|e| eval_err(&rule.name, m.darts[rule.hooks[0]][r], &e))?;
+                    if !finite(&v) {
+                        let dart = m
+                            .darts
+                            .get(*node)
+                            .and_then(|d| d.get(r))
+                            .copied()
+                            .unwrap_or(m.darts[rule.hooks[0]][r]);
+                        return Err(ApplyError::NonFinite {
+                            rule: rule.name.clone(),
+                            embedding: b.embs[*emb].name.clone(),
+                            dart,
+                            value: describe_non_finite(&v),
+                        });
+                    }
                     by_class.insert(cls, v.clone());
                     v
                 };
@@ -1163,6 +1190,45 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
         }
     }
     Ok(report)
+}
+
+/// Whether every real of a value is finite (integers and booleans always are).
+fn finite(v: &Val) -> bool {
+    match v {
+        Val::F(x) => x.is_finite(),
+        Val::I(_) | Val::B(_) => true,
+        Val::V2(a) => a.iter().all(|x| x.is_finite()),
+        Val::V3(a) => a.iter().all(|x| x.is_finite()),
+        Val::M(m) => m.data.iter().all(|x| x.is_finite()),
+    }
+}
+
+/// A non-finite value for a message: a scalar or vector in full, a matrix by its type and its
+/// first non-finite entry.
+fn describe_non_finite(v: &Val) -> String {
+    let list = |a: &[f64]| {
+        a.iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    match v {
+        Val::F(x) => x.to_string(),
+        Val::V2(a) => format!("({})", list(a)),
+        Val::V3(a) => format!("({})", list(a)),
+        Val::M(m) => {
+            let k = m.data.iter().position(|x| !x.is_finite()).unwrap_or(0);
+            format!(
+                "(a {} with entry ({}, {}) = {})",
+                v.ty(),
+                k / m.cols.max(1),
+                k % m.cols.max(1),
+                m.data.get(k).copied().unwrap_or(f64::NAN)
+            )
+        }
+        Val::I(i) => i.to_string(),
+        Val::B(b) => b.to_string(),
+    }
 }
 
 /// Bitwise equality of values: a NaN written twice is the same value, and 0.0 and -0.0 are not.
