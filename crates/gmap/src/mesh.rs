@@ -300,13 +300,11 @@ pub enum MeshError {
         /// The dimension of cell 0.
         dim: usize,
     },
-    /// A vertex index past the points.
-    #[error("cell {cell} refers to vertex {vertex}, but there are only {n_points} points")]
+    /// Vertex indices past the points.
+    #[error("{} vertex index(es) past the {n_points} points: {}", cells.len(), listed(cells, |(c, v)| format!("cell {c} refers to vertex {v}")))]
     VertexOutOfRange {
-        /// The cell.
-        cell: usize,
-        /// The index.
-        vertex: usize,
+        /// (cell, vertex index) for each index past the points.
+        cells: Vec<(usize, usize)>,
         /// Number of points.
         n_points: usize,
     },
@@ -374,17 +372,15 @@ pub enum MeshError {
         /// Each point and the cells around it.
         points: Vec<(usize, Vec<usize>)>,
     },
-    /// An edge (2D) or face (3D) shared by three or more cells.
-    #[error("non-manifold {what} {vertices:?} in cells {cells:?}: {why}")]
+    /// Edges (2D) or faces (3D) shared by three or more cells.
+    #[error("{} non-manifold {what}(s) ({why}): {}", items.len(), listed(items, |(v, c)| format!("{what} {v:?} in cells {c:?}")))]
     NonManifold {
         /// What the rule is.
         why: &'static str,
         /// `edge` or `face`.
         what: &'static str,
-        /// Its vertices.
-        vertices: Vec<usize>,
-        /// The cells sharing it.
-        cells: Vec<usize>,
+        /// Each edge or face (its points, increasing) and the cells sharing it, by points.
+        items: Vec<(Vec<usize>, Vec<usize>)>,
     },
     /// Non-conforming interfaces: faces (2D: edges) of two cells that share points but do not
     /// match, or that overlap (mismatched diagonals, hanging nodes).
@@ -591,6 +587,7 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
         });
     }
     let dim = mesh.kinds[0].dimension();
+    let mut out_of_range = Vec::new();
     for (c, (&kind, verts)) in mesh.kinds.iter().zip(&mesh.cells).enumerate() {
         if kind.dimension() != dim {
             return Err(MeshError::MixedDimension {
@@ -614,13 +611,15 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
         }
         for &v in verts {
             if v >= mesh.points.len() {
-                return Err(MeshError::VertexOutOfRange {
-                    cell: c,
-                    vertex: v,
-                    n_points: mesh.points.len(),
-                });
+                out_of_range.push((c, v));
             }
         }
+    }
+    if !out_of_range.is_empty() {
+        return Err(MeshError::VertexOutOfRange {
+            cells: out_of_range,
+            n_points: mesh.points.len(),
+        });
     }
     let bad: Vec<(usize, [f64; 3])> = mesh
         .points
@@ -1286,7 +1285,7 @@ fn shared_edges(cells: &[Vec<usize>], ids: &[usize]) -> Result<Vec<SharedEdge>, 
         }
     }
     let mut shared = Vec::new();
-    let mut bad: Option<((u32, u32), Vec<usize>)> = None;
+    let mut bad: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
     for (&key, uses) in &edges {
         match uses.len() {
             1 => {}
@@ -1294,18 +1293,16 @@ fn shared_edges(cells: &[Vec<usize>], ids: &[usize]) -> Result<Vec<SharedEdge>, 
             _ => {
                 let mut faces: Vec<usize> = uses.iter().map(|u| ids[u.0 as usize]).collect();
                 faces.sort_unstable();
-                if bad.as_ref().is_none_or(|(k, _)| key < *k) {
-                    bad = Some((key, faces));
-                }
+                bad.push((vec![key.0 as usize, key.1 as usize], faces));
             }
         }
     }
-    if let Some((key, faces)) = bad {
+    if !bad.is_empty() {
+        bad.sort_unstable();
         return Err(MeshError::NonManifold {
             what: "edge",
             why: "an edge joins at most 2 faces",
-            vertices: vec![key.0 as usize, key.1 as usize],
-            cells: faces,
+            items: bad,
         });
     }
     shared.sort_unstable_by_key(|s| s.0);
@@ -1344,7 +1341,7 @@ fn build_volume(
     let mut local: Vec<BuiltFace> = Vec::with_capacity(6);
     let mut mismatched: Vec<FacePair> = Vec::new();
     let mut folded: Vec<(usize, usize, Vec<usize>)> = Vec::new();
-    let mut non_manifold: Option<[u32; 4]> = None;
+    let mut non_manifold: std::collections::BTreeSet<[u32; 4]> = std::collections::BTreeSet::new();
     for (c, (&kind, verts)) in kinds.iter().zip(cells).enumerate() {
         local.clear();
         cell_first.push(vert_of_dart.len() as u32);
@@ -1389,9 +1386,7 @@ fn build_volume(
                 }
                 Some((other, h)) if other == u32::MAX => {
                     face_map.insert(key, (other, h));
-                    if non_manifold.is_none_or(|k| key < k) {
-                        non_manifold = Some(key);
-                    }
+                    non_manifold.insert(key);
                 }
                 Some((other, h)) => {
                     let k = f.len as usize;
@@ -1427,8 +1422,8 @@ fn build_volume(
         }
     }
     cell_first.push(vert_of_dart.len() as u32);
-    if let Some(key) = non_manifold {
-        return Err(non_manifold_face(&key, cells, &kinds, ids));
+    if !non_manifold.is_empty() {
+        return Err(non_manifold_faces(&non_manifold, cells, &kinds, ids));
     }
     if !mismatched.is_empty() {
         return Err(MeshError::NonConforming { pairs: mismatched });
@@ -1460,32 +1455,43 @@ fn build_volume(
     })
 }
 
-fn non_manifold_face(
-    key: &[u32; 4],
+/// The error listing every face (sorted padded key) of `keys` with the cells on it.
+fn non_manifold_faces(
+    keys: &std::collections::BTreeSet<[u32; 4]>,
     cells: &[Vec<usize>],
     kinds: &[CellKind],
     ids: &[usize],
 ) -> MeshError {
-    let verts: Vec<usize> = key
-        .iter()
-        .filter(|&&v| v != u32::MAX)
-        .map(|&v| v as usize)
-        .collect();
-    let mut on_face = Vec::new();
+    let mut on_face: std::collections::BTreeMap<[u32; 4], Vec<usize>> =
+        keys.iter().map(|k| (*k, Vec::new())).collect();
     for (c, (cv, &kind)) in cells.iter().zip(kinds).enumerate() {
         for lf in local_faces(kind) {
-            let mut fv: Vec<usize> = lf.iter().map(|&l| cv[l]).collect();
-            fv.sort_unstable();
-            if fv == verts {
-                on_face.push(ids[c]);
+            let mut key = [u32::MAX; 4];
+            for (j, &l) in lf.iter().enumerate() {
+                key[j] = cv[l] as u32;
+            }
+            key[..lf.len()].sort_unstable();
+            if let Some(list) = on_face.get_mut(&key) {
+                list.push(ids[c]);
             }
         }
     }
+    let items = on_face
+        .into_iter()
+        .map(|(key, mut c)| {
+            c.sort_unstable();
+            let verts = key
+                .iter()
+                .filter(|&&v| v != u32::MAX)
+                .map(|&v| v as usize)
+                .collect();
+            (verts, c)
+        })
+        .collect();
     MeshError::NonManifold {
         what: "face",
         why: "a face joins at most 2 cells",
-        vertices: verts,
-        cells: on_face,
+        items,
     }
 }
 
