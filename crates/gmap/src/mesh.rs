@@ -301,7 +301,7 @@ pub enum MeshError {
         dim: usize,
     },
     /// Vertex indices past the points.
-    #[error("{} vertex index(es) past the {n_points} points: {}", cells.len(), listed(cells, |(c, v)| format!("cell {c} refers to vertex {v}")))]
+    #[error("{} vertex index(es) out of range: {}; there are only {n_points} points", cells.len(), listed(cells, |(c, v)| format!("cell {c} refers to vertex {v}")))]
     VertexOutOfRange {
         /// (cell, vertex index) for each index past the points.
         cells: Vec<(usize, usize)>,
@@ -373,7 +373,7 @@ pub enum MeshError {
         points: Vec<(usize, Vec<usize>)>,
     },
     /// Edges (2D) or faces (3D) shared by three or more cells.
-    #[error("{} non-manifold {what}(s) ({why}): {}", items.len(), listed(items, |(v, c)| format!("{what} {v:?} in cells {c:?}")))]
+    #[error("{} non-manifold {what}(s) ({why}): {}", items.len(), listed(items, |(v, c)| format!("non-manifold {what} {v:?} in cells {c:?}")))]
     NonManifold {
         /// What the rule is.
         why: &'static str,
