@@ -1149,21 +1149,23 @@ fn build_surface(
     if !report.non_orientable {
         check_planar_folds(points, &cells, ids, &shared)?;
     }
-    // boundary sides: overlapping ones are non-conforming (hanging nodes)
-    let mut n_uses: FxMap<(u32, u32), u32> = fx_map(2 * cells.len());
+    // boundary sides (the sides not shared): overlapping ones are non-conforming (hanging
+    // nodes)
+    let mut side_first = Vec::with_capacity(cells.len() + 1);
+    side_first.push(0usize);
     for verts in &cells {
-        let k = verts.len();
-        for j in 0..k {
-            let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
-            *n_uses.entry((a.min(b), a.max(b))).or_default() += 1;
-        }
+        side_first.push(side_first[side_first.len() - 1] + verts.len());
+    }
+    let mut is_shared = vec![false; side_first[cells.len()]];
+    for (_, [a, b]) in &shared {
+        is_shared[side_first[a.0 as usize] + a.1 as usize] = true;
+        is_shared[side_first[b.0 as usize] + b.1 as usize] = true;
     }
     let mut boundary = Vec::new();
     for (f, verts) in cells.iter().enumerate() {
         let k = verts.len();
         for j in 0..k {
-            let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
-            if n_uses[&(a.min(b), a.max(b))] == 1 {
+            if !is_shared[side_first[f] + j] {
                 boundary.push(conform::Facet {
                     cell: ids[f],
                     verts: vec![verts[j], verts[(j + 1) % k]],
@@ -1273,31 +1275,41 @@ type SharedEdge = ((u32, u32), [Side; 2]);
 
 /// The edges shared by two faces, sorted, with the side of each face; refuses an edge on 3+.
 fn shared_edges(cells: &[Vec<usize>], ids: &[usize]) -> Result<Vec<SharedEdge>, MeshError> {
-    let mut edges: FxMap<(u32, u32), Vec<Side>> = fx_map(2 * cells.len());
+    // the first two sides of each edge inline (no allocation per edge); the edges with more
+    // go to `extra`
+    let none: Side = (u32::MAX, 0, false);
+    let mut edges: FxMap<(u32, u32), [Side; 2]> = fx_map(2 * cells.len());
+    let mut extra: FxMap<(u32, u32), Vec<u32>> = fx_map(0);
     for (f, verts) in cells.iter().enumerate() {
         let k = verts.len();
         for j in 0..k {
             let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
-            edges
-                .entry((a.min(b), a.max(b)))
-                .or_default()
-                .push((f as u32, j as u32, a < b));
-        }
-    }
-    let mut shared = Vec::new();
-    let mut bad: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
-    for (&key, uses) in &edges {
-        match uses.len() {
-            1 => {}
-            2 => shared.push((key, [uses[0], uses[1]])),
-            _ => {
-                let mut faces: Vec<usize> = uses.iter().map(|u| ids[u.0 as usize]).collect();
-                faces.sort_unstable();
-                bad.push((vec![key.0 as usize, key.1 as usize], faces));
+            let key = (a.min(b), a.max(b));
+            let side = (f as u32, j as u32, a < b);
+            let e = edges.entry(key).or_insert([none, none]);
+            if e[0].0 == u32::MAX {
+                e[0] = side;
+            } else if e[1].0 == u32::MAX {
+                e[1] = side;
+            } else {
+                extra.entry(key).or_default().push(f as u32);
             }
         }
     }
-    if !bad.is_empty() {
+    if !extra.is_empty() {
+        let mut bad: Vec<(Vec<usize>, Vec<usize>)> = extra
+            .iter()
+            .map(|(key, more)| {
+                let two = edges[key];
+                let mut faces: Vec<usize> = [two[0].0, two[1].0]
+                    .iter()
+                    .chain(more)
+                    .map(|&f| ids[f as usize])
+                    .collect();
+                faces.sort_unstable();
+                (vec![key.0 as usize, key.1 as usize], faces)
+            })
+            .collect();
         bad.sort_unstable();
         return Err(MeshError::NonManifold {
             what: "edge",
@@ -1305,6 +1317,10 @@ fn shared_edges(cells: &[Vec<usize>], ids: &[usize]) -> Result<Vec<SharedEdge>, 
             items: bad,
         });
     }
+    let mut shared: Vec<SharedEdge> = edges
+        .into_iter()
+        .filter(|(_, s)| s[1].0 != u32::MAX)
+        .collect();
     shared.sort_unstable_by_key(|s| s.0);
     Ok(shared)
 }
