@@ -216,3 +216,22 @@ def test_scikit_fem_tetrahedra_negative_ones_are_turned() -> None:
     with pytest.raises(topomech.MeshError, match=r"inverted cell\(s\)") as e:
         topomech.GMap.from_mesh(p, [("tetra", t)], reorient=False)
     assert f"{int((d < 0).sum())} inverted cell(s)" in str(e.value)
+
+
+def test_from_meshio_takes_the_same_options() -> None:
+    meshio = pytest.importorskip("meshio")
+    m = meshio.Mesh(TET_POINTS, [("tetra", np.array([[0, 1, 2, 3], [3, 2, 1, 0]]))])
+    with pytest.raises(topomech.MeshError, match=r"use --duplicates merge$"):
+        topomech.GMap.from_meshio(m, _style="cli")
+    g = topomech.GMap.from_meshio(m, duplicates="merge")
+    assert g.report.merged_duplicates == [(1, 0)]
+    assert g.report.unused_points == [4]
+
+
+def test_int_embedding_refuses_other_types() -> None:
+    g = topomech.GMap.from_mesh(TET_POINTS[:4], [("tetra", [[0, 1, 2, 3]])])
+    with pytest.raises(topomech.EmbeddingError, match="'position' is vec3, not i64"):
+        g.core.int_embedding("position")
+    with pytest.raises(topomech.EmbeddingError, match="nope"):
+        g.core.int_embedding("nope")
+    assert sorted(set(g.core.int_embedding("point_id").tolist())) == [0, 1, 2, 3]

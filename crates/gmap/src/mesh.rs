@@ -300,13 +300,11 @@ pub enum MeshError {
         /// The dimension of cell 0.
         dim: usize,
     },
-    /// A vertex index past the points.
-    #[error("cell {cell} refers to vertex {vertex}, but there are only {n_points} points")]
+    /// Vertex indices past the points.
+    #[error("{} vertex index(es) out of range: {}; there are only {n_points} points", cells.len(), listed(cells, |(c, v)| format!("cell {c} refers to vertex {v}")))]
     VertexOutOfRange {
-        /// The cell.
-        cell: usize,
-        /// The index.
-        vertex: usize,
+        /// (cell, vertex index) for each index past the points.
+        cells: Vec<(usize, usize)>,
         /// Number of points.
         n_points: usize,
     },
@@ -374,17 +372,15 @@ pub enum MeshError {
         /// Each point and the cells around it.
         points: Vec<(usize, Vec<usize>)>,
     },
-    /// An edge (2D) or face (3D) shared by three or more cells.
-    #[error("non-manifold {what} {vertices:?} in cells {cells:?}: {why}")]
+    /// Edges (2D) or faces (3D) shared by three or more cells.
+    #[error("{} non-manifold {what}(s) ({why}): {}", items.len(), listed(items, |(v, c)| format!("non-manifold {what} {v:?} in cells {c:?}")))]
     NonManifold {
         /// What the rule is.
         why: &'static str,
         /// `edge` or `face`.
         what: &'static str,
-        /// Its vertices.
-        vertices: Vec<usize>,
-        /// The cells sharing it.
-        cells: Vec<usize>,
+        /// Each edge or face (its points, increasing) and the cells sharing it, by points.
+        items: Vec<(Vec<usize>, Vec<usize>)>,
     },
     /// Non-conforming interfaces: faces (2D: edges) of two cells that share points but do not
     /// match, or that overlap (mismatched diagonals, hanging nodes).
@@ -591,6 +587,7 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
         });
     }
     let dim = mesh.kinds[0].dimension();
+    let mut out_of_range = Vec::new();
     for (c, (&kind, verts)) in mesh.kinds.iter().zip(&mesh.cells).enumerate() {
         if kind.dimension() != dim {
             return Err(MeshError::MixedDimension {
@@ -614,13 +611,15 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
         }
         for &v in verts {
             if v >= mesh.points.len() {
-                return Err(MeshError::VertexOutOfRange {
-                    cell: c,
-                    vertex: v,
-                    n_points: mesh.points.len(),
-                });
+                out_of_range.push((c, v));
             }
         }
+    }
+    if !out_of_range.is_empty() {
+        return Err(MeshError::VertexOutOfRange {
+            cells: out_of_range,
+            n_points: mesh.points.len(),
+        });
     }
     let bad: Vec<(usize, [f64; 3])> = mesh
         .points
@@ -1150,21 +1149,23 @@ fn build_surface(
     if !report.non_orientable {
         check_planar_folds(points, &cells, ids, &shared)?;
     }
-    // boundary sides: overlapping ones are non-conforming (hanging nodes)
-    let mut n_uses: FxMap<(u32, u32), u32> = fx_map(2 * cells.len());
+    // boundary sides (the sides not shared): overlapping ones are non-conforming (hanging
+    // nodes)
+    let mut side_first = Vec::with_capacity(cells.len() + 1);
+    side_first.push(0usize);
     for verts in &cells {
-        let k = verts.len();
-        for j in 0..k {
-            let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
-            *n_uses.entry((a.min(b), a.max(b))).or_default() += 1;
-        }
+        side_first.push(side_first[side_first.len() - 1] + verts.len());
+    }
+    let mut is_shared = vec![false; side_first[cells.len()]];
+    for (_, [a, b]) in &shared {
+        is_shared[side_first[a.0 as usize] + a.1 as usize] = true;
+        is_shared[side_first[b.0 as usize] + b.1 as usize] = true;
     }
     let mut boundary = Vec::new();
     for (f, verts) in cells.iter().enumerate() {
         let k = verts.len();
         for j in 0..k {
-            let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
-            if n_uses[&(a.min(b), a.max(b))] == 1 {
+            if !is_shared[side_first[f] + j] {
                 boundary.push(conform::Facet {
                     cell: ids[f],
                     verts: vec![verts[j], verts[(j + 1) % k]],
@@ -1274,40 +1275,52 @@ type SharedEdge = ((u32, u32), [Side; 2]);
 
 /// The edges shared by two faces, sorted, with the side of each face; refuses an edge on 3+.
 fn shared_edges(cells: &[Vec<usize>], ids: &[usize]) -> Result<Vec<SharedEdge>, MeshError> {
-    let mut edges: FxMap<(u32, u32), Vec<Side>> = fx_map(2 * cells.len());
+    // the first two sides of each edge inline (no allocation per edge); the edges with more
+    // go to `extra`
+    let none: Side = (u32::MAX, 0, false);
+    let mut edges: FxMap<(u32, u32), [Side; 2]> = fx_map(2 * cells.len());
+    let mut extra: FxMap<(u32, u32), Vec<u32>> = fx_map(0);
     for (f, verts) in cells.iter().enumerate() {
         let k = verts.len();
         for j in 0..k {
             let (a, b) = (verts[j] as u32, verts[(j + 1) % k] as u32);
-            edges
-                .entry((a.min(b), a.max(b)))
-                .or_default()
-                .push((f as u32, j as u32, a < b));
-        }
-    }
-    let mut shared = Vec::new();
-    let mut bad: Option<((u32, u32), Vec<usize>)> = None;
-    for (&key, uses) in &edges {
-        match uses.len() {
-            1 => {}
-            2 => shared.push((key, [uses[0], uses[1]])),
-            _ => {
-                let mut faces: Vec<usize> = uses.iter().map(|u| ids[u.0 as usize]).collect();
-                faces.sort_unstable();
-                if bad.as_ref().is_none_or(|(k, _)| key < *k) {
-                    bad = Some((key, faces));
-                }
+            let key = (a.min(b), a.max(b));
+            let side = (f as u32, j as u32, a < b);
+            let e = edges.entry(key).or_insert([none, none]);
+            if e[0].0 == u32::MAX {
+                e[0] = side;
+            } else if e[1].0 == u32::MAX {
+                e[1] = side;
+            } else {
+                extra.entry(key).or_default().push(f as u32);
             }
         }
     }
-    if let Some((key, faces)) = bad {
+    if !extra.is_empty() {
+        let mut bad: Vec<(Vec<usize>, Vec<usize>)> = extra
+            .iter()
+            .map(|(key, more)| {
+                let two = edges[key];
+                let mut faces: Vec<usize> = [two[0].0, two[1].0]
+                    .iter()
+                    .chain(more)
+                    .map(|&f| ids[f as usize])
+                    .collect();
+                faces.sort_unstable();
+                (vec![key.0 as usize, key.1 as usize], faces)
+            })
+            .collect();
+        bad.sort_unstable();
         return Err(MeshError::NonManifold {
             what: "edge",
             why: "an edge joins at most 2 faces",
-            vertices: vec![key.0 as usize, key.1 as usize],
-            cells: faces,
+            items: bad,
         });
     }
+    let mut shared: Vec<SharedEdge> = edges
+        .into_iter()
+        .filter(|(_, s)| s[1].0 != u32::MAX)
+        .collect();
     shared.sort_unstable_by_key(|s| s.0);
     Ok(shared)
 }
@@ -1344,7 +1357,7 @@ fn build_volume(
     let mut local: Vec<BuiltFace> = Vec::with_capacity(6);
     let mut mismatched: Vec<FacePair> = Vec::new();
     let mut folded: Vec<(usize, usize, Vec<usize>)> = Vec::new();
-    let mut non_manifold: Option<[u32; 4]> = None;
+    let mut non_manifold: std::collections::BTreeSet<[u32; 4]> = std::collections::BTreeSet::new();
     for (c, (&kind, verts)) in kinds.iter().zip(cells).enumerate() {
         local.clear();
         cell_first.push(vert_of_dart.len() as u32);
@@ -1389,9 +1402,7 @@ fn build_volume(
                 }
                 Some((other, h)) if other == u32::MAX => {
                     face_map.insert(key, (other, h));
-                    if non_manifold.is_none_or(|k| key < k) {
-                        non_manifold = Some(key);
-                    }
+                    non_manifold.insert(key);
                 }
                 Some((other, h)) => {
                     let k = f.len as usize;
@@ -1427,8 +1438,8 @@ fn build_volume(
         }
     }
     cell_first.push(vert_of_dart.len() as u32);
-    if let Some(key) = non_manifold {
-        return Err(non_manifold_face(&key, cells, &kinds, ids));
+    if !non_manifold.is_empty() {
+        return Err(non_manifold_faces(&non_manifold, cells, &kinds, ids));
     }
     if !mismatched.is_empty() {
         return Err(MeshError::NonConforming { pairs: mismatched });
@@ -1460,32 +1471,43 @@ fn build_volume(
     })
 }
 
-fn non_manifold_face(
-    key: &[u32; 4],
+/// The error listing every face (sorted padded key) of `keys` with the cells on it.
+fn non_manifold_faces(
+    keys: &std::collections::BTreeSet<[u32; 4]>,
     cells: &[Vec<usize>],
     kinds: &[CellKind],
     ids: &[usize],
 ) -> MeshError {
-    let verts: Vec<usize> = key
-        .iter()
-        .filter(|&&v| v != u32::MAX)
-        .map(|&v| v as usize)
-        .collect();
-    let mut on_face = Vec::new();
+    let mut on_face: std::collections::BTreeMap<[u32; 4], Vec<usize>> =
+        keys.iter().map(|k| (*k, Vec::new())).collect();
     for (c, (cv, &kind)) in cells.iter().zip(kinds).enumerate() {
         for lf in local_faces(kind) {
-            let mut fv: Vec<usize> = lf.iter().map(|&l| cv[l]).collect();
-            fv.sort_unstable();
-            if fv == verts {
-                on_face.push(ids[c]);
+            let mut key = [u32::MAX; 4];
+            for (j, &l) in lf.iter().enumerate() {
+                key[j] = cv[l] as u32;
+            }
+            key[..lf.len()].sort_unstable();
+            if let Some(list) = on_face.get_mut(&key) {
+                list.push(ids[c]);
             }
         }
     }
+    let items = on_face
+        .into_iter()
+        .map(|(key, mut c)| {
+            c.sort_unstable();
+            let verts = key
+                .iter()
+                .filter(|&&v| v != u32::MAX)
+                .map(|&v| v as usize)
+                .collect();
+            (verts, c)
+        })
+        .collect();
     MeshError::NonManifold {
         what: "face",
         why: "a face joins at most 2 cells",
-        vertices: verts,
-        cells: on_face,
+        items,
     }
 }
 

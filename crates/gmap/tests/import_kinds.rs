@@ -809,3 +809,41 @@ fn long_lists_are_cut_with_a_count() {
     assert!(text.ends_with(&format!("and {} more", n - 20)), "{text}");
     assert_eq!(text.matches("duplicates cell").count(), 20);
 }
+
+/// Two edges each on three triangles: both named in one error, with their faces.
+#[test]
+fn every_non_manifold_edge_is_named() {
+    let mut points = Vec::new();
+    let mut cells = Vec::new();
+    for k in 0..2 {
+        let x = 10.0 * f64::from(k);
+        let b = points.len();
+        points.extend([
+            [x, 0.0, 0.0],
+            [x + 1.0, 0.0, 0.0],
+            [x + 0.5, 1.0, 0.0],
+            [x + 0.5, -1.0, 0.0],
+            [x + 0.5, 0.0, 1.0],
+        ]);
+        cells.extend([
+            vec![b, b + 1, b + 2],
+            vec![b + 1, b, b + 3],
+            vec![b, b + 1, b + 4],
+        ]);
+    }
+    let m = Mesh {
+        kinds: vec![CellKind::Polygon; 6],
+        cells,
+        points,
+    };
+    match refused(&m, &BuildOptions::default()) {
+        MeshError::NonManifold { what, items, .. } => {
+            assert_eq!(what, "edge");
+            assert_eq!(
+                items,
+                vec![(vec![0, 1], vec![0, 1, 2]), (vec![5, 6], vec![3, 4, 5])]
+            );
+        }
+        other => panic!("{other}"),
+    }
+}

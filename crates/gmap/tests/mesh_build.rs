@@ -141,17 +141,20 @@ fn unit_tet_points() -> Vec<[f64; 3]> {
 
 #[test]
 fn out_of_range_vertex_names_the_cell() {
-    let m = tet_mesh(vec![vec![0, 1, 2, 3], vec![1, 2, 3, 9]], unit_tet_points());
+    // every index past the points is named, in one error
+    let m = tet_mesh(
+        vec![vec![0, 1, 2, 3], vec![1, 2, 3, 9], vec![7, 2, 3, 8]],
+        unit_tet_points(),
+    );
     let e = build(&m, &BuildOptions::default()).unwrap_err();
     assert_eq!(
         e,
         MeshError::VertexOutOfRange {
-            cell: 1,
-            vertex: 9,
+            cells: vec![(1, 9), (2, 7), (2, 8)],
             n_points: 5
         }
     );
-    assert!(e.to_string().contains("cell 1"));
+    assert!(e.to_string().contains("cell 1 refers to vertex 9"), "{e}");
 }
 
 #[test]
@@ -281,12 +284,10 @@ fn non_manifold_face_names_the_cells() {
     match e {
         MeshError::NonManifold {
             what: "face",
-            vertices,
-            cells,
+            items,
             ..
         } => {
-            assert_eq!(vertices, vec![1, 2, 3]);
-            assert_eq!(cells, vec![0, 1, 2]);
+            assert_eq!(items, vec![(vec![1, 2, 3], vec![0, 1, 2])]);
         }
         other => panic!("{other}"),
     }
@@ -327,12 +328,10 @@ fn non_manifold_edge_in_2d() {
     match e {
         MeshError::NonManifold {
             what: "edge",
-            vertices,
-            cells,
+            items,
             ..
         } => {
-            assert_eq!(vertices, vec![0, 1]);
-            assert_eq!(cells, vec![0, 1, 2]);
+            assert_eq!(items, vec![(vec![0, 1], vec![0, 1, 2])]);
         }
         other => panic!("{other}"),
     }
