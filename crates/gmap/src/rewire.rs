@@ -9,9 +9,9 @@
 
 use std::collections::HashMap;
 
-use crate::embedding::{Column, Policy};
+use crate::embedding::{Column, ColumnRef, EmbeddingType, Policy, Value};
 use crate::marks::Marks;
-use crate::{Dart, GMap, LinkError};
+use crate::{Dart, GMap, LinkError, OrbitType};
 
 /// Why a batch was refused; the map is left unchanged.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -150,6 +150,7 @@ impl GMap {
                 self.apply_reslot(k, p);
             }
         }
+        self.number_fresh_vertices(fresh, &removed);
         for &d in remove {
             let iu = d.index();
             self.alive[iu] = false;
@@ -163,6 +164,69 @@ impl GMap {
             }
         }
         Ok(())
+    }
+
+    /// Gives the vertex orbits made only of `fresh` darts (vertices a rule created) their own
+    /// row in the map's vertex numbering, when the map has one (the `particle` and `point_id`
+    /// embeddings of [`crate::mesh::build`]): `particle` the next row after every row in use,
+    /// `point_id` -1 (no input point). Without this they would hold the default 0 and read as
+    /// a copy of row 0. Orbits that also hold older darts keep their value (copy policy).
+    fn number_fresh_vertices(&mut self, fresh: &[Dart], removed: &Marks) {
+        if fresh.is_empty() {
+            return;
+        }
+        let o = OrbitType::vertex(self.dim);
+        let numbering = |name: &str| {
+            self.embedding_id(name).filter(|&id| {
+                let e = self.embedding(id);
+                e.ty() == EmbeddingType::I64 && e.orbit() == o
+            })
+        };
+        let (particle, point_id) = (numbering("particle"), numbering("point_id"));
+        if particle.is_none() && point_id.is_none() {
+            return;
+        }
+        let mut is_fresh = Marks::with_capacity(self.capacity());
+        for &d in fresh {
+            is_fresh.mark(d);
+        }
+        let mut seen = Marks::with_capacity(self.capacity());
+        let mut created = Vec::new();
+        for &d in fresh {
+            if seen.is_marked(d) || removed.is_marked(d) || !self.is_alive(d) {
+                continue;
+            }
+            let mut all_fresh = true;
+            self.visit_orbit(d, o, &mut seen, |x| all_fresh &= is_fresh.is_marked(x));
+            if all_fresh {
+                created.push(d);
+            }
+        }
+        if created.is_empty() {
+            return;
+        }
+        let mut next = 0i64;
+        if let Some(id) = particle {
+            let e = self.embedding(id);
+            if let ColumnRef::Int(col) = e.column() {
+                for d in self.darts() {
+                    if !is_fresh.is_marked(d) {
+                        next = next.max(col[e.slot(d)] + 1);
+                    }
+                }
+            }
+        }
+        for d in created {
+            if let Some(id) = particle {
+                self.set_value(id, d, &Value::Int(next))
+                    .expect("an i64 embedding takes an integer");
+                next += 1;
+            }
+            if let Some(id) = point_id {
+                self.set_value(id, d, &Value::Int(-1))
+                    .expect("an i64 embedding takes an integer");
+            }
+        }
     }
 
     /// The new orbits of embedding `k` around `seeds`, with the old slots each one covers.
