@@ -291,12 +291,10 @@ pub enum MeshError {
         cells: usize,
     },
     /// Cells of both dimensions.
-    #[error("cell {cell} is a {kind} but cell 0 is of dimension {dim}: a mesh is all surface or all volume")]
+    #[error("{} cell(s) of another dimension than cell 0 (dimension {dim}): {}; a mesh is all surface or all volume", cells.len(), listed(cells, |(c, k)| format!("cell {c} is a {k}")))]
     MixedDimension {
-        /// The offending cell.
-        cell: usize,
-        /// Its kind's name.
-        kind: &'static str,
+        /// (cell, its kind's name) for each cell whose dimension differs from cell 0's.
+        cells: Vec<(usize, &'static str)>,
         /// The dimension of cell 0.
         dim: usize,
     },
@@ -308,17 +306,11 @@ pub enum MeshError {
         /// Number of points.
         n_points: usize,
     },
-    /// Wrong number of vertices for the kind.
-    #[error("cell {cell} is a {kind} with {got} vertices, expected {}{expected}", if *kind == "polygon" { "at least " } else { "" })]
+    /// Wrong numbers of vertices for the kinds.
+    #[error("{} cell(s) with a wrong number of vertices: {}", cells.len(), listed(cells, |(c, k, got, want)| format!("cell {c} is a {k} with {got} vertices, expected {}{want}", if *k == "polygon" { "at least " } else { "" })))]
     VertexCount {
-        /// The cell.
-        cell: usize,
-        /// Its kind's name.
-        kind: &'static str,
-        /// Vertices given.
-        got: usize,
-        /// Vertices expected.
-        expected: usize,
+        /// (cell, its kind's name, vertices given, vertices expected) for each such cell.
+        cells: Vec<(usize, &'static str, usize, usize)>,
     },
     /// Points with a NaN or infinite coordinate.
     #[error("{} point(s) with a non-finite coordinate: {}", points.len(), listed(points, |(p, c)| format!("point {p} has a non-finite coordinate {c:?}")))]
@@ -588,13 +580,11 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
     }
     let dim = mesh.kinds[0].dimension();
     let mut out_of_range = Vec::new();
+    let mut other_dim = Vec::new();
+    let mut bad_counts = Vec::new();
     for (c, (&kind, verts)) in mesh.kinds.iter().zip(&mesh.cells).enumerate() {
         if kind.dimension() != dim {
-            return Err(MeshError::MixedDimension {
-                cell: c,
-                kind: kind.name(),
-                dim,
-            });
+            other_dim.push((c, kind.name()));
         }
         let expected = kind.n_vertices();
         let bad_count = match expected {
@@ -602,18 +592,22 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
             None => verts.len() < 3,
         };
         if bad_count {
-            return Err(MeshError::VertexCount {
-                cell: c,
-                kind: kind.name(),
-                got: verts.len(),
-                expected: expected.unwrap_or(3),
-            });
+            bad_counts.push((c, kind.name(), verts.len(), expected.unwrap_or(3)));
         }
         for &v in verts {
             if v >= mesh.points.len() {
                 out_of_range.push((c, v));
             }
         }
+    }
+    if !other_dim.is_empty() {
+        return Err(MeshError::MixedDimension {
+            cells: other_dim,
+            dim,
+        });
+    }
+    if !bad_counts.is_empty() {
+        return Err(MeshError::VertexCount { cells: bad_counts });
     }
     if !out_of_range.is_empty() {
         return Err(MeshError::VertexOutOfRange {

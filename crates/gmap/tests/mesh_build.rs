@@ -164,15 +164,12 @@ fn wrong_vertex_count_is_refused() {
         cells: vec![vec![0, 1, 2, 3]],
         points: unit_tet_points(),
     };
-    assert!(matches!(
-        build(&m, &BuildOptions::default()),
-        Err(MeshError::VertexCount {
-            cell: 0,
-            got: 4,
-            expected: 8,
-            ..
-        })
-    ));
+    assert_eq!(
+        build(&m, &BuildOptions::default()).unwrap_err(),
+        MeshError::VertexCount {
+            cells: vec![(0, "hexahedron", 4, 8)]
+        }
+    );
     let m = Mesh {
         kinds: vec![CellKind::Polygon],
         cells: vec![vec![0, 1]],
@@ -180,8 +177,22 @@ fn wrong_vertex_count_is_refused() {
     };
     assert!(matches!(
         build(&m, &BuildOptions::default()),
-        Err(MeshError::VertexCount { cell: 0, .. })
+        Err(MeshError::VertexCount { cells }) if cells == vec![(0, "polygon", 2, 3)]
     ));
+    // every offending cell at once
+    let m = Mesh {
+        kinds: vec![CellKind::Tetra, CellKind::Tetra, CellKind::Hexa],
+        cells: vec![vec![0, 1, 2], vec![0, 1, 2, 3], vec![0, 1, 2, 3]],
+        points: unit_tet_points(),
+    };
+    let e = build(&m, &BuildOptions::default()).unwrap_err();
+    assert_eq!(
+        e,
+        MeshError::VertexCount {
+            cells: vec![(0, "tetra", 3, 4), (2, "hexahedron", 4, 8)]
+        }
+    );
+    assert!(e.to_string().starts_with("2 cell(s) with a wrong number of vertices: cell 0 is a tetra with 3 vertices, expected 4; cell 2"), "{e}");
 }
 
 #[test]
@@ -373,10 +384,13 @@ fn non_finite_points_and_empty_meshes_are_refused() {
         cells: vec![vec![0, 1, 2, 3], vec![0, 1, 2]],
         points: unit_tet_points(),
     };
-    assert!(matches!(
-        build(&m, &BuildOptions::default()),
-        Err(MeshError::MixedDimension { cell: 1, .. })
-    ));
+    assert_eq!(
+        build(&m, &BuildOptions::default()).unwrap_err(),
+        MeshError::MixedDimension {
+            cells: vec![(1, "polygon")],
+            dim: 3
+        }
+    );
 }
 
 #[test]
