@@ -297,16 +297,19 @@ _EDGES: dict[str, list[tuple[int, int]]] = {
     "wedge": [(0, 1), (1, 2), (2, 0), (3, 4), (4, 5), (5, 3), (0, 3), (1, 4), (2, 5)],
     "pyramid": [(0, 1), (1, 2), (2, 3), (3, 0), (0, 4), (1, 4), (2, 4), (3, 4)],
 }  # fmt: skip
-#: Faces of each linear volume cell, all turning the same way around the cell (each edge is
-#: walked once in each direction), so that their signed volumes add up to the cell's.
-_FACES: dict[str, list[tuple[int, ...]]] = {
-    "tetra": [(0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)],
-    "hexahedron": [
+#: The faces of each linear volume cell, outward for VTK's vertex order (the kernel's table):
+#: every edge is walked once in each direction, so the signed volumes of the faces' cones add
+#: up to the cell's. One table for the whole package (loads, outputs, previews, quality).
+CELL_FACES: dict[str, tuple[tuple[int, ...], ...]] = {
+    "tetra": ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)),
+    "hexahedron": (
         (0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7),
-    ],
-    "wedge": [(0, 2, 1), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)],
-    "pyramid": [(0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)],
+    ),
+    "wedge": ((0, 1, 2), (3, 5, 4), (0, 3, 4, 1), (1, 4, 5, 2), (2, 5, 3, 0)),
+    "pyramid": ((0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
 }  # fmt: skip
+#: The linear volume kind of each vertex count.
+KIND_BY_SIZE = {4: "tetra", 5: "pyramid", 6: "wedge", 8: "hexahedron"}
 _POLYGON_TYPES = ("triangle", "quad", "polygon")
 
 
@@ -324,7 +327,7 @@ def _volume(kind: str, x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     make with the cell's centroid; positions are taken relative to that centroid."""
     x = x - x.mean(axis=1, keepdims=True)
     total = np.zeros(len(x))
-    for face in _FACES[kind]:
+    for face in CELL_FACES[kind]:
         f = x[:, list(face), :]
         fc = f.mean(axis=1)
         nxt = np.roll(f, -1, axis=1)
@@ -362,7 +365,7 @@ def _figures_of(
                 faces = np.stack(
                     [
                         np.linalg.norm(_polygon_vector_area(x[:, list(f), :]), axis=1)
-                        for f in _FACES["tetra"]
+                        for f in CELL_FACES["tetra"]
                     ],
                     axis=1,
                 ).sum(axis=1)

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from topomech._cells import CELL_FACES, KIND_BY_SIZE
 from topomech._core import TopomechError
 
 if TYPE_CHECKING:
@@ -50,23 +51,6 @@ __all__ = [
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
-#: The 3D kinds by vertex count.
-_KIND_BY_SIZE = {4: "tetra", 5: "pyramid", 6: "wedge", 8: "hexahedron"}
-
-#: The faces of each volume kind, outward for VTK's vertex order (the kernel's table).
-LOCAL_FACES: dict[str, tuple[tuple[int, ...], ...]] = {
-    "tetra": ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)),
-    "hexahedron": (
-        (0, 3, 2, 1),
-        (4, 5, 6, 7),
-        (0, 1, 5, 4),
-        (1, 2, 6, 5),
-        (2, 3, 7, 6),
-        (3, 0, 4, 7),
-    ),
-    "wedge": ((0, 1, 2), (3, 5, 4), (0, 3, 4, 1), (1, 4, 5, 2), (2, 5, 3, 0)),
-    "pyramid": ((0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
-}
 #: The vertex order of the same cell with the opposite orientation (the kernel's
 #: ``reversed``; a polygon is read backwards).
 REVERSAL: dict[str, tuple[int, ...]] = {
@@ -86,7 +70,7 @@ def signed_volumes(kind: str, cells: I64, points: F64) -> F64:
     p = p - p[:, :1]
     c = p.mean(axis=1)
     vol = np.zeros(len(cells))
-    for face in LOCAL_FACES[kind]:
+    for face in CELL_FACES[kind]:
         for t in range(1, len(face) - 1):
             a = p[:, face[0]] - c
             b = p[:, face[t]] - c
@@ -131,7 +115,7 @@ class Elements:
 def _kind_of(dimension: int, n: int) -> str:
     if dimension == 2:
         return {3: "triangle", 4: "quad"}.get(n, "polygon")
-    return _KIND_BY_SIZE.get(n, f"cell{n}")
+    return KIND_BY_SIZE.get(n, f"cell{n}")
 
 
 def _map_elements(sim: Simulation) -> tuple[I64, list[I64]]:
@@ -231,7 +215,7 @@ class OutputCells:
             q, ok = self._input_rows(cell_ids[idx], r, pid)
             from_input += int(ok.sum())
             if dim == 3:
-                if kind in LOCAL_FACES:
+                if kind in CELL_FACES:
                     neg = signed_volumes(kind, q, rest) < 0
                     q[neg] = reversed_cells(kind, q[neg])
             else:

@@ -39,6 +39,8 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 import numpy.typing as npt
 
+from topomech._cells import CELL_FACES, KIND_BY_SIZE
+
 if TYPE_CHECKING:
     from topomech.simulation import Simulation
 
@@ -63,23 +65,6 @@ LOAD_KINDS = ("point", "traction", "pressure")
 
 #: How many offenders a message lists before "and N more".
 LIST_LIMIT = 20
-
-# The faces of each element kind, in the kernel's (VTK's) vertex order. Their orientation does
-# not matter: boundary faces are turned to face away from their element's centroid.
-_FACES: dict[str, tuple[tuple[int, ...], ...]] = {
-    "tetra": ((0, 1, 2), (0, 1, 3), (1, 2, 3), (0, 2, 3)),
-    "hexahedron": (
-        (0, 1, 2, 3),
-        (4, 5, 6, 7),
-        (0, 1, 5, 4),
-        (1, 2, 6, 5),
-        (2, 3, 7, 6),
-        (3, 0, 4, 7),
-    ),
-    "wedge": ((0, 1, 2), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)),
-    "pyramid": ((0, 1, 2, 3), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
-}
-_KIND_BY_SIZE = {4: "tetra", 8: "hexahedron", 6: "wedge", 5: "pyramid"}
 
 
 class LoadError(ValueError):
@@ -338,10 +323,10 @@ def _elements(sim: Simulation) -> tuple[npt.NDArray[np.int64], list[npt.NDArray[
 def _element_faces(n: int, dim: int) -> tuple[tuple[int, ...], ...]:
     if dim == 2:
         return tuple((i, (i + 1) % n) for i in range(n))
-    kind = _KIND_BY_SIZE.get(n)
+    kind = KIND_BY_SIZE.get(n)
     if kind is None:
         raise LoadError(f"an element of {n} vertices has no known faces")
-    return _FACES[kind]
+    return CELL_FACES[kind]
 
 
 def boundary_faces(sim: Simulation) -> list[BoundaryFace]:

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from topomech._cells import CELL_FACES
 from topomech._core import TopomechError
 from topomech._output import OutputCells
 
@@ -71,21 +72,6 @@ ENERGY_COLUMNS = ("step", "time", "kinetic", "gravitational", "elastic", "total"
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
-# Faces of the volume cells, VTK vertex order (orientation does not matter: the renderers
-# light both sides).
-_CELL_FACES: dict[str, tuple[tuple[int, ...], ...]] = {
-    "tetra": ((0, 1, 2), (0, 1, 3), (1, 2, 3), (0, 2, 3)),
-    "hexahedron": (
-        (0, 1, 2, 3),
-        (4, 5, 6, 7),
-        (0, 1, 5, 4),
-        (1, 2, 6, 5),
-        (2, 3, 7, 6),
-        (3, 0, 4, 7),
-    ),
-    "wedge": ((0, 1, 2), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)),
-    "pyramid": ((0, 1, 2, 3), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
-}
 # Signs of the hexahedron's nodes in its reference cube (VTK order).
 _HEX_SIGNS = np.array(
     [
@@ -174,7 +160,7 @@ def _surface(cells: list[tuple[str, I64]], dimension: int) -> tuple[list[tuple[i
     else:
         seen: dict[tuple[int, ...], int] = {}
         for kind, c in cells:
-            for local in _CELL_FACES.get(kind, ()):
+            for local in CELL_FACES.get(kind, ()):
                 f = tuple(int(c[k]) for k in local)
                 key = tuple(sorted(f))
                 if key in seen:
@@ -187,7 +173,7 @@ def _surface(cells: list[tuple[str, I64]], dimension: int) -> tuple[list[tuple[i
         polys = (
             [tuple(int(v) for v in c)]
             if dimension == 2
-            else [tuple(int(c[k]) for k in local) for local in _CELL_FACES.get(kind, ())]
+            else [tuple(int(c[k]) for k in local) for local in CELL_FACES.get(kind, ())]
         )
         for p in polys:
             for a, b in zip(p, p[1:] + p[:1]):
