@@ -188,13 +188,13 @@ def two_hexes() -> tuple[np.ndarray, list[tuple[str, Any]]]:
 
 @pytest.fixture
 def two_wedges() -> tuple[np.ndarray, list[tuple[str, Any]]]:
-    # a unit cube cut along its diagonal plane x = y into two prisms; VTK's wedge has its first
-    # triangle's normal pointing away from the second triangle.
+    # a unit cube cut along its diagonal plane x = y into two prisms; a positive wedge (Gmsh's,
+    # VTK's) has its first triangle counter-clockwise seen from the second.
     points = np.array(
         [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
         dtype=float,
     )
-    wedges = np.array([[4, 5, 6, 0, 1, 2], [4, 6, 7, 0, 2, 3]])
+    wedges = np.array([[0, 1, 2, 4, 5, 6], [0, 2, 3, 4, 6, 7]])
     return points, [("wedge", wedges)]
 
 

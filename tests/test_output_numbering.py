@@ -539,8 +539,9 @@ def test_signed_volumes_and_reversal_against_closed_forms() -> None:
     cases = {
         "tetra": ([0, 1, 3, 4], 1 / 6),
         "pyramid": ([0, 1, 2, 3, 8], 1 / 3),
-        # VTK's wedge lists its first triangle clockwise seen from the second
-        "wedge": ([0, 3, 1, 4, 7, 5], 1 / 2),
+        # a positive wedge (Gmsh's and VTK's) lists its first triangle counter-clockwise seen
+        # from the second
+        "wedge": ([0, 1, 3, 4, 5, 7], 1 / 2),
         "hexahedron": (list(range(8)), 1.0),
     }
     for kind, (cell, volume) in cases.items():

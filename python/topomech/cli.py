@@ -135,6 +135,23 @@ def _summary(path: Path, m: ImportedMesh) -> dict[str, Any]:
     reoriented = [int(c) for c in r.reoriented]
     if m.mesh is not None:
         points, blocks = m.mesh.points, [(str(b.type), b.data) for b in m.mesh.cells]
+        dropped_cells = sorted(int(a) for a, _ in r.merged_duplicates)
+        if dropped_cells:
+            import numpy as np
+
+            # the figures describe the cells that became the map: duplicates merged away are
+            # not counted (cell indices run over the blocks in order, as the kernel's do)
+            kept, start = [], 0
+            for t, data in blocks:
+                data = np.asarray(data)
+                lo, hi = np.searchsorted(dropped_cells, [start, start + len(data)])
+                drop = np.asarray(dropped_cells[lo:hi], dtype=np.int64) - start
+                keep = np.ones(len(data), dtype=bool)
+                keep[drop] = False
+                if keep.any():
+                    kept.append((t, data[keep]))
+                start += len(data)
+            blocks = kept
     else:
         points, kinds, offsets, connectivity = g.to_flat()
         blocks = [(b.type, b.data) for b in flat_to_blocks(kinds, offsets, connectivity)]

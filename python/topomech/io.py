@@ -888,8 +888,9 @@ def build_notes(g: GMap, pinched_option: str = "merge") -> list[str]:
         )
     if getattr(r, "non_orientable", False):
         notes.append(
-            "the surface is not orientable (a Moebius strip or the like): accepted, its "
-            "cells keep their input order"
+            "the surface is not orientable (a Moebius strip or the like): no orientation "
+            "agrees across every edge; accepted as a valid G-map (a G-map needs no "
+            "orientation)"
         )
     pinched = list(getattr(r, "pinched", []))
     if pinched:

@@ -229,6 +229,11 @@ class MeshGroups:
         ``meshio.Mesh`` gives its ``point_sets`` only."""
         if mesh is None:
             return cls()
+        if isinstance(mesh, tuple):
+            raise TypeError(
+                "MeshGroups.from_meshio takes the mesh, not the (mesh, dropped) pair that "
+                "read_mesh returns: mesh, _ = topomech.io.read_mesh(path)"
+            )
         point_sets = {
             str(k): np.asarray(v, dtype=np.int64).ravel()
             for k, v in (getattr(mesh, "point_sets", None) or {}).items()
@@ -703,14 +708,23 @@ def point_load(
     group: str | None = None,
     groups: MeshGroups | None = None,
 ) -> npt.NDArray[np.float64]:
-    """The loads ``(V, 3)`` (N) of ``force`` (3 numbers) applied on each selected vertex (see
-    :func:`select_vertices`). Raises :class:`LoadError` for a bad force or selection."""
+    """The loads ``(V, 3)`` (N) of ``force`` (3 numbers) applied on each selected input point
+    (see :func:`select_vertices`): a point that is several rows (a pinched point imported with
+    ``pinched="split"``, a vertex split by a cut) gets ``force`` once, divided equally among
+    its rows, so the total does not depend on how the point was split. Rows with no input
+    point get ``force`` each. Raises :class:`LoadError` for a bad force or selection."""
     f = np.asarray(force, dtype=np.float64).reshape(-1)
     if f.shape != (3,) or not np.all(np.isfinite(f)):
         raise LoadError(f"force: expected 3 finite numbers, got {force!r}")
     mask = select_vertices(sim, where=where, points=points, group=group, groups=groups)
+    pid = _point_ids(sim, groups)
+    share = np.ones(sim.n_vertices)
+    known = mask & (pid >= 0)
+    if known.any():
+        ids, counts = np.unique(pid[known], return_counts=True)
+        share[known] = counts[np.searchsorted(ids, pid[known])]
     out = np.zeros((sim.n_vertices, 3))
-    out[mask] = f
+    out[mask] = f / share[mask, None]
     return out
 
 

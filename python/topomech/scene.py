@@ -603,7 +603,10 @@ class Scene:
         m = self.mesh
         if m.file is None:
             return MeshGroups()
-        from topomech.io import read_mesh
+        from topomech.io import GMAP_SUFFIX, read_mesh
+
+        if m.file.suffix.lower() == GMAP_SUFFIX:
+            return MeshGroups()  # a saved map keeps its numbering (point_id), not groups
 
         kwargs: dict[str, Any] = {}
         if getattr(m, "linear", False):

@@ -119,12 +119,12 @@ pub fn cuboid(n: [usize; 3], size: [f64; 3], element: BoxElement) -> Mesh {
                         push(
                             &mut mesh,
                             CellKind::Wedge,
-                            vec![c(0), c(1), c(3), c(4), c(5), c(7)],
+                            vec![c(4), c(5), c(7), c(0), c(1), c(3)],
                         );
                         push(
                             &mut mesh,
                             CellKind::Wedge,
-                            vec![c(0), c(3), c(2), c(4), c(7), c(6)],
+                            vec![c(4), c(7), c(6), c(0), c(3), c(2)],
                         );
                     }
                     _ => {

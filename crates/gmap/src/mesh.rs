@@ -413,12 +413,14 @@ fn local_faces(kind: CellKind) -> &'static [&'static [usize]] {
             &[2, 3, 7, 6],
             &[3, 0, 4, 7],
         ],
+        // Gmsh's and VTK's positive prism: the base (0, 1, 2) turns counter-clockwise seen from
+        // the top (3, 4, 5), like the base of a hexahedron or a pyramid
         CellKind::Wedge => &[
-            &[0, 1, 2],
-            &[3, 5, 4],
-            &[0, 3, 4, 1],
-            &[1, 4, 5, 2],
-            &[2, 5, 3, 0],
+            &[0, 2, 1],
+            &[3, 4, 5],
+            &[0, 1, 4, 3],
+            &[1, 2, 5, 4],
+            &[2, 0, 3, 5],
         ],
         CellKind::Pyramid => &[
             &[0, 3, 2, 1],
@@ -447,12 +449,12 @@ fn corners(kind: CellKind) -> &'static [[usize; 4]] {
             [7, 6, 4, 3],
         ],
         CellKind::Wedge => &[
-            [0, 2, 1, 3],
-            [1, 0, 2, 4],
-            [2, 1, 0, 5],
-            [3, 4, 5, 0],
-            [4, 5, 3, 1],
-            [5, 3, 4, 2],
+            [0, 1, 2, 3],
+            [1, 2, 0, 4],
+            [2, 0, 1, 5],
+            [3, 5, 4, 0],
+            [4, 3, 5, 1],
+            [5, 4, 3, 2],
         ],
         CellKind::Pyramid => &[[0, 1, 3, 4], [1, 2, 0, 4], [2, 3, 1, 4], [3, 0, 2, 4]],
         CellKind::Tetra => &[[0, 1, 2, 3]],
@@ -723,6 +725,37 @@ fn polygon_crossing(verts: &[usize], points: &[[f64; 3]]) -> Option<(usize, usiz
     None
 }
 
+/// Why a simple polygon cannot be an element, or None: it must be star-shaped around its
+/// vertex centroid, every side seen from the front (the fan of triangles from that centroid,
+/// which the rules use for areas, masses and face forces, covers the polygon exactly once only
+/// then; a concave quad whose reflex corner hides a side would get a wrong area and mass). In
+/// the polygon's plane (its Newell normal), with the tolerance of a twist. A corner of exactly
+/// 180 degrees (a vertex on a side, as where a polygon meets two smaller neighbours) is fine.
+fn polygon_fold(verts: &[usize], points: &[[f64; 3]]) -> Option<String> {
+    let k = verts.len();
+    let n = polygon_normal(verts, points);
+    let n_len = norm(n);
+    let l = max_edge(verts, points);
+    let eps = TWIST * l * l * n_len;
+    let p = |j: usize| points[verts[j % k]];
+    let mut cf = [0.0; 3];
+    for &v in verts {
+        for (c, x) in cf.iter_mut().zip(points[v]) {
+            *c += x / k as f64;
+        }
+    }
+    for j in 0..k {
+        if dot(cross(sub(p(j), cf), sub(p(j + 1), cf)), n) <= eps {
+            return Some(format!(
+                "not star-shaped around its vertex centroid: side ({}, {}) is seen from behind, so its area and mass would be wrong (split it into triangles)",
+                verts[j],
+                verts[(j + 1) % k]
+            ));
+        }
+    }
+    None
+}
+
 /// Per-cell geometry: degenerate and twisted cells are refused (all listed); 3D cells with a
 /// negative volume are turned (or refused without `reorient`). Returns the oriented cells.
 fn check_geometry(
@@ -766,6 +799,8 @@ fn check_geometry(
                 ));
             } else if norm(polygon_normal(verts, points)) <= DEGENERATE * l * l {
                 degenerate.push((c, "zero area".into()));
+            } else if let Some(why) = polygon_fold(verts, points) {
+                twisted.push((c, kind.name(), why));
             }
             cells.push(verts.clone());
             continue;
