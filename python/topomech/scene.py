@@ -662,11 +662,8 @@ def _check_saved_map(g: GMap, path: Path, fail: _Fail) -> None:
     shown = "\n  ".join(violations[:MAX_VIOLATIONS_LISTED])
     more = len(violations) - MAX_VIOLATIONS_LISTED
     tail = f"\n  ... and {more} more" if more > 0 else ""
-    raise fail(
-        "mesh.file",
-        f"{path} is not a valid G-map: it breaks {len(violations)} invariant(s):\n  {shown}"
-        f"{tail}",
-    )
+    what = f"{path} is not a valid G-map: it breaks {len(violations)} invariant(s)"
+    raise fail("mesh.file", f"{what}:\n  {shown}{tail}")
 
 
 def _check_fracture(fracture: Mapping[str, Any] | None, g: GMap, fail: _Fail) -> None:

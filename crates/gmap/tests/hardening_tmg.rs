@@ -193,7 +193,7 @@ fn mutated_maps_with_every_embedding_kind_never_panic_or_stall() {
         match next() % 4 {
             0 => {
                 // flip a few bytes anywhere
-                for _ in 0..1 + next() % 4 {
+                for _ in 0..=(next() % 4) {
                     let k = (next() as usize) % b.len();
                     b[k] = next() as u8;
                 }
