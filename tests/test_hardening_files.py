@@ -298,6 +298,12 @@ for i in range(1500):
     f = outcome(f"tmg #{i}", lambda: check_map(topomech.GMap.from_bytes(b)))
     if f:
         findings.append(f)
+# every 4-byte window past the header set to a huge count: each count field is hit
+for k in range(14, len(base) - 3):
+    b = base[:k] + (2**32 - 1).to_bytes(4, "little") + base[k + 4:]
+    f = outcome(f"tmg window {k}", lambda: check_map(topomech.GMap.from_bytes(b)))
+    if f:
+        findings.append(f)
 
 # mesh files written by meshio, mutated, read through read_gmap
 import meshio
