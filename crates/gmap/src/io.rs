@@ -22,6 +22,11 @@
 //!
 //! Reals are stored as their bit patterns, so a load gives back exactly what was saved.
 //! Slot use counts and free lists are recomputed on load; derived embeddings are recomputed.
+//!
+//! Reading never trusts a count: each one (darts, embeddings, name length, slots) is checked
+//! against the bytes left in the file before anything is allocated for it, so a short or
+//! garbage file costs at most memory in proportion to its own size. [`load`] reads only
+//! regular files, and no more than the size the file has when opened.
 
 use std::path::Path;
 
