@@ -223,12 +223,23 @@ class GMap:
 
     @classmethod
     def load(cls, path: PathLike) -> GMap:
-        """A map saved by :meth:`save` (a ``.tmg`` file)."""
+        """A map saved by :meth:`save` (a ``.tmg`` file). The map is taken as written: check
+        :meth:`violations` before trusting one from elsewhere.
+
+        Raises :class:`FileFormatError` naming the path for a file that cannot be opened or
+        is not a regular file (a directory, or an endless stream such as ``/dev/zero`` or a
+        FIFO, refused before reading), and for a truncated or corrupt file (as
+        :meth:`from_bytes`)."""
         return cls(_core.GMap.load(os.fspath(path)))
 
     @classmethod
     def from_bytes(cls, data: bytes) -> GMap:
-        """A map from the bytes of a ``.tmg`` file."""
+        """A map from the bytes of a ``.tmg`` file.
+
+        Raises :class:`FileFormatError` for bytes that are not a ``.tmg`` file, of another
+        version, truncated, or corrupt (with the byte offset and what is wrong); every count
+        in the file is checked against the bytes left before anything is allocated for it, so
+        a short file never asks for more memory than its own size implies."""
         return cls(_core.GMap.from_bytes(bytes(data)))
 
     # ------------------------------------------------------------------ output

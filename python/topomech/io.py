@@ -354,8 +354,12 @@ def _quiet_read(
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out), guard:
             mesh = meshio.read(p, file_format=fmt)
-    except (MemoryError, KeyboardInterrupt):
+    except KeyboardInterrupt:
         raise
+    except MemoryError as e:
+        # a count in the file (garbage, or a file too big for this machine) asked for more
+        # memory than there is: a reason, not a MemoryError traceback
+        return None, out.getvalue(), f"out of memory reading it ({e}): a count in it is too large"
     except SystemExit:
         return None, out.getvalue(), _clean(out.getvalue()) or f"not a valid {fmt} file"
     except Exception as e:  # meshio's readers raise anything from ReadError to IndexError
@@ -679,7 +683,8 @@ def read_mesh(
     Gmsh groups are named by ``$PhysicalNames``; an unnamed physical tag N is named ``"N"``.
 
     Raises :class:`MeshReadError` (with the path and the reason) for a missing, unreadable,
-    truncated or garbage file, and :class:`MeshError` for a file without surface or volume
+    truncated or garbage file, or one that is not a regular file (a device or FIFO such as
+    ``/dev/zero``: an endless stream), and :class:`MeshError` for a file without surface or volume
     cells or with second-order cells (without ``linear=True``; ``.option`` is then
     ``("linear", "true")``). What meshio prints while reading goes to stderr, never stdout.
     """
@@ -690,6 +695,12 @@ def read_mesh(
         raise MeshReadError(f"{p}: no such file")
     if p.is_dir():
         raise MeshReadError(f"{p}: is a directory, not a mesh file")
+    if not p.is_file():
+        # a device or FIFO (/dev/zero, a named pipe) may be an endless stream
+        raise MeshReadError(
+            f"{p}: not a regular file (a device, FIFO or socket); a mesh is read only from "
+            "a regular file"
+        )
     if not os.access(p, os.R_OK):
         raise MeshReadError(f"{p}: permission denied")
     raw, _fmt, tags, notes = _read_raw(p)

@@ -108,7 +108,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, overload
 
 from topomech import _core
-from topomech._core import MeshError, MeshReadError, RuleError, SceneError, SimulationError
+from topomech._core import (
+    FileFormatError,
+    MeshError,
+    MeshReadError,
+    RuleError,
+    SceneError,
+    SimulationError,
+)
 from topomech._gmap import GMap
 from topomech.loads import (
     LOAD_KINDS,
@@ -534,7 +541,8 @@ class Scene:
         its named sets (``.mesh``, see :func:`topomech.io.read_mesh`), the dropped blocks and
         the notes, which are also printed to stderr. For a generated mesh ``.mesh`` is None.
         Raises :class:`SceneError` naming ``mesh.file``, or the ``mesh.*`` key of the option
-        that would accept a refused mesh."""
+        that would accept a refused mesh; a saved map (``.tmg``) that cannot be read or is not
+        a valid G-map is refused naming ``mesh.file``, with its violated invariants."""
         from topomech.io import ImportedMesh, import_mesh
 
         fail = self._fail()
@@ -551,10 +559,13 @@ class Scene:
                     linear=m.order == "linear",
                     _style="scene",
                 )
-            except (MeshReadError, MeshError) as e:
+            except (MeshReadError, MeshError, FileFormatError) as e:
                 option = getattr(e, "option", None)
                 key = _MESH_OPTION_KEYS.get(option[0], "mesh.file") if option else "mesh.file"
                 raise fail(key, str(e)) from e
+            if imported.mesh is None:
+                # a saved map (.tmg) is taken as written: refuse one that is not a G-map
+                _check_saved_map(imported.gmap, m.file, fail)
             for note in imported.notes:
                 print(f"topomech: note: {m.file.name}: {note}", file=sys.stderr)
             return imported
@@ -639,6 +650,23 @@ _KERNEL_WHAT = {
     "material region": "region",
     "model": "model",
 }
+
+
+#: How many violated invariants a refused saved map lists.
+MAX_VIOLATIONS_LISTED = 20
+
+
+def _check_saved_map(g: GMap, path: Path, fail: _Fail) -> None:
+    """Refuses a saved map (``.tmg``) that breaks a G-map invariant, listing the violations
+    (as ``topomech info`` does), naming ``mesh.file``."""
+    violations = g.violations()
+    if not violations:
+        return
+    shown = "\n  ".join(violations[:MAX_VIOLATIONS_LISTED])
+    more = len(violations) - MAX_VIOLATIONS_LISTED
+    tail = f"\n  ... and {more} more" if more > 0 else ""
+    what = f"{path} is not a valid G-map: it breaks {len(violations)} invariant(s)"
+    raise fail("mesh.file", f"{what}:\n  {shown}{tail}")
 
 
 def _check_fracture(fracture: Mapping[str, Any] | None, g: GMap, fail: _Fail) -> None:

@@ -22,6 +22,11 @@
 //!
 //! Reals are stored as their bit patterns, so a load gives back exactly what was saved.
 //! Slot use counts and free lists are recomputed on load; derived embeddings are recomputed.
+//!
+//! Reading never trusts a count: each one (darts, embeddings, name length, slots) is checked
+//! against the bytes left in the file before anything is allocated for it, so a short or
+//! garbage file costs at most memory in proportion to its own size. [`load`] reads only
+//! regular files, and no more than the size the file has when opened.
 
 use std::path::Path;
 
@@ -161,11 +166,20 @@ impl<'a> Reader<'a> {
         ))
     }
 
-    /// Refuses counts that the rest of the file cannot hold (so garbage never allocates
-    /// gigabytes).
-    fn expect_room(&self, count: usize, each: usize) -> Result<(), FormatError> {
-        if count.saturating_mul(each) > self.b.len() - self.at {
-            return Err(FormatError::Truncated(self.b.len()));
+    /// The bytes not read yet.
+    fn left(&self) -> usize {
+        self.b.len() - self.at
+    }
+
+    /// Refuses a count of `what` whose `need` bytes the rest of the file cannot hold,
+    /// naming it; called before anything is allocated for it.
+    fn expect_bytes(&self, need: usize, what: impl FnOnce() -> String) -> Result<(), FormatError> {
+        let left = self.left();
+        if need > left {
+            return Err(self.corrupt(format!(
+                "{} need {need} bytes but only {left} are left in the file",
+                what()
+            )));
         }
         Ok(())
     }
@@ -194,7 +208,9 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
     if cap > crate::MAX_DARTS {
         return Err(r.corrupt("dart capacity too large"));
     }
-    r.expect_room(cap, 17)?;
+    r.expect_bytes(cap.saturating_mul(17), || {
+        format!("{cap} darts (alive flags and 4 links)")
+    })?;
     for (i, &a) in r.take(cap)?.iter().enumerate() {
         if a > 1 {
             return Err(r.corrupt(format!("alive flag of dart {i} is {a}")));
@@ -220,9 +236,12 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
         g.alpha[i] = col;
     }
     let n_emb = r.u32()? as usize;
-    r.expect_room(n_emb, 12)?;
+    // the smallest embedding record: name length, a 1-byte name, orbit, type (3), policy,
+    // derived flag, slot count
+    r.expect_bytes(n_emb.saturating_mul(15), || format!("{n_emb} embeddings"))?;
     for k in 0..n_emb {
         let len = r.u32()? as usize;
+        r.expect_bytes(len, || format!("embedding {k}: a name of {len} bytes"))?;
         let name = std::str::from_utf8(r.take(len)?)
             .map_err(|_| r.corrupt(format!("embedding {k}: name is not UTF-8")))?
             .to_string();
@@ -281,6 +300,22 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
         };
         let mut e = Embedding::new(&name, ty, orbit, policy, derived);
         let n_slots = r.u32()? as usize;
+        // every count is checked against the bytes left before anything is allocated
+        let value_bytes = match ty {
+            EmbeddingType::Bool => 1,
+            _ => 8 * ty.width(),
+        };
+        let map_bytes = if e.is_direct() { 0 } else { cap * 4 };
+        r.expect_bytes(
+            n_slots
+                .saturating_mul(value_bytes)
+                .saturating_add(map_bytes),
+            || {
+                format!(
+                    "embedding '{name}': {n_slots} slots of {value_bytes} bytes for {cap} darts"
+                )
+            },
+        )?;
         if e.is_direct() {
             if n_slots != cap {
                 return Err(r.corrupt(format!(
@@ -288,7 +323,6 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
                 )));
             }
         } else {
-            r.expect_room(cap, 4)?;
             e.slot_of.reserve(cap);
             e.slot_use = vec![0; n_slots];
             for d in 0..cap {
@@ -310,30 +344,23 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
         }
         let w = ty.width();
         e.values = match ty {
-            EmbeddingType::I64 => {
-                r.expect_room(n_slots, 8)?;
-                Column::Int(
-                    (0..n_slots)
-                        .map(|_| r.u64().map(|x| x as i64))
-                        .collect::<Result<_, _>>()?,
-                )
-            }
+            EmbeddingType::I64 => Column::Int(
+                (0..n_slots)
+                    .map(|_| r.u64().map(|x| x as i64))
+                    .collect::<Result<_, _>>()?,
+            ),
             EmbeddingType::Bool => {
-                r.expect_room(n_slots, 1)?;
                 let bytes = r.take(n_slots)?;
                 if let Some(x) = bytes.iter().find(|&&x| x > 1) {
                     return Err(r.corrupt(format!("embedding '{name}': boolean byte {x}")));
                 }
                 Column::Bool(bytes.iter().map(|&x| x == 1).collect())
             }
-            _ => {
-                r.expect_room(n_slots.saturating_mul(w), 8)?;
-                Column::Real(
-                    (0..n_slots * w)
-                        .map(|_| r.u64().map(f64::from_bits))
-                        .collect::<Result<_, _>>()?,
-                )
-            }
+            _ => Column::Real(
+                (0..n_slots * w)
+                    .map(|_| r.u64().map(f64::from_bits))
+                    .collect::<Result<_, _>>()?,
+            ),
         };
         if let Some(d) = derived {
             let src = &g.embeddings[d.source.0 as usize];
@@ -366,11 +393,34 @@ pub fn save(g: &GMap, path: &Path) -> Result<(), FormatError> {
     })
 }
 
-/// Loads a map from `path`.
+/// Loads a map from `path`: a regular file, read up to the size it has when opened. A
+/// device, FIFO or socket (`/dev/zero`, a named pipe: an endless stream) is refused with
+/// [`FormatError::Io`] before anything is read.
 pub fn load(path: &Path) -> Result<GMap, FormatError> {
-    let b = std::fs::read(path).map_err(|source| FormatError::Io {
+    use std::io::Read;
+    let io_err = |source| FormatError::Io {
         path: path.display().to_string(),
         source,
-    })?;
+    };
+    let not_a_file = || {
+        io_err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file (a directory, device, FIFO or socket); a .tmg map is read \
+             only from a regular file",
+        ))
+    };
+    // checked before opening too: opening a FIFO waits for a writer
+    if !std::fs::metadata(path).map_err(io_err)?.is_file() {
+        return Err(not_a_file());
+    }
+    let f = std::fs::File::open(path).map_err(io_err)?;
+    let meta = f.metadata().map_err(io_err)?;
+    if !meta.is_file() {
+        return Err(not_a_file());
+    }
+    let len = meta.len();
+    // no capacity reserved from the size: a sparse file may claim terabytes
+    let mut b = Vec::new();
+    f.take(len).read_to_end(&mut b).map_err(io_err)?;
     from_bytes(&b)
 }

@@ -127,14 +127,17 @@ impl PyGMap {
         Ok((PyGMap::new(g), d))
     }
 
-    /// Loads a map saved by `save` (a `.tmg` file).
+    /// Loads a map saved by `save` (a `.tmg` file). Raises `FileFormatError` naming the path
+    /// for a file that cannot be opened or is not a regular file (a directory, `/dev/zero`,
+    /// a FIFO: refused before reading), or that is truncated or corrupt.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<PyGMap> {
         let g = py.detach(move || guard(|| Ok(io::load(&path)?)))?;
         Ok(PyGMap::new(g))
     }
 
-    /// Reads a map from the bytes of a `.tmg` file.
+    /// Reads a map from the bytes of a `.tmg` file. Raises `FileFormatError` for bytes that are
+    /// truncated or corrupt; every count is checked against the bytes left before allocating.
     #[staticmethod]
     fn from_bytes(py: Python<'_>, data: Vec<u8>) -> PyResult<PyGMap> {
         let g = py.detach(move || guard(|| Ok(io::from_bytes(&data)?)))?;
