@@ -388,7 +388,21 @@ fn mutate(rng: &mut Rng, s: &str) -> String {
             // a long operator chain, sometimes at, sometimes far beyond the limit
             let n = [LIMIT - 1, LIMIT, LIMIT + 1, 3000, 20_000][rng.below(5)];
             let op = ["+", "*", "-", "&&", "||", "<"][rng.below(6)];
-            format!("{head} {} {tail}", chain("1.0", op, n))
+            let c = chain("1.0", op, n);
+            // mostly where an expression starts, so the chain gets past the parser
+            let starts: Vec<usize> = s
+                .match_indices("= ")
+                .chain(s.match_indices("where "))
+                .map(|(i, m)| s[..i + m.len()].chars().count())
+                .collect();
+            if starts.is_empty() || rng.below(4) == 0 {
+                format!("{head} {c} {tail}")
+            } else {
+                let k = starts[rng.below(starts.len())];
+                let h: String = chars[..k].iter().collect();
+                let t: String = chars[k..].iter().collect();
+                format!("{h}{c} {op} {t}")
+            }
         }
         4 => {
             let n = [LIMIT, LIMIT + 1, 5000][rng.below(3)];
