@@ -171,6 +171,10 @@ rule nested {{
   left {{ n0 : <0,1> hook }}
   compute {{ n0.weight = {}0.5{} }}
 }}
+rule choose {{
+  left {{ n0 : <0,1> hook }}
+  compute {{ n0.weight = {}{{ 2 }} }}
+}}
 ",
                 chain("1.0", "+", LIMIT - 1), // the comparison adds one level
                 chain("1.0", "+", LIMIT),
@@ -178,6 +182,8 @@ rule nested {{
                 chain("n0.tally", "+", LIMIT - 1) + " + 1",
                 "(1.0 - ".repeat(LIMIT - 1),
                 ")".repeat(LIMIT - 1),
+                // an else-if chain with an integer last branch (promoted to a real)
+                "if false { 1.0 } else ".repeat(LIMIT - 2),
             );
             let rules = load(&src).unwrap_or_else(|d| panic!("{d:?}"));
             let mut g = quad_grid();
@@ -199,6 +205,10 @@ rule nested {{
                 .unwrap();
             // 1 - (1 - (... - 0.5)) with LIMIT - 1 subtractions: 0.5 either way
             assert_eq!(g.value(w, d0).unwrap(), Value::Real(vec![0.5]));
+            rules
+                .apply_everywhere(&mut g, "choose", &Params::new())
+                .unwrap();
+            assert_eq!(g.value(w, d0).unwrap(), Value::Real(vec![2.0]));
             assert!(g.is_valid());
         })
         .unwrap()
