@@ -83,7 +83,7 @@ def test_operator_chain_at_the_limit_loads_and_runs() -> None:
         rules = topomech.RuleSet.from_source({src!r}, "chain.tmr")
         g = topomech.GMap.from_flat(*topomech._core.grid(2, 2, 1.0, 1.0, "quad"))
         p0 = g.positions().copy()
-        assert rules.apply(g, "r").matches == 9
+        assert rules.apply(g, "r")["matches"] == 9
         print(np.array_equal(g.positions(), {LIMIT} * p0), g.is_valid())
         """
     )
@@ -164,7 +164,7 @@ def test_fuzzed_rule_texts_with_long_chains_give_a_rule_set_or_a_rule_error() ->
         limit = int(sys.argv[2])
         rng = random.Random(13)
         ok = refused = 0
-        for case in range(150):
+        for case in range(100):
             s = text
             for _ in range(rng.randint(1, 3)):
                 k = rng.randrange(len(s) + 1)
@@ -172,7 +172,7 @@ def test_fuzzed_rule_texts_with_long_chains_give_a_rule_set_or_a_rule_error() ->
                 if kind == 0:
                     starts = [i + 2 for i in range(len(s)) if s.startswith("= ", i)]
                     k = rng.choice(starts) if starts else k
-                    n = rng.choice([limit - 1, limit, limit + 1, 3000])
+                    n = rng.choice([limit - 1, limit, limit + 1, 20000])
                     op = rng.choice(["+", "*", "-", "&&", "<"])
                     s = s[:k] + " " + f" {op} ".join(["1.0"] * n) + f" {op} " + s[k:]
                 elif kind == 1:
@@ -195,5 +195,5 @@ def test_fuzzed_rule_texts_with_long_chains_give_a_rule_set_or_a_rule_error() ->
     )
     assert r.returncode == 0, (r.returncode, r.stderr[-2000:])
     ok, refused = map(int, r.stdout.split())
-    assert ok + refused == 150
+    assert ok + refused == 100
     assert refused > 0
