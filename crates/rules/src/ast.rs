@@ -11,16 +11,19 @@ pub struct Pos {
     pub col: u32,
 }
 
-/// An orbit label as written: a dimension, or `_` (a deleted implicit arc).
+/// An orbit label of a checked rule: a dimension, or `_` (a deleted implicit arc).
 pub type Label = Option<u8>;
+
+/// An orbit label as written: a dimension (the number the user wrote, however large), or `_`.
+pub type WrittenLabel = Option<u64>;
 
 /// A node declaration in a left or right graph.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeDecl {
     /// Its name.
     pub name: String,
-    /// Its orbit type, position by position.
-    pub orbit: Vec<Label>,
+    /// Its orbit type, position by position, as written.
+    pub orbit: Vec<WrittenLabel>,
     /// Whether it is marked `hook`.
     pub hook: bool,
     /// Where it is declared.
@@ -35,7 +38,7 @@ pub struct ArcDecl {
     /// One end.
     pub a: String,
     /// The dimension, as written (checked against the map's dimension later).
-    pub dim: u32,
+    pub dim: u64,
     /// The other end.
     pub b: String,
     /// Where it is written.
@@ -92,7 +95,7 @@ pub enum ExprKind {
         /// `sum`, `mean` or `count`.
         kind: AggKind,
         /// The orbit, as written.
-        orbit: Vec<u32>,
+        orbit: Vec<u64>,
         /// The node.
         node: String,
         /// The embedding (absent for `count`).
@@ -182,7 +185,7 @@ pub struct EmbeddingDecl {
     /// Its type, as written.
     pub ty: String,
     /// Its orbit, as written.
-    pub orbit: Vec<u32>,
+    pub orbit: Vec<u64>,
     /// Its merge/split policy, as written (`copy` by default).
     pub policy: Option<String>,
     /// For a derived embedding: the aggregate and the source embedding.
@@ -195,7 +198,7 @@ pub struct EmbeddingDecl {
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct File {
     /// `dimension n`, with its position.
-    pub dimension: Option<(u32, Pos)>,
+    pub dimension: Option<(u64, Pos)>,
     /// Its embeddings.
     pub embeddings: Vec<EmbeddingDecl>,
     /// Its rules.

@@ -308,13 +308,13 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
                 format!("dimension {n} is not supported: use 2 (surfaces) or 3 (volumes)"),
             ),
             Some((n, p)) => match &dim {
-                Some((d, other)) if *d != n as usize => c.error(
+                Some((d, other)) if *d as u64 != n => c.error(
                     p,
                     "dimension",
                     format!("dimension {n} differs from dimension {d} of {other}"),
                 ),
                 Some(_) => {}
-                None => dim = Some((n as usize, name.clone())),
+                None => dim = Some((n as usize, name.clone())), // 2 or 3
             },
         }
     }
@@ -380,10 +380,10 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
     )
 }
 
-fn check_orbit(c: &mut Ctx, dims: &[u32], dim: usize, pos: Pos, what: &str) -> Option<OrbitType> {
+fn check_orbit(c: &mut Ctx, dims: &[u64], dim: usize, pos: Pos, what: &str) -> Option<OrbitType> {
     let mut v = Vec::new();
     for &i in dims {
-        if i as usize > dim {
+        if i > dim as u64 {
             c.error(
                 pos,
                 "dimension",
@@ -493,6 +493,20 @@ fn check_embedding(
     })
 }
 
+/// A label as written, as an index (labels beyond `usize` are out of range anyway).
+fn small(i: u64) -> usize {
+    usize::try_from(i).unwrap_or(usize::MAX)
+}
+
+/// The labels of a node as written, for the checked rule: a label above 255 (refused with the
+/// number as written, before the rule is used) saturates.
+fn checked_labels(orbit: &[ast::WrittenLabel]) -> Vec<Label> {
+    orbit
+        .iter()
+        .map(|l| l.map(|i| u8::try_from(i).unwrap_or(u8::MAX)))
+        .collect()
+}
+
 /// Label sources of each node of one graph; reports duplicate labels.
 fn sources(
     c: &mut Ctx,
@@ -521,7 +535,7 @@ fn sources(
         let k = index[nd.name.as_str()];
         for (t, l) in nd.orbit.iter().enumerate() {
             if let Some(i) = l {
-                set(c, k, *i as usize, Source::Orbit(t), nd.orbit_pos, &nd.name);
+                set(c, k, small(*i), Source::Orbit(t), nd.orbit_pos, &nd.name);
             }
         }
     }
@@ -529,7 +543,7 @@ fn sources(
         let (Some(&ka), Some(&kb)) = (index.get(a.a.as_str()), index.get(a.b.as_str())) else {
             continue;
         };
-        let i = a.dim as usize;
+        let i = small(a.dim);
         if ka == kb {
             set(c, ka, i, Source::Loop, a.pos, &a.a);
         } else {
@@ -578,9 +592,9 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
                 nodes.len() - 1
             });
             if side == "left" {
-                nodes[k].left = Some(nd.orbit.clone());
+                nodes[k].left = Some(checked_labels(&nd.orbit));
             } else {
-                nodes[k].right = Some(nd.orbit.clone());
+                nodes[k].right = Some(checked_labels(&nd.orbit));
                 if nd.hook && r.right.is_some() {
                     c.error(nd.pos, "hook", format!("rule '{rn}': node '{}' is marked hook in the right graph; hooks belong to the left graph", nd.name));
                 }
@@ -592,7 +606,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
                     c.error(a.pos, "name", format!("rule '{rn}': arc {} -{}- {} names node '{end}', which is not in the {side} graph", a.a, a.dim, a.b));
                 }
             }
-            if a.dim as usize > dim {
+            if a.dim > dim as u64 {
                 c.error(
                     a.pos,
                     "dimension",
@@ -605,7 +619,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         }
         for nd in &g.nodes {
             for l in nd.orbit.iter().flatten() {
-                if *l as usize > dim {
+                if *l > dim as u64 {
                     c.error(nd.orbit_pos, "dimension", format!("rule '{rn}': node '{}' has label {l} outside 0..={dim} in the {side} graph", nd.name));
                 }
             }
@@ -1215,7 +1229,7 @@ impl ExprCheck<'_, '_> {
             } => {
                 let mut dims = Vec::new();
                 for &i in orbit {
-                    if i as usize > self.dim {
+                    if i > self.dim as u64 {
                         self.err(
                             pos,
                             "dimension",

@@ -2,8 +2,8 @@
 //! stops it and names its line and column.
 
 use crate::ast::{
-    AggKind, ArcDecl, EmbeddingDecl, Expr, ExprKind, File, Graph, Label, NodeDecl, Param, Pos,
-    RuleDecl, Stmt,
+    AggKind, ArcDecl, EmbeddingDecl, Expr, ExprKind, File, Graph, NodeDecl, Param, Pos, RuleDecl,
+    Stmt,
 };
 use crate::lexer::{lex, Tok};
 use crate::value::{BinOp, UnOp};
@@ -31,8 +31,16 @@ pub fn parse(src: &str) -> Result<File, SyntaxError> {
     p.file()
 }
 
-/// Deepest nesting of expressions accepted (deeper input is refused, never a stack overflow).
-const MAX_DEPTH: u32 = 200;
+/// A number as written (the lexer reads no sign, so it is never negative).
+fn written(i: i64) -> u64 {
+    i.unsigned_abs()
+}
+
+/// Deepest expression accepted, counted two ways, both refused above it with a syntax error
+/// (never a stack overflow): the height of the tree built (a leaf is 1; a chain `a + b + ...`
+/// of n terms is n, as every later pass walks it recursively), and the parser's own nesting
+/// (parentheses, blocks, unary operators, `else if`).
+pub const MAX_DEPTH: u32 = 256;
 
 struct Parser {
     toks: Vec<(Tok, Pos)>,
@@ -132,7 +140,7 @@ impl Parser {
                             message: "'dimension' given twice".into(),
                         });
                     }
-                    f.dimension = Some((u32::try_from(n).unwrap_or(u32::MAX), p));
+                    f.dimension = Some((written(n), p));
                     self.eat_punct(";");
                 }
                 Tok::Ident(k) if k == "embedding" => {
@@ -153,7 +161,7 @@ impl Parser {
         }
     }
 
-    fn orbit_dims(&mut self) -> R<Vec<u32>> {
+    fn orbit_dims(&mut self) -> R<Vec<u64>> {
         self.expect_punct("<", "to open an orbit")?;
         let mut v = Vec::new();
         if self.eat_punct(">") {
@@ -161,7 +169,7 @@ impl Parser {
         }
         loop {
             let (i, _) = self.int("a dimension in the orbit")?;
-            v.push(u32::try_from(i).unwrap_or(u32::MAX));
+            v.push(written(i));
             if self.eat_punct(">") {
                 return Ok(v);
             }
@@ -310,14 +318,14 @@ impl Parser {
             if self.eat_punct(":") {
                 let orbit_pos = self.pos();
                 self.expect_punct("<", "to open the node's orbit type")?;
-                let mut orbit: Vec<Label> = Vec::new();
+                let mut orbit = Vec::new();
                 if !self.eat_punct(">") {
                     loop {
                         if self.eat_punct("_") {
                             orbit.push(None);
                         } else {
                             let (i, _) = self.int("a dimension or '_'")?;
-                            orbit.push(Some(u8::try_from(i).unwrap_or(u8::MAX)));
+                            orbit.push(Some(written(i)));
                         }
                         if self.eat_punct(">") {
                             break;
@@ -344,7 +352,7 @@ impl Parser {
                 let (b, _) = self.ident("the arc's second node")?;
                 g.arcs.push(ArcDecl {
                     a,
-                    dim: u32::try_from(d).unwrap_or(u32::MAX),
+                    dim: written(d),
                     b,
                     pos: apos,
                 });
@@ -383,31 +391,64 @@ impl Parser {
         })
     }
 
+    /// An expression: its tree, checked against [`MAX_DEPTH`].
     fn expr(&mut self) -> R<Expr> {
-        self.depth += 1;
-        if self.depth > MAX_DEPTH {
-            return self.err("expression nested too deeply");
-        }
-        let r = self.binary(0);
-        self.depth -= 1;
-        r
+        Ok(self.expr_h()?.0)
     }
 
-    fn binary(&mut self, min_prec: u8) -> R<Expr> {
-        let mut lhs = self.unary()?;
+    /// Enters one level of the parser's own recursion (parentheses, blocks, unary operators,
+    /// `else if`), refusing more than [`MAX_DEPTH`] levels.
+    fn enter(&mut self) -> R<()> {
+        self.depth += 1;
+        if self.depth > MAX_DEPTH {
+            return self.err(format!(
+                "expression nested too deeply: depth {}, the limit is {MAX_DEPTH}",
+                self.depth
+            ));
+        }
+        Ok(())
+    }
+
+    fn leave(&mut self) {
+        self.depth -= 1;
+    }
+
+    /// A node of height `h` (1 for a leaf, 1 + the tallest child otherwise) at `pos`,
+    /// refused above [`MAX_DEPTH`]: every later pass walks expressions recursively, so no tree
+    /// taller than the limit is ever built (a chain `a + b + ...` of n terms has height n).
+    fn node(pos: Pos, kind: ExprKind, h: u32) -> R<(Expr, u32)> {
+        if h > MAX_DEPTH {
+            return Err(SyntaxError {
+                pos,
+                message: format!(
+                    "expression nested too deeply: depth {h}, the limit is {MAX_DEPTH}"
+                ),
+            });
+        }
+        Ok((Expr { kind, pos }, h))
+    }
+
+    /// An expression and its height.
+    fn expr_h(&mut self) -> R<(Expr, u32)> {
+        self.binary(0)
+    }
+
+    fn binary(&mut self, min_prec: u8) -> R<(Expr, u32)> {
+        let (mut lhs, mut lh) = self.unary()?;
         loop {
             let Some((op, prec)) = self.binop() else {
-                return Ok(lhs);
+                return Ok((lhs, lh));
             };
             if prec < min_prec {
-                return Ok(lhs);
+                return Ok((lhs, lh));
             }
             let pos = self.bump().1;
-            let rhs = self.binary(prec + 1)?;
-            lhs = Expr {
-                kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
+            let (rhs, rh) = self.binary(prec + 1)?;
+            (lhs, lh) = Self::node(
                 pos,
-            };
+                ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
+                1 + lh.max(rh),
+            )?;
         }
     }
 
@@ -433,7 +474,14 @@ impl Parser {
         })
     }
 
-    fn unary(&mut self) -> R<Expr> {
+    fn unary(&mut self) -> R<(Expr, u32)> {
+        self.enter()?;
+        let r = self.unary_inner();
+        self.leave();
+        r
+    }
+
+    fn unary_inner(&mut self) -> R<(Expr, u32)> {
         let pos = self.pos();
         let op = if self.eat_punct("-") {
             UnOp::Neg
@@ -442,50 +490,48 @@ impl Parser {
         } else {
             return self.primary();
         };
-        self.depth += 1;
-        if self.depth > MAX_DEPTH {
-            return self.err("expression nested too deeply");
-        }
-        let e = self.unary()?;
-        self.depth -= 1;
-        Ok(Expr {
-            kind: ExprKind::Unary(op, Box::new(e)),
-            pos,
-        })
+        let (e, h) = self.unary()?;
+        Self::node(pos, ExprKind::Unary(op, Box::new(e)), 1 + h)
     }
 
-    fn primary(&mut self) -> R<Expr> {
+    fn primary(&mut self) -> R<(Expr, u32)> {
         let pos = self.pos();
         let (tok, _) = self.bump();
-        let kind = match tok {
-            Tok::Int(i) => ExprKind::Int(i),
-            Tok::Real(x) => ExprKind::Real(x),
+        let (kind, h) = match tok {
+            Tok::Int(i) => (ExprKind::Int(i), 1),
+            Tok::Real(x) => (ExprKind::Real(x), 1),
             Tok::Punct("(") => {
-                let e = self.expr()?;
+                let e = self.expr_h()?;
                 self.expect_punct(")", "to close the parenthesis")?;
                 return Ok(e);
             }
             Tok::Punct("{") => return self.block(pos),
             Tok::Ident(s) => match s.as_str() {
-                "true" => ExprKind::Bool(true),
-                "false" => ExprKind::Bool(false),
+                "true" => (ExprKind::Bool(true), 1),
+                "false" => (ExprKind::Bool(false), 1),
                 "if" => {
-                    let c = self.expr()?;
+                    let (c, hc) = self.expr_h()?;
                     let open = self.pos();
                     self.expect_punct("{", "to open the 'if' branch")?;
-                    let a = self.block(open)?;
+                    let (a, ha) = self.block(open)?;
                     if !self.is_kw("else") {
                         return self.err("an 'if' expression needs an 'else' branch");
                     }
                     self.bump();
-                    let b = if self.is_kw("if") {
-                        self.primary()?
+                    let (b, hb) = if self.is_kw("if") {
+                        self.enter()?;
+                        let r = self.primary();
+                        self.leave();
+                        r?
                     } else {
                         let open = self.pos();
                         self.expect_punct("{", "to open the 'else' branch")?;
                         self.block(open)?
                     };
-                    ExprKind::If(Box::new(c), Box::new(a), Box::new(b))
+                    (
+                        ExprKind::If(Box::new(c), Box::new(a), Box::new(b)),
+                        1 + hc.max(ha).max(hb),
+                    )
                 }
                 "sum" | "mean" | "count" if self.is_punct("<") => {
                     let kind = match s.as_str() {
@@ -503,33 +549,39 @@ impl Parser {
                         Some(self.ident("an embedding name")?.0)
                     };
                     self.expect_punct(")", "to close the aggregate")?;
-                    ExprKind::Aggregate {
-                        kind,
-                        orbit,
-                        node,
-                        emb,
-                    }
+                    (
+                        ExprKind::Aggregate {
+                            kind,
+                            orbit,
+                            node,
+                            emb,
+                        },
+                        1,
+                    )
                 }
                 _ if self.is_punct("(") => {
                     self.bump();
                     let mut args = Vec::new();
+                    let mut h = 0;
                     if !self.eat_punct(")") {
                         loop {
-                            args.push(self.expr()?);
+                            let (a, ha) = self.expr_h()?;
+                            args.push(a);
+                            h = h.max(ha);
                             if self.eat_punct(")") {
                                 break;
                             }
                             self.expect_punct(",", "between arguments")?;
                         }
                     }
-                    ExprKind::Call { name: s, args }
+                    (ExprKind::Call { name: s, args }, 1 + h)
                 }
                 _ if self.is_punct(".") && matches!(self.peek_at(1), Tok::Ident(_)) => {
                     self.bump();
                     let (emb, _) = self.ident("an embedding name")?;
-                    ExprKind::Read { node: s, emb }
+                    (ExprKind::Read { node: s, emb }, 1)
                 }
-                _ => ExprKind::Name(s),
+                _ => (ExprKind::Name(s), 1),
             },
             t => {
                 return Err(SyntaxError {
@@ -538,18 +590,20 @@ impl Parser {
                 })
             }
         };
-        Ok(Expr { kind, pos })
+        Self::node(pos, kind, h)
     }
 
     /// `{ let x = e; ...; result }` (the `{` is consumed).
-    fn block(&mut self, pos: Pos) -> R<Expr> {
+    fn block(&mut self, pos: Pos) -> R<(Expr, u32)> {
         let mut stmts = Vec::new();
+        let mut h = 0;
         while self.is_kw("let") {
             let spos = self.pos();
             self.bump();
             let (name, _) = self.ident("a variable name")?;
             self.expect_punct("=", "after the variable name")?;
-            let value = self.expr()?;
+            let (value, hv) = self.expr_h()?;
+            h = h.max(hv);
             self.eat_punct(";");
             stmts.push(Stmt::Let {
                 name,
@@ -557,15 +611,12 @@ impl Parser {
                 pos: spos,
             });
         }
-        let e = self.expr()?;
+        let (e, he) = self.expr_h()?;
         self.expect_punct("}", "to close the block")?;
         if stmts.is_empty() {
-            Ok(e)
+            Ok((e, he))
         } else {
-            Ok(Expr {
-                kind: ExprKind::Block(stmts, Box::new(e)),
-                pos,
-            })
+            Self::node(pos, ExprKind::Block(stmts, Box::new(e)), 1 + h.max(he))
         }
     }
 }
