@@ -154,22 +154,6 @@ def test_info_into_a_closed_pipe_exits_quietly(tmp_path: Path) -> None:
         assert code == cli.EXIT_BROKEN_PIPE == 141
 
 
-def test_info_into_a_pipe_closed_after_some_lines_exits_quietly(tmp_path: Path) -> None:
-    path = tmp_path / "sheet.tmg"
-    _sheet(3).save(path)
-    # the shell's own `| head -n 1`
-    r = subprocess.run(
-        f"'{sys.executable}' -m topomech info '{path}' | head -n 1",
-        shell=True,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert r.returncode == 0
-    assert len(r.stdout.splitlines()) == 1
-    assert r.stderr == ""
-
-
 # ------------------------------------------------------------------------------ bad settings
 
 BAD = [math.nan, math.inf, -math.inf, -1.0]
@@ -204,37 +188,30 @@ def test_nan_infinite_and_negative_settings_raise_the_same_exception(key: str) -
 
 
 @pytest.mark.parametrize(
-    ("key", "value"),
+    ("key", "value", "good"),
     [
-        ("dt", 0.0),
-        ("density", 0.0),
-        ("young", 0.0),
-        ("poisson", 0.5),
-        ("poisson", -1.0),
-        ("poisson", math.nan),
-        ("poisson", math.inf),
+        ("dt", 0.0, 1e-4),
+        ("density", 0.0, 2.0),
+        ("young", 0.0, 1e5),
+        ("poisson", 0.5, 0.49),
+        ("poisson", -1.0, -0.99),
+        ("damping", -1e-9, 0.0),
     ],
 )
-def test_settings_out_of_range_raise_value_error(key: str, value: float) -> None:
+def test_settings_out_of_range_raise_value_error(key: str, value: float, good: float) -> None:
     with pytest.raises(ValueError, match=key):
         _build(**{key: value})
+    _build(**{key: good})  # the nearest good value is accepted
 
 
 @pytest.mark.parametrize(
     "region",
     [
         {"where": "x > 0.5", "density": -1.0},
-        {"where": "x > 0.5", "density": math.nan},
         {"where": "x > 0.5", "young": -5.0},
-        {"where": "x > 0.5", "young": math.inf},
         {"where": "x > 0.5", "poisson": 0.7},
     ],
 )
 def test_region_values_out_of_range_raise_value_error(region: dict[str, Any]) -> None:
     with pytest.raises(ValueError, match=r"regions\[0\]"):
         _build(regions=[region])
-
-
-def test_good_settings_still_build() -> None:
-    _build(dt=1e-4, density=2.0, young=1e5, poisson=0.0, damping=0.0)
-    _build(poisson=-0.5, damping=3.0)

@@ -133,18 +133,11 @@ def served(run_dir: Path) -> Iterator[Served]:
             s.stop()
 
 
-def test_server_serves_the_page_it_wrote(served: Served) -> None:
-    status, headers, body = served.request(f"/{VIEWER_FILE}")
+def test_server_lists_no_directory(served: Served) -> None:
+    status, headers, body = served.request(f"/{VIEWER_FILE}?t=1", host=f"127.0.0.1:{served.port}")
     assert status == 200
     assert headers["content-type"].startswith("text/html")
     assert b'id="view-meta"' in body
-    status, _, body = served.request(f"/{VIEWER_FILE}?t=1", host=f"127.0.0.1:{served.port}")
-    assert status == 200
-    assert b'id="view-meta"' in body
-    assert "Traceback" not in served.stderr()
-
-
-def test_server_lists_no_directory(served: Served) -> None:
     # the root redirects to the page; no folder is ever listed
     status, headers, body = served.request("/")
     assert status == 302
@@ -164,22 +157,20 @@ def test_server_refuses_files_it_did_not_write(served: Served) -> None:
         assert SECRET.encode() not in body
 
 
-@pytest.mark.parametrize(
-    "path",
-    [
+def test_server_refuses_paths_leaving_the_folder(served: Served) -> None:
+    for path in (
         "/../secret.txt",
         "/%2e%2e/secret.txt",
         "/..%2fsecret.txt",
         "/sub/../../secret.txt",
         "/%2E%2E%2Fsecret.txt",
         "//etc/passwd",
-    ],
-)
-def test_server_refuses_paths_leaving_the_folder(served: Served, path: str) -> None:
-    status, _, body = served.request(path)
-    assert status in (400, 404)
-    assert SECRET.encode() not in body
-    assert b"root:" not in body
+        "/sub/../sub/inner.txt",  # inside the folder, but not written by the viewer
+    ):
+        status, _, body = served.request(path)
+        assert status in (400, 404), path
+        assert SECRET.encode() not in body
+        assert b"root:" not in body
     assert "Traceback" not in served.stderr()
 
 
@@ -218,17 +209,14 @@ def test_writing_the_page_replaces_a_symlink_without_following_it(
     assert 'id="view-meta"' in page.read_text()
 
 
-@pytest.mark.parametrize("host", ["evil.example", "evil.example:80", "127.0.0.1.evil.example"])
-def test_server_refuses_a_foreign_host_header(served: Served, host: str) -> None:
-    status, _, body = served.request(f"/{VIEWER_FILE}", host=host)
-    assert status in (403, 421)
-    assert b"view-meta" not in body
-
-
-@pytest.mark.parametrize("host", ["localhost", "LOCALHOST:1", "127.0.0.1", "[::1]", "[::1]:8000"])
-def test_server_answers_local_host_headers(served: Served, host: str) -> None:
-    status, _, _ = served.request(f"/{VIEWER_FILE}", host=host)
-    assert status == 200
+def test_server_refuses_a_foreign_host_header(served: Served) -> None:
+    for host in ("evil.example", "evil.example:80", "127.0.0.1.evil.example", "localhost.evil"):
+        status, _, body = served.request(f"/{VIEWER_FILE}", host=host)
+        assert status in (403, 421), host
+        assert b"view-meta" not in body
+    for host in ("localhost", "LOCALHOST:1", "127.0.0.1", "[::1]", "[::1]:8000"):
+        status, _, _ = served.request(f"/{VIEWER_FILE}", host=host)
+        assert status == 200, host
 
 
 def test_server_refuses_a_request_without_host(served: Served) -> None:
