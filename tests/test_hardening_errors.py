@@ -125,6 +125,29 @@ def test_gmap_changed_while_another_thread_reads_it_raises_busy_error() -> None:
     assert g.is_valid()
 
 
+SCALE = """dimension 2
+embedding position : vec3 on <1,2> policy mean
+
+rule scale(f: f64) {
+  left { v : <1,2> hook }
+  compute { v.position = v.position * f }
+}
+"""
+
+
+def test_gmap_read_while_a_rule_runs_on_it_raises_busy_error() -> None:
+    g = _sheet(120)
+    rules = topomech.RuleSet.from_source(SCALE, "scale.tmr")
+    n = g.n_darts
+    raised, _ = _contend(
+        lambda: rules.count_matches(g, "scale", {"f": 1.0}), lambda: g.core.n_darts
+    )
+    assert raised, "the other thread never found the map busy"
+    assert all(isinstance(e, topomech.BusyError) for e in raised), raised
+    assert "GMap is busy: another thread is changing it" in str(raised[0])
+    assert g.n_darts == n
+
+
 def test_busy_error_is_exported() -> None:
     assert issubclass(topomech.BusyError, topomech.TopomechError)
     assert "BusyError" in topomech.__all__
