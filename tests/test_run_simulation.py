@@ -186,7 +186,7 @@ def test_prescribed_and_regions() -> None:
             topomech.SimulationError,
             "has no parameter 'stifness'",
         ),
-        ({"dt": -1.0}, topomech.SimulationError, "dt must be positive, got -1"),
+        ({"dt": -1.0}, ValueError, "dt must be positive, got -1"),
         ({"dt": "big"}, TypeError, "dt must be a number, got str"),
         ({"dt": True}, TypeError, "dt must be a number, got bool"),
         ({"density": float("nan")}, ValueError, "density must be finite"),

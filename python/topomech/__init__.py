@@ -19,6 +19,7 @@ Every error topomech raises is a :class:`TopomechError`.
 
 from topomech._core import (
     ApplyError,
+    BusyError,
     DivergenceError,
     EmbeddingError,
     FileFormatError,
@@ -49,6 +50,7 @@ __all__ = [
     "ApplyError",
     "ApplyReport",
     "BuildReport",
+    "BusyError",
     "CellCounts",
     "DivergenceError",
     "EmbeddingError",

@@ -9,6 +9,7 @@ import numpy.typing as npt
 
 __all__ = [
     "ApplyError",
+    "BusyError",
     "DivergenceError",
     "EmbeddingError",
     "FileFormatError",
@@ -88,6 +89,10 @@ class SceneError(TopomechError):
     key: str | None
     #: The scene file (or ``<scene>`` for a scene parsed from text).
     source: str
+
+class BusyError(TopomechError):
+    """A map or simulation used while another thread is using it (a call on it that runs
+    without the GIL, such as ``Simulation.step`` or ``RuleSet.apply``, has not returned)."""
 
 class InternalError(TopomechError):
     """A bug in topomech (a Rust panic, caught at the boundary). Please report it."""

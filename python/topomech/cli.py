@@ -12,7 +12,10 @@ interrupted by Ctrl-C (what was written stays).
 from __future__ import annotations
 
 import argparse
+import io
 import json
+import os
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -476,9 +479,24 @@ def _add_view(sub: Any) -> None:
         help="only write OUT_DIR/viewer.html (or --output) and print its path",
     )
     p.add_argument("--output", metavar="FILE", type=Path, help="where to write the page")
-    p.add_argument("--port", type=int, default=0, help="port to serve on (default: a free one)")
+    p.add_argument(
+        "--port",
+        type=_port_arg,
+        default=0,
+        help="port to serve on, 0 to 65535 (default 0: a free one)",
+    )
     p.add_argument("--open", action="store_true", help="open the page in the default browser")
     p.set_defaults(run=_run_view)
+
+
+def _port_arg(text: str) -> int:
+    """``--port``: an integer from 0 to 65535; anything else is a usage error (exit 2)."""
+    from topomech.viewer import port_number
+
+    try:
+        return port_number(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def _run_view(args: argparse.Namespace) -> int:
@@ -786,17 +804,43 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Runs the command line ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
-    args = build_parser().parse_args(argv)
+#: The exit code after stdout was closed early (``topomech info X | head``): 128 + SIGPIPE,
+#: what a shell reports for a program that a closed pipe stopped.
+EXIT_BROKEN_PIPE = 128 + getattr(signal, "SIGPIPE", 13)
+
+
+def _quiet_stdout() -> None:
+    """Points stdout at the null device, so that the interpreter's last flush at exit does not
+    fail again on the closed pipe (as Python's documentation of SIGPIPE advises)."""
     try:
-        code: int = args.run(args)
-    except TopomechError as e:  # InternalError included: a bug, reported without a traceback
-        _error(str(e))
-        return EXIT_REFUSED
-    except OSError as e:
-        _error(f"{e.filename or ''}: {e.strerror or e}" if e.filename else str(e))
-        return EXIT_REFUSED
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        pass  # stdout is not a file descriptor (a test's capture): nothing will flush it
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Runs the command line ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
+
+    A usage error exits 2 (``SystemExit``, from argparse). When stdout is closed before the
+    output is written (``topomech info X | head``) it returns :data:`EXIT_BROKEN_PIPE`
+    quietly, without a traceback."""
+    try:
+        args = build_parser().parse_args(argv)
+        try:
+            code: int = args.run(args)
+        except TopomechError as e:  # InternalError included: a bug, reported without a traceback
+            _error(str(e))
+            return EXIT_REFUSED
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            _error(f"{e.filename or ''}: {e.strerror or e}" if e.filename else str(e))
+            return EXIT_REFUSED
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
     return code
 
 

@@ -13,16 +13,20 @@ toggle and the dart view (see :mod:`topomech.recording` for what is recorded).
 from __future__ import annotations
 
 import base64
-import functools
+import contextlib
 import http.server
 import json
+import os
+import stat
+import sys
+import tempfile
 import threading
 from importlib import resources
 from pathlib import Path
 
 from topomech.recording import ViewError, read_view
 
-__all__ = ["Server", "ViewError", "serve", "viewer_html", "write_viewer"]
+__all__ = ["Server", "ViewError", "port_number", "serve", "viewer_html", "write_viewer"]
 
 VIEWER_FILE = "viewer.html"
 
@@ -53,26 +57,154 @@ def viewer_html(out_dir: Path) -> str:
 
 
 def write_viewer(out_dir: Path, path: Path | None = None) -> Path:
-    """Writes the viewer page (default ``OUT_DIR/viewer.html``); returns its path."""
+    """Writes the viewer page (default ``OUT_DIR/viewer.html``); returns its path.
+
+    The page is written to a new file then renamed over the target, so a symlink at the
+    target is replaced, never followed. Raises :class:`ViewError` when the directory has no
+    readable view data and :class:`OSError` when the page cannot be written."""
     out_dir = Path(out_dir)
     html = viewer_html(out_dir)
     target = Path(path) if path is not None else out_dir / VIEWER_FILE
-    target.write_text(html, encoding="utf-8")
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    tmp = Path(name)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(html)
+        tmp.chmod(0o644)
+        tmp.replace(target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
     return target
 
 
-class _Quiet(http.server.SimpleHTTPRequestHandler):
+#: The ``Host`` names the server answers to; any other is refused (DNS rebinding).
+LOCAL_HOSTS = frozenset({"localhost", "127.0.0.1", "[::1]"})
+
+#: Seconds a connection may stay silent before the server drops it.
+REQUEST_TIMEOUT = 10.0
+
+
+def _host_name(header: str) -> str:
+    """The host of a ``Host`` header, without its port, lowercased (``[::1]`` keeps its
+    brackets)."""
+    host = header.strip().lower()
+    if host.startswith("["):
+        end = host.find("]")
+        return host[: end + 1] if end >= 0 else host
+    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+
+
+def port_number(value: object) -> int:
+    """``value`` as a TCP port to serve on: an int from 0 (a free port) to 65535; raises
+    :class:`ValueError` naming the value otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, str)):
+        raise ValueError(f"port must be an integer from 0 to 65535, got {value!r}")
+    try:
+        port = int(value)
+    except ValueError:
+        raise ValueError(f"port must be an integer from 0 to 65535, got {value!r}") from None
+    if not 0 <= port <= 65535:
+        raise ValueError(f"port must be an integer from 0 to 65535 (0: a free one), got {port}")
+    return port
+
+
+class _ViewerHandler(http.server.BaseHTTPRequestHandler):
+    """Answers GET and HEAD for the files the viewer wrote, and nothing else: no directory
+    listing, no other file of the folder, no path that leaves it, no symlink; a request whose
+    ``Host`` is not this machine is refused with 403."""
+
+    server: _ViewerHTTPServer
+    timeout = REQUEST_TIMEOUT
+    server_version = "topomech-viewer"
+    sys_version = ""
+
     def log_message(self, format: str, *args: object) -> None:
         pass
 
+    def do_GET(self) -> None:
+        self._answer(body=True)
+
+    def do_HEAD(self) -> None:
+        self._answer(body=False)
+
+    def _answer(self, body: bool) -> None:
+        host = self.headers.get("Host")
+        if host is None:
+            self.send_error(400, "missing Host header")
+            return
+        if _host_name(host) not in LOCAL_HOSTS:
+            self.send_error(403, "this server answers only to localhost")
+            return
+        path = self.path.split("?", 1)[0].split("#", 1)[0]
+        if path == "/":
+            self.send_response(302)
+            self.send_header("Location", f"/{VIEWER_FILE}")
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+            return
+        name = path[1:] if path.startswith("/") else None
+        target = self.server.files.get(name) if name is not None else None
+        data = _read_own_file(target) if target is not None else None
+        if data is None:
+            self.send_error(404)
+            return
+        self.send_response(200)
+        self.send_header("Content-Type", "text/html; charset=utf-8")
+        self.send_header("Content-Length", str(len(data)))
+        self.send_header("Cache-Control", "no-store")
+        self.send_header("X-Content-Type-Options", "nosniff")
+        self.end_headers()
+        if body:
+            self.wfile.write(data)
+
+
+def _read_own_file(path: Path) -> bytes | None:
+    """The bytes of ``path`` when it is still a regular file and not a symlink (opened without
+    following one), else None."""
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0)
+    try:
+        if path.is_symlink():
+            return None
+        fd = os.open(path, flags)
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+            return None
+        return f.read()
+
+
+class _ViewerHTTPServer(http.server.ThreadingHTTPServer):
+    """The HTTP server of :class:`Server`: ``files`` maps the URL names it serves to the files
+    the viewer wrote; a client that hangs up or times out is dropped without a traceback."""
+
+    daemon_threads = True
+
+    def __init__(self, address: tuple[str, int], files: dict[str, Path]) -> None:
+        self.files = files
+        super().__init__(address, _ViewerHandler)
+
+    def handle_error(self, request: object, client_address: object) -> None:
+        exc = sys.exc_info()[1]
+        if isinstance(exc, (ConnectionError, TimeoutError)):
+            return  # the client hung up or went silent: nothing to report
+        print(f"topomech view: error answering {client_address}: {exc!r}", file=sys.stderr)
+
 
 class Server:
-    """A run directory served over HTTP on 127.0.0.1 from a background thread."""
+    """A run directory's viewer page served over HTTP on 127.0.0.1 from a background thread.
+
+    Only the page the viewer wrote (``OUT_DIR/viewer.html``) is served; ``/`` redirects to it,
+    every other path is 404, and a ``Host`` other than localhost, 127.0.0.1 or [::1] gets 403.
+    Raises :class:`ViewError` when the directory has no readable view data, :class:`ValueError`
+    for a port outside 0..65535 and :class:`OSError` when the port cannot be bound."""
 
     def __init__(self, out_dir: Path, port: int = 0, host: str = "127.0.0.1") -> None:
+        port = port_number(port)
         self.page = write_viewer(Path(out_dir))
-        handler = functools.partial(_Quiet, directory=str(Path(out_dir).resolve()))
-        self.httpd = http.server.ThreadingHTTPServer((host, port), handler)
+        self.httpd = _ViewerHTTPServer((host, port), {VIEWER_FILE: self.page.resolve()})
         self.thread = threading.Thread(target=self.httpd.serve_forever, daemon=True)
 
     @property

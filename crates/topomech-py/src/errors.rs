@@ -13,6 +13,7 @@
 //!     ├── SimulationError        a simulation that cannot be built or stepped (PhysicsError)
 //!     │   └── DivergenceError    a step that produced non-finite values (step, vertex, why)
 //!     ├── SceneError             a scene file that is refused (raised by topomech.scene)
+//!     ├── BusyError              a map or simulation in use by another thread
 //!     └── InternalError          a bug: a Rust panic, caught before it reaches Python
 //! ```
 //!
@@ -21,6 +22,10 @@
 //!
 //! Every exported function runs its body through [`guard`], so a Rust panic never unwinds into
 //! Python: it becomes an `InternalError` carrying the panic's message and location.
+//!
+//! Methods borrow their object through [`shared`] and [`exclusive`], never through `&self`:
+//! an object that another thread is using (a step or a rule running without the GIL) then
+//! raises `BusyError` naming it, not `PyO3`'s `RuntimeError: Already mutably borrowed`.
 
 use std::any::Any;
 use std::cell::RefCell;
@@ -30,6 +35,8 @@ use std::sync::Once;
 
 use pyo3::exceptions::{PyException, PyIndexError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::pyclass::boolean_struct::False;
+use pyo3::PyClass;
 use topomech_gmap::io::FormatError;
 use topomech_gmap::mesh::MeshError as KernelMeshError;
 use topomech_gmap::{
@@ -116,6 +123,15 @@ pyo3::create_exception!(
 );
 pyo3::create_exception!(
     topomech._core,
+    BusyError,
+    TopomechError,
+    "A map or simulation used while another thread is using it (a call on it that runs\n\
+     without the GIL, such as `Simulation.step` or `RuleSet.apply`, has not returned). The\n\
+     object is unchanged by the refused call; wait for the other call, or give each thread\n\
+     its own object."
+);
+pyo3::create_exception!(
+    topomech._core,
     InternalError,
     TopomechError,
     "A bug in topomech (a Rust panic, caught at the boundary). Please report it."
@@ -138,6 +154,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("DivergenceError", py.get_type::<DivergenceError>())?;
     m.add("SceneError", py.get_type::<SceneError>())?;
+    m.add("BusyError", py.get_type::<BusyError>())?;
     m.add("InternalError", py.get_type::<InternalError>())?;
     install_panic_hook();
     Ok(())
@@ -317,6 +334,40 @@ pub(crate) fn type_error(msg: impl Display) -> Error {
 /// An `IndexError` (a dart or dimension out of range).
 pub(crate) fn index_error(msg: impl Display) -> Error {
     Error::Py(PyIndexError::new_err(msg.to_string()))
+}
+
+/// The `BusyError` of a `what` (e.g. "Simulation") that another thread is using.
+fn busy_error(what: &str, writing: bool) -> PyErr {
+    BusyError::new_err(format!(
+        "this {what} is busy: another thread is {} it (a call on it has not returned yet); \
+         wait for that call to finish, or give each thread its own {what}",
+        if writing { "changing" } else { "using" }
+    ))
+}
+
+/// The Python object's name, for messages.
+fn class_name<T: PyClass>(slf: &Bound<'_, T>) -> String {
+    slf.as_any()
+        .get_type()
+        .name()
+        .map_or_else(|_| "object".to_string(), |n| n.to_string())
+}
+
+/// `slf` borrowed for reading, or `BusyError` when another thread is changing it.
+pub(crate) fn shared<'py, T: PyClass>(slf: &Bound<'py, T>) -> PyResult<PyRef<'py, T>> {
+    slf.try_borrow()
+        .map_err(|_| busy_error(&class_name(slf), true))
+}
+
+/// `slf` borrowed for writing, or `BusyError` when another thread is using it.
+pub(crate) fn exclusive<'py, T: PyClass<Frozen = False>>(
+    slf: &Bound<'py, T>,
+) -> PyResult<PyRefMut<'py, T>> {
+    slf.try_borrow_mut().map_err(|_| {
+        // a failed shared borrow means a writer holds it; otherwise readers do
+        let writing = slf.try_borrow().is_err();
+        busy_error(&class_name(slf), writing)
+    })
 }
 
 /// The result type of the bindings' internals.

@@ -9,7 +9,7 @@ use topomech_gmap::mesh::{self, BuildOptions, Duplicates, Pinched};
 use topomech_gmap::{io, EmbeddingType, GMap, OrbitType};
 
 use crate::convert::{dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, rows_to_array, FlatMesh};
-use crate::errors::{guard, value_error, Error, InternalError, Result};
+use crate::errors::{exclusive, guard, shared, value_error, Error, InternalError, Result};
 
 /// A generalized map of dimension 2 (surfaces) or 3 (volumes).
 ///
@@ -145,58 +145,70 @@ impl PyGMap {
     }
 
     /// Saves the map, with its embeddings, to a `.tmg` file (round-trip exact).
-    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let g = self.map()?;
+    fn save(slf: &Bound<'_, Self>, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         py.detach(move || guard(|| Ok(io::save(g, &path)?)))
     }
 
     /// The bytes of the map's `.tmg` file.
-    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
-        let g = self.map()?;
+    fn to_bytes<'py>(slf: &Bound<'_, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         let b = py.detach(|| guard(|| Ok(io::to_bytes(g))))?;
         Ok(PyBytes::new(py, &b))
     }
 
     /// The dimension n: 2 (surface) or 3 (volume).
     #[getter]
-    fn dimension(&self) -> PyResult<usize> {
-        Ok(self.map()?.dimension())
+    fn dimension(slf: &Bound<'_, Self>) -> PyResult<usize> {
+        let this = shared(slf)?;
+        Ok(this.map()?.dimension())
     }
 
     /// The number of live darts.
     #[getter]
-    fn n_darts(&self) -> PyResult<usize> {
-        Ok(self.map()?.n_darts())
+    fn n_darts(slf: &Bound<'_, Self>) -> PyResult<usize> {
+        let this = shared(slf)?;
+        Ok(this.map()?.n_darts())
     }
 
     /// The topology version: it changes whenever a link changes or a dart is added or removed.
     #[getter]
-    fn version(&self) -> PyResult<u64> {
-        Ok(self.map()?.version())
+    fn version(slf: &Bound<'_, Self>) -> PyResult<u64> {
+        let this = shared(slf)?;
+        Ok(this.map()?.version())
     }
 
     /// Counts of darts, vertices, edges, faces, volumes, connected components and boundary
     /// cells (faces in 3D, edges in 2D).
-    fn cell_counts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        counts_dict(py, self.map()?)
+    fn cell_counts<'py>(slf: &Bound<'_, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let this = shared(slf)?;
+        counts_dict(py, this.map()?)
     }
 
     /// Whether every invariant holds (involutions, cycles, embeddings constant on orbits).
-    fn is_valid(&self, py: Python<'_>) -> PyResult<bool> {
-        let g = self.map()?;
+    fn is_valid(slf: &Bound<'_, Self>, py: Python<'_>) -> PyResult<bool> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         py.detach(|| guard(|| Ok(g.is_valid())))
     }
 
     /// Each violated invariant, described (empty for a valid map).
-    fn violations(&self, py: Python<'_>) -> PyResult<Vec<String>> {
-        let g = self.map()?;
+    fn violations(slf: &Bound<'_, Self>, py: Python<'_>) -> PyResult<Vec<String>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         py.detach(|| guard(|| Ok(g.validate().iter().map(ToString::to_string).collect())))
     }
 
     /// Vertex positions, float64 (V, 3), in row order (`GMap::vertex_rows`: the input point
     /// order of an imported map; row k is the vertex labelled k by `vertex_labels`).
-    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let g = self.map()?;
+    fn positions<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         let rows = guard(|| {
             let id = g.require("position")?;
             let ty = g.embedding(id).ty();
@@ -222,8 +234,12 @@ impl PyGMap {
     }
 
     /// The vertex row of each dart, int64 (capacity,): -1 for removed darts.
-    fn vertex_labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        let g = self.map()?;
+    fn vertex_labels<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         let labels = guard(|| {
             let (labels, _) = g.vertex_rows();
             Ok(labels
@@ -236,15 +252,21 @@ impl PyGMap {
 
     /// The map as a flat mesh `(points, kinds, offsets, connectivity)`: one point per vertex
     /// orbit, one cell per face (2D) or volume (3D).
-    fn to_flat<'py>(&self, py: Python<'py>) -> PyResult<FlatMesh<'py>> {
-        let g = self.map()?;
+    fn to_flat<'py>(slf: &Bound<'_, Self>, py: Python<'py>) -> PyResult<FlatMesh<'py>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         let mesh = py.detach(|| guard(|| Ok(mesh::extract(g)?)))?;
         guard(|| mesh_to_flat(py, &mesh))
     }
 
     /// `alpha_i(dart)`; a free link returns the dart itself.
-    fn alpha(&self, i: &Bound<'_, PyAny>, dart: &Bound<'_, PyAny>) -> PyResult<u32> {
-        let g = self.map()?;
+    fn alpha(
+        slf: &Bound<'_, Self>,
+        i: &Bound<'_, PyAny>,
+        dart: &Bound<'_, PyAny>,
+    ) -> PyResult<u32> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         guard(|| {
             let i = dim_arg(g, i)?;
             let d = dart_arg(g, dart)?;
@@ -254,12 +276,13 @@ impl PyGMap {
 
     /// The darts of the orbit of `dart` of type `orbit` (e.g. `"<0,1>"`), `dart` first.
     fn orbit<'py>(
-        &self,
+        slf: &Bound<'_, Self>,
         py: Python<'py>,
         dart: &Bound<'py, PyAny>,
         orbit: &str,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        let g = self.map()?;
+        let this = shared(slf)?;
+        let g = this.map()?;
         let darts = guard(|| {
             let d = dart_arg(g, dart)?;
             let o = OrbitType::parse(orbit)?;
@@ -273,13 +296,14 @@ impl PyGMap {
 
     /// Sews `a` and `b` along dimension `i`, keeping the map valid; on error nothing changes.
     fn sew(
-        &mut self,
+        slf: &Bound<'_, Self>,
         py: Python<'_>,
         i: &Bound<'_, PyAny>,
         a: &Bound<'_, PyAny>,
         b: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
-        self.mutate(py, |g| {
+        let mut this = exclusive(slf)?;
+        this.mutate(py, |g| {
             let i = dim_arg(g, i)?;
             let a = dart_arg(g, a)?;
             let b = dart_arg(g, b)?;
@@ -289,12 +313,13 @@ impl PyGMap {
 
     /// Unsews the orbit of `a` along dimension `i`; on error nothing changes.
     fn unsew(
-        &mut self,
+        slf: &Bound<'_, Self>,
         py: Python<'_>,
         i: &Bound<'_, PyAny>,
         a: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
-        self.mutate(py, |g| {
+        let mut this = exclusive(slf)?;
+        this.mutate(py, |g| {
             let i = dim_arg(g, i)?;
             let a = dart_arg(g, a)?;
             Ok(g.unsew(i, a)?)
@@ -302,8 +327,9 @@ impl PyGMap {
     }
 
     /// The names of the embeddings, in declaration order.
-    fn embedding_names(&self) -> PyResult<Vec<String>> {
-        let g = self.map()?;
+    fn embedding_names(slf: &Bound<'_, Self>) -> PyResult<Vec<String>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         Ok(g.embeddings()
             .iter()
             .map(|e| e.name().to_string())
@@ -312,8 +338,13 @@ impl PyGMap {
 
     /// `{"name", "type", "orbit", "policy", "derived"}` of an embedding; `derived` is `None`
     /// or `{"source": name, "aggregate": "sum" | "mean" | "count"}`.
-    fn embedding_info<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
-        let g = self.map()?;
+    fn embedding_info<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
         let id = guard(|| Ok(g.require(name)?))?;
         let e = g.embedding(id);
         let d = PyDict::new(py);
@@ -337,11 +368,12 @@ impl PyGMap {
     /// darts), e.g. the `point_id`, `particle` and `cell_id` that a mesh build writes.
     /// Raises `EmbeddingError` for an unknown name or an embedding of another type.
     fn int_embedding<'py>(
-        &self,
+        slf: &Bound<'_, Self>,
         py: Python<'py>,
         name: &str,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        let g = self.map()?;
+        let this = shared(slf)?;
+        let g = this.map()?;
         let id = guard(|| Ok(g.require(name)?))?;
         if g.embedding(id).ty() != EmbeddingType::I64 {
             return Err(Error::EmbeddingInput(format!(
@@ -363,18 +395,22 @@ impl PyGMap {
     }
 
     /// Bytes used by the topology and every embedding.
-    fn memory_bytes(&self) -> PyResult<usize> {
-        Ok(self.map()?.memory_bytes())
+    fn memory_bytes(slf: &Bound<'_, Self>) -> PyResult<usize> {
+        let this = shared(slf)?;
+        Ok(this.map()?.memory_bytes())
     }
 
-    fn __repr__(&self) -> String {
-        if self.poisoned {
+    fn __repr__(slf: &Bound<'_, Self>) -> String {
+        let Ok(this) = slf.try_borrow() else {
+            return "<topomech._core.GMap (busy: in use by another thread)>".to_string();
+        };
+        if this.poisoned {
             return "<topomech._core.GMap (unusable after an internal error)>".to_string();
         }
         format!(
             "<topomech._core.GMap dimension={} darts={}>",
-            self.inner.dimension(),
-            self.inner.n_darts()
+            this.inner.dimension(),
+            this.inner.n_darts()
         )
     }
 }

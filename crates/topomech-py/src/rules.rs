@@ -21,7 +21,7 @@ use topomech_rules::{
 };
 
 use crate::convert::{dart_arg, shape_str, type_name};
-use crate::errors::{guard, type_error, value_error, Error, Result};
+use crate::errors::{exclusive, guard, type_error, value_error, Error, Result};
 use crate::gmap::PyGMap;
 
 /// Rules loaded from rule files (`.tmr`) and checked: every rule accepted keeps any map of
@@ -66,7 +66,7 @@ pub(crate) fn gmap_core<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyG
 
 /// The map behind `obj` (see [`gmap_core`]), borrowed for writing.
 fn gmap_arg<'py>(obj: &Bound<'py, PyAny>) -> PyResult<PyRefMut<'py, PyGMap>> {
-    Ok(gmap_core(obj)?.try_borrow_mut()?)
+    exclusive(&gmap_core(obj)?)
 }
 
 /// The hook darts: one int, or a sequence of ints (one per hook), each a live dart of `g`.

@@ -27,7 +27,9 @@ use topomech_physics::{
 };
 
 use crate::convert::{array_arg, rows3_arg, rows_to_array, shape_str, type_name};
-use crate::errors::{guard, type_error, value_error, Error, InternalError, Result};
+use crate::errors::{
+    exclusive, guard, shared, type_error, value_error, Error, InternalError, Result,
+};
 use crate::gmap::PyGMap;
 
 /// The keys of a configuration, in the order of [`Config`]'s fields.
@@ -94,6 +96,36 @@ fn real_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<f64> {
         Ok(x)
     } else {
         Err(value_error(format!("{what} must be finite, got {x}")))
+    }
+}
+
+// A setting's value out of its range is a `ValueError`, like a non-finite one (`real_arg`):
+// the same kind of bad value gives the same kind of exception.
+
+/// `x` (a finite number) when it is > 0.
+fn positive(x: f64, what: &str) -> Result<f64> {
+    if x > 0.0 {
+        Ok(x)
+    } else {
+        Err(value_error(format!("{what} must be positive, got {x}")))
+    }
+}
+
+/// `x` (a finite number) when it is >= 0.
+fn non_negative(x: f64, what: &str) -> Result<f64> {
+    if x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(value_error(format!("{what} must be >= 0, got {x}")))
+    }
+}
+
+/// `x` (a finite number) when it is a Poisson ratio, in (-1, 0.5).
+fn poisson_ratio(x: f64, what: &str) -> Result<f64> {
+    if -1.0 < x && x < 0.5 {
+        Ok(x)
+    } else {
+        Err(value_error(format!("{what} must be in (-1, 0.5), got {x}")))
     }
 }
 
@@ -244,9 +276,9 @@ fn region_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<MaterialRegion> {
         let w = format!("{what}['{key}']");
         match key.as_str() {
             "where" => pred = Some(str_arg(&v, &w)?),
-            "density" => r.density = Some(real_arg(&v, &w)?),
-            "young" => r.young = Some(real_arg(&v, &w)?),
-            "poisson" => r.poisson = Some(real_arg(&v, &w)?),
+            "density" => r.density = Some(positive(real_arg(&v, &w)?, &w)?),
+            "young" => r.young = Some(positive(real_arg(&v, &w)?, &w)?),
+            "poisson" => r.poisson = Some(poisson_ratio(real_arg(&v, &w)?, &w)?),
             _ => {
                 return Err(type_error(format!(
                     "{what} has an unknown key '{key}' (known: where, density, young, poisson)"
@@ -433,11 +465,11 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
                     .map(|(i, m)| model_arg(m, i))
                     .collect::<Result<_>>()?;
             }
-            "density" => cfg.density = real_arg(v, k)?,
-            "young" => cfg.young = real_arg(v, k)?,
-            "poisson" => cfg.poisson = real_arg(v, k)?,
-            "damping" => cfg.damping = real_arg(v, k)?,
-            "dt" => cfg.dt = real_arg(v, k)?,
+            "density" => cfg.density = positive(real_arg(v, k)?, k)?,
+            "young" => cfg.young = positive(real_arg(v, k)?, k)?,
+            "poisson" => cfg.poisson = poisson_ratio(real_arg(v, k)?, k)?,
+            "damping" => cfg.damping = non_negative(real_arg(v, k)?, k)?,
+            "dt" => cfg.dt = positive(real_arg(v, k)?, k)?,
             "gravity" => cfg.gravity = vec3_arg(v, k)?,
             "ground" => cfg.ground = ground_arg(v)?,
             "fixed" => {
@@ -502,7 +534,7 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
 /// The map behind `obj` (see [`crate::rules::gmap_core`]), copied.
 fn gmap_copy_arg(obj: &Bound<'_, PyAny>) -> PyResult<topomech_gmap::GMap> {
     let core = crate::rules::gmap_core(obj)?;
-    let g = core.try_borrow()?;
+    let g = shared(&core)?;
     Ok(g.map()?.clone())
 }
 
@@ -520,6 +552,11 @@ fn gmap_copy_arg(obj: &Bound<'_, PyAny>) -> PyResult<topomech_gmap::GMap> {
 /// topology changes: dicts `{"time": t, "kind": "cut", "plane": {"normal": [..], "offset":
 /// o}}` or `{"time": t, "kind": "cut", "where": predicate on the centroid of the shared face
 /// or edge}`), `fracture` (`{"criterion": "stress" | "strain", "threshold": x}`, or None).
+///
+/// Raises `TypeError` for a value of the wrong type or an unknown key, `ValueError` for a
+/// value that is not finite or out of its range (`dt`, `density`, `young` > 0, `poisson` in
+/// (-1, 0.5), `damping` >= 0; NaN, an infinity and a negative `dt` alike) and
+/// `SimulationError` for a configuration the kernel refuses.
 #[pyclass(name = "Simulation", module = "topomech._core")]
 pub(crate) struct PySimulation {
     inner: Simulation,
@@ -630,8 +667,13 @@ impl PySimulation {
     /// Sets the external loads `f_ext` from a float64 `(V, 3)` array of finite values (N, in
     /// vertex order): constant forces added to the models' forces every step and balanced by
     /// the static solve.
-    fn set_external_forces(&mut self, py: Python<'_>, forces: &Bound<'_, PyAny>) -> PyResult<()> {
-        let n = self.sim()?.vertex_darts().len();
+    fn set_external_forces(
+        slf: &Bound<'_, Self>,
+        py: Python<'_>,
+        forces: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
+        let n = this.sim()?.vertex_darts().len();
         let rows = guard(|| {
             let rows = rows3_arg(forces, "forces", "V")?;
             if rows.len() != n {
@@ -648,23 +690,28 @@ impl PySimulation {
             }
             Ok(rows)
         })?;
-        self.run(py, |sim| Ok(sim.set_external_forces(&rows)?))
+        this.run(py, |sim| Ok(sim.set_external_forces(&rows)?))
     }
 
     /// The external loads `f_ext` `(V, 3)` (N).
-    fn external_forces<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows = self.read(|s| Ok(s.external_forces()?))?;
+    fn external_forces<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let this = shared(slf)?;
+        let rows = this.read(|s| Ok(s.external_forces()?))?;
         guard(|| rows_to_array(py, &rows))
     }
 
     /// Runs `n` time steps. On divergence raises `DivergenceError` (with `step`, `vertex` and
     /// `why`); the state is then the one before the failed step. Ctrl-C stops between steps.
     #[pyo3(signature = (n = 1))]
-    fn step(&mut self, py: Python<'_>, n: i64) -> PyResult<()> {
+    fn step(slf: &Bound<'_, Self>, py: Python<'_>, n: i64) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
         let n = u64::try_from(n)
             .map_err(|_| PyErr::from(value_error(format!("n must be >= 0, got {n}"))))?;
         for _ in 0..n {
-            self.run(py, |sim| Ok(sim.step()?))?;
+            this.run(py, |sim| Ok(sim.step()?))?;
             py.check_signals()?;
         }
         Ok(())
@@ -676,17 +723,18 @@ impl PySimulation {
     /// nothing changes then) and the rows appended, int64 (k,) (existing rows keep their
     /// meaning).
     fn cut<'py>(
-        &mut self,
+        slf: &Bound<'_, Self>,
         py: Python<'py>,
         normal: &Bound<'_, PyAny>,
         offset: &Bound<'_, PyAny>,
     ) -> PyResult<(usize, Bound<'py, PyArray1<i64>>)> {
+        let mut this = exclusive(slf)?;
         let cut = guard(|| {
             let normal = vec3_arg(normal, "normal")?;
             let offset = real_arg(offset, "offset")?;
             plane_cut(normal, offset, "normal")
         })?;
-        let r = self.run(py, move |sim| Ok(sim.cut(&cut)?))?;
+        let r = this.run(py, move |sim| Ok(sim.cut(&cut)?))?;
         Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
     }
 
@@ -696,11 +744,12 @@ impl PySimulation {
     /// l / l0 - 1). Returns how many faces or edges were opened and the rows appended, int64
     /// (k,).
     fn fracture<'py>(
-        &mut self,
+        slf: &Bound<'_, Self>,
         py: Python<'py>,
         criterion: &Bound<'_, PyAny>,
         threshold: &Bound<'_, PyAny>,
     ) -> PyResult<(usize, Bound<'py, PyArray1<i64>>)> {
+        let mut this = exclusive(slf)?;
         let f = guard(|| {
             let criterion = criterion_arg(&str_arg(criterion, "criterion")?, "criterion")?;
             let threshold = real_arg(threshold, "threshold")?;
@@ -709,39 +758,56 @@ impl PySimulation {
                 threshold,
             })
         })?;
-        let r = self.run(py, move |sim| Ok(sim.fracture(f)?))?;
+        let r = this.run(py, move |sim| Ok(sim.fracture(f)?))?;
         Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
     }
 
     /// The topology changes so far, in order: dicts `{"step": after which step, "time",
     /// "kind": "cut" | "fracture", "unsewn": faces (3D) or edges (2D) unsewn}`.
-    fn topology_changes<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
-        let changes = self.read(|s| Ok(s.topology_changes().to_vec()))?;
+    fn topology_changes<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let this = shared(slf)?;
+        let changes = this.read(|s| Ok(s.topology_changes().to_vec()))?;
         changes.iter().map(|c| change_dict(py, c)).collect()
     }
 
     /// Current positions, float64 (V, 3).
-    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows = self.read(|s| Ok(s.vertex_vec3("position")?))?;
+    fn positions<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let this = shared(slf)?;
+        let rows = this.read(|s| Ok(s.vertex_vec3("position")?))?;
         guard(|| rows_to_array(py, &rows))
     }
 
     /// Current velocities, float64 (V, 3).
-    fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows = self.read(|s| Ok(s.vertex_vec3("velocity")?))?;
+    fn velocities<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let this = shared(slf)?;
+        let rows = this.read(|s| Ok(s.vertex_vec3("velocity")?))?;
         guard(|| rows_to_array(py, &rows))
     }
 
     /// Rest positions (the positions when the simulation was built), float64 (V, 3).
-    fn rest_positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows = self.read(|s| Ok(s.vertex_vec3("rest")?))?;
+    fn rest_positions<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let this = shared(slf)?;
+        let rows = this.read(|s| Ok(s.vertex_vec3("rest")?))?;
         guard(|| rows_to_array(py, &rows))
     }
 
     /// The models' forces on each vertex at the current state (without gravity and viscous
     /// damping), float64 (V, 3), summed over a row's orbits. Computes them now.
-    fn forces<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows = self.run(py, |s| {
+    fn forces<'py>(slf: &Bound<'_, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let mut this = exclusive(slf)?;
+        let rows = this.run(py, |s| {
             s.forces()?;
             Ok(s.vertex_vec3_sum("force")?)
         })?;
@@ -749,25 +815,31 @@ impl PySimulation {
     }
 
     /// Lumped vertex masses, float64 (V,), summed over a row's orbits.
-    fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(self
+    fn masses<'py>(slf: &Bound<'_, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let this = shared(slf)?;
+        Ok(this
             .read(|s| Ok(s.vertex_scalar_sum("mass")?))?
             .into_pyarray(py))
     }
 
     /// The input point index of each row, int64 (V,) (-1 for none).
-    fn point_ids<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        Ok(self.read(|s| Ok(s.point_ids()?))?.into_pyarray(py))
+    fn point_ids<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let this = shared(slf)?;
+        Ok(this.read(|s| Ok(s.point_ids()?))?.into_pyarray(py))
     }
 
     /// Every element (volume in 3D, face in 2D), in the order of its smallest dart: the
     /// `cell_id`s, int64 (E,) (-1 when unknown), and each element's vertex rows, int64 arrays.
     #[allow(clippy::type_complexity)]
     fn elements<'py>(
-        &self,
+        slf: &Bound<'_, Self>,
         py: Python<'py>,
     ) -> PyResult<(Bound<'py, PyArray1<i64>>, Vec<Bound<'py, PyArray1<i64>>>)> {
-        let elements = self.read(|s| Ok(s.elements()?))?;
+        let this = shared(slf)?;
+        let elements = this.read(|s| Ok(s.elements()?))?;
         let ids: Vec<i64> = elements.iter().map(|e| e.cell_id).collect();
         let rows = elements
             .iter()
@@ -777,8 +849,9 @@ impl PySimulation {
     }
 
     /// Holds the rows where `mask` (bool (V,)) is true, frees the others.
-    fn set_fixed(&mut self, py: Python<'_>, mask: &Bound<'_, PyAny>) -> PyResult<()> {
-        let n = self.sim()?.n_vertices();
+    fn set_fixed(slf: &Bound<'_, Self>, py: Python<'_>, mask: &Bound<'_, PyAny>) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
+        let n = this.sim()?.n_vertices();
         let mask = guard(|| {
             let a = array_arg::<bool>(mask, "mask", "bool")?;
             if a.shape() != [n] {
@@ -789,19 +862,20 @@ impl PySimulation {
             }
             Ok(a.as_array().iter().copied().collect::<Vec<bool>>())
         })?;
-        self.run(py, move |sim| Ok(sim.set_fixed(&mask)?))
+        this.run(py, move |sim| Ok(sim.set_fixed(&mask)?))
     }
 
     /// Writes a vertex embedding from one value per row: float64 (V,) for `f64`, float64
     /// (V, 3) for `vec3`, bool (V,) for `bool` (every orbit of a row gets its row's value; a
     /// force, `f_*`, goes to the row's first orbit alone: it is the row's total).
     fn set_vertex_field(
-        &mut self,
+        slf: &Bound<'_, Self>,
         py: Python<'_>,
         name: &str,
         values: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
-        let n = self.sim()?.n_vertices();
+        let mut this = exclusive(slf)?;
+        let n = this.sim()?.n_vertices();
         let values = guard(|| {
             let shape_err = |shape: &[usize]| {
                 value_error(format!(
@@ -827,38 +901,55 @@ impl PySimulation {
                 s => Err(shape_err(s)),
             }
         })?;
-        self.run(py, move |sim| Ok(sim.set_vertex_field(name, &values)?))
+        this.run(py, move |sim| Ok(sim.set_vertex_field(name, &values)?))
     }
 
     /// Whether each vertex is fixed (held in place or at a prescribed displacement), bool (V,).
-    fn fixed<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
-        Ok(self.read(|s| Ok(s.vertex_bool("fixed")?))?.into_pyarray(py))
+    fn fixed<'py>(slf: &Bound<'_, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let this = shared(slf)?;
+        Ok(this.read(|s| Ok(s.vertex_bool("fixed")?))?.into_pyarray(py))
     }
 
     /// Sets the positions, float64 (V, 3) of finite values (fixed vertices included: they stay
     /// where they are put).
-    fn set_positions(&mut self, py: Python<'_>, positions: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.set_vec3(py, "position", "positions", positions)
+    fn set_positions(
+        slf: &Bound<'_, Self>,
+        py: Python<'_>,
+        positions: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
+        this.set_vec3(py, "position", "positions", positions)
     }
 
     /// Sets the velocities, float64 (V, 3) of finite values.
-    fn set_velocities(&mut self, py: Python<'_>, velocities: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.set_vec3(py, "velocity", "velocities", velocities)
+    fn set_velocities(
+        slf: &Bound<'_, Self>,
+        py: Python<'_>,
+        velocities: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
+        this.set_vec3(py, "velocity", "velocities", velocities)
     }
 
     /// Sum of the vertex masses.
-    fn total_mass(&self) -> PyResult<f64> {
-        self.read(|s| Ok(s.total_mass()?))
+    fn total_mass(slf: &Bound<'_, Self>) -> PyResult<f64> {
+        let this = shared(slf)?;
+        this.read(|s| Ok(s.total_mass()?))
     }
 
     /// Kinetic energy, sum of m |v|^2 / 2.
-    fn kinetic_energy(&self) -> PyResult<f64> {
-        self.read(|s| Ok(s.kinetic_energy()?))
+    fn kinetic_energy(slf: &Bound<'_, Self>) -> PyResult<f64> {
+        let this = shared(slf)?;
+        this.read(|s| Ok(s.kinetic_energy()?))
     }
 
     /// Linear momentum, sum of m v, float64 (3,).
-    fn momentum<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(self.read(|s| Ok(s.momentum()?))?.to_vec().into_pyarray(py))
+    fn momentum<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let this = shared(slf)?;
+        Ok(this.read(|s| Ok(s.momentum()?))?.to_vec().into_pyarray(py))
     }
 
     /// The values of a vertex embedding, one row per vertex: shape (V,) for `f64` (float64),
@@ -866,13 +957,18 @@ impl PySimulation {
     /// matrix. An embedding on another orbit raises `EmbeddingError`. For a row of several
     /// orbits, masses and forces (`mass`, `force`, `df`, `f_*`, `df_*`) are summed over them;
     /// other values are the first orbit's.
-    fn embedding<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+    fn embedding<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyAny>> {
         enum Column {
             Real(Vec<usize>, Vec<f64>),
             Int(Vec<i64>),
             Bool(Vec<bool>),
         }
-        let col = self.read(|s| {
+        let this = shared(slf)?;
+        let col = this.read(|s| {
             let g = s.gmap();
             let id = g.require(name)?;
             let e = g.embedding(id);
@@ -956,63 +1052,74 @@ impl PySimulation {
     }
 
     /// A copy of the simulated map, with every embedding (positions as they are now).
-    fn gmap(&self) -> PyResult<PyGMap> {
-        Ok(PyGMap::new(self.read(|s| Ok(s.gmap().clone()))?))
+    fn gmap(slf: &Bound<'_, Self>) -> PyResult<PyGMap> {
+        let this = shared(slf)?;
+        Ok(PyGMap::new(this.read(|s| Ok(s.gmap().clone()))?))
     }
 
     /// Simulated time.
     #[getter]
-    fn time(&self) -> PyResult<f64> {
-        Ok(self.sim()?.time())
+    fn time(slf: &Bound<'_, Self>) -> PyResult<f64> {
+        let this = shared(slf)?;
+        Ok(this.sim()?.time())
     }
 
     /// Steps done.
     #[getter]
-    fn steps(&self) -> PyResult<u64> {
-        Ok(self.sim()?.steps())
+    fn steps(slf: &Bound<'_, Self>) -> PyResult<u64> {
+        let this = shared(slf)?;
+        Ok(this.sim()?.steps())
     }
 
     /// The number of vertices (V, the rows of the per-vertex arrays: particles).
     #[getter]
-    fn n_vertices(&self) -> PyResult<usize> {
-        Ok(self.sim()?.n_vertices())
+    fn n_vertices(slf: &Bound<'_, Self>) -> PyResult<usize> {
+        let this = shared(slf)?;
+        Ok(this.sim()?.n_vertices())
     }
 
     /// The dimension of the map: 2 (surface) or 3 (volume).
     #[getter]
-    fn dimension(&self) -> PyResult<usize> {
-        Ok(self.sim()?.gmap().dimension())
+    fn dimension(slf: &Bound<'_, Self>) -> PyResult<usize> {
+        let this = shared(slf)?;
+        Ok(this.sim()?.gmap().dimension())
     }
 
     /// The time step.
     #[getter]
-    fn dt(&self) -> PyResult<f64> {
-        Ok(self.sim()?.config().dt)
+    fn dt(slf: &Bound<'_, Self>) -> PyResult<f64> {
+        let this = shared(slf)?;
+        Ok(this.sim()?.config().dt)
     }
 
     /// The map's topology version: it changes when a topology change (a cut, a fracture)
     /// relinks darts, and with it the vertices and cells.
     #[getter]
-    fn topology_version(&self) -> PyResult<u64> {
-        Ok(self.sim()?.gmap().version())
+    fn topology_version(slf: &Bound<'_, Self>) -> PyResult<u64> {
+        let this = shared(slf)?;
+        Ok(this.sim()?.gmap().version())
     }
 
     /// The integrator's name.
     #[getter]
-    fn integrator(&self) -> PyResult<&'static str> {
-        Ok(integrator_name(self.sim()?.config().integrator))
+    fn integrator(slf: &Bound<'_, Self>) -> PyResult<&'static str> {
+        let this = shared(slf)?;
+        Ok(integrator_name(this.sim()?.config().integrator))
     }
 
-    fn __repr__(&self) -> String {
-        if self.poisoned {
+    fn __repr__(slf: &Bound<'_, Self>) -> String {
+        let Ok(this) = slf.try_borrow() else {
+            return "<topomech._core.Simulation (busy: in use by another thread)>".to_string();
+        };
+        if this.poisoned {
             return "<topomech._core.Simulation (unusable after an internal error)>".to_string();
         }
         format!(
             "<topomech._core.Simulation dimension={} vertices={} steps={} time={}>",
-            self.inner.gmap().dimension(),
-            self.inner.n_vertices(),
-            self.inner.steps(),
-            self.inner.time()
+            this.inner.gmap().dimension(),
+            this.inner.n_vertices(),
+            this.inner.steps(),
+            this.inner.time()
         )
     }
 }
