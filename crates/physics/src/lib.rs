@@ -525,6 +525,9 @@ pub const IMPLICIT_TOLERANCE: f64 = 1e-8;
 /// The relative residual at which a static solve whose Newton step no longer decreases the
 /// residual (rounding in the forces) counts as converged.
 pub const STALL_TOLERANCE: f64 = 1e-8;
+/// The rounding level of the forces, in ulps of the size of their terms, at which a static
+/// solve whose Newton step no longer decreases the residual counts as converged.
+const ROUNDING_ULPS: f64 = 1e3;
 /// The smallest load increment automatic load stepping tries, as a fraction of the load.
 pub const MIN_LOAD_INCREMENT: f64 = 1.0 / 1024.0;
 /// Newton iterations allowed for one load increment.
@@ -1407,6 +1410,13 @@ impl Simulation {
         let norm = |r: &[[f64; 3]]| r.iter().map(|x| norm3(*x).powi(2)).sum::<f64>().sqrt();
         let scale = load.max(norm(&first)).max(norm(&r0)).max(f64::MIN_POSITIVE);
         let tol = STATIC_TOLERANCE * scale;
+        // the rounding level of the forces: the stiffness applied to the positions is the
+        // size of the forces' terms (at unit strain), each computed to a few ulps
+        let zero = vec![[0.0; 3]; n];
+        let mut kx = self.jvp(&x0, &zero)?;
+        project(&mut kx, &fixed);
+        let rounding = ROUNDING_ULPS * f64::EPSILON * norm(&kx);
+        let stall = (STALL_TOLERANCE * scale).max(rounding);
         let mut iterations = 0;
         let mut load_steps = 0;
         let (mut s, mut ds) = (0.0f64, 1.0f64);
@@ -1417,7 +1427,7 @@ impl Simulation {
             let t = (s + ds).min(1.0);
             let trial = at(t, &good);
             self.set_vertex_vec3("position", &trial)?;
-            let out = self.newton(&fixed, &r0, t, (tol, STALL_TOLERANCE * scale))?;
+            let out = self.newton(&fixed, &r0, t, (tol, stall))?;
             iterations += out.iterations;
             if t >= 1.0 && out.residual < best {
                 best = out.residual;
