@@ -123,3 +123,12 @@ def test_heavy_static_load_converges_by_load_stepping() -> None:
     assert np.abs(sim.forces()[free]).max() < 1e-6
     # large deflection: the nonlinear regime
     assert (sim.rest_positions() - sim.positions())[:, 1].max() > 0.4
+
+
+def test_explicit_run_summary_has_no_solver_report(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    code = cli.main(["run", "cloth", "--out", str(out), "--steps", "2", "--no-preview"])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert "solver" in summary
+    assert summary["solver"] is None

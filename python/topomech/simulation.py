@@ -191,8 +191,10 @@ class Simulation:
     # ------------------------------------------------------------------ stepping
 
     def step(self, n: int = 1) -> None:
-        """Runs ``n`` time steps; raises :class:`DivergenceError` on divergence (the state is
-        then the one before the failed step)."""
+        """Runs ``n`` time steps; raises :class:`DivergenceError` on divergence, and when a
+        ``static`` or ``implicit_euler`` step's solve does not converge (its message gives the
+        relative residual and the tolerance; :meth:`solver_report` the details). The state is
+        then the one before the failed step."""
         self._core.step(n)
 
     # ------------------------------------------------------------------ topology

@@ -151,3 +151,34 @@ fn unbalanced_load_fails_with_the_residual() {
     assert!(!r.converged, "{r:?}");
     assert!(r.relative_residual > 0.1, "{r:?}");
 }
+
+/// An implicit Euler step reports its linear solve: converged, within its tolerance, no load
+/// stepping; the explicit integrators report nothing.
+#[test]
+fn implicit_euler_step_reports_its_linear_solve() {
+    let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    for (integrator, reported) in [
+        (Integrator::ImplicitEuler, true),
+        (Integrator::SymplecticEuler, false),
+    ] {
+        let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![model("stretch_elementary", &[("stiffness", 1e3)])],
+            fixed: vec!["x < 1e-9".into()],
+            integrator,
+            ..Config::default()
+        };
+        let mut s = Simulation::new(g, cfg).unwrap();
+        s.step().unwrap();
+        s.step().unwrap();
+        let Some(r) = s.solver_report() else {
+            assert!(!reported);
+            continue;
+        };
+        assert!(reported);
+        assert_eq!(r.integrator, "implicit_euler");
+        assert!(r.converged && r.iterations >= 1, "{r:?}");
+        assert!(r.relative_residual <= r.tolerance, "{r:?}");
+        assert_eq!((r.load_steps, r.load_stepped_steps), (0, 0));
+    }
+}
