@@ -86,6 +86,7 @@ SUMMARY_KEYS = (
     "kinetic_energy",
     "momentum",
     "max_displacement",
+    "solver",
     "frames",
     "wall_seconds",
     "step_seconds",
@@ -276,7 +277,10 @@ def run_scene(
     the final map: 2 or more once a cut or a fracture split the object), ``topology_changes``
     (a list of ``{"step", "time", "kind": "cut" | "fracture", "unsewn"}``, ``unsewn`` counting
     the faces, in 3D, or edges, in 2D, opened), ``total_mass``, ``kinetic_energy``,
-    ``momentum``, ``max_displacement``, ``frames``, ``wall_seconds`` (the whole run),
+    ``momentum``, ``max_displacement``, ``solver`` (static and implicit Euler runs: the
+    last step's :meth:`Simulation.solver_report`, with the worst relative residual over the
+    run and the number of steps that needed load stepping; null for explicit integrators),
+    ``frames``, ``wall_seconds`` (the whole run),
     ``step_seconds`` (in steps only), ``steps_per_second``, ``outputs`` and
     ``topomech_version`` (a number that is not finite, after a divergence, is null); plus
     ``error`` (``type``, ``message``, and ``step``, ``vertex`` for a divergence, ``event`` for
@@ -416,6 +420,7 @@ def run_scene(
         "kinetic_energy": sim.kinetic_energy(),
         "momentum": [float(x) for x in sim.momentum()],
         "max_displacement": _max_displacement(sim),
+        "solver": sim.solver_report(),
         "frames": len(frames),
         "wall_seconds": time.perf_counter() - t0,
         "step_seconds": step_seconds,

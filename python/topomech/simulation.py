@@ -191,8 +191,10 @@ class Simulation:
     # ------------------------------------------------------------------ stepping
 
     def step(self, n: int = 1) -> None:
-        """Runs ``n`` time steps; raises :class:`DivergenceError` on divergence (the state is
-        then the one before the failed step)."""
+        """Runs ``n`` time steps; raises :class:`DivergenceError` on divergence, and when a
+        ``static`` or ``implicit_euler`` step's solve does not converge (its message gives the
+        relative residual and the tolerance; :meth:`solver_report` the details). The state is
+        then the one before the failed step."""
         self._core.step(n)
 
     # ------------------------------------------------------------------ topology
@@ -215,6 +217,19 @@ class Simulation:
         (:class:`SimulationError` otherwise)."""
         unsewn, added = self._core.fracture(criterion, threshold)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
+
+    def solver_report(self) -> dict[str, Any] | None:
+        """What the solve of the last ``static`` or ``implicit_euler`` step did: a dict with
+        ``integrator``, ``iterations`` (Newton iterations over every load increment, or
+        conjugate-gradient iterations), ``residual`` (the norm of the residual force on the
+        free vertices, or of the linear system), ``relative_residual`` (divided by the load),
+        ``tolerance``, ``converged``, ``load_steps`` (the load increments the static solve
+        took: more than 1 when automatic load stepping was needed), ``load_fraction`` (of
+        the load reached), ``worst_relative_residual`` (over every step so far) and
+        ``load_stepped_steps`` (how many steps needed load stepping). None before the first
+        such step and for the explicit integrators. After a step that raised
+        :class:`DivergenceError` it describes that step."""
+        return self._core.solver_report()
 
     def topology_changes(self) -> list[TopologyChange]:
         """The topology changes so far, in order."""

@@ -762,6 +762,31 @@ impl PySimulation {
         Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
     }
 
+    /// What the solve of the last static or implicit Euler step did, as a dict:
+    /// `integrator`, `iterations` (Newton iterations over every load increment, or
+    /// conjugate-gradient iterations), `residual`, `relative_residual` (to the load),
+    /// `tolerance`, `converged`, `load_steps` (the load increments taken), `load_fraction`
+    /// (reached), `worst_relative_residual` (over every step so far) and `load_stepped_steps`
+    /// (steps that needed more than one increment); None before the first such step and for
+    /// the explicit integrators. After a failed step it describes the failure.
+    fn solver_report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(r) = self.read(|s| Ok(s.solver_report().cloned()))? else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("integrator", r.integrator)?;
+        d.set_item("iterations", r.iterations)?;
+        d.set_item("residual", r.residual)?;
+        d.set_item("relative_residual", r.relative_residual)?;
+        d.set_item("tolerance", r.tolerance)?;
+        d.set_item("converged", r.converged)?;
+        d.set_item("load_steps", r.load_steps)?;
+        d.set_item("load_fraction", r.load_fraction)?;
+        d.set_item("worst_relative_residual", r.worst_relative_residual)?;
+        d.set_item("load_stepped_steps", r.load_stepped_steps)?;
+        Ok(Some(d))
+    }
+
     /// The topology changes so far, in order: dicts `{"step": after which step, "time",
     /// "kind": "cut" | "fracture", "unsewn": faces (3D) or edges (2D) unsewn}`.
     fn topology_changes<'py>(
