@@ -13,6 +13,7 @@ import pytest
 
 import topomech
 from topomech import cli
+from topomech.scene import parse_scene
 
 REPORT_KEYS = {
     "integrator",
@@ -132,3 +133,58 @@ def test_explicit_run_summary_has_no_solver_report(tmp_path: Path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert "solver" in summary
     assert summary["solver"] is None
+
+
+HUGE_LOAD = """
+name = "huge_load"
+
+[mesh]
+generator = "box"
+element = "tet"
+size = [1.0, 0.2, 0.2]
+cells = [4, 1, 1]
+
+[[model]]
+kind = "linear_fem"
+young = 1e7
+poisson = 0.3
+
+[[fix]]
+where = "x < 1e-9"
+
+[[load]]
+kind = "traction"
+traction = [0.0, TRACTION, 0.0]
+where = "x > 1.0 - 1e-9"
+
+[world]
+gravity = [0.0, 0.0, 0.0]
+
+[integrator]
+kind = "static"
+dt = 1.0
+steps = 1
+"""
+
+
+def test_a_load_whose_squares_overflow_is_never_a_silent_success() -> None:
+    """A traction of 1e160 Pa (its squared norm overflows f64) used to "converge" in zero
+    iterations to zero displacement: the tolerance, computed from that overflowed norm, was
+    infinite. Linear FEM is linear, so a finite answer must be exactly the 1 Pa answer scaled
+    (1e-9 relative: one static solve to 1e-10 each); otherwise the solve must fail with a
+    DivergenceError. At 1e100 Pa the squares are finite and the scaled answer is required."""
+    unit = parse_scene(HUGE_LOAD.replace("TRACTION", "1.0")).build()
+    unit.step()
+    u1 = unit.displacements()
+    assert np.abs(u1).max() > 0
+    for traction, must_converge in ((1e100, True), (1e160, False)):
+        sim = parse_scene(HUGE_LOAD.replace("TRACTION", repr(traction))).build()
+        try:
+            sim.step()
+        except topomech.DivergenceError:
+            assert not must_converge, f"{traction:e} Pa: should converge"
+            assert sim.solver_report() is None or not sim.solver_report()["converged"]
+            continue
+        u = sim.displacements()
+        assert np.all(np.isfinite(u))
+        np.testing.assert_allclose(u, traction * u1, rtol=1e-9, atol=0)

@@ -1407,8 +1407,17 @@ impl Simulation {
         let r0 = self.static_residual(&fixed, None, 1.0)?;
         self.set_vertex_vec3("position", &x0)?;
         let first = self.static_residual(&fixed, None, 1.0)?;
-        let norm = |r: &[[f64; 3]]| r.iter().map(|x| norm3(*x).powi(2)).sum::<f64>().sqrt();
+        let norm = rows_norm;
         let scale = load.max(norm(&first)).max(norm(&r0)).max(f64::MIN_POSITIVE);
+        if !scale.is_finite() {
+            return Err(PhysicsError::Diverged {
+                step: self.steps + 1,
+                vertex: 0,
+                why: format!(
+                    "the static solve's load overflows: its size is {scale:e} (gravity times mass plus the external loads), beyond what f64 arithmetic can balance; scale the problem (units) or the load down"
+                ),
+            });
+        }
         let tol = STATIC_TOLERANCE * scale;
         // the rounding level of the forces: the stiffness applied to the positions is the
         // size of the forces' terms (at unit strain), each computed to a few ulps
@@ -1537,7 +1546,7 @@ impl Simulation {
         t: f64,
         (tol, stall): (f64, f64),
     ) -> Result<NewtonOutcome, PhysicsError> {
-        let norm = |r: &[[f64; 3]]| r.iter().map(|x| norm3(*x).powi(2)).sum::<f64>().sqrt();
+        let norm = rows_norm;
         let worst_of = |r: &[[f64; 3]]| {
             r.iter()
                 .map(|x| norm3(*x))
@@ -2366,8 +2375,25 @@ impl Rows {
 /// Per vertex: total force, mass, fixed.
 type VertexForces = (Vec<[f64; 3]>, Vec<f64>, Vec<bool>);
 
+/// The Euclidean norm of a `(V, 3)` array, scaled by its largest entry so that forces up to
+/// the largest f64 do not overflow when squared (an unscaled sum of squares of 1e160 N is
+/// infinite, and a solve would take an infinite tolerance for convergence).
+fn rows_norm(r: &[[f64; 3]]) -> f64 {
+    let m = r.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    m * r
+        .iter()
+        .flatten()
+        .map(|x| (x / m) * (x / m))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The length of a 3-vector, without overflow for entries up to the largest f64.
 fn norm3(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+    a[0].hypot(a[1]).hypot(a[2])
 }
 
 /// Zeroes the components of fixed vertices.
