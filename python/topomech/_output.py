@@ -31,7 +31,6 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech._cells import CELL_FACES, KIND_BY_SIZE
-from topomech._core import TopomechError
 
 if TYPE_CHECKING:
     from topomech._cells import FlatMesh
@@ -88,15 +87,8 @@ def reversed_cells(kind: str, cells: I64) -> I64:
 
 
 def point_ids(sim: Simulation) -> I64:
-    """The input point index of each vertex row ``(V,)``: ``Simulation.point_ids()``, else
-    the ``point_id`` vertex embedding, else the row itself."""
-    f = getattr(sim, "point_ids", None)
-    if callable(f):
-        return np.asarray(f(), dtype=np.int64)
-    try:
-        return np.asarray(sim.embedding("point_id"), dtype=np.int64).reshape(-1)
-    except (TopomechError, KeyError, ValueError):
-        return np.arange(sim.n_vertices, dtype=np.int64)
+    """The input point index of each vertex row ``(V,)`` (``Simulation.point_ids()``)."""
+    return np.asarray(sim.point_ids(), dtype=np.int64)
 
 
 @dataclass
@@ -119,18 +111,9 @@ def _kind_of(dimension: int, n: int) -> str:
 
 
 def _map_elements(sim: Simulation) -> tuple[I64, list[I64]]:
-    """``(cell_ids, rows)`` of every element in the map's order: ``Simulation.elements()``,
-    else the map's extraction (``cell_id`` -1)."""
-    f = getattr(sim, "elements", None)
-    if callable(f):
-        ids, rows = f()
-        return np.asarray(ids, dtype=np.int64), [np.asarray(r, dtype=np.int64) for r in rows]
-    _, _, offsets, conn = sim.core.gmap().to_flat()
-    rows = [
-        np.asarray(conn[offsets[c] : offsets[c + 1]], dtype=np.int64)
-        for c in range(len(offsets) - 1)
-    ]
-    return np.full(len(rows), -1, dtype=np.int64), rows
+    """``(cell_ids, rows)`` of every element in the map's order (``Simulation.elements()``)."""
+    ids, rows = sim.elements()
+    return np.asarray(ids, dtype=np.int64), [np.asarray(r, dtype=np.int64) for r in rows]
 
 
 def _rotation_of(a: I64, b: I64) -> npt.NDArray[np.bool_]:

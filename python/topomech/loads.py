@@ -293,36 +293,15 @@ class BoundaryFace:
     element: int
 
 
-def _point_ids(sim: Simulation, groups: MeshGroups | None = None) -> npt.NDArray[np.int64]:
-    """The input point of each row: the simulation's ``point_ids()`` when it has them, else
-    the input point at the row's rest position when ``groups`` knows the file's points
-    (-1 where none), else the row itself."""
-    f = getattr(sim, "point_ids", None)
-    if f is not None:
-        return np.asarray(f(), dtype=np.int64)
-    if groups is not None and groups.points is not None and len(groups.points):
-        pts = np.zeros((len(groups.points), 3))
-        pts[:, : min(3, groups.points.shape[1])] = groups.points[:, :3]
-        index: dict[tuple[float, ...], int] = {}
-        for i, p in enumerate(pts.tolist()):
-            index.setdefault(tuple(p), i)
-        rest = sim.rest_positions().tolist()
-        return np.array([index.get(tuple(r), -1) for r in rest], dtype=np.int64)
-    return np.arange(sim.n_vertices, dtype=np.int64)
+def _point_ids(sim: Simulation) -> npt.NDArray[np.int64]:
+    """The input point of each row (``Simulation.point_ids()``; -1 for none)."""
+    return np.asarray(sim.point_ids(), dtype=np.int64)
 
 
 def _elements(sim: Simulation) -> tuple[npt.NDArray[np.int64], list[npt.NDArray[np.int64]]]:
-    """Each element's cell_id and vertex rows (contract C5), else from the map's flat mesh
-    (whose points are the rows)."""
-    f = getattr(sim, "elements", None)
-    if f is not None:
-        ids, rows = f()
-        return np.asarray(ids, dtype=np.int64), [np.asarray(r, dtype=np.int64) for r in rows]
-    _, _, offsets, conn = sim.gmap().to_flat()
-    offsets = np.asarray(offsets)
-    conn = np.asarray(conn)
-    rows = [conn[offsets[i] : offsets[i + 1]].astype(np.int64) for i in range(len(offsets) - 1)]
-    return np.arange(len(rows), dtype=np.int64), rows
+    """Each element's cell_id and vertex rows (``Simulation.elements()``)."""
+    ids, rows = sim.elements()
+    return np.asarray(ids, dtype=np.int64), [np.asarray(r, dtype=np.int64) for r in rows]
 
 
 def _element_faces(n: int, dim: int) -> tuple[tuple[int, ...], ...]:
@@ -393,7 +372,7 @@ def _one_selection(where: str | None, points: Any, group: str | None) -> None:
 def _cells_by_id(sim: Simulation, groups: MeshGroups | None) -> list[list[int]]:
     """Each kept cell's input points, by cell_id (for cell sets)."""
     ids, rows = _elements(sim)
-    pid = _point_ids(sim, groups)
+    pid = _point_ids(sim)
     n = int(ids.max()) + 1 if len(ids) else 0
     cells: list[list[int]] = [[] for _ in range(n)]
     for cid, r in zip(ids, rows):
@@ -407,7 +386,7 @@ def _rows_of_points(
 ) -> npt.NDArray[np.bool_]:
     """The rows whose input point is in ``pts``; refuses points that are not vertices of the
     mesh, listing them all."""
-    pid = _point_ids(sim, groups)
+    pid = _point_ids(sim)
     wanted = np.array(sorted({int(p) for p in pts}), dtype=np.int64)
     mask = np.isin(pid, wanted)
     missing = sorted(set(wanted.tolist()) - set(pid[mask].tolist()))
@@ -444,7 +423,7 @@ def select_vertices(
         assert group is not None
         g = groups if groups is not None else MeshGroups()
         pts_set = g.points_of(group, _cells_by_id(sim, groups) if group in g.cell_sets else None)
-        pid = _point_ids(sim, groups)
+        pid = _point_ids(sim)
         mask = np.isin(pid, np.array(sorted(pts_set), dtype=np.int64))
         what = f"group '{group}'"
     if not mask.any():
@@ -496,7 +475,7 @@ def select_faces(
             pts_set = g.points_of(
                 group, _cells_by_id(sim, groups) if group in g.cell_sets else None
             )
-            mask = np.isin(_point_ids(sim, groups), np.array(sorted(pts_set), dtype=np.int64))
+            mask = np.isin(_point_ids(sim), np.array(sorted(pts_set), dtype=np.int64))
             chosen = [f for f in faces if all(mask[r] for r in f.rows)]
         what = f"group '{group}'"
     if not chosen:
@@ -513,7 +492,7 @@ def _facets_on_boundary(
 ) -> list[BoundaryFace]:
     """The boundary faces the group's facets (input point indices) are; refuses the facets
     that are not boundary faces, all of them."""
-    pid = _point_ids(sim, groups)
+    pid = _point_ids(sim)
     by_points: dict[tuple[int, ...], BoundaryFace] = {}
     for f in faces:
         by_points.setdefault(tuple(sorted(int(pid[r]) for r in f.rows)), f)
@@ -717,7 +696,7 @@ def point_load(
     if f.shape != (3,) or not np.all(np.isfinite(f)):
         raise LoadError(f"force: expected 3 finite numbers, got {force!r}")
     mask = select_vertices(sim, where=where, points=points, group=group, groups=groups)
-    pid = _point_ids(sim, groups)
+    pid = _point_ids(sim)
     share = np.ones(sim.n_vertices)
     known = mask & (pid >= 0)
     if known.any():

@@ -461,11 +461,8 @@ class Recorder:
 
     def _external(self) -> F64:
         """The external loads ``f_ext`` (constant: their work is a potential, counted with
-        gravity), zeros for a simulation without them."""
-        f = getattr(self.sim, "external_forces", None)
-        if f is None:
-            return np.zeros((self.sim.n_vertices, 3))
-        return np.asarray(f(), dtype=np.float64)
+        gravity); zeros unless set."""
+        return np.asarray(self.sim.external_forces(), dtype=np.float64)
 
     def _elastic_forces(self) -> F64:
         """The models' forces at the current positions and zero velocity (without the

@@ -173,7 +173,7 @@ def _input_cells(sc: Scene) -> FlatMesh | None:
         return None
     from topomech.io import read_mesh
 
-    linear = bool(getattr(m, "linear", False)) or getattr(m, "order", None) == "linear"
+    linear = m.linear
     try:
         # read again: what it had to say was said the first time
         with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):

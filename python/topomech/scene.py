@@ -620,7 +620,7 @@ class Scene:
             return MeshGroups()  # a saved map keeps its numbering (point_id), not groups
 
         kwargs: dict[str, Any] = {}
-        if getattr(m, "linear", False):
+        if m.linear:
             kwargs["linear"] = True
         try:
             mesh, _ = read_mesh(m.file, **kwargs)
