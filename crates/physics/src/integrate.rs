@@ -1,0 +1,209 @@
+//! A time step: forces, accumulation and the explicit integrators.
+
+use topomech_gmap::{ColumnMut, Dart, EmbeddingId};
+use topomech_rules::{ApplyError, Params, Val};
+
+use crate::{Integrator, PhysicsError, Simulation};
+
+impl Simulation {
+    /// One time step: forces, accumulation, integration. On divergence (a non-finite
+    /// position or velocity) the state before the step is restored and an error names the
+    /// step and the vertex.
+    pub fn step(&mut self) -> Result<(), PhysicsError> {
+        let pos = self.id("position")?;
+        let vel = self.id("velocity")?;
+        // the state before the step: the whole position and velocity columns (kept to restore
+        // them on divergence; a step changes values only, never the slots)
+        for (id, saved) in [pos, vel].into_iter().zip(&mut self.saved) {
+            let column =
+                self.g.embedding(id).real_column().ok_or_else(|| {
+                    PhysicsError::Config("position and velocity must be vec3".into())
+                })?;
+            saved.clear();
+            saved.extend_from_slice(column);
+        }
+        let result = match self.cfg.integrator {
+            Integrator::ExplicitEuler => self.explicit("explicit_euler"),
+            Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
+            Integrator::ImplicitEuler => self.implicit_euler(),
+            Integrator::Static => self.solve_static(),
+        };
+        let bad = match &result {
+            // a rule computed a non-finite value (and wrote nothing): name its vertex
+            Err(PhysicsError::Apply(ApplyError::NonFinite {
+                rule,
+                embedding,
+                dart,
+                value,
+            })) => Some((
+                self.vertex_of(*dart, pos),
+                format!("rule '{rule}' computed a non-finite value {value} for '{embedding}' (dart {dart})"),
+            )),
+            Err(e) => Some((0, e.to_string())),
+            // every slot scanned in order first (dead slots included: they hold old, finite
+            // values), the vertices searched one by one only to name the one that fails
+            Ok(()) if self.columns_sane(pos, vel) => None,
+            Ok(()) => self.rows.darts.iter().enumerate().find_map(|(v, d)| {
+                let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
+                if p.iter().chain(u).any(|x| !x.is_finite()) {
+                    return Some((v, "non-finite position or velocity".to_string()));
+                }
+                // runaway: a vertex crossing more than the whole object in one step
+                let step = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * self.cfg.dt;
+                (step > self.size).then(|| {
+                    (v, format!("runaway motion: the vertex moved {step:.3e} in one step, more than the object's size {:.3e}", self.size))
+                })
+            }),
+        };
+        if let Some((vertex, why)) = bad {
+            for (id, saved) in [pos, vel].into_iter().zip(&self.saved) {
+                if let Ok(ColumnMut::Real(v)) = self.g.column_mut(id) {
+                    if v.len() == saved.len() {
+                        v.copy_from_slice(saved);
+                    }
+                }
+            }
+            return Err(match result {
+                // the step's own finding, or a rule's non-finite value (its why says which)
+                Ok(()) | Err(PhysicsError::Apply(ApplyError::NonFinite { .. })) => {
+                    PhysicsError::Diverged {
+                        step: self.steps + 1,
+                        vertex,
+                        why,
+                    }
+                }
+                Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
+                    step: self.steps + 1,
+                    vertex,
+                    why: e.to_string(),
+                },
+                Err(e) => e,
+            });
+        }
+        self.steps += 1;
+        self.time += self.cfg.dt;
+        self.topology_events()
+    }
+
+    /// The row of the vertex whose orbit holds `dart`, by the slot of the vertex
+    /// embedding `pos`; 0 if none does.
+    pub(crate) fn vertex_of(&self, dart: Dart, pos: EmbeddingId) -> usize {
+        let e = self.g.embedding(pos);
+        if !self.g.is_alive(dart) {
+            return 0;
+        }
+        let slot = e.slot(dart);
+        self.rows
+            .orbits
+            .iter()
+            .zip(&self.rows.row_of)
+            .find(|(d, _)| e.slot(**d) == slot)
+            .map_or(0, |(_, &r)| r)
+    }
+
+    /// Whether every value of the position and velocity columns is finite and no velocity
+    /// moves a vertex further than the object's size in one step: the test of
+    /// [`Simulation::step`] over whole columns, in order.
+    pub(crate) fn columns_sane(&self, pos: EmbeddingId, vel: EmbeddingId) -> bool {
+        let (Some(p), Some(v)) = (
+            self.g.embedding(pos).real_column(),
+            self.g.embedding(vel).real_column(),
+        ) else {
+            return false;
+        };
+        p.iter().all(|x| x.is_finite())
+            && v.chunks_exact(3).all(|u| {
+                // the same expression as the vertex test, so that both agree at the limit
+                let step = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * self.cfg.dt;
+                step.is_finite() && step <= self.size
+            })
+    }
+
+    pub(crate) fn explicit(&mut self, rule: &str) -> Result<(), PhysicsError> {
+        self.forces()?;
+        self.share_welded_forces()?;
+        self.rules
+            .apply_everywhere(&mut self.g, rule, &self.step_params)?;
+        self.contact()
+    }
+
+    /// The ground plane, if any.
+    pub(crate) fn contact(&mut self) -> Result<(), PhysicsError> {
+        if let Some(ground) = &self.cfg.ground {
+            let (point, normal) = ground.plane(self.cfg.gravity)?;
+            let p: Params = [
+                ("p".to_string(), Val::V3(point)),
+                ("n".to_string(), Val::V3(normal)),
+            ]
+            .into();
+            self.rules.apply_everywhere(&mut self.g, "ground", &p)?;
+        }
+        Ok(())
+    }
+
+    /// Gives every orbit of a welded row the share of the row's total force in proportion to
+    /// its mass, so that each orbit's acceleration `force / mass` (and with it gravity and
+    /// viscous damping, which act per unit mass on the shared velocity) is the row's
+    /// `F_total / M_total`: the orbits move as one particle. Nothing to do (no allocation, no
+    /// orbit walk) for maps without welded rows.
+    pub(crate) fn share_welded_forces(&mut self) -> Result<(), PhysicsError> {
+        if self.rows.welded.is_empty() {
+            return Ok(());
+        }
+        let force = self.id("force")?;
+        let mass = self.id("mass")?;
+        let err = |e: topomech_gmap::EmbeddingError| PhysicsError::Config(e.to_string());
+        for (_, darts) in &self.rows.welded {
+            let mut f = [0.0; 3];
+            let mut m = 0.0;
+            for &d in darts {
+                let x = self.g.real(force, d);
+                for a in 0..3 {
+                    f[a] += x[a];
+                }
+                m += self.g.real(mass, d)[0];
+            }
+            if m.is_nan() || m <= 0.0 {
+                continue;
+            }
+            for &d in darts {
+                let share = self.g.real(mass, d)[0] / m;
+                self.g
+                    .set_real(force, d, &[f[0] * share, f[1] * share, f[2] * share])
+                    .map_err(err)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Computes every model's forces and their sum `force` on each vertex.
+    pub fn forces(&mut self) -> Result<(), PhysicsError> {
+        // force embeddings (named f_*) are rewritten every step; a pattern that no longer
+        // matches after a topology change must not leave a stale force behind
+        for k in 0..self.g.embeddings().len() {
+            let e = &self.g.embeddings()[k];
+            // (but not the external loads, which the user sets once)
+            if e.name().starts_with("f_") && e.name() != "f_ext" && e.derived().is_none() {
+                let id = topomech_gmap::EmbeddingId(k as u32);
+                self.g
+                    .reset_values(id)
+                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            }
+        }
+        let none = Params::new();
+        for (def, _) in &self.defs {
+            for r in def.rules {
+                self.rules.apply_everywhere(&mut self.g, r, &none)?;
+            }
+        }
+        self.rules
+            .apply_everywhere(&mut self.g, "accumulate", &none)?;
+        Ok(())
+    }
+
+    /// Whether the computation rules run through compiled plans (the default) or through the
+    /// interpreter only: both give the same results; the switch exists to compare them.
+    pub fn set_compiled(&mut self, on: bool) {
+        self.rules.set_compiled(on);
+    }
+}
