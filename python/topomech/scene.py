@@ -340,8 +340,17 @@ class _Table:
             if k not in known:
                 close = difflib.get_close_matches(k, known, n=1)
                 hint = f"; did you mean '{close[0]}'?" if close else ""
+                if k in _SPELLED_ELSEWHERE and _SPELLED_ELSEWHERE[k][0] in known:
+                    hint = f"; write {_SPELLED_ELSEWHERE[k][1]}"
                 expected = f" (known: {', '.join(sorted(set(known)))})" if known else ""
                 raise self.fail(self.key(k), f"unknown key{hint}{expected}")
+
+
+#: Keys people write that a scene spells otherwise: the key, the key that is known where
+#: this one is written, and the hint.
+_SPELLED_ELSEWHERE = {
+    "linear": ("order", 'order = "linear" (keep the corner nodes of second-order cells)'),
+}
 
 
 class _Fail:
