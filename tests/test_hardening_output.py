@@ -614,3 +614,18 @@ def test_real_file_size_limit(limit: int, failing: str, tmp_path: Path) -> None:
     assert s["error"]["errno"] == "EFBIG"
     assert s["error"]["path"] == str(path)
     assert "Traceback" not in r.stderr
+
+
+def test_overwrite_never_adopts_a_users_file_in_frames(tmp_path: Path) -> None:
+    """With --overwrite into a folder whose `frames/` holds a user's file, the run does not
+    list that file as its own: the next runs keep refusing the folder, and never delete it."""
+    out = tmp_path / "o"
+    (out / "frames").mkdir(parents=True)
+    (out / "frames" / "notes.txt").write_text("mine")
+    scene = springs(tmp_path)
+    run_scene(scene, out, preview=False, overwrite=True)
+    assert "frames/notes.txt" not in (read_manifest(out) or [])
+    with pytest.raises(OutputError, match=r"frames/notes\.txt"):
+        run_scene(scene, out, preview=False)
+    run_scene(scene, out, preview=False, overwrite=True)
+    assert (out / "frames" / "notes.txt").read_text() == "mine"

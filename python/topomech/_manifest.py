@@ -293,7 +293,11 @@ class OutputFolder:
         written by this run, since everything there before was listed or foreign. Returns
         them."""
         known = {r.rstrip("/") for r in self._foreign}
-        new = [r for r in self.foreign_to(self._listed) if r not in known]
+        new = [
+            r
+            for r in self.foreign_to(self._listed)
+            if r not in known and r.split("/")[0] not in known  # nor inside a foreign folder
+        ]
         for r in new:
             with contextlib.suppress(OSError, ValueError):
                 self.add(r)

@@ -3,8 +3,10 @@
 Each subcommand is a pair of functions: ``_add_NAME(subparsers)`` declares its arguments and
 ``_run_NAME(args) -> exit code`` does the work. Exit codes: 0 success, 1 the input was read but
 fails on its merits (an invalid G-map, a rule the checker refuses, a rule that does not apply,
-a simulation that diverges, a timed cut that misses the object when its time comes), 2 a file
-cannot be read or is refused (a scene included, with an event after the end of the run), or
+a simulation that diverges, a timed cut that misses the object when its time comes, a run
+that cannot write one of its files: a full disk), 2 a file
+cannot be read or is refused (a scene included, with an event after the end of the run, and
+an output directory holding files topomech did not write), or
 the arguments are wrong (the reason goes to stderr, without a traceback); 130 a run
 interrupted by Ctrl-C (what was written stays).
 """

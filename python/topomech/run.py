@@ -460,6 +460,8 @@ def run_scene(
         sim = sc.build()
         fields = check_fields(sim, getattr(sc, "fields", ()), sc.path)
         folder.prepare()
+        for rel in ("view.bin", "view.json", "energy.csv"):
+            folder.add(rel)  # before the recorder starts: it may write them as it goes
         cells = OutputCells(sim, _input_cells(sc))
         writer = _Writer(sim, cells, fields)
         recorder = Recorder(sim, sc, energy=preview, cells=cells)
