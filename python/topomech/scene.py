@@ -367,6 +367,31 @@ class _Fail:
         return err
 
 
+#: The longest scene name, in UTF-8 bytes (a file name's limit on common file systems).
+MAX_NAME_BYTES = 255
+
+
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot be a scene's name, or None when it can. The name is the output
+    folder's name (``out/<name>``) and is shown in previews, so it must be one plain folder
+    name: not empty, not ``.`` or ``..``, no path separator (``/``, ``\\``) or drive colon,
+    no NUL or other control character, at most :data:`MAX_NAME_BYTES` bytes."""
+    if not name:
+        return "the name is empty"
+    if name in (".", ".."):
+        return f"{_show(name)} is not a folder name (it names a folder above or itself)"
+    for ch in name:
+        if ch in "/\\":
+            return f"{_show(name)} contains a path separator {_show(ch)}: give a plain name"
+        if ch == ":":
+            return f"{_show(name)} contains ':' (a drive or stream separator): give a plain name"
+        if ord(ch) < 32 or ord(ch) == 127:
+            return f"{_show(name)} contains the control character U+{ord(ch):04X}"
+    if len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        return f"the name is longer than {MAX_NAME_BYTES} bytes"
+    return None
+
+
 def _number(
     v: Any, key: str, fail: _Fail, *, positive: bool = False, nonneg: bool = False
 ) -> float:
@@ -956,6 +981,12 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         raise fail(None, f"invalid TOML: {e}") from None
     top = _Table(data, "", fail)
     name = top.string("name", p.stem if p is not None else "scene")
+    problem = name_problem(name)
+    if problem is not None:
+        given = top.has("name")
+        raise fail(
+            "name", f"{problem}{'' if given else ' (the name comes from the file name: give one)'}"
+        )
     description = top.string("description", "")
 
     if not top.has("mesh"):

@@ -65,6 +65,10 @@ def write_viewer(out_dir: Path, path: Path | None = None) -> Path:
     out_dir = Path(out_dir)
     html = viewer_html(out_dir)
     target = Path(path) if path is not None else out_dir / VIEWER_FILE
+    if path is None:
+        from topomech._manifest import register
+
+        register(out_dir, VIEWER_FILE)  # a rerun of the run may then replace it
     fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     tmp = Path(name)
     try:
