@@ -168,19 +168,17 @@ class _Writer:
 def _input_cells(sc: Scene) -> FlatMesh | None:
     """The cells of the scene's mesh file as the map was built from them (``cell_id``
     numbers them), or None for a generated mesh, a saved map or a file that cannot be read
-    again (the output then orients the cells at rest without them)."""
+    again (the output then orients the cells at rest without them). The file is not read
+    again: :meth:`Scene.file_mesh` keeps what building the simulation read."""
     m = sc.mesh
     if m.file is None or m.file.suffix.lower() == ".tmg":
         return None
-    from topomech.io import read_mesh
-
-    linear = m.linear
     try:
-        # read again: what it had to say was said the first time
+        # read again only when the scene was built elsewhere: what the file had to say was
+        # said the first time
         with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):
             warnings.simplefilter("ignore")
-            read: Any = read_mesh
-            mesh, _ = read(m.file, linear=True) if linear else read(m.file)
+            mesh = sc.file_mesh()
         return to_flat(mesh.points, mesh.cells)
     except (TopomechError, ValueError, TypeError, OSError):
         return None

@@ -133,6 +133,8 @@ else:  # pragma: no cover - exercised on Python 3.9 and 3.10 only
     import tomli as tomllib
 
 if TYPE_CHECKING:
+    import meshio
+
     from topomech._gmap import PathLike
     from topomech.io import ImportedMesh
 
@@ -509,6 +511,9 @@ class Scene:
     #: :func:`topomech.loads.apply_conditions`): ``held`` (fixes by points or group),
     #: ``loads`` and ``initial``, each entry with its scene key.
     conditions: dict[str, Any] = field(default_factory=dict)
+    #: The mesh file as read (``"mesh"``: the meshio mesh of the kept cells), kept so that a
+    #: run reads the file once: building, the groups of the loads and the output cells.
+    _read: dict[str, Any] = field(default_factory=dict, init=False, compare=False, repr=False)
 
     @property
     def integrator(self) -> str:
@@ -600,6 +605,8 @@ class Scene:
             if imported.mesh is None:
                 # a saved map (.tmg) is taken as written: refuse one that is not a G-map
                 _check_saved_map(imported.gmap, m.file, fail)
+            else:
+                self._read["mesh"] = imported.mesh
             for note in imported.notes:
                 print(f"topomech: note: {m.file.name}: {note}", file=sys.stderr)
             return imported
@@ -648,11 +655,25 @@ class Scene:
         m = self.mesh
         if m.file is None:
             return MeshGroups()
-        from topomech.io import GMAP_SUFFIX, read_mesh
+        from topomech.io import GMAP_SUFFIX
 
         if m.file.suffix.lower() == GMAP_SUFFIX:
             return MeshGroups()  # a saved map keeps its numbering (point_id), not groups
+        return MeshGroups.from_meshio(self.file_mesh())
 
+    def file_mesh(self) -> meshio.Mesh:
+        """The scene's mesh file as read (:func:`topomech.io.read_mesh` with ``mesh.order``:
+        the kept cells and the named sets), read once per scene: :meth:`load_mesh` keeps what
+        it read. Raises :class:`SceneError` naming ``mesh.file`` when the file cannot be read,
+        ValueError for a generated mesh or a saved map (``.tmg``), which have no mesh file."""
+        from topomech.io import GMAP_SUFFIX, read_mesh
+
+        m = self.mesh
+        if m.file is None or m.file.suffix.lower() == GMAP_SUFFIX:
+            raise ValueError("the scene's mesh is not read from a mesh file")
+        cached = self._read.get("mesh")
+        if cached is not None:
+            return cached
         kwargs: dict[str, Any] = {}
         if m.linear:
             kwargs["linear"] = True
@@ -660,7 +681,8 @@ class Scene:
             mesh, _ = read_mesh(m.file, **kwargs)
         except (MeshReadError, MeshError, OSError) as e:
             raise self._fail()("mesh.file", str(e)) from e
-        return MeshGroups.from_meshio(mesh)
+        self._read["mesh"] = mesh
+        return mesh
 
     def _key_of(self, message: str) -> str | None:
         """The key a kernel refusal is about: the first predicate or model kind it quotes."""
