@@ -358,8 +358,8 @@ fn relative_gap(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 /// length): the static solves of both models equal linear FEM, solved here by a dense Cholesky
 /// on an independently assembled stiffness, to 1e-5 relative. The models differ from linear
 /// elasticity by O(strain) ~ 1e-6 (geometric and material nonlinearity); the solver's residual
-/// tolerance is 1e-10; measured: 5e-7. A wrong small-strain parametrisation (e.g. Neo-Hookean without the 4/3
-/// and 5/6 of Smith et al.) is off by tens of percent.
+/// tolerance is 1e-10; measured: 5e-7. A wrong small-strain parametrisation (e.g. Neo-Hookean
+/// without the 4/3 and 5/6 of Smith et al.) is off by tens of percent.
 #[test]
 fn small_strain_static_cantilever_equals_linear_fem() {
     let (length, young, nu, rho, gy) = (6.0, 1e6, 0.3, 100.0, -1e-4);
