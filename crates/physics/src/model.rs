@@ -176,6 +176,32 @@ pub const MODELS: &[ModelDef] = &[
         needs: "tetrahedra",
         per_element: true,
     },
+    ModelDef {
+        kind: "neohookean",
+        dims: &[3],
+        file: "hyperelastic",
+        init: &["neohookean_init"],
+        rules: &["neohookean"],
+        forces: &["f_neohookean"],
+        jvp_rules: &["neohookean_jvp"],
+        jvp_forces: &["df_neohookean"],
+        params: &[],
+        needs: "tetrahedra",
+        per_element: true,
+    },
+    ModelDef {
+        kind: "stvk",
+        dims: &[3],
+        file: "hyperelastic",
+        init: &["stvk_init"],
+        rules: &["stvk"],
+        forces: &["f_stvk"],
+        jvp_rules: &["stvk_jvp"],
+        jvp_forces: &["df_stvk"],
+        params: &[],
+        needs: "tetrahedra",
+        per_element: true,
+    },
 ];
 
 pub(crate) fn model_source(file: &str, dim: usize) -> Option<&'static str> {
@@ -191,6 +217,7 @@ pub(crate) fn model_source(file: &str, dim: usize) -> Option<&'static str> {
         ("fem", 2) => include_str!("../models/fem2d.tmr"),
         ("topology", 2) => include_str!("../models/topology2d.tmr"),
         ("topology", 3) => include_str!("../models/topology3d.tmr"),
+        ("hyperelastic", 3) => include_str!("../models/hyperelastic3d.tmr"),
         _ => return None,
     })
 }
