@@ -35,7 +35,8 @@ impl Integrator {
 /// A model in a scene: its kind and parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModelSpec {
-    /// One of [`MODELS`]' kinds.
+    /// The model's name: one of [`shipped_models`](crate::shipped_models), or a model declared
+    /// in one of [`Config::model_files`].
     pub kind: String,
     /// Parameters (missing ones take the model's defaults).
     pub params: HashMap<String, f64>,
@@ -46,6 +47,12 @@ pub struct ModelSpec {
 pub struct Config {
     /// The models, summed.
     pub models: Vec<ModelSpec>,
+    /// Rule files of the user's own, `(file name, text)`, declaring models (`model`
+    /// declarations): loaded with the shipped common rules of the map's dimension, after
+    /// the shipped model files. A model they declare replaces the shipped one of the same
+    /// name (a simulation that needs both files, for another shipped model of the same file,
+    /// is refused: the name is declared twice).
+    pub model_files: Vec<(String, String)>,
     /// Mass density (per volume in 3D, per area in 2D).
     pub density: f64,
     /// Young's modulus for the continuous models.
@@ -82,6 +89,7 @@ impl Default for Config {
     fn default() -> Self {
         Config {
             models: Vec::new(),
+            model_files: Vec::new(),
             density: 1000.0,
             young: 1e6,
             poisson: 0.3,

@@ -191,9 +191,9 @@ impl Simulation {
             }
         }
         let none = Params::new();
-        for (def, _) in &self.defs {
-            for r in def.rules {
-                self.rules.apply_everywhere(&mut self.g, r, &none)?;
+        for def in &self.defs {
+            for (r, p) in &def.step {
+                self.rules.apply_everywhere(&mut self.g, r, p)?;
             }
         }
         self.rules

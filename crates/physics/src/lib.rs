@@ -1,6 +1,7 @@
 //! Physics through rules: the models of the paper as rule files, and the simulation loop.
 //!
-//! Every model is a `.tmr` file shipped in `models/` (see [`MODELS`]): an init rule that
+//! Every model is a `.tmr` file shipped in `models/` (see [`shipped_models`]) declaring it as
+//! a `model` (see [`model`](crate::model)): an init rule that
 //! stores its parameters on the orbits the paper's Tables 1 and 2 give, and interaction rules
 //! that store forces on sub-orbits of the vertices. A step applies, in order, every model's
 //! interaction rules everywhere, one accumulation rule that sums every force embedding over
@@ -8,7 +9,8 @@
 //! the G-map: the simulation state is its embeddings.
 //!
 //! Where things are:
-//! - `model`: the shipped models, their rule files and parameters;
+//! - `model`: finding a model's declaration (shipped or the user's file) and binding its
+//!   parameters;
 //! - `schedule`: building a simulation, the glue rules of a step (accumulation, fixed and
 //!   prescribed vertices, material regions, ground) and the set-up they run;
 //! - `integrate`: a time step and the explicit integrators;
@@ -26,7 +28,6 @@ mod schedule;
 mod solve;
 mod state;
 
-use std::collections::HashMap;
 use std::fmt::Write as _;
 
 use topomech_gmap::GMap;
@@ -71,7 +72,7 @@ pub struct Simulation {
     g: GMap,
     rules: RuleSet,
     cfg: Config,
-    defs: Vec<(ModelDef, HashMap<String, f64>)>,
+    defs: Vec<model::RunModel>,
     step_params: Params,
     time: f64,
     steps: u64,

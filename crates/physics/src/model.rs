@@ -1,247 +1,251 @@
-//! The models topomech ships: each a rule file and the rules a step applies from it.
+//! Models: the `model` declarations of rule files (shipped in `models/`, or the user's own
+//! files given in [`Config::model_files`]), and what a simulation runs of them.
+//!
+//! A model is found by name: first in the user's files, then in the shipped files of the
+//! map's dimension. Its file is loaded with the shipped common rules of that dimension (the
+//! embeddings every simulation has: `position`, `rest`, `velocity`, `force`, `mass`, `dx`,
+//! `dv`, `df`, the material, ...), so a user's file declares only its own embeddings. The
+//! declaration's `init` calls run once at set-up, its `step` calls every step, its `forces`
+//! are summed into `force`, its `jvp` calls and outputs make the Jacobian-vector product.
 
-use crate::PhysicsError;
+use std::collections::HashMap;
+use std::sync::OnceLock;
 
-/// A physical model: its rule file and rules.
-#[derive(Clone, Copy, Debug)]
-pub struct ModelDef {
-    /// The scene's name for it.
-    pub kind: &'static str,
-    /// Dimensions it exists in.
-    pub dims: &'static [usize],
-    /// Base name of its rule file in `models/` (`{file}{dim}d.tmr`).
-    pub file: &'static str,
-    /// Init rules, applied once, in order; a rule's parameters come from the model's
-    /// parameters of the same name.
-    pub init: &'static [&'static str],
-    /// Interaction rules, applied every step, in order.
-    pub rules: &'static [&'static str],
-    /// The force embeddings the accumulation sums.
-    pub forces: &'static [&'static str],
-    /// Rules computing the Jacobian-vector product `df = (df/dx) dx + (df/dv) dv`.
-    pub jvp_rules: &'static [&'static str],
-    /// The embeddings they write, summed per vertex into `df`.
-    pub jvp_forces: &'static [&'static str],
-    /// Parameters with their defaults.
-    pub params: &'static [(&'static str, f64)],
-    /// What the model needs of the mesh, said when it matches nothing.
-    pub needs: &'static str,
-    /// Whether every element must be matched by one of the init rules (the element models:
-    /// an element they cannot handle would silently get no force).
-    pub per_element: bool,
-}
+use topomech_rules::model::{Model, ModelParam};
+use topomech_rules::{load_sources, Params, Val};
 
-/// Every model topomech ships.
-pub const MODELS: &[ModelDef] = &[
-    ModelDef {
-        kind: "stretch_elementary",
-        dims: &[2, 3],
-        file: "stretch",
-        init: &["stretch_init"],
-        rules: &["stretch_elementary"],
-        forces: &["f_stretch"],
-        jvp_rules: &["stretch_elementary_jvp"],
-        jvp_forces: &["df_stretch"],
-        params: &[("stiffness", 1000.0), ("damping", 0.0)],
-        needs: "edges",
-        per_element: false,
-    },
-    ModelDef {
-        kind: "stretch_cumulated",
-        dims: &[2, 3],
-        file: "stretch",
-        init: &["stretch_init"],
-        rules: &["stretch_cumulated"],
-        forces: &["f_stretch_cum"],
-        jvp_rules: &["stretch_cumulated_jvp"],
-        jvp_forces: &["df_stretch_cum"],
-        params: &[("stiffness", 1000.0), ("damping", 0.0)],
-        needs: "edges",
-        per_element: false,
-    },
-    ModelDef {
-        kind: "shear_isotropic",
-        dims: &[2, 3],
-        file: "shear",
-        init: &["shear_isotropic_init"],
-        rules: &["shear_isotropic"],
-        forces: &["f_shear_iso"],
-        jvp_rules: &["shear_isotropic_jvp"],
-        jvp_forces: &["df_shear_iso"],
-        params: &[("stiffness", 1000.0), ("damping", 0.0)],
-        needs: "quadrilateral faces",
-        per_element: false,
-    },
-    ModelDef {
-        kind: "shear_anisotropic",
-        dims: &[2, 3],
-        file: "shear",
-        init: &["shear_anisotropic_init"],
-        rules: &["shear_anisotropic"],
-        forces: &["f_shear_aniso"],
-        jvp_rules: &["shear_anisotropic_jvp"],
-        jvp_forces: &["df_shear_aniso"],
-        params: &[("stiffness", 1000.0), ("damping", 0.0)],
-        needs: "faces",
-        per_element: false,
-    },
-    ModelDef {
-        kind: "shear_volumic",
-        dims: &[3],
-        file: "shear",
-        init: &["shear_volumic_init"],
-        rules: &["shear_volumic"],
-        forces: &["f_shear_vol"],
-        jvp_rules: &["shear_volumic_jvp"],
-        jvp_forces: &["df_shear_vol"],
-        params: &[("stiffness", 1000.0), ("damping", 0.0)],
-        needs: "hexahedra",
-        per_element: false,
-    },
-    ModelDef {
-        kind: "bending_linear",
-        dims: &[2],
-        file: "bending",
-        init: &["bending_linear_init"],
-        rules: &["bending_linear"],
-        forces: &["f_bend_lin_a", "f_bend_lin_e"],
-        jvp_rules: &["bending_linear_jvp"],
-        jvp_forces: &["df_bend_lin_a", "df_bend_lin_e"],
-        params: &[("stiffness", 100.0), ("damping", 0.0)],
-        needs: "edges continuing each other across faces",
-        per_element: false,
-    },
-    ModelDef {
-        kind: "bending_angular",
-        dims: &[2],
-        file: "bending",
-        init: &["bending_angular_init", "face_rest_centroids"],
-        rules: &["face_centroids", "bending_angular"],
-        forces: &["f_bend", "f_bend_wing"],
-        jvp_rules: &[],
-        jvp_forces: &[],
-        params: &[("stiffness", 1.0), ("damping", 0.0)],
-        needs: "interior edges between two triangles or quads",
-        per_element: false,
-    },
-    ModelDef {
-        kind: "linear_fem",
-        dims: &[3],
-        file: "fem",
-        init: &["fem_init"],
-        rules: &["linear_fem"],
-        forces: &["f_linear"],
-        jvp_rules: &["linear_fem_jvp"],
-        jvp_forces: &["df_linear"],
-        params: &[],
-        needs: "tetrahedra",
-        per_element: true,
-    },
-    ModelDef {
-        kind: "corotational",
-        dims: &[3],
-        file: "fem",
-        init: &["fem_init", "corotational_hex_init"],
-        rules: &["corotational", "corotational_hex"],
-        forces: &["f_corot", "f_corot_hex"],
-        jvp_rules: &["corotational_jvp", "corotational_hex_jvp"],
-        jvp_forces: &["df_corot", "df_corot_hex"],
-        params: &[],
-        needs: "tetrahedra or hexahedra",
-        per_element: true,
-    },
-    ModelDef {
-        kind: "corotational",
-        dims: &[2],
-        file: "fem",
-        init: &["corotational_tri_init"],
-        rules: &["corotational_tri"],
-        forces: &["f_corot_tri"],
-        jvp_rules: &["corotational_tri_jvp"],
-        jvp_forces: &["df_corot_tri"],
-        params: &[("thickness", 1.0)],
-        needs: "triangles",
-        per_element: true,
-    },
-    ModelDef {
-        kind: "mass_tensor",
-        dims: &[3],
-        file: "fem",
-        init: &["mass_tensor_init"],
-        rules: &["mass_tensor_edges", "mass_tensor_vertices"],
-        forces: &["f_tensor"],
-        jvp_rules: &["mass_tensor_edges_jvp", "mass_tensor_vertices_jvp"],
-        jvp_forces: &["df_tensor"],
-        params: &[],
-        needs: "tetrahedra",
-        per_element: true,
-    },
-    ModelDef {
-        kind: "neohookean",
-        dims: &[3],
-        file: "hyperelastic",
-        init: &["neohookean_init"],
-        rules: &["neohookean"],
-        forces: &["f_neohookean"],
-        jvp_rules: &["neohookean_jvp"],
-        jvp_forces: &["df_neohookean"],
-        params: &[],
-        needs: "tetrahedra",
-        per_element: true,
-    },
-    ModelDef {
-        kind: "stvk",
-        dims: &[3],
-        file: "hyperelastic",
-        init: &["stvk_init"],
-        rules: &["stvk"],
-        forces: &["f_stvk"],
-        jvp_rules: &["stvk_jvp"],
-        jvp_forces: &["df_stvk"],
-        params: &[],
-        needs: "tetrahedra",
-        per_element: true,
-    },
+use crate::{Config, PhysicsError};
+
+/// The shipped model files: `(file name, dimension, text)`, in the order models are listed.
+const SHIPPED: &[(&str, usize, &str)] = &[
+    ("stretch2d.tmr", 2, include_str!("../models/stretch2d.tmr")),
+    ("stretch3d.tmr", 3, include_str!("../models/stretch3d.tmr")),
+    ("shear2d.tmr", 2, include_str!("../models/shear2d.tmr")),
+    ("shear3d.tmr", 3, include_str!("../models/shear3d.tmr")),
+    ("bending2d.tmr", 2, include_str!("../models/bending2d.tmr")),
+    ("fem3d.tmr", 3, include_str!("../models/fem3d.tmr")),
+    ("fem2d.tmr", 2, include_str!("../models/fem2d.tmr")),
+    ("hyperelastic3d.tmr", 3, include_str!("../models/hyperelastic3d.tmr")),
 ];
 
+/// A shipped rule file that is not a model file (or is loaded for more than its models).
 pub(crate) fn model_source(file: &str, dim: usize) -> Option<&'static str> {
     Some(match (file, dim) {
         ("common", 2) => include_str!("../models/common2d.tmr"),
         ("common", 3) => include_str!("../models/common3d.tmr"),
-        ("stretch", 2) => include_str!("../models/stretch2d.tmr"),
-        ("stretch", 3) => include_str!("../models/stretch3d.tmr"),
-        ("fem", 3) => include_str!("../models/fem3d.tmr"),
-        ("shear", 2) => include_str!("../models/shear2d.tmr"),
-        ("shear", 3) => include_str!("../models/shear3d.tmr"),
-        ("bending", 2) => include_str!("../models/bending2d.tmr"),
-        ("fem", 2) => include_str!("../models/fem2d.tmr"),
         ("topology", 2) => include_str!("../models/topology2d.tmr"),
         ("topology", 3) => include_str!("../models/topology3d.tmr"),
-        ("hyperelastic", 3) => include_str!("../models/hyperelastic3d.tmr"),
+        ("fem", 3) => include_str!("../models/fem3d.tmr"),
         _ => return None,
     })
 }
 
-pub(crate) fn find_model(kind: &str, dim: usize) -> Result<ModelDef, PhysicsError> {
-    if let Some(def) = MODELS
+/// The model names each shipped file declares (parsed once).
+fn shipped_names() -> &'static [Vec<String>] {
+    static NAMES: OnceLock<Vec<Vec<String>>> = OnceLock::new();
+    NAMES.get_or_init(|| {
+        SHIPPED
+            .iter()
+            .map(|(_, _, text)| declared_names(text))
+            .collect()
+    })
+}
+
+/// The names of the models a rule text declares (none when it does not parse: the loader
+/// reports why).
+fn declared_names(text: &str) -> Vec<String> {
+    topomech_rules::parser::parse(text)
+        .map(|f| f.models.into_iter().map(|m| m.name).collect())
+        .unwrap_or_default()
+}
+
+/// A model topomech ships, as its declaration says.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShippedModel {
+    /// Its name (a scene's `kind`).
+    pub name: String,
+    /// The dimensions of maps it runs on.
+    pub dimensions: Vec<usize>,
+    /// Its parameters, with their types and defaults.
+    pub params: Vec<ModelParam>,
+    /// What it needs of the mesh.
+    pub needs: Option<String>,
+    /// Whether it has Jacobian rules (implicit Euler and static runs need them).
+    pub has_jvp: bool,
+}
+
+/// Every model topomech ships, read from the declarations of its rule files. One name may
+/// appear twice when its declarations differ between dimensions (the 2D co-rotational
+/// triangle has a `thickness`, the 3D elements have none); declarations that agree are one
+/// entry with both dimensions.
+///
+/// # Panics
+/// Never on the shipped files (a test loads each of them); a shipped file that failed to
+/// check would be left out.
+pub fn shipped_models() -> Vec<ShippedModel> {
+    static ALL: OnceLock<Vec<ShippedModel>> = OnceLock::new();
+    ALL.get_or_init(|| {
+        let mut out: Vec<ShippedModel> = Vec::new();
+        for (file, dim, text) in SHIPPED {
+            let common = model_source("common", *dim).expect("shipped");
+            let Ok((rules, _)) = load_sources(&[
+                (format!("common{dim}d.tmr"), common.to_string()),
+                ((*file).to_string(), (*text).to_string()),
+            ]) else {
+                continue;
+            };
+            for m in rules.models() {
+                let needs = m.needs.clone();
+                if let Some(e) = out
+                    .iter_mut()
+                    .find(|e| e.name == m.name && e.params == m.params && e.needs == needs)
+                {
+                    if !e.dimensions.contains(dim) {
+                        e.dimensions.push(*dim);
+                        e.dimensions.sort_unstable();
+                    }
+                    continue;
+                }
+                out.push(ShippedModel {
+                    name: m.name.clone(),
+                    dimensions: m.dimensions.clone(),
+                    params: m.params.clone(),
+                    needs,
+                    has_jvp: !m.jvp.is_empty(),
+                });
+            }
+        }
+        out
+    })
+    .clone()
+}
+
+/// A model as a simulation runs it: its rule calls with their parameters bound.
+#[derive(Clone, Debug)]
+pub(crate) struct RunModel {
+    /// Its name.
+    pub name: String,
+    /// Init rules and their parameters, in order.
+    pub init: Vec<(String, Params)>,
+    /// Step rules and their parameters, in order.
+    pub step: Vec<(String, Params)>,
+    /// Jacobian-vector product rules and their parameters, in order.
+    pub jvp: Vec<(String, Params)>,
+    /// What it needs of the mesh.
+    pub needs: String,
+    /// Whether every element must be matched by an init rule.
+    pub per_element: bool,
+}
+
+impl RunModel {
+    /// Binds a checked declaration to the scene's parameter values (`given`, over the
+    /// declaration's defaults).
+    pub(crate) fn bind(m: &Model, given: &HashMap<String, f64>) -> Result<Self, PhysicsError> {
+        for k in given.keys() {
+            if !m.params.iter().any(|p| &p.name == k) {
+                let known: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
+                return Err(PhysicsError::Config(format!(
+                    "model '{}' has no parameter '{k}' (it has: {})",
+                    m.name,
+                    if known.is_empty() {
+                        "none; it uses the material's young and poisson".into()
+                    } else {
+                        known.join(", ")
+                    }
+                )));
+            }
+        }
+        let given: HashMap<String, Val> =
+            given.iter().map(|(k, v)| (k.clone(), Val::F(*v))).collect();
+        let values = m.values(&given).map_err(PhysicsError::Config)?;
+        let bind = |calls: &[topomech_rules::model::Call]| -> Vec<(String, Params)> {
+            calls
+                .iter()
+                .map(|c| (c.rule.clone(), c.params(&values)))
+                .collect()
+        };
+        Ok(RunModel {
+            name: m.name.clone(),
+            init: bind(&m.init),
+            step: bind(&m.step),
+            jvp: bind(&m.jvp),
+            needs: m
+                .needs
+                .clone()
+                .unwrap_or_else(|| "what its init rules match".into()),
+            per_element: m.per_element,
+        })
+    }
+}
+
+/// The rule files the models of `cfg` need on a map of dimension `dim`, in the order they
+/// are loaded after the common files: the shipped file declaring each shipped model (once),
+/// then the user's files. Errors: a model no file declares (listing the known ones), or one
+/// declared only for other dimensions.
+pub(crate) fn model_files(cfg: &Config, dim: usize) -> Result<Vec<(String, String)>, PhysicsError> {
+    let user: Vec<Vec<String>> = cfg
+        .model_files
         .iter()
-        .find(|m| m.kind == kind && m.dims.contains(&dim))
-    {
-        return Ok(*def);
-    }
-    let Some(def) = MODELS.iter().find(|m| m.kind == kind) else {
-        let mut known: Vec<&str> = MODELS.iter().map(|m| m.kind).collect();
-        known.dedup();
+        .map(|(_, text)| declared_names(text))
+        .collect();
+    let names = shipped_names();
+    let mut out: Vec<(String, String)> = Vec::new();
+    for spec in &cfg.models {
+        let kind = spec.kind.as_str();
+        if user.iter().any(|n| n.iter().any(|x| x == kind)) {
+            continue;
+        }
+        let found = SHIPPED
+            .iter()
+            .zip(names)
+            .find(|((_, d, _), n)| *d == dim && n.iter().any(|x| x == kind));
+        if let Some(((file, _, text), _)) = found {
+            if !out.iter().any(|s| s.0 == *file) {
+                out.push(((*file).to_string(), (*text).to_string()));
+            }
+            continue;
+        }
+        let dims: Vec<usize> = SHIPPED
+            .iter()
+            .zip(names)
+            .filter(|(_, n)| n.iter().any(|x| x == kind))
+            .map(|((_, d, _), _)| *d)
+            .collect();
+        if dims.is_empty() {
+            let mut known: Vec<&str> = Vec::new();
+            for n in names.iter().chain(&user).flatten() {
+                if !known.contains(&n.as_str()) {
+                    known.push(n);
+                }
+            }
+            return Err(PhysicsError::Model(format!(
+                "unknown model '{kind}' (known: {})",
+                known.join(", ")
+            )));
+        }
         return Err(PhysicsError::Model(format!(
-            "unknown model '{kind}' (known: {})",
-            known.join(", ")
-        )));
-    };
-    if !def.dims.contains(&dim) {
-        return Err(PhysicsError::Model(format!(
-            "model '{kind}' needs a mesh of dimension {:?}, this one has dimension {dim}",
-            def.dims
+            "model '{kind}' needs a mesh of dimension {dims:?}, this one has dimension {dim}"
         )));
     }
-    Ok(*def)
+    out.extend(cfg.model_files.iter().cloned());
+    Ok(out)
+}
+
+/// The forces and jvp outputs of model `kind` as declared (unchecked) in `sources`; empty when
+/// no source declares it (the checker then says why).
+pub(crate) fn declared_outputs(
+    sources: &[(String, String)],
+    kind: &str,
+) -> (Vec<String>, Vec<String>) {
+    for (_, text) in sources {
+        if let Ok(f) = topomech_rules::parser::parse(text) {
+            if let Some(m) = f.models.into_iter().find(|m| m.name == kind) {
+                return (
+                    m.forces.into_iter().map(|x| x.0).collect(),
+                    m.jvp_outputs.into_iter().map(|x| x.0).collect(),
+                );
+            }
+        }
+    }
+    (Vec::new(), Vec::new())
 }

@@ -1,7 +1,6 @@
 //! Building a simulation: the rules of its models and the glue of a step (accumulation,
 //! fixed and prescribed vertices, material regions, ground), and the set-up they run.
 
-use std::collections::HashMap;
 use std::fmt::Write as _;
 
 use topomech_gmap::{Dart, GMap, OrbitType, Value};
@@ -104,42 +103,6 @@ impl Simulation {
         if cfg.models.is_empty() {
             return Err(PhysicsError::Model("no model given".into()));
         }
-        let mut defs = Vec::new();
-        for m in &cfg.models {
-            let def = find_model(&m.kind, dim)?;
-            let mut params: HashMap<String, f64> = def
-                .params
-                .iter()
-                .map(|(k, v)| ((*k).to_string(), *v))
-                .collect();
-            for (k, v) in &m.params {
-                if !params.contains_key(k) {
-                    let known: Vec<&str> = def.params.iter().map(|p| p.0).collect();
-                    return Err(PhysicsError::Config(format!(
-                        "model '{}' has no parameter '{k}' (it has: {})",
-                        m.kind,
-                        if known.is_empty() {
-                            "none; it uses the material's young and poisson".into()
-                        } else {
-                            known.join(", ")
-                        }
-                    )));
-                }
-                params.insert(k.clone(), *v);
-            }
-            defs.push((def, params));
-        }
-        if matches!(
-            cfg.integrator,
-            Integrator::ImplicitEuler | Integrator::Static
-        ) {
-            if let Some((def, _)) = defs.iter().find(|(d, _)| d.jvp_rules.is_empty()) {
-                return Err(PhysicsError::Model(format!(
-                    "model '{}' has no Jacobian rules yet: use explicit_euler or symplectic_euler with it",
-                    def.kind
-                )));
-            }
-        }
         let mut sources = vec![
             (
                 format!("common{dim}d.tmr"),
@@ -175,24 +138,25 @@ impl Simulation {
                 )));
             }
         }
-        for (def, _) in &defs {
-            let name = format!("{}{dim}d.tmr", def.file);
+        for (name, text) in model_files(&cfg, dim)? {
             if !sources.iter().any(|s| s.0 == name) {
-                sources.push((
-                    name,
-                    model_source(def.file, dim)
-                        .expect("listed in MODELS")
-                        .to_string(),
-                ));
+                sources.push((name, text));
             }
         }
-        let forces: Vec<&str> = defs
+        // the forces the glue sums, from the declarations as written (they are checked with
+        // everything else below)
+        let outputs: Vec<(Vec<String>, Vec<String>)> = cfg
+            .models
             .iter()
-            .flat_map(|(d, _)| d.forces.iter().copied())
+            .map(|m| declared_outputs(&sources, &m.kind))
             .collect();
-        let jvp: Vec<&str> = defs
+        let forces: Vec<&str> = outputs
             .iter()
-            .flat_map(|(d, _)| d.jvp_forces.iter().copied())
+            .flat_map(|o| o.0.iter().map(String::as_str))
+            .collect();
+        let jvp: Vec<&str> = outputs
+            .iter()
+            .flat_map(|o| o.1.iter().map(String::as_str))
             .collect();
         sources.push((
             "scene-generated.tmr".into(),
@@ -200,9 +164,15 @@ impl Simulation {
         ));
         let (rules, _warnings) = load_sources(&sources).map_err(|diags| {
             // a refused predicate is the scene's fault: say so
-            if diags.iter().any(|d| {
-                d.file == "scene-generated.tmr" && d.severity == topomech_rules::Severity::Error
-            }) {
+            let error =
+                |d: &topomech_rules::Diagnostic| d.severity == topomech_rules::Severity::Error;
+            if diags
+                .iter()
+                .any(|d| d.file == "scene-generated.tmr" && error(d))
+                && !diags
+                    .iter()
+                    .any(|d| d.file != "scene-generated.tmr" && error(d))
+            {
                 let msgs: Vec<String> = diags
                     .iter()
                     .filter(|d| d.severity == topomech_rules::Severity::Error)
@@ -217,6 +187,30 @@ impl Simulation {
                 PhysicsError::Rules(diags)
             }
         })?;
+        let mut defs = Vec::new();
+        for m in &cfg.models {
+            let decl = rules.model(&m.kind).ok_or_else(|| {
+                PhysicsError::Model(format!("model '{}' is not declared in its file", m.kind))
+            })?;
+            if !decl.dimensions.contains(&dim) {
+                return Err(PhysicsError::Model(format!(
+                    "model '{}' needs a mesh of dimension {:?}, this one has dimension {dim}",
+                    m.kind, decl.dimensions
+                )));
+            }
+            defs.push(RunModel::bind(decl, &m.params)?);
+        }
+        if matches!(
+            cfg.integrator,
+            Integrator::ImplicitEuler | Integrator::Static
+        ) {
+            if let Some(def) = defs.iter().find(|d| d.jvp.is_empty()) {
+                return Err(PhysicsError::Model(format!(
+                    "model '{}' has no Jacobian rules yet: use explicit_euler or symplectic_euler with it",
+                    def.name
+                )));
+            }
+        }
         if let Some(ground) = &cfg.ground {
             ground.plane(cfg.gravity)?;
         }
@@ -283,27 +277,21 @@ impl Simulation {
         } else {
             OrbitType::face(2)
         });
-        for (def, params) in &defs {
+        for def in &defs {
             let mut matched = 0;
-            for init in def.init {
-                let rule = rules.rule(init)?;
-                let p: Params = rule
-                    .params
-                    .iter()
-                    .map(|(n, _)| (n.clone(), Val::F(params.get(n).copied().unwrap_or(0.0))))
-                    .collect();
-                matched += rules.apply_everywhere(&mut g, init, &p)?.matches;
+            for (init, p) in &def.init {
+                matched += rules.apply_everywhere(&mut g, init, p)?.matches;
             }
             if matched == 0 {
                 return Err(PhysicsError::Model(format!(
                     "model '{}' matches nothing on this mesh: it needs {}",
-                    def.kind, def.needs
+                    def.name, def.needs
                 )));
             }
             if def.per_element && matched < elements {
                 return Err(PhysicsError::Model(format!(
                     "model '{}' handles {} elements of {elements}: it needs {}, and the others would get no force",
-                    def.kind, matched, def.needs
+                    def.name, matched, def.needs
                 )));
             }
         }

@@ -80,9 +80,9 @@ impl Simulation {
         self.set_vertex_vec3("dx", dx)?;
         self.set_vertex_vec3("dv", dv)?;
         let none = Params::new();
-        for (def, _) in &self.defs {
-            for r in def.jvp_rules {
-                self.rules.apply_everywhere(&mut self.g, r, &none)?;
+        for def in &self.defs {
+            for (r, p) in &def.jvp {
+                self.rules.apply_everywhere(&mut self.g, r, p)?;
             }
         }
         self.rules

@@ -194,6 +194,76 @@ pub struct EmbeddingDecl {
     pub pos: Pos,
 }
 
+/// A constant or parameter given to a rule by a model declaration.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ModelArgKind {
+    /// A model parameter, by name.
+    Param(String),
+    /// A number (`1`, `-2.5e3`).
+    Number(f64),
+    /// A vector `vec3(x, y, z)` of numbers.
+    Vec3([f64; 3]),
+}
+
+/// An argument of a rule call in a model declaration, with its position.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelArg {
+    /// What it is.
+    pub kind: ModelArgKind,
+    /// Where.
+    pub pos: Pos,
+}
+
+/// A model parameter `name: type [= default]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelParam {
+    /// Its name.
+    pub name: String,
+    /// Its type, as written (`f64` or `vec3`).
+    pub ty: String,
+    /// Its default (absent: the parameter is required).
+    pub default: Option<ModelArg>,
+    /// Where.
+    pub pos: Pos,
+}
+
+/// A rule call `rule(arg, ...)` (or a bare `rule` for a rule without parameters).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RuleCall {
+    /// The rule's name.
+    pub rule: String,
+    /// Its arguments, in the rule's parameter order.
+    pub args: Vec<ModelArg>,
+    /// Where.
+    pub pos: Pos,
+}
+
+/// A `model name(params) { init ... step ... forces ... jvp ... -> ... needs "..." per_element }`
+/// declaration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelDecl {
+    /// Its name.
+    pub name: String,
+    /// Its parameters.
+    pub params: Vec<ModelParam>,
+    /// Rules applied once at set-up, everywhere, in order.
+    pub init: Vec<RuleCall>,
+    /// Rules applied every step, everywhere, in order.
+    pub step: Vec<RuleCall>,
+    /// The force embeddings summed into each vertex's `force`.
+    pub forces: Vec<(String, Pos)>,
+    /// Rules computing the Jacobian-vector product, in order.
+    pub jvp: Vec<RuleCall>,
+    /// The embeddings the Jacobian-vector product rules write.
+    pub jvp_outputs: Vec<(String, Pos)>,
+    /// What the model needs of the mesh, said when it matches nothing.
+    pub needs: Option<(String, Pos)>,
+    /// Where `per_element` is written: every element must be matched by the init rules.
+    pub per_element: Option<Pos>,
+    /// Where it is declared.
+    pub pos: Pos,
+}
+
 /// A whole rule file.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct File {
@@ -203,4 +273,6 @@ pub struct File {
     pub embeddings: Vec<EmbeddingDecl>,
     /// Its rules.
     pub rules: Vec<RuleDecl>,
+    /// Its model declarations.
+    pub models: Vec<ModelDecl>,
 }

@@ -232,6 +232,8 @@ pub struct Checked {
     pub embeddings: Vec<EmbDecl>,
     /// The rules.
     pub rules: Vec<Rule>,
+    /// The model declarations.
+    pub models: Vec<crate::model::Model>,
 }
 
 struct Ctx<'a> {
@@ -369,12 +371,15 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
             }
         }
     }
+    let file_dims: Vec<Vec<usize>> = files.iter().map(|_| vec![dim]).collect();
+    let models = crate::model::check_models(&files, &file_dims, &embs, &rules, &mut diags);
     let ok = !diags.iter().any(|d| d.severity == Severity::Error);
     (
         ok.then_some(Checked {
             dim,
             embeddings: embs,
             rules,
+            models,
         }),
         diags,
     )

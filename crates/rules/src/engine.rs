@@ -388,6 +388,16 @@ impl RuleSet {
         &self.checked.rules
     }
 
+    /// The checked model declarations (see [`crate::model`]).
+    pub fn models(&self) -> &[crate::model::Model] {
+        &self.checked.models
+    }
+
+    /// The model declared as `name`, if any.
+    pub fn model(&self, name: &str) -> Option<&crate::model::Model> {
+        self.checked.models.iter().find(|m| m.name == name)
+    }
+
     /// The declared embeddings.
     pub fn embeddings(&self) -> &[EmbDecl] {
         &self.checked.embeddings

@@ -11,6 +11,8 @@ pub enum Tok {
     Int(i64),
     /// A real literal (has a `.` or an exponent).
     Real(f64),
+    /// A string literal `"..."` (no escapes; it ends at the next `"` on its line).
+    Str(String),
     /// Punctuation or operator: `{ } ( ) < > , : ; = - + * / % ! . _ == != <= >= && ||`.
     Punct(&'static str),
     /// End of input.
@@ -24,6 +26,7 @@ impl Tok {
             Tok::Ident(s) => format!("'{s}'"),
             Tok::Int(i) => format!("'{i}'"),
             Tok::Real(x) => format!("'{x}'"),
+            Tok::Str(s) => format!("\"{s}\""),
             Tok::Punct(p) => format!("'{p}'"),
             Tok::Eof => "end of file".into(),
         }
@@ -124,6 +127,25 @@ pub fn lex(src: &str) -> Result<Vec<(Tok, Pos)>, LexError> {
                 })?)
             };
             out.push((tok, pos));
+            continue;
+        }
+        if c == '"' {
+            let start = i + 1;
+            let mut j = start;
+            while j < chars.len() && chars[j] != '"' && chars[j] != '\n' {
+                j += 1;
+            }
+            if j >= chars.len() || chars[j] != '"' {
+                return Err(LexError {
+                    pos,
+                    message: "string not closed: a '\"' is missing before the end of the line"
+                        .into(),
+                });
+            }
+            let s: String = chars[start..j].iter().collect();
+            col += (j + 1 - i) as u32;
+            i = j + 1;
+            out.push((Tok::Str(s), pos));
             continue;
         }
         let rest: String = chars[i..(i + 2).min(chars.len())].iter().collect();

@@ -29,6 +29,7 @@ mod compiled;
 pub mod engine;
 pub mod lexer;
 pub mod mechanics;
+pub mod model;
 pub mod parser;
 pub mod value;
 
@@ -36,6 +37,7 @@ use std::path::Path;
 
 pub use check::{Diagnostic, Severity};
 pub use engine::{ApplyError, ApplyReport, Params, RuleSet};
+pub use model::Model;
 pub use value::{Ty, Val};
 
 /// Parses and checks rule sources `(file name, text)` that share their embeddings.

@@ -2,8 +2,8 @@
 //! stops it and names its line and column.
 
 use crate::ast::{
-    AggKind, ArcDecl, EmbeddingDecl, Expr, ExprKind, File, Graph, NodeDecl, Param, Pos, RuleDecl,
-    Stmt,
+    AggKind, ArcDecl, EmbeddingDecl, Expr, ExprKind, File, Graph, ModelArg, ModelArgKind,
+    ModelDecl, ModelParam, NodeDecl, Param, Pos, RuleCall, RuleDecl, Stmt,
 };
 use crate::lexer::{lex, Tok};
 use crate::value::{BinOp, UnOp};
@@ -151,13 +151,183 @@ impl Parser {
                     let r = self.rule()?;
                     f.rules.push(r);
                 }
+                Tok::Ident(k) if k == "model" => {
+                    let m = self.model()?;
+                    f.models.push(m);
+                }
                 t => {
                     return self.err(format!(
-                        "expected 'dimension', 'embedding' or 'rule', found {}",
+                        "expected 'dimension', 'embedding', 'rule' or 'model', found {}",
                         t.describe()
                     ))
                 }
             }
+        }
+    }
+
+    /// A number with an optional sign, as a real.
+    fn signed_number(&mut self, what: &str) -> R<f64> {
+        let neg = self.eat_punct("-");
+        let x = match self.peek().clone() {
+            #[allow(clippy::cast_precision_loss)]
+            Tok::Int(i) => i as f64,
+            Tok::Real(x) => x,
+            t => return self.err(format!("expected {what}, found {}", t.describe())),
+        };
+        self.bump();
+        Ok(if neg { -x } else { x })
+    }
+
+    /// A model argument or default: a parameter name, a number or `vec3(x, y, z)`.
+    fn model_arg(&mut self) -> R<ModelArg> {
+        let pos = self.pos();
+        if self.is_kw("vec3") && matches!(self.peek_at(1), Tok::Punct("(")) {
+            self.bump();
+            self.bump();
+            let mut v = [0.0; 3];
+            for (k, x) in v.iter_mut().enumerate() {
+                *x = self.signed_number("a number in vec3(x, y, z)")?;
+                if k < 2 {
+                    self.expect_punct(",", "between the components of vec3(x, y, z)")?;
+                }
+            }
+            self.expect_punct(")", "to close vec3(x, y, z)")?;
+            return Ok(ModelArg {
+                kind: ModelArgKind::Vec3(v),
+                pos,
+            });
+        }
+        if let Tok::Ident(name) = self.peek().clone() {
+            self.bump();
+            return Ok(ModelArg {
+                kind: ModelArgKind::Param(name),
+                pos,
+            });
+        }
+        let x = self.signed_number("a model parameter, a number or vec3(x, y, z)")?;
+        Ok(ModelArg {
+            kind: ModelArgKind::Number(x),
+            pos,
+        })
+    }
+
+    /// `rule(arg, ...), rule, ...`: one or more rule calls separated by commas.
+    fn rule_calls(&mut self) -> R<Vec<RuleCall>> {
+        let mut calls = Vec::new();
+        loop {
+            let (rule, pos) = self.ident("a rule name")?;
+            let mut args = Vec::new();
+            if self.eat_punct("(") && !self.eat_punct(")") {
+                loop {
+                    args.push(self.model_arg()?);
+                    if self.eat_punct(")") {
+                        break;
+                    }
+                    self.expect_punct(",", "between arguments")?;
+                }
+            }
+            calls.push(RuleCall { rule, args, pos });
+            if !self.eat_punct(",") {
+                return Ok(calls);
+            }
+        }
+    }
+
+    /// `name, name, ...`: one or more embedding names separated by commas.
+    fn names(&mut self, what: &str) -> R<Vec<(String, Pos)>> {
+        let mut v = vec![self.ident(what)?];
+        while self.eat_punct(",") {
+            v.push(self.ident(what)?);
+        }
+        Ok(v)
+    }
+
+    /// `model name(p: f64 = 1.0, ...) { init ... step ... forces ... [jvp ... -> ...]
+    /// [needs "..."] [per_element] }`
+    fn model(&mut self) -> R<ModelDecl> {
+        let pos = self.bump().1;
+        let (name, _) = self.ident("a model name")?;
+        let mut params = Vec::new();
+        if self.eat_punct("(") && !self.eat_punct(")") {
+            loop {
+                let (pname, ppos) = self.ident("a parameter name")?;
+                self.expect_punct(":", "after the parameter name")?;
+                let ty = self.ident("a parameter type (f64 or vec3)")?.0;
+                let default = if self.eat_punct("=") {
+                    Some(self.model_arg()?)
+                } else {
+                    None
+                };
+                params.push(ModelParam {
+                    name: pname,
+                    ty,
+                    default,
+                    pos: ppos,
+                });
+                if self.eat_punct(")") {
+                    break;
+                }
+                self.expect_punct(",", "between parameters")?;
+            }
+        }
+        self.expect_punct("{", "to open the model")?;
+        let mut m = ModelDecl {
+            name,
+            params,
+            init: Vec::new(),
+            step: Vec::new(),
+            forces: Vec::new(),
+            jvp: Vec::new(),
+            jvp_outputs: Vec::new(),
+            needs: None,
+            per_element: None,
+            pos,
+        };
+        let mut seen: Vec<String> = Vec::new();
+        loop {
+            if self.eat_punct("}") {
+                return Ok(m);
+            }
+            let expected = "'init', 'step', 'forces', 'jvp', 'needs', 'per_element' or '}'";
+            let (kw, kpos) = self.ident(expected)?;
+            if seen.contains(&kw) {
+                return Err(SyntaxError {
+                    pos: kpos,
+                    message: format!("'{kw}' given twice in model '{}'", m.name),
+                });
+            }
+            match kw.as_str() {
+                "init" => m.init = self.rule_calls()?,
+                "step" => m.step = self.rule_calls()?,
+                "forces" => m.forces = self.names("a force embedding name")?,
+                "jvp" => {
+                    m.jvp = self.rule_calls()?;
+                    self.expect_punct("-", "then '>' after the jvp rules, as in 'jvp r -> df_r'")?;
+                    self.expect_punct(">", "after '-', as in 'jvp r -> df_r'")?;
+                    m.jvp_outputs = self.names("a jvp output embedding name")?;
+                }
+                "needs" => match self.peek().clone() {
+                    Tok::Str(s) => {
+                        let p = self.bump().1;
+                        m.needs = Some((s, p));
+                    }
+                    t => {
+                        return self.err(format!(
+                            "expected a string after 'needs', as in needs \"tetrahedra\", found {}",
+                            t.describe()
+                        ))
+                    }
+                },
+                "per_element" => m.per_element = Some(kpos),
+                other => {
+                    return Err(SyntaxError {
+                        pos: kpos,
+                        message: format!("expected {expected}, found '{other}'"),
+                    })
+                }
+            }
+            seen.push(kw);
+            self.eat_punct(";");
         }
     }
 

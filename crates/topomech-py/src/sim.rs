@@ -22,8 +22,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
 use topomech_gmap::{EmbeddingType, OrbitType, Value};
 use topomech_physics::{
-    is_additive, Config, Criterion, Cut, Fracture, Ground, Integrator, MaterialRegion, ModelSpec,
-    Simulation, TimedEvent, TopologyChange, MODELS,
+    is_additive, shipped_models, Config, Criterion, Cut, Fracture, Ground, Integrator,
+    MaterialRegion, ModelSpec, Simulation, TimedEvent, TopologyChange,
 };
 
 use crate::convert::{array_arg, rows3_arg, rows_to_array, shape_str, type_name};
@@ -1260,18 +1260,20 @@ fn rows_i64(rows: &[usize]) -> Vec<i64> {
 /// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "needs"}]`.
 #[pyfunction]
 pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
-    MODELS
+    shipped_models()
         .iter()
         .map(|m| {
             let d = PyDict::new(py);
-            d.set_item("kind", m.kind)?;
-            d.set_item("dims", m.dims.to_vec())?;
+            d.set_item("kind", &m.name)?;
+            d.set_item("dims", m.dimensions.clone())?;
             let p = PyDict::new(py);
-            for (k, v) in m.params {
-                p.set_item(*k, *v)?;
+            for q in &m.params {
+                if let Some(topomech_rules::Val::F(v)) = q.default {
+                    p.set_item(&q.name, v)?;
+                }
             }
             d.set_item("params", p)?;
-            d.set_item("needs", m.needs)?;
+            d.set_item("needs", m.needs.as_deref().unwrap_or(""))?;
             Ok(d)
         })
         .collect()

@@ -1,0 +1,458 @@
+//! Model declarations: a physical model as its rule file says it is run.
+//!
+//! ```text
+//! model anchor(k: f64 = 10.0) {
+//!   init   anchor_init(k)               # rules applied once, everywhere, in this order
+//!   step   anchor_force                 # rules applied every step, everywhere, in this order
+//!   forces f_anchor                     # force embeddings summed into each vertex's `force`
+//!   jvp    anchor_jvp(k) -> df_anchor   # optional: Jacobian-vector product rules, outputs
+//!   needs  "vertices"                   # optional: said when the model matches nothing
+//!   per_element                         # optional: every element must be matched by init
+//! }
+//! ```
+//!
+//! A parameter is `name: f64` or `name: vec3`, with a default (`= 1.5`, `= vec3(0, 0, -1)`)
+//! or without one (then it is required). A rule call's arguments are model parameters,
+//! numbers or `vec3(x, y, z)` literals, one per parameter of the rule, in the rule's order;
+//! a rule without parameters is called by its bare name.
+//!
+//! The checker refuses, with the usual conditions:
+//! - `name`: a model declared twice (across the files loaded together), a parameter twice,
+//!   a call to an unknown rule, an argument naming no parameter of the model, a force or jvp
+//!   output that is not a declared embedding;
+//! - `arity`: a call with a number of arguments other than the rule's parameters; a `jvp`
+//!   whose outputs are not as many as the forces (output k is the derivative of force k);
+//! - `type`: a parameter type other than `f64`/`vec3`, a default or argument of the wrong
+//!   type, a force or jvp output that is not a `vec3` embedding on a sub-orbit of the vertex
+//!   orbit (labels within {1, 2, 3});
+//! - `syntax`: a model without `init`, `step` or `forces`.
+
+use std::collections::HashMap;
+
+use crate::ast::{self, ModelArgKind, Pos};
+use crate::check::{Diagnostic, EmbDecl, Rule, Severity};
+use crate::value::{Ty, Val};
+
+/// A checked argument of a rule call.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Arg {
+    /// The model parameter of this name.
+    Param(String),
+    /// A constant.
+    Const(Val),
+}
+
+/// A checked rule call: the rule and one argument per rule parameter, in its order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Call {
+    /// The rule.
+    pub rule: String,
+    /// `(rule parameter name, argument)`, in the rule's parameter order.
+    pub args: Vec<(String, Arg)>,
+}
+
+/// A checked model parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelParam {
+    /// Its name.
+    pub name: String,
+    /// Its type (`F64` or `Vec3`).
+    pub ty: Ty,
+    /// Its default; `None` when it is required.
+    pub default: Option<Val>,
+}
+
+/// A checked model declaration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Model {
+    /// Its name.
+    pub name: String,
+    /// Its parameters, in declaration order.
+    pub params: Vec<ModelParam>,
+    /// Rules applied once at set-up, everywhere, in order.
+    pub init: Vec<Call>,
+    /// Rules applied every step, everywhere, in order.
+    pub step: Vec<Call>,
+    /// Force embeddings (vec3 on sub-orbits of the vertex) summed into `force`.
+    pub forces: Vec<String>,
+    /// Rules computing the Jacobian-vector product `(df/dx) dx + (df/dv) dv` (empty: the
+    /// model has none, and runs with explicit integrators only).
+    pub jvp: Vec<Call>,
+    /// The embeddings the jvp rules write, summed into `df`.
+    pub jvp_outputs: Vec<String>,
+    /// What the model needs of the mesh (said when it matches nothing).
+    pub needs: Option<String>,
+    /// Whether every element must be matched by one of the init rules.
+    pub per_element: bool,
+    /// The dimensions of maps it runs on.
+    pub dimensions: Vec<usize>,
+    /// The file that declares it.
+    pub file: String,
+    /// Where it is declared.
+    pub pos: Pos,
+}
+
+impl Model {
+    /// The model's parameter values: the defaults, overridden by `given`. Errors name the
+    /// model and the parameter: an unknown parameter (listing the model's), a required one
+    /// missing, a value of the wrong type.
+    pub fn values(&self, given: &HashMap<String, Val>) -> Result<HashMap<String, Val>, String> {
+        let mut out = HashMap::new();
+        for (k, v) in given {
+            let Some(p) = self.params.iter().find(|p| &p.name == k) else {
+                let known: Vec<&str> = self.params.iter().map(|p| p.name.as_str()).collect();
+                return Err(format!(
+                    "model '{}' has no parameter '{k}' (it has: {})",
+                    self.name,
+                    if known.is_empty() {
+                        "none".to_string()
+                    } else {
+                        known.join(", ")
+                    }
+                ));
+            };
+            if v.ty() != p.ty {
+                return Err(format!(
+                    "model '{}': parameter '{k}' is a {}, got a {}",
+                    self.name,
+                    p.ty,
+                    v.ty()
+                ));
+            }
+            out.insert(k.clone(), v.clone());
+        }
+        for p in &self.params {
+            if out.contains_key(&p.name) {
+                continue;
+            }
+            match &p.default {
+                Some(d) => {
+                    out.insert(p.name.clone(), d.clone());
+                }
+                None => {
+                    return Err(format!(
+                        "model '{}': parameter '{}' is required (it has no default)",
+                        self.name, p.name
+                    ))
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl Call {
+    /// The rule's parameters for this call, given the model's parameter values (from
+    /// [`Model::values`], which has every parameter).
+    pub fn params(&self, values: &HashMap<String, Val>) -> crate::Params {
+        self.args
+            .iter()
+            .map(|(name, a)| {
+                let v = match a {
+                    Arg::Const(v) => v.clone(),
+                    Arg::Param(p) => values.get(p).cloned().unwrap_or(Val::F(0.0)),
+                };
+                (name.clone(), v)
+            })
+            .collect()
+    }
+}
+
+fn error(out: &mut Vec<Diagnostic>, file: &str, pos: Pos, condition: &'static str, m: String) {
+    out.push(Diagnostic {
+        file: file.to_string(),
+        pos,
+        severity: Severity::Error,
+        condition,
+        message: m,
+    });
+}
+
+fn constant(a: &ast::ModelArg) -> Option<Val> {
+    match &a.kind {
+        ModelArgKind::Number(x) => Some(Val::F(*x)),
+        ModelArgKind::Vec3(v) => Some(Val::V3(*v)),
+        ModelArgKind::Param(_) => None,
+    }
+}
+
+/// Checks the model declarations of `files` (parsed, with their names) against the checked
+/// rules and embeddings; `dims[k]` are the dimensions file `k` serves. Diagnostics go to `out`.
+pub(crate) fn check_models(
+    files: &[(String, ast::File)],
+    dims: &[Vec<usize>],
+    embs: &[EmbDecl],
+    rules: &[Rule],
+    out: &mut Vec<Diagnostic>,
+) -> Vec<Model> {
+    let mut models: Vec<Model> = Vec::new();
+    let mut seen: HashMap<String, (String, Pos)> = HashMap::new();
+    for ((file, f), fdims) in files.iter().zip(dims) {
+        for m in &f.models {
+            let mn = m.name.as_str();
+            if let Some((other, p)) = seen.get(mn) {
+                error(
+                    out,
+                    file,
+                    m.pos,
+                    "name",
+                    format!(
+                        "model '{mn}' is already declared at {other}:{}:{}",
+                        p.line, p.col
+                    ),
+                );
+                continue;
+            }
+            seen.insert(m.name.clone(), (file.clone(), m.pos));
+            if let Some(c) = check_model(file, m, fdims, embs, rules, out) {
+                models.push(c);
+            }
+        }
+    }
+    models
+}
+
+#[allow(clippy::too_many_lines)]
+fn check_model(
+    file: &str,
+    m: &ast::ModelDecl,
+    dims: &[usize],
+    embs: &[EmbDecl],
+    rules: &[Rule],
+    out: &mut Vec<Diagnostic>,
+) -> Option<Model> {
+    let before = out.len();
+    let mn = m.name.as_str();
+    let mut params: Vec<ModelParam> = Vec::new();
+    for p in &m.params {
+        if params.iter().any(|q| q.name == p.name) {
+            error(
+                out,
+                file,
+                p.pos,
+                "name",
+                format!("model '{mn}': parameter '{}' is declared twice", p.name),
+            );
+            continue;
+        }
+        let ty = match p.ty.as_str() {
+            "f64" => Ty::F64,
+            "vec3" => Ty::Vec3,
+            other => {
+                error(
+                    out,
+                    file,
+                    p.pos,
+                    "type",
+                    format!(
+                        "model '{mn}': parameter '{}' has type '{other}'; a model parameter is f64 or vec3",
+                        p.name
+                    ),
+                );
+                continue;
+            }
+        };
+        let default = match &p.default {
+            None => None,
+            Some(d) => match constant(d) {
+                Some(v) if v.ty() == ty => Some(v),
+                Some(v) => {
+                    error(
+                        out,
+                        file,
+                        d.pos,
+                        "type",
+                        format!(
+                            "model '{mn}': the default of parameter '{}' is a {}, the parameter a {ty}",
+                            p.name,
+                            v.ty()
+                        ),
+                    );
+                    None
+                }
+                None => {
+                    error(
+                        out,
+                        file,
+                        d.pos,
+                        "type",
+                        format!(
+                            "model '{mn}': the default of parameter '{}' must be a number or vec3(x, y, z)",
+                            p.name
+                        ),
+                    );
+                    None
+                }
+            },
+        };
+        params.push(ModelParam {
+            name: p.name.clone(),
+            ty,
+            default,
+        });
+    }
+    for (what, empty) in [
+        ("init", m.init.is_empty()),
+        ("step", m.step.is_empty()),
+        ("forces", m.forces.is_empty()),
+    ] {
+        if empty {
+            error(
+                out,
+                file,
+                m.pos,
+                "syntax",
+                format!("model '{mn}' has no '{what}' line"),
+            );
+        }
+    }
+    let calls = |list: &[ast::RuleCall], what: &str, out: &mut Vec<Diagnostic>| {
+        let mut v = Vec::new();
+        for c in list {
+            let Some(rule) = rules.iter().find(|r| r.name == c.rule) else {
+                error(
+                    out,
+                    file,
+                    c.pos,
+                    "name",
+                    format!(
+                        "model '{mn}': {what} calls rule '{}', which is not defined",
+                        c.rule
+                    ),
+                );
+                continue;
+            };
+            if c.args.len() != rule.params.len() {
+                let want: Vec<String> = rule
+                    .params
+                    .iter()
+                    .map(|(n, t)| format!("{n}: {t}"))
+                    .collect();
+                error(
+                    out,
+                    file,
+                    c.pos,
+                    "arity",
+                    format!(
+                        "model '{mn}': rule '{}' takes {} argument(s) ({}), the call gives {}",
+                        c.rule,
+                        rule.params.len(),
+                        if want.is_empty() {
+                            "none".into()
+                        } else {
+                            want.join(", ")
+                        },
+                        c.args.len()
+                    ),
+                );
+                continue;
+            }
+            let mut args = Vec::new();
+            for (a, (pn, pt)) in c.args.iter().zip(&rule.params) {
+                let (arg, ty) = if let ModelArgKind::Param(name) = &a.kind {
+                    let Some(p) = params.iter().find(|p| &p.name == name) else {
+                        let known: Vec<&str> = params.iter().map(|p| p.name.as_str()).collect();
+                        error(
+                                out,
+                                file,
+                                a.pos,
+                                "name",
+                                format!(
+                                    "model '{mn}': argument '{name}' of rule '{}' names no parameter of the model (it has: {})",
+                                    c.rule,
+                                    if known.is_empty() { "none".into() } else { known.join(", ") }
+                                ),
+                            );
+                        continue;
+                    };
+                    (Arg::Param(name.clone()), p.ty)
+                } else {
+                    let v = constant(a).expect("a constant");
+                    let t = v.ty();
+                    (Arg::Const(v), t)
+                };
+                if ty != *pt {
+                    error(
+                        out,
+                        file,
+                        a.pos,
+                        "type",
+                        format!(
+                            "model '{mn}': parameter '{pn}' of rule '{}' is a {pt}, the argument a {ty}",
+                            c.rule
+                        ),
+                    );
+                    continue;
+                }
+                args.push((pn.clone(), arg));
+            }
+            v.push(Call {
+                rule: c.rule.clone(),
+                args,
+            });
+        }
+        v
+    };
+    let init = calls(&m.init, "init", out);
+    let step = calls(&m.step, "step", out);
+    let jvp = calls(&m.jvp, "jvp", out);
+    let vector_embeddings = |list: &[(String, Pos)], what: &str, out: &mut Vec<Diagnostic>| {
+        for (name, pos) in list {
+            let Some(e) = embs.iter().find(|e| &e.name == name) else {
+                error(
+                    out,
+                    file,
+                    *pos,
+                    "name",
+                    format!("model '{mn}': {what} '{name}' is not a declared embedding"),
+                );
+                continue;
+            };
+            let on_vertex = e.orbit.dims().all(|i| (1..=3).contains(&i));
+            if e.ty != Ty::Vec3 || !on_vertex {
+                error(
+                    out,
+                    file,
+                    *pos,
+                    "type",
+                    format!(
+                        "model '{mn}': {what} '{name}' is a {} on {}; it must be a vec3 on a sub-orbit of the vertex (labels within {{1, 2, 3}})",
+                        e.ty, e.orbit
+                    ),
+                );
+            }
+        }
+    };
+    vector_embeddings(&m.forces, "force", out);
+    vector_embeddings(&m.jvp_outputs, "jvp output", out);
+    if !m.jvp.is_empty() && m.jvp_outputs.len() != m.forces.len() {
+        error(
+            out,
+            file,
+            m.jvp_outputs.first().map_or(m.pos, |o| o.1),
+            "arity",
+            format!(
+                "model '{mn}' has {} force(s) and {} jvp output(s): jvp output k is the derivative of force k",
+                m.forces.len(),
+                m.jvp_outputs.len()
+            ),
+        );
+    }
+    if out.len() > before {
+        return None;
+    }
+    Some(Model {
+        name: m.name.clone(),
+        params,
+        init,
+        step,
+        forces: m.forces.iter().map(|f| f.0.clone()).collect(),
+        jvp,
+        jvp_outputs: m.jvp_outputs.iter().map(|f| f.0.clone()).collect(),
+        needs: m.needs.as_ref().map(|n| n.0.clone()),
+        per_element: m.per_element.is_some(),
+        dimensions: dims.to_vec(),
+        file: file.to_string(),
+        pos: m.pos,
+    })
+}

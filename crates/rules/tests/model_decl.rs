@@ -1,0 +1,259 @@
+//! Model declarations: parsed into checked models with their calls, parameters and
+//! defaults; each mistake refused at its `file:line:col` with the checker's condition name.
+
+use topomech_rules::model::Arg;
+use topomech_rules::{load_sources, Diagnostic, Severity, Val};
+
+const HEAD: &str = "dimension 3
+embedding position : vec3 on <1,2,3>
+embedding rest     : vec3 on <1,2,3>
+embedding f_anchor : vec3 on <1,2,3>
+embedding df_anchor : vec3 on <1,2,3>
+embedding dx       : vec3 on <1,2,3>
+embedding k_anchor : f64  on <1,2,3>
+embedding dir      : vec3 on <1,2,3>
+embedding wrong    : vec3 on <0,1>
+embedding scalar   : f64  on <1,2,3>
+rule anchor_init(k: f64, d: vec3) {
+  left { v : <1,2,3> hook }
+  compute { v.k_anchor = k  v.dir = d }
+}
+rule anchor_force {
+  left { v : <1,2,3> hook }
+  compute { v.f_anchor = -v.k_anchor * (v.position - v.rest) }
+}
+rule anchor_jvp {
+  left { v : <1,2,3> hook }
+  compute { v.df_anchor = -v.k_anchor * v.dx }
+}
+";
+
+fn errors(model: &str) -> Vec<Diagnostic> {
+    let src = format!("{HEAD}{model}");
+    match load_sources(&[("m.tmr".into(), src)]) {
+        Ok(_) => panic!("accepted:\n{model}"),
+        Err(d) => d
+            .into_iter()
+            .filter(|d| d.severity == Severity::Error)
+            .collect(),
+    }
+}
+
+/// The line of `HEAD` + model text on which `needle` first appears (1-based).
+fn line_of(model: &str, needle: &str) -> u32 {
+    let src = format!("{HEAD}{model}");
+    let k = src.find(needle).expect("needle in source");
+    (src[..k].matches('\n').count() + 1) as u32
+}
+
+#[test]
+fn a_declaration_is_parsed_into_a_checked_model() {
+    let model = "model anchor(k: f64 = 10.0, d: vec3 = vec3(0, 0, -1.5), c: f64) {
+  init   anchor_init(k, vec3(1, 2, 3)), anchor_init(2.5, d)
+  step   anchor_force
+  forces f_anchor
+  jvp    anchor_jvp -> df_anchor
+  needs  \"vertices\"
+  per_element
+}
+";
+    let (rules, _) = load_sources(&[("m.tmr".into(), format!("{HEAD}{model}"))]).unwrap();
+    let ms = rules.models();
+    assert_eq!(ms.len(), 1);
+    let m = &ms[0];
+    assert_eq!(m.name, "anchor");
+    assert_eq!(m.file, "m.tmr");
+    assert_eq!(m.pos.line, line_of(model, "model anchor"));
+    assert_eq!(m.params.len(), 3);
+    assert_eq!(m.params[0].default, Some(Val::F(10.0)));
+    assert_eq!(m.params[1].default, Some(Val::V3([0.0, 0.0, -1.5])));
+    assert_eq!(m.params[2].default, None);
+    assert_eq!(m.init.len(), 2);
+    assert_eq!(m.init[0].rule, "anchor_init");
+    assert_eq!(
+        m.init[0].args,
+        vec![
+            ("k".to_string(), Arg::Param("k".into())),
+            ("d".to_string(), Arg::Const(Val::V3([1.0, 2.0, 3.0])))
+        ]
+    );
+    assert_eq!(m.init[1].args[0].1, Arg::Const(Val::F(2.5)));
+    assert_eq!(m.step[0].rule, "anchor_force");
+    assert!(m.step[0].args.is_empty());
+    assert_eq!(m.forces, vec!["f_anchor"]);
+    assert_eq!(m.jvp[0].rule, "anchor_jvp");
+    assert_eq!(m.jvp_outputs, vec!["df_anchor"]);
+    assert_eq!(m.needs.as_deref(), Some("vertices"));
+    assert!(m.per_element);
+    assert_eq!(m.dimensions, vec![3]);
+    // parameter values: defaults, overrides, required, unknown, wrong type
+    let given = [("c".to_string(), Val::F(1.0))].into();
+    let v = m.values(&given).unwrap();
+    assert_eq!(v["k"], Val::F(10.0));
+    assert_eq!(v["c"], Val::F(1.0));
+    let p = m.init[0].params(&v);
+    assert_eq!(p["k"], Val::F(10.0));
+    assert_eq!(p["d"], Val::V3([1.0, 2.0, 3.0]));
+    let e = m.values(&std::collections::HashMap::default()).unwrap_err();
+    assert!(e.contains("parameter 'c' is required"), "{e}");
+    let e = m
+        .values(&[("kk".to_string(), Val::F(1.0))].into())
+        .unwrap_err();
+    assert!(e.contains("has no parameter 'kk' (it has: k, d, c)"), "{e}");
+    let e = m
+        .values(&[("d".to_string(), Val::F(1.0))].into())
+        .unwrap_err();
+    assert!(e.contains("parameter 'd' is a vec3"), "{e}");
+}
+
+/// Each mistake: the model text, the condition, a piece of the message, the text at whose
+/// line the error is reported.
+#[test]
+fn mistakes_are_refused_where_they_are() {
+    let cases: &[(&str, &str, &str, &str)] = &[
+        (
+            "model a(k: f64 = 1.0) { init nope(k) step anchor_force forces f_anchor }",
+            "name",
+            "calls rule 'nope', which is not defined",
+            "model a",
+        ),
+        (
+            "model a(k: f64 = 1.0) {\n init anchor_init(k)\n step anchor_force forces f_anchor }",
+            "arity",
+            "rule 'anchor_init' takes 2 argument(s) (k: f64, d: vec3), the call gives 1",
+            "init anchor_init",
+        ),
+        (
+            "model a(k: f64 = 1.0) {\n init anchor_init(k, k)\n step anchor_force forces f_anchor }",
+            "type",
+            "parameter 'd' of rule 'anchor_init' is a vec3, the argument a f64",
+            "init anchor_init",
+        ),
+        (
+            "model a(k: f64 = 1.0) {\n init anchor_init(stiff, vec3(0,0,0))\n step anchor_force forces f_anchor }",
+            "name",
+            "argument 'stiff' of rule 'anchor_init' names no parameter of the model (it has: k)",
+            "init anchor_init",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces f_nope }",
+            "name",
+            "force 'f_nope' is not a declared embedding",
+            "forces f_nope",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces wrong }",
+            "type",
+            "force 'wrong' is a vec3 on <0,1>; it must be a vec3 on a sub-orbit of the vertex",
+            "forces wrong",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces scalar }",
+            "type",
+            "force 'scalar' is a f64",
+            "forces scalar",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor\n jvp anchor_jvp -> scalar }",
+            "type",
+            "jvp output 'scalar' is a f64",
+            "jvp anchor_jvp",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor\n jvp anchor_jvp -> df_anchor, dx }",
+            "arity",
+            "has 1 force(s) and 2 jvp output(s)",
+            "jvp anchor_jvp",
+        ),
+        (
+            "model a(k: f64 = vec3(1, 2, 3)) { init anchor_init(k, vec3(0,0,0)) step anchor_force forces f_anchor }",
+            "type",
+            "the default of parameter 'k' is a vec3, the parameter a f64",
+            "model a",
+        ),
+        (
+            "model a(k: i64) { init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor }",
+            "type",
+            "parameter 'k' has type 'i64'; a model parameter is f64 or vec3",
+            "model a",
+        ),
+        (
+            "model a(k: f64, k: f64) { init anchor_init(k, vec3(0,0,0)) step anchor_force forces f_anchor }",
+            "name",
+            "parameter 'k' is declared twice",
+            "model a",
+        ),
+        (
+            "model a { step anchor_force forces f_anchor }",
+            "syntax",
+            "model 'a' has no 'init' line",
+            "model a",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor }\nmodel a { init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor }",
+            "name",
+            "model 'a' is already declared at m.tmr:",
+            "model a {",
+        ),
+    ];
+    for (model, cond, msg, at) in cases {
+        let errs = errors(model);
+        let hit = errs
+            .iter()
+            .find(|d| d.condition == *cond && d.message.contains(msg))
+            .unwrap_or_else(|| panic!("{model}: no {cond} error with {msg:?} in {errs:?}"));
+        let mut line = line_of(model, at);
+        if model.matches("model a {").count() == 2 {
+            line += 1; // the second declaration
+        }
+        assert_eq!(hit.pos.line, line, "{model}: {hit}");
+        assert_eq!(hit.file, "m.tmr");
+        assert!(hit.pos.col >= 1);
+    }
+}
+
+#[test]
+fn duplicate_models_across_files_are_refused() {
+    let other = "dimension 3\nmodel anchor { init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor }\n";
+    let first = format!(
+        "{HEAD}model anchor {{ init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor }}\n"
+    );
+    let d = load_sources(&[("a.tmr".into(), first), ("b.tmr".into(), other.into())])
+        .expect_err("refused");
+    let e = d
+        .iter()
+        .find(|d| d.condition == "name")
+        .expect("a name error");
+    assert_eq!(e.file, "b.tmr");
+    assert_eq!((e.pos.line, e.pos.col), (2, 1));
+    assert!(
+        e.message
+            .contains("model 'anchor' is already declared at a.tmr:"),
+        "{e}"
+    );
+}
+
+#[test]
+fn syntax_errors_name_line_and_column() {
+    for (model, msg) in [
+        ("model a { init }", "expected a rule name, found '}'"),
+        (
+            "model a { needs vertices }",
+            "expected a string after 'needs'",
+        ),
+        ("model a { needs \"vertices }", "string not closed"),
+        (
+            "model a { init r init r }",
+            "'init' given twice in model 'a'",
+        ),
+        ("model a { jvp r df }", "expected '-'"),
+        ("model a { bogus }", "expected 'init', 'step', 'forces'"),
+        ("model a(k: f64 = vec3(1, 2)) { }", "expected ','"),
+    ] {
+        let d = load_sources(&[("m.tmr".into(), format!("dimension 3\n{model}"))])
+            .expect_err("refused");
+        assert_eq!(d[0].condition, "syntax", "{model}");
+        assert_eq!(d[0].pos.line, 2, "{model}: {}", d[0]);
+        assert!(d[0].message.contains(msg), "{model}: {}", d[0]);
+    }
+}
