@@ -322,7 +322,7 @@ def run_scene(
         (out_dir / stale).unlink(missing_ok=True)
     cells = OutputCells(sim, _input_cells(sc))
     writer = _Writer(sim, cells, fields)
-    recorder = Recorder(sim, sc, energy=preview, cells=cells)
+    recorder = Recorder(sim, sc, energy=preview, cells=cells, out_dir=out_dir)
     frames: list[tuple[float, str]] = []
 
     def frame() -> None:
