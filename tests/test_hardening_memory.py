@@ -126,7 +126,7 @@ def test_recorded_frames_are_not_held_in_memory(tmp_path: Path) -> None:
 def test_frames_read_back_one_at_a_time(tmp_path: Path) -> None:
     """Reading a view and fitting the previews' camera to all of its frames (what rendering
     does first) holds one frame at a time: the peak for 100 frames of the 775-vertex bar is
-    within 0.4 MB of that for 10 (view.json's index of the frames, about 1.5 kB a frame, is
+    within 0.4 MB of that for 10 (view.json's index of the frames, about 1 kB a frame, is
     read whole), while view.bin grows by 1.1 MB, which reading it whole takes, and gathering
     every frame's positions as float32 and float64 (as before) 2.5 MB more."""
     sc = load_scene(_scene(tmp_path, 30, 4, model="stretch_elementary"))
