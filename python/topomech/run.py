@@ -462,7 +462,7 @@ def run_scene(
             folder.add(rel)  # before the recorder starts: it may write them as it goes
         cells = OutputCells(sim, _input_cells(sc))
         writer = _Writer(sim, cells, fields)
-        recorder = Recorder(sim, sc, energy=preview, cells=cells)
+        recorder = Recorder(sim, sc, energy=preview, cells=cells, out_dir=out_dir)
 
         def frame() -> None:
             assert writer is not None
