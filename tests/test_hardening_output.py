@@ -6,6 +6,7 @@ and failed there (see the report of part 13a)."""
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import errno
 import json
@@ -537,21 +538,57 @@ def test_disk_full_names_the_file(
 
 
 def test_disk_full_on_the_view_data(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """ENOSPC writing view.bin (a bytes write that has no file name): the error names
-    view.bin."""
-    real = Path.write_bytes
+    """ENOSPC appending a frame to view.bin (a write to an open file, which names no file):
+    the error names view.bin, not the frame file written just before it."""
+    import topomech.recording as recording
 
-    def write_bytes(self: Path, data: Any) -> int:
-        if self.name == "view.bin":
+    real = recording.Recorder._bin_file
+
+    class Full:
+        def __init__(self, f: Any) -> None:
+            self.f = f
+
+        def write(self, data: bytes) -> int:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        return real(self, data)
 
-    monkeypatch.setattr(Path, "write_bytes", write_bytes)
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.f, name)
+
+    def bin_file(self: Any) -> Any:
+        return Full(real(self))
+
+    monkeypatch.setattr(recording.Recorder, "_bin_file", bin_file)
     s = run_scene(springs(tmp_path), tmp_path / "o")
     assert s["error"]["type"] == "io"
-    assert s["error"]["phase"] == "view"
     assert s["error"]["path"] == str(tmp_path / "o" / "view.bin")
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["error"] == s["error"]
+
+
+def test_disk_full_on_the_energy_rows(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """ENOSPC appending a row to energy.csv as the run goes: the error names energy.csv."""
+    import topomech.recording as recording
+
+    real = recording.Recorder._energy_file
+
+    class Full:
+        def __init__(self, f: Any) -> None:
+            self.f = f
+
+        def write(self, data: str) -> int:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.f, name)
+
+    def energy_file(self: Any) -> Any:
+        fh = real(self)
+        self._csv_writer = csv.writer(Full(fh))
+        return fh
+
+    monkeypatch.setattr(recording.Recorder, "_energy_file", energy_file)
+    s = run_scene(springs(tmp_path), tmp_path / "o")
+    assert s["error"]["type"] == "io"
+    assert s["error"]["path"] == str(tmp_path / "o" / "energy.csv")
 
 
 def test_disk_full_on_the_summary(

@@ -39,6 +39,7 @@ without, it spools them to temporary files that :meth:`Recorder.write_view` and
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -48,6 +49,7 @@ import tempfile
 import weakref
 from array import array
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
@@ -134,6 +136,19 @@ class Topology:
     #: None for maps above :data:`DART_LIMIT`.
     darts: dict[str, I64] | None
     n_darts: int
+
+
+@contextlib.contextmanager
+def _naming(out_dir: Path | None, name: str) -> Iterator[None]:
+    """Gives an OSError raised inside (a full disk: a write to an open file says no file name)
+    the name of the file written, ``out_dir / name`` (or the spool's ``name``)."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is not None:
+            raise
+        where = os.fspath(out_dir / name) if out_dir is not None else f"{name} (spooled)"
+        raise OSError(e.errno, e.strerror, where) from e
 
 
 def _components(n: int, links: list[I64], live: npt.NDArray[np.bool_]) -> I64:
@@ -445,7 +460,8 @@ class Recorder:
             refs.append({"offset": offset, "dtype": dtype, "shape": list(arr.shape)})
             chunks.append(arr.tobytes())
             offset += arr.nbytes
-        self._bin_file().write(b"".join(chunks))
+        with _naming(self.out_dir, "view.bin"):
+            self._bin_file().write(b"".join(chunks))
         self._bin_size = offset
         return refs
 
@@ -635,11 +651,15 @@ class Recorder:
         total = kinetic + gravitational + elastic
         self.energy["elastic"].append(elastic)
         self.energy["total"].append(total)
-        fh = self._energy_file()
-        self._csv_writer.writerow(
-            [int(step), *(repr(float(v)) for v in (time, kinetic, gravitational, elastic, total))]
-        )
-        fh.flush()
+        with _naming(self.out_dir, "energy.csv"):
+            fh = self._energy_file()
+            self._csv_writer.writerow(
+                [
+                    int(step),
+                    *(repr(float(v)) for v in (time, kinetic, gravitational, elastic, total)),
+                ]
+            )
+            fh.flush()
         self._energy_rows += 1
 
     def _complete(self, x: F64, rest: F64, version: int, f: F64) -> None:
