@@ -88,22 +88,10 @@ pub(crate) fn glue_files(
     }
     out.push((ACCUMULATION.to_string(), file(acc)));
 
-    // the guard `{ let <prefix...>  let x = x(point)  let y = ...  let z = ...  <predicate> }`
-    let guard =
-        |label: &str, text: &str, mut lets: Vec<(&'static str, ast::Expr)>, point: ast::Expr| {
-            let pred = parse_predicate(label, text)?;
-            let pos = pred.pos;
-            for c in ["x", "y", "z"] {
-                lets.push((c, build::call(c, vec![point.clone()])));
-            }
-            let mut g = build::let_block(lets, pred);
-            g.pos = pos;
-            Ok::<_, PhysicsError>(g)
-        };
     for (k, p) in cfg.fixed.iter().enumerate() {
         let label = format!("fixed[{k}]");
         let mut r = build::rule(&format!("fix_{k}"), vertex());
-        r.guard = Some(guard(&label, p, vec![], build::read("v", "rest"))?);
+        r.guard = Some(glue_guard(&label, p, vec![], build::read("v", "rest"))?);
         r.compute = vec![build::write("v", "fixed", build::boolean(true))];
         out.push((label, file(vec![r])));
     }
@@ -111,7 +99,7 @@ pub(crate) fn glue_files(
         let label = format!("prescribed[{k}]");
         let mut r = build::rule(&format!("prescribe_{k}"), vertex());
         r.params = vec![build::param("d", "vec3")];
-        r.guard = Some(guard(&label, p, vec![], build::read("v", "rest"))?);
+        r.guard = Some(glue_guard(&label, p, vec![], build::read("v", "rest"))?);
         r.compute = vec![
             build::write("v", "fixed", build::boolean(true)),
             build::write(
@@ -139,7 +127,7 @@ pub(crate) fn glue_files(
             ]);
             let mut r = build::rule(&format!("cut_where_{k}"), left);
             r.right = Some(right);
-            r.guard = Some(guard(
+            r.guard = Some(glue_guard(
                 &label,
                 p,
                 vec![("c", build::mean(side, "a", "position"))],
@@ -165,7 +153,7 @@ pub(crate) fn glue_files(
                 r.compute.push(build::write("e", name, build::real(x)));
             }
         }
-        r.guard = Some(guard(
+        r.guard = Some(glue_guard(
             &label,
             &reg.predicate,
             vec![("c", build::mean(e_orbit, "e", "rest"))],
@@ -176,10 +164,72 @@ pub(crate) fn glue_files(
     Ok(out)
 }
 
-/// A predicate of the configuration parsed as one expression ([`build::parse_expression`]),
-/// or the configuration error naming its key, the predicate and the place in it.
-fn parse_predicate(label: &str, text: &str) -> Result<ast::Expr, PhysicsError> {
-    build::parse_expression(label, text).map_err(|d| bad_predicate(label, text, &[d]))
+/// The guard of a glue rule around a scene's predicate, `{ let <lets...>  let x = x(point)
+/// let y = y(point)  let z = z(point)  <predicate> }`, at the predicate's position; the
+/// predicate is parsed as one expression ([`build::parse_expression`]), `label` naming it in
+/// the diagnostic.
+fn predicate_guard(
+    label: &str,
+    text: &str,
+    mut lets: Vec<(&'static str, ast::Expr)>,
+    point: &ast::Expr,
+) -> Result<ast::Expr, topomech_rules::Diagnostic> {
+    let pred = build::parse_expression(label, text)?;
+    let pos = pred.pos;
+    for c in ["x", "y", "z"] {
+        lets.push((c, build::call(c, vec![point.clone()])));
+    }
+    let mut g = build::let_block(lets, pred);
+    g.pos = pos;
+    Ok(g)
+}
+
+/// [`predicate_guard`], a refusal being the configuration error naming the key.
+fn glue_guard(
+    label: &str,
+    text: &str,
+    lets: Vec<(&'static str, ast::Expr)>,
+    point: ast::Expr,
+) -> Result<ast::Expr, PhysicsError> {
+    predicate_guard(label, text, lets, &point).map_err(|d| bad_predicate(label, text, &[d]))
+}
+
+/// Checks a predicate on the rest position `x`, `y`, `z` exactly as a simulation builds and
+/// checks a fixed vertex's (a 3D `fix` rule's guard): one expression of the rule language
+/// ([`build::parse_expression`]), of type bool, reading only `x`, `y`, `z` and its own `let`
+/// bindings. The same predicate is accepted for prescribed displacements, material regions
+/// (on the element's centroid) and cuts (on the side's centroid).
+///
+/// Errors: every error diagnostic, its `file` being `label` and its line and column the place
+/// in `text` (e.g. rule syntax after the expression: "expected the end of the expression").
+pub fn check_predicate(label: &str, text: &str) -> Result<(), Vec<topomech_rules::Diagnostic>> {
+    const DECLS: &str = "dimension 3
+embedding rest : vec3 on <1,2,3>
+embedding fixed : bool on <1,2,3>
+";
+    let decls = parser::parse(DECLS).expect("static declarations parse");
+    let guard =
+        predicate_guard(label, text, vec![], &build::read("v", "rest")).map_err(|d| vec![d])?;
+    let mut r = build::rule(
+        "fix",
+        build::graph(vec![build::node("v", &[1, 2, 3], true)]),
+    );
+    r.guard = Some(guard);
+    r.compute = vec![build::write("v", "fixed", build::boolean(true))];
+    let mut f = ast::File::default();
+    f.dimension = decls.dimension;
+    f.rules = vec![r];
+    build::load(
+        &[("decls".into(), DECLS.into())],
+        vec![(label.to_string(), f)],
+    )
+    .map(|_| ())
+    .map_err(|diags| {
+        diags
+            .into_iter()
+            .filter(|d| d.severity == topomech_rules::Severity::Error)
+            .collect()
+    })
 }
 
 /// The error for a refused predicate: `bad <kind> predicate <key> "<text>": <where>: <what>`,
