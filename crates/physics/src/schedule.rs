@@ -49,12 +49,7 @@ pub(crate) fn glue_files(
     jvp: &[&str],
     cfg: &Config,
 ) -> Result<Vec<(String, ast::File)>, PhysicsError> {
-    let file = |rules: Vec<ast::RuleDecl>| {
-        let mut f = ast::File::default();
-        f.dimension = glue.dimension;
-        f.rules = rules;
-        f
-    };
+    let file = |rules: Vec<ast::RuleDecl>| build::file(glue, rules);
     let v_orbit: &[u64] = if dim == 3 { &[1, 2, 3] } else { &[1, 2] };
     let vertex = || build::graph(vec![build::node("v", v_orbit, true)]);
     let mut out = Vec::new();
@@ -91,7 +86,7 @@ pub(crate) fn glue_files(
     for (k, p) in cfg.fixed.iter().enumerate() {
         let label = format!("fixed[{k}]");
         let mut r = build::rule(&format!("fix_{k}"), vertex());
-        r.guard = Some(glue_guard(&label, p, vec![], build::read("v", "rest"))?);
+        r.guard = Some(glue_guard(&label, p, vec![], &build::read("v", "rest"))?);
         r.compute = vec![build::write("v", "fixed", build::boolean(true))];
         out.push((label, file(vec![r])));
     }
@@ -99,7 +94,7 @@ pub(crate) fn glue_files(
         let label = format!("prescribed[{k}]");
         let mut r = build::rule(&format!("prescribe_{k}"), vertex());
         r.params = vec![build::param("d", "vec3")];
-        r.guard = Some(glue_guard(&label, p, vec![], build::read("v", "rest"))?);
+        r.guard = Some(glue_guard(&label, p, vec![], &build::read("v", "rest"))?);
         r.compute = vec![
             build::write("v", "fixed", build::boolean(true)),
             build::write(
@@ -131,7 +126,7 @@ pub(crate) fn glue_files(
                 &label,
                 p,
                 vec![("c", build::mean(side, "a", "position"))],
-                build::name("c"),
+                &build::name("c"),
             )?);
             out.push((label, file(vec![r])));
         }
@@ -157,7 +152,7 @@ pub(crate) fn glue_files(
             &label,
             &reg.predicate,
             vec![("c", build::mean(e_orbit, "e", "rest"))],
-            build::name("c"),
+            &build::name("c"),
         )?);
         out.push((label, file(vec![r])));
     }
@@ -189,9 +184,9 @@ fn glue_guard(
     label: &str,
     text: &str,
     lets: Vec<(&'static str, ast::Expr)>,
-    point: ast::Expr,
+    point: &ast::Expr,
 ) -> Result<ast::Expr, PhysicsError> {
-    predicate_guard(label, text, lets, &point).map_err(|d| bad_predicate(label, text, &[d]))
+    predicate_guard(label, text, lets, point).map_err(|d| bad_predicate(label, text, &[d]))
 }
 
 /// Checks a predicate on the rest position `x`, `y`, `z` exactly as a simulation builds and
@@ -216,9 +211,7 @@ embedding fixed : bool on <1,2,3>
     );
     r.guard = Some(guard);
     r.compute = vec![build::write("v", "fixed", build::boolean(true))];
-    let mut f = ast::File::default();
-    f.dimension = decls.dimension;
-    f.rules = vec![r];
+    let f = build::file(&decls, vec![r]);
     build::load(
         &[("decls".into(), DECLS.into())],
         vec![(label.to_string(), f)],

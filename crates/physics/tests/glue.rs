@@ -3,6 +3,9 @@
 //! and column; an ordinary predicate selects exactly the vertices (elements) it says,
 //! checked against the same predicate evaluated here in Rust on the rest positions.
 
+// the shared test helpers index arrays in loops, as the formulas they mirror do
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::model;
@@ -23,6 +26,9 @@ fn sim(mesh: &Mesh, f: impl FnOnce(&mut Config)) -> Result<Simulation, PhysicsEr
 fn mesh() -> Mesh {
     cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra)
 }
+
+/// Sets one predicate of a configuration.
+type SetUp = Box<dyn FnOnce(&mut Config)>;
 
 /// Predicates that, spliced into rule text as they used to be, closed the guard and defined
 /// rules of their own (the first two made a valid file: the old code built the simulation
@@ -51,7 +57,7 @@ const EVIL: [(&str, u32); 5] = [
 fn rule_syntax_in_a_predicate_is_refused_as_a_bad_predicate() {
     let m = mesh();
     for (p, col) in EVIL {
-        let cases: [(&str, &str, Box<dyn FnOnce(&mut Config)>); 4] = [
+        let cases: [(&str, &str, SetUp); 4] = [
             (
                 "fixed-vertex",
                 "fixed[1]",
@@ -85,9 +91,8 @@ fn rule_syntax_in_a_predicate_is_refused_as_a_bad_predicate() {
             ),
         ];
         for (kind, key, f) in cases {
-            let e = match sim(&m, f) {
-                Ok(_) => panic!("{key} = {p:?} was accepted"),
-                Err(e) => e,
+            let Err(e) = sim(&m, f) else {
+                panic!("{key} = {p:?} was accepted")
             };
             let msg = e.to_string();
             assert!(matches!(e, PhysicsError::Config(_)), "{msg}");

@@ -7,7 +7,6 @@
 //! [`parse_expression`], never read as more rules.
 //!
 //! ```
-//! use topomech_rules::ast::File;
 //! use topomech_rules::build::{self, parse_expression};
 //!
 //! // where { let x = x(v.rest)  <the user's predicate> }
@@ -22,10 +21,7 @@
 //! let text = "dimension 2
 //!   embedding rest : vec3 on <1,2>
 //!   embedding fixed : bool on <1,2>";
-//! let mut glue = File::default();
-//! glue.rules.push(r);
-//! let parsed = topomech_rules::parser::parse(text).unwrap();
-//! glue.dimension = parsed.dimension;
+//! let glue = build::file(&topomech_rules::parser::parse(text).unwrap(), vec![r]);
 //! let (rules, _) = build::load(&[("decl.tmr".into(), text.into())], vec![("glue".into(), glue)])
 //!     .unwrap();
 //! assert_eq!(rules.rule("fix_0").unwrap().name, "fix_0");
@@ -209,6 +205,16 @@ pub fn rule(name: &str, left: Graph) -> RuleDecl {
         compute: Vec::new(),
         guard: None,
         pos: Pos::default(),
+    }
+}
+
+/// A file of the same dimension as `like` (e.g. a parsed declaration file) holding `rules`,
+/// and nothing else.
+pub fn file(like: &File, rules: Vec<RuleDecl>) -> File {
+    File {
+        dimension: like.dimension,
+        rules,
+        ..File::default()
     }
 }
 

@@ -5,7 +5,7 @@
 use topomech_gmap::generators::{grid, GridElement};
 use topomech_gmap::mesh::{build as build_mesh, BuildOptions};
 use topomech_gmap::Value;
-use topomech_rules::ast::{ExprKind, File};
+use topomech_rules::ast::ExprKind;
 use topomech_rules::build::{self, parse_expression};
 use topomech_rules::value::BinOp;
 use topomech_rules::{load_sources, parser, Params, Severity};
@@ -112,9 +112,7 @@ rule fix {
         pred,
     ));
     r.compute = vec![build::write("v", "fixed", build::boolean(true))];
-    let mut built = File::default();
-    built.dimension = parser::parse(DECLS).unwrap().dimension;
-    built.rules.push(r);
+    let built = build::file(&parser::parse(DECLS).unwrap(), vec![r]);
 
     let (by_text, _) = load_sources(&[
         ("decls.tmr".into(), DECLS.into()),
@@ -157,13 +155,11 @@ rule fix {
 /// parsed predicate.
 #[test]
 fn built_rules_are_checked() {
-    let dimension = parser::parse(DECLS).unwrap().dimension;
+    let decls = parser::parse(DECLS).unwrap();
     let mut r = build::rule("r", build::graph(vec![build::node("v", &[1, 2], true)]));
     r.guard = Some(parse_expression("fixed[0]", "x < 1 && w > 0").unwrap());
     r.compute = vec![build::write("v", "fixed", build::boolean(true))];
-    let mut f = File::default();
-    f.dimension = dimension;
-    f.rules.push(r);
+    let f = build::file(&decls, vec![r]);
     let diags = build::load(
         &[("decls.tmr".into(), DECLS.into())],
         vec![("fixed[0]".into(), f)],
@@ -183,9 +179,7 @@ fn built_rules_are_checked() {
 
     let mut r = build::rule("r", build::graph(vec![build::node("v", &[1, 2], true)]));
     r.compute = vec![build::write("v", "nowhere", build::real(1.0))];
-    let mut f = File::default();
-    f.dimension = dimension;
-    f.rules.push(r);
+    let f = build::file(&decls, vec![r]);
     let diags = build::load(
         &[("decls.tmr".into(), DECLS.into())],
         vec![("built".into(), f)],
