@@ -27,6 +27,7 @@ __all__ = [
     "__version__",
     "_panic_for_tests",
     "box",
+    "check_predicate",
     "grid",
     "models",
 ]

@@ -632,7 +632,7 @@ impl Parser {
         let (e, he) = self.expr_h()?;
         if !matches!(self.peek(), Tok::Eof) {
             return self.err(format!(
-                "expected the end of the expression, found {}: an expression is one expression (with leading 'let' bindings), not rule syntax",
+                "expected the end of the expression, found {} (one expression is expected here, after optional 'let' bindings; rule syntax is not allowed)",
                 self.peek().describe()
             ));
         }
