@@ -27,6 +27,7 @@ __all__ = [
     "__version__",
     "_panic_for_tests",
     "box",
+    "check_predicate",
     "grid",
     "models",
 ]
@@ -231,6 +232,12 @@ class Simulation:
 
 def models() -> list[dict[str, Any]]:
     """The models topomech ships: ``kind``, ``dims``, ``params`` (with defaults), ``needs``."""
+
+def check_predicate(text: str, label: str = "predicate") -> None:
+    """Checks a predicate on the rest position ``x``, ``y``, ``z`` as a simulation builds it:
+    one expression of the rule language, of type bool (no rule syntax). Raises
+    :class:`RuleError` whose ``diagnostics`` name ``label`` and the line and column in
+    ``text``."""
 
 def grid(
     nx: int, ny: int, sx: float = 1.0, sy: float = 1.0, element: str = "quad"

@@ -414,33 +414,27 @@ def _or(items: Sequence[str]) -> str:
     return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} or {items[-1]}"
 
 
-_DIAGNOSTIC = re.compile(r"^.*?:(\d+):(\d+): error\[([\w-]+)\]: (?:rule 'p': )?(.*)$")
+_DIAGNOSTIC = re.compile(r"^.*?:(\d+):(\d+): error\[([\w-]+)\]: (?:rule '\w+': )?(.*)$")
 
 
 def _check_predicate(pred: str, key: str, fail: _Fail) -> str:
-    """Checks a predicate the way the kernel will compile it (a rule's ``where`` guard over
-    ``x``, ``y``, ``z``), so that a bad one is named by its key."""
+    """Checks a predicate the way the kernel will compile it (one expression of the rule
+    language over ``x``, ``y``, ``z``, the guard of a rule built around it, never rule text),
+    so that a bad one is named by its key and the place in it (line and column)."""
     if not pred.strip():
         raise fail(key, "the predicate is empty")
-    src = (
-        "dimension 3\n"
-        "embedding rest : vec3 on <1,2,3>\n"
-        "embedding fixed : bool on <1,2,3>\n"
-        "rule p {\n"
-        "  left { v : <1,2,3> hook }\n"
-        "  where { let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)\n"
-        f"{pred}\n"
-        "  }\n"
-        "  compute { v.fixed = true }\n"
-        "}\n"
-    )
     try:
-        _core.RuleSet.from_source(src, "predicate")
+        _core.check_predicate(pred, key)
     except RuleError as e:
         problems = []
         for line in e.diagnostics:
             m = _DIAGNOSTIC.match(line)
-            problems.append(m.group(4) if m else line)
+            if m is None:
+                problems.append(line)
+                continue
+            row, col = int(m.group(1)), int(m.group(2))
+            at = f"line {row}, column {col}" if row > 1 else f"column {col}"
+            problems.append(f"{at}: {m.group(4)}")
         raise fail(key, f"bad predicate {_show(pred)}: {'; '.join(problems)}") from None
     return pred
 

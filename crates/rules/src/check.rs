@@ -291,9 +291,16 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
     if diags.iter().any(|d| d.severity == Severity::Error) {
         return (None, diags);
     }
+    check_files(&files)
+}
+
+/// Checks rule files already parsed (or built as syntax trees, see [`crate::build`]), given as
+/// `(file name, syntax tree)`, exactly as [`check_sources`] checks parsed text.
+pub fn check_files(files: &[(String, crate::ast::File)]) -> (Option<Checked>, Vec<Diagnostic>) {
+    let mut diags = Vec::new();
     // dimension
     let mut dim: Option<(usize, String)> = None;
-    for (name, f) in &files {
+    for (name, f) in files {
         let mut c = Ctx {
             file: name,
             out: &mut diags,
@@ -325,7 +332,7 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
     };
     // embeddings, shared by all files
     let mut embs: Vec<EmbDecl> = Vec::new();
-    for (name, f) in &files {
+    for (name, f) in files {
         let mut c = Ctx {
             file: name,
             out: &mut diags,
@@ -348,7 +355,7 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
     }
     let mut rules: Vec<Rule> = Vec::new();
     let mut rule_pos: HashMap<String, (String, Pos)> = HashMap::new();
-    for (name, f) in &files {
+    for (name, f) in files {
         let mut c = Ctx {
             file: name,
             out: &mut diags,
@@ -372,7 +379,7 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
         }
     }
     let file_dims: Vec<Vec<usize>> = files.iter().map(|_| vec![dim]).collect();
-    let models = crate::model::check_models(&files, &file_dims, &embs, &rules, &mut diags);
+    let models = crate::model::check_models(files, &file_dims, &embs, &rules, &mut diags);
     let ok = !diags.iter().any(|d| d.severity == Severity::Error);
     (
         ok.then_some(Checked {
