@@ -98,7 +98,8 @@ pub enum ApplyError {
     Interrupted {
         /// The rule.
         rule: String,
-        /// What it was doing: `finding matches`, `evaluating` or `running its compiled plan`.
+        /// What it was doing: `finding matches`, `evaluating`, `planning the new topology`,
+        /// `checking the values written` or `running its compiled plan`.
         stage: &'static str,
         /// Matches found before the interruption.
         found: usize,
@@ -1162,8 +1163,20 @@ fn apply_matches(
     let mut changes = Vec::new();
     let mut fresh = Vec::new();
     let mut remove = Vec::new();
+    let interrupted = |stage| ApplyError::Interrupted {
+        rule: rule.name.clone(),
+        stage,
+        found: ms.len(),
+        applied: 0,
+    };
     if rule.changes_topology {
         for m in ms {
+            // the darts created so far are free (every alpha a fixed point): removing them
+            // leaves the map as it was
+            if poll.tick(m.rows) {
+                undo_fresh(g, &fresh);
+                return Err(interrupted("planning the new topology"));
+            }
             let mut nd_darts = m.darts.clone();
             for (k, nd) in rule.nodes.iter().enumerate() {
                 if nd.left.is_none() {
@@ -1205,12 +1218,22 @@ fn apply_matches(
         node_darts = ms.iter().map(|m| m.darts.clone()).collect();
     }
     // 3. one value per orbit of the result: checked on the planned topology, before any change
-    let overlay: HashMap<(usize, Dart), Dart> =
-        changes.iter().map(|&(i, a, b)| ((i, a), b)).collect();
+    let mut overlay: HashMap<(usize, Dart), Dart> = HashMap::with_capacity(changes.len());
+    for chunk in changes.chunks(INTERRUPT_EVERY) {
+        if poll.tick(chunk.len()) {
+            undo_fresh(g, &fresh);
+            return Err(interrupted("planning the new topology"));
+        }
+        overlay.extend(chunk.iter().map(|&(i, a, b)| ((i, a), b)));
+    }
     let mut groups: HashMap<usize, HashMap<Dart, u32>> = HashMap::new();
     let mut written: HashMap<(usize, u32), (Val, Dart)> = HashMap::new();
     let mut conflict = None;
     'outer: for (ps, nd_darts) in pending.iter().zip(&node_darts) {
+        if poll.tick(ps.iter().map(|p| p.values.len()).sum()) {
+            undo_fresh(g, &fresh);
+            return Err(interrupted("checking the values written"));
+        }
         for p in ps {
             let orbit = b.embs[p.emb].orbit;
             let group = groups.entry(p.emb).or_default();
@@ -1238,19 +1261,14 @@ fn apply_matches(
             }
         }
     }
-    let undo_fresh = |g: &mut GMap| {
-        for &d in &fresh {
-            let _ = g.remove_dart(d);
-        }
-    };
     if let Some(c) = conflict {
-        undo_fresh(g);
+        undo_fresh(g, &fresh);
         return Err(c);
     }
     // 4. rewrite the topology, then write
     if rule.changes_topology && !ms.is_empty() {
         if let Err(source) = g.rewire(&changes, &fresh, &remove) {
-            undo_fresh(g);
+            undo_fresh(g, &fresh);
             return Err(ApplyError::Rewire {
                 rule: rule.name.clone(),
                 source,
@@ -1283,6 +1301,14 @@ fn apply_matches(
         }
     }
     Ok(report)
+}
+
+/// Removes the darts an application created before it stopped (free darts, linked to
+/// nothing yet).
+fn undo_fresh(g: &mut GMap, fresh: &[Dart]) {
+    for &d in fresh {
+        let _ = g.remove_dart(d);
+    }
 }
 
 /// Whether every real of a value is finite (integers and booleans always are).

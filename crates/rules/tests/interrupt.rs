@@ -75,9 +75,15 @@ fn interrupted_topology_rule_stops_before_any_change_and_leaves_the_map_valid() 
             }
             other => panic!("k = {k}: expected Interrupted, got {other:?}"),
         }
-        assert_eq!(calls, k, "the application went on after the check said stop");
+        assert_eq!(
+            calls, k,
+            "the application went on after the check said stop"
+        );
         let msg = r.unwrap_err().to_string();
-        assert!(msg.contains("interrupted") && msg.contains("0 match(es) applied"), "{msg}");
+        assert!(
+            msg.contains("interrupted") && msg.contains("0 match(es) applied"),
+            "{msg}"
+        );
         assert!(g.is_valid());
         assert_eq!(g.cell_counts().darts, darts);
         assert!(positions(&g) == before, "a position changed");
@@ -105,7 +111,11 @@ fn check_is_called_regularly_and_a_never_check_gives_the_plain_result() {
     // 6400 darts tried, then 1600 matches of 4 rows evaluated: at least one check per
     // INTERRUPT_EVERY units of work, so never more than INTERRUPT_EVERY units unchecked
     let work = 6400 + 1600 * 4;
-    assert!(calls.get() >= work / INTERRUPT_EVERY - 1, "{} calls", calls.get());
+    assert!(
+        calls.get() >= work / INTERRUPT_EVERY - 1,
+        "{} calls",
+        calls.get()
+    );
     // the same positions (slots may be numbered differently: compare them as sorted lists)
     let sorted = |g: &GMap| {
         let mut p = positions(g);
