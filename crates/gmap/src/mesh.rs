@@ -587,16 +587,15 @@ pub const TINY_SIZE: f64 = f64::MIN_POSITIVE / DEGENERATE;
 /// extent, computed without squares, so that it is finite for any finite coordinates whose
 /// differences are, and zero only when every point of the cell is at one position.
 pub(crate) fn extent(verts: &[usize], points: &[[f64; 3]]) -> f64 {
-    let mut e: f64 = 0.0;
-    for a in 0..3 {
-        let (lo, hi) = verts
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
-                (l.min(points[v][a]), h.max(points[v][a]))
-            });
-        e = e.max(hi - lo);
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for &v in verts {
+        for ((l, h), &x) in lo.iter_mut().zip(&mut hi).zip(&points[v]) {
+            *l = l.min(x);
+            *h = h.max(x);
+        }
     }
-    e
+    (0..3).fold(0.0, |e: f64, a| e.max(hi[a] - lo[a]))
 }
 
 /// Why the area (`dim` 2) or volume (`dim` 3) of a cell of extent `ext` is out of f64's

@@ -165,3 +165,41 @@ fn interrupted_computation_rule_writes_no_value() {
     assert!(positions(&g) == after_one, "a position changed");
     assert!(g.is_valid());
 }
+
+#[test]
+fn interrupted_after_darts_were_created_removes_them() {
+    // count the checks of a whole application, then stop at each of the last ones: those
+    // come after the new darts are created (planning the new topology, checking the values)
+    let rules = library2();
+    let mut probe = quad_map(30);
+    let calls = Cell::new(0usize);
+    let count = || {
+        calls.set(calls.get() + 1);
+        false
+    };
+    rules
+        .apply_everywhere_interruptible(&mut probe, "triangulate_face", &Params::new(), &count)
+        .unwrap();
+    let total = calls.get();
+    let mut stages = Vec::new();
+    for k in [total, total - 1, total / 2 + 1] {
+        let mut g = quad_map(30);
+        let counts = g.cell_counts();
+        let (r, _) = interrupted_at(&rules, &mut g, "triangulate_face", &Params::new(), k);
+        match r {
+            Err(ApplyError::Interrupted { stage, applied, .. }) => {
+                assert_eq!(applied, 0);
+                stages.push(stage);
+            }
+            other => panic!("k = {k} of {total}: expected Interrupted, got {other:?}"),
+        }
+        assert!(g.is_valid());
+        assert_eq!(g.cell_counts(), counts, "created darts left behind");
+    }
+    assert!(
+        stages
+            .iter()
+            .any(|s| *s == "planning the new topology" || *s == "checking the values written"),
+        "{stages:?}"
+    );
+}

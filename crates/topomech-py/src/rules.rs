@@ -48,7 +48,9 @@ fn signal_raised(last: &Cell<Instant>, raised: &Mutex<Option<PyErr>>) -> bool {
         return false;
     }
     last.set(Instant::now());
-    match Python::attach(|py| py.check_signals()) {
+    #[allow(clippy::redundant_closure_for_method_calls)] // the method is not general enough
+    let checked = Python::attach(|py| py.check_signals());
+    match checked {
         Ok(()) => false,
         Err(e) => {
             *raised
