@@ -1,11 +1,12 @@
 """Issue 13: a long rule application answers Ctrl-C within a second.
 
 Before the engine polled for interrupts, ``RuleSet.apply`` ran to its end with the GIL
-released: SIGINT was only seen when it returned (here after many seconds), and ``topomech
-apply`` then wrote nothing useful either. Each test runs the application in a subprocess on a
-map generated here, sends SIGINT one second in, and asserts that the process ends within
-``ANSWER_S`` of the signal, with ``KeyboardInterrupt`` (the map valid and unchanged) or exit
-130 and one line on stderr, no Rust traceback and no output file.
+released: SIGINT was only seen when it returned (15 s after the signal here, on main), and
+``topomech apply`` then died with a ``KeyboardInterrupt`` traceback. Each test runs the
+application in a subprocess on a map generated here, sends SIGINT a second or two in, and
+asserts that the process answers within ``ANSWER_S`` (its first line of output after the
+signal): ``KeyboardInterrupt`` with the map valid and unchanged, or exit 130 with one line on
+stderr, no Rust panic, no traceback and no output file.
 
 The rule is a computation rule whose guard (a long but shallow expression, false everywhere)
 costs tens of microseconds per dart: the whole application is matching, which the engine
@@ -20,8 +21,10 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
+from typing import IO
 
 import pytest
 
@@ -61,19 +64,21 @@ def _env() -> dict[str, str]:
     return env
 
 
-def _interrupt(p: subprocess.Popen[str], after_s: float) -> tuple[float, str, str]:
-    """Sends SIGINT `after_s` seconds from now; returns (seconds to exit, stdout, stderr)."""
+def _interrupt(p: subprocess.Popen[str], after_s: float, answer: IO[str]) -> tuple[float, str]:
+    """Sends SIGINT `after_s` seconds from now; returns (seconds until the process printed its
+    first line on `answer` after the signal, that line). Measured to the answer, not to the
+    exit: the interpreter's shutdown on a loaded machine is not what is tested."""
     time.sleep(after_s)
     assert p.poll() is None, "the application ended before the signal: make the map bigger"
     t = time.monotonic()
     p.send_signal(signal.SIGINT)
+    timer = threading.Timer(60, p.kill)
+    timer.start()
     try:
-        out, err = p.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        out, err = p.communicate()
-        pytest.fail(f"no answer to SIGINT within 60 s; stderr: {err[-2000:]}")
-    return time.monotonic() - t, out, err
+        line = answer.readline()
+    finally:
+        timer.cancel()
+    return time.monotonic() - t, line
 
 
 SCRIPT = textwrap.dedent(
@@ -108,7 +113,9 @@ def test_ruleset_apply_answers_ctrl_c_with_keyboard_interrupt(tmp_path: Path) ->
     )
     assert p.stdout is not None
     assert p.stdout.readline().strip() == "ready"
-    took, out, err = _interrupt(p, 1.0)
+    took, line = _interrupt(p, 1.0, p.stdout)
+    out, err = p.communicate(timeout=60)
+    out = line + out
     assert p.returncode == 130, (out, err)
     assert out.startswith("interrupted"), out
     assert out.split()[2] == "True", f"the map changed or is invalid: {out}"
@@ -133,7 +140,10 @@ def test_cli_apply_exits_130_on_ctrl_c_and_writes_nothing(tmp_path: Path) -> Non
         text=True,
         env=_env(),
     )
-    took, out, err = _interrupt(p, 2.0)
+    assert p.stderr is not None
+    took, line = _interrupt(p, 2.0, p.stderr)
+    out, err = p.communicate(timeout=60)
+    err = line + err
     assert p.returncode == 130, (out, err)
     lines = err.strip().splitlines()
     assert lines == ["topomech: error: interrupted while applying rule 'slow'; nothing written"], (
