@@ -683,7 +683,7 @@ def _add_apply(sub: Any) -> None:
             "on stdout. Exit 0 on success (zero matches with --everywhere included); 1 when "
             "the rule does not match at --at or its application fails; 2 when a file cannot "
             "be read, the rule file is refused (its diagnostics on stderr) or an argument is "
-            "wrong."
+            "wrong; 130 on Ctrl-C (nothing written unless it came while writing)."
         ),
     )
     p.add_argument("input", metavar="INPUT", type=Path, help="mesh file or saved G-map (.tmg)")
@@ -767,12 +767,27 @@ def _check_call(rules: RuleSet, args: argparse.Namespace, spec: str) -> str | No
 
 
 def _run_apply(args: argparse.Namespace) -> int:
+    """``topomech apply``; Ctrl-C exits :data:`EXIT_INTERRUPTED` with one line on stderr."""
+    stage = ["reading the input"]
+    try:
+        return _apply(args, stage)
+    except KeyboardInterrupt:
+        if stage[0] == "writing":
+            _error(f"interrupted while writing {args.out}; it may be incomplete")
+        else:
+            _error(f"interrupted while {stage[0]}; nothing written")
+        return EXIT_INTERRUPTED
+
+
+def _apply(args: argparse.Namespace, stage: list[str]) -> int:
+    """The work of ``topomech apply``; ``stage[0]`` says what it is doing (for Ctrl-C)."""
     try:
         write_format(args.out)
     except ValueError as e:
         _error(str(e))
         return EXIT_REFUSED
     g = _import(args.input, args).gmap
+    stage[0] = "loading the rules"
     rules = _load_rules(args.rules, g.dimension)
     if rules is None:
         return EXIT_REFUSED
@@ -780,7 +795,10 @@ def _run_apply(args: argparse.Namespace) -> int:
     if why is not None:
         _error(why)
         return EXIT_REFUSED
+    stage[0] = f"applying rule {args.rule!r}"
     try:
+        # answers Ctrl-C within milliseconds while matching and evaluating (the engine polls
+        # the signal), raising KeyboardInterrupt with the map unchanged
         report = rules.apply(g, args.rule, args.at, dict(args.param))
     except ApplyError as e:
         _error(str(e))
@@ -794,6 +812,7 @@ def _run_apply(args: argparse.Namespace) -> int:
             print(f"topomech: violation: {v}", file=sys.stderr)
         _error(f"rule {args.rule!r} left an invalid map; nothing written")
         return EXIT_INVALID
+    stage[0] = "writing"
     try:
         write_gmap(g, args.out)
     except ValueError as e:

@@ -8,7 +8,10 @@
 //! wrong shape or a non-finite number). A missing or unknown parameter is the rule's business:
 //! `ApplyError`.
 
+use std::cell::Cell;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use numpy::{PyArrayDescrMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -31,6 +34,31 @@ pub(crate) struct PyRuleSet {
     inner: RuleSet,
     /// The checker's warnings, one `FILE:LINE:COL: warning[CONDITION]: message` line each.
     warnings: Vec<String>,
+}
+
+/// How often an application polls Python's signal handlers (taking the GIL for that).
+const SIGNAL_POLL: Duration = Duration::from_millis(10);
+
+/// The interrupt check of a long application: at most once per [`SIGNAL_POLL`], runs
+/// Python's signal handlers (`Python::check_signals`, with the GIL); when one raises
+/// (`KeyboardInterrupt` for Ctrl-C) keeps the exception in `raised` and asks the engine to
+/// stop.
+fn signal_raised(last: &Cell<Instant>, raised: &Mutex<Option<PyErr>>) -> bool {
+    if last.get().elapsed() < SIGNAL_POLL {
+        return false;
+    }
+    last.set(Instant::now());
+    #[allow(clippy::redundant_closure_for_method_calls)] // the method is not general enough
+    let checked = Python::attach(|py| py.check_signals());
+    match checked {
+        Ok(()) => false,
+        Err(e) => {
+            *raised
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(e);
+            true
+        }
+    }
 }
 
 /// The rule set, or `RuleError` with every diagnostic.
@@ -370,7 +398,10 @@ impl PyRuleSet {
     /// else once with its hooks at the darts `at` (one per hook). `params` maps each
     /// parameter to a value: a number, a bool, a list or array of 2 or 3 numbers, or a 2-D
     /// list or array for a matrix. Returns `{"matches", "created", "deleted"}` (darts).
-    /// Raises `ApplyError` (the map unchanged) when the rule does not apply.
+    /// Raises `ApplyError` (the map unchanged) when the rule does not apply. Ctrl-C
+    /// (SIGINT) during an application at every match raises `KeyboardInterrupt` within
+    /// milliseconds (the signal is polled every 10 ms), the map valid and without any of the
+    /// rule's changes.
     #[pyo3(signature = (gmap, name, at = None, params = None))]
     fn apply<'py>(
         &self,
@@ -385,11 +416,23 @@ impl PyRuleSet {
         let report = g.mutate(py, |map| {
             let params = params_arg(rules.rule(name)?, params)?;
             let hooks = at.map(|at| hooks_arg(map, at)).transpose()?;
-            py.detach(|| match hooks {
-                None => rules.apply_everywhere(map, name, &params),
+            let raised: Mutex<Option<PyErr>> = Mutex::new(None);
+            let r = py.detach(|| match hooks {
+                None => {
+                    let last = Cell::new(Instant::now());
+                    let interrupt = || signal_raised(&last, &raised);
+                    rules.apply_everywhere_interruptible(map, name, &params, &interrupt)
+                }
                 Some(h) => rules.apply_at(map, name, &h, &params),
-            })
-            .map_err(Error::from)
+            });
+            let raised = raised
+                .into_inner()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            match (r, raised) {
+                // the engine stopped because a signal handler raised (KeyboardInterrupt)
+                (Err(KernelApplyError::Interrupted { .. }), Some(e)) => Err(Error::Py(e)),
+                (r, _) => r.map_err(Error::from),
+            }
         })?;
         report_dict(py, &report)
     }
