@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -519,3 +520,22 @@ def test_cli_check_reports_model_mistakes_at_file_line_col(tmp_path: Path, case:
     assert errors[0].startswith(f"{path}:{line}:{col}: error[{condition}]"), (r.stdout, line, col)
     assert words in errors[0], r.stdout
     assert "common2d.tmr" not in r.stdout
+
+
+def test_python_refusals_name_the_model(tmp_path: Path) -> None:
+    """A required parameter not set, and a 2D model on a 3D map: refused naming the model
+    (and its file)."""
+    path = _write(tmp_path, "req.tmr", ANCHOR.replace("k: f64 = 10.0", "k: f64"))
+    m = Model.load(path)
+    assert m.params == {"k": None}
+    assert m.missing == ["k"]
+    g2 = topomech.GMap.from_flat(*topomech._core.grid(2, 2, 1.0, 1.0, "triangle"))
+    with pytest.raises(SimulationError, match="model 'anchor': parameter 'k' is required"):
+        topomech.Simulation(g2, models=[m])
+    g3 = topomech.GMap.from_flat(*topomech._core.box(1, 1, 1, 1.0, 1.0, 1.0, "tetra"))
+    with pytest.raises(
+        SimulationError,
+        match=rf"models\[0\]: model 'anchor' \({re.escape(str(path))}\) runs "
+        "on 2D maps, this map is 3D",
+    ):
+        topomech.Simulation(g3, models=[m.with_params(k=1.0)])

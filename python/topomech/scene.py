@@ -18,6 +18,9 @@ the fixed vertices, gravity, the integrator and how often to write frames::
     kind = "corotational"
     young = 1e6                        # young/poisson set the material's
     poisson = 0.3
+    # [[model]]                        # a model from the user's rule file (relative to
+    # file = "anchor.tmr"              #   the scene), name = "..." when it declares
+    # k = 50.0                         #   several; its parameters as keys
 
     [material]
     density = 1000.0                   # per volume in 3D, per area in 2D

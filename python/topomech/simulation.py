@@ -117,6 +117,19 @@ def available_models() -> list[ModelInfo]:
     ]
 
 
+def _check_dimensions(models: Any, gmap: Any) -> None:
+    """Refuses a :class:`Model` declared for other dimensions than the map's, naming it and
+    its file (the kernel would only say that the file's dimension differs)."""
+    dim = getattr(gmap, "dimension", None)
+    for i, m in enumerate(models):
+        if isinstance(m, Model) and isinstance(dim, int) and dim not in m.dimensions:
+            dims = " or ".join(f"{d}D" for d in m.dimensions)
+            source = f" ({m.file})" if m.file is not None else ""
+            raise SimulationError(
+                f"models[{i}]: model '{m.name}'{source} runs on {dims} maps, this map is {dim}D"
+            )
+
+
 class Simulation:
     """Physical models on a copy of a G-map, stepped in time.
 
@@ -179,6 +192,7 @@ class Simulation:
         cfg = dict(config) if config is not None else None
         for where in (cfg, kwargs):
             if where is not None and isinstance(where.get("models"), (list, tuple)):
+                _check_dimensions(where["models"], gmap)
                 models, files = model_files_of(list(where["models"]))
                 where["models"] = models
                 if files:
