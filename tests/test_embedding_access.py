@@ -1,6 +1,6 @@
 """Embeddings from Python, one row per orbit (issue 14): ``GMap.embedding`` /
 ``GMap.set_embedding`` / ``GMap.embeddings`` and the same on a ``Simulation``
-(``orbit_embedding`` / ``set_orbit_embedding`` / ``embeddings``).
+(``Simulation.embedding`` / ``Simulation.set_embedding`` / ``embeddings``).
 
 What is checked against what:
 
@@ -96,7 +96,7 @@ def test_embeddings_lists_names_types_orbits() -> None:
 
 def test_matrix_shapes_and_per_element_stiffness() -> None:
     sim = tet_sim()
-    k, darts, orbit = sim.orbit_embedding("k_elem")
+    k, darts, orbit = sim.embedding("k_elem")
     assert orbit == "<0,1,2>"
     assert k.shape == (2, 12, 12)
     assert len(darts) == 2
@@ -107,9 +107,9 @@ def test_matrix_shapes_and_per_element_stiffness() -> None:
             t = np.zeros(12)
             t[a::3] = 1.0
             assert np.abs(ke @ t).max() <= 1e-9 * np.abs(ke).max()
-    x_rest, _, _ = sim.orbit_embedding("x_rest")
+    x_rest, _, _ = sim.embedding("x_rest")
     assert x_rest.shape == (2, 12, 1), "a rectangular mat12x1 keeps its (R, C)"
-    dm_inv, _, _ = sim.orbit_embedding("dm_inv")
+    dm_inv, _, _ = sim.embedding("dm_inv")
     assert dm_inv.shape == (2, 3, 3)
 
 
@@ -122,7 +122,7 @@ def test_corner_forces_sum_to_vertex_forces() -> None:
     sim.set_positions(sim.positions() + 0.05 * rng.standard_normal((sim.n_vertices, 3)))
     total = sim.forces()
     assert np.abs(total).max() > 1.0, "a deformed state has forces"
-    f, darts, orbit = sim.orbit_embedding("f_corot")
+    f, darts, orbit = sim.embedding("f_corot")
     assert orbit == "<1,2>"
     assert f.shape == (8, 3), "4 corners per tetrahedron"
     rows = sim.gmap().vertex_labels()[darts]
@@ -134,11 +134,11 @@ def test_corner_forces_sum_to_vertex_forces() -> None:
 def test_masses_sum_to_total_mass() -> None:
     sim = tet_sim()
     volume = 1.0 / 6.0 + abs(np.linalg.det(TET_POINTS[[2, 3, 4]] - TET_POINTS[1])) / 6.0
-    m, _, orbit = sim.orbit_embedding("mass")
+    m, _, orbit = sim.embedding("mass")
     assert orbit == "<1,2,3>"
     assert np.isclose(m.sum(), sim.total_mass(), rtol=1e-14)
     assert np.isclose(sim.total_mass(), 1000.0 * volume, rtol=1e-14)
-    cm, _, corner = sim.orbit_embedding("corner_mass")
+    cm, _, corner = sim.embedding("corner_mass")
     assert corner == "<1,2>"
     assert np.isclose(cm.sum(), sim.total_mass(), rtol=1e-14)
 
@@ -186,12 +186,12 @@ def test_every_embedding_round_trips_exactly_on_thousands_of_orbits() -> None:
 
 def test_write_velocities_then_step() -> None:
     sim = tet_sim()
-    v, darts, _ = sim.orbit_embedding("velocity")
+    v, darts, _ = sim.embedding("velocity")
     assert not v.any()
-    rest, rdarts, _ = sim.orbit_embedding("rest")
+    rest, rdarts, _ = sim.embedding("rest")
     assert np.array_equal(rdarts, darts)
     new = np.column_stack([rest[:, 1], -rest[:, 0], 0.5 * rest[:, 2]])  # per-orbit values
-    sim.set_orbit_embedding("velocity", new)
+    sim.set_embedding("velocity", new)
     rows = sim.gmap().vertex_labels()[darts]
     expect = np.zeros((sim.n_vertices, 3))
     expect[rows] = new
@@ -205,10 +205,10 @@ def test_write_velocities_then_step() -> None:
 
 def test_write_positions_matches_set_positions() -> None:
     a, b = tet_sim(), tet_sim()
-    x, darts, _ = a.orbit_embedding("position")
+    x, darts, _ = a.embedding("position")
     rng = np.random.default_rng(3)
     x = x + 0.05 * rng.standard_normal(x.shape)
-    a.set_orbit_embedding("position", x)
+    a.set_embedding("position", x)
     rows = a.gmap().vertex_labels()[darts]
     per_row = np.zeros((a.n_vertices, 3))
     per_row[rows] = x
@@ -223,10 +223,10 @@ def test_write_positions_matches_set_positions() -> None:
 def test_write_corner_mass_refreshes_derived_mass() -> None:
     sim = tet_sim()
     m0 = sim.total_mass()
-    cm, _, _ = sim.orbit_embedding("corner_mass")
-    sim.set_orbit_embedding("corner_mass", 2.0 * cm)
+    cm, _, _ = sim.embedding("corner_mass")
+    sim.set_embedding("corner_mass", 2.0 * cm)
     assert np.isclose(sim.total_mass(), 2.0 * m0, rtol=1e-14)
-    m, _, _ = sim.orbit_embedding("mass")
+    m, _, _ = sim.embedding("mass")
     assert np.isclose(m.sum(), 2.0 * m0, rtol=1e-14)
     g = sim.gmap()
     g.set_embedding("corner_mass", cm)
@@ -251,8 +251,8 @@ def test_unknown_name_is_a_key_error_listing_embeddings() -> None:
     for call in (
         lambda: g.embedding("velocty"),
         lambda: g.set_embedding("velocty", np.zeros(3)),
-        lambda: sim.orbit_embedding("velocty"),
-        lambda: sim.set_orbit_embedding("velocty", np.zeros(3)),
+        lambda: sim.embedding("velocty"),
+        lambda: sim.set_embedding("velocty", np.zeros(3)),
     ):
         with pytest.raises(KeyError, match=r"no embedding named 'velocty'.*position"):
             call()
@@ -293,12 +293,12 @@ def test_wrong_shape_dtype_and_values_are_refused_and_nothing_is_written() -> No
     # the same refusals on the simulation, plus its numbering and its welded rows
     x0 = sim.positions()
     with pytest.raises(ValueError, match=r"must be finite: row 3"):
-        sim.set_orbit_embedding("position", bad)
+        sim.set_embedding("position", bad)
     with pytest.raises(EmbeddingError, match=r"'mass' is derived"):
-        sim.set_orbit_embedding("mass", np.ones(5))
+        sim.set_embedding("mass", np.ones(5))
     for name in ("particle", "point_id", "vertex0"):
         with pytest.raises(SimulationError, match=rf"'{name}' numbers the simulation"):
-            sim.set_orbit_embedding(name, sim.orbit_embedding(name).values)
+            sim.set_embedding(name, sim.embedding(name).values)
     assert np.array_equal(sim.positions(), x0)
 
 
@@ -312,20 +312,20 @@ def test_welded_particle_needs_one_position() -> None:
     tets = [("tetra", np.array([[0, 1, 2, 3], [0, 4, 6, 5]]))]
     sim = topomech.Simulation(GMap.from_mesh(pts, tets), models=["corotational"])
     assert sim.n_vertices == 7
-    x, darts, _ = sim.orbit_embedding("position")
+    x, darts, _ = sim.embedding("position")
     assert len(darts) == 8, "the pinched point is two vertex orbits"
     rows = sim.gmap().vertex_labels()[darts]
     k0, k1 = np.flatnonzero(rows == rows[np.argmax(np.bincount(rows))])
     moved = x.copy()
     moved[k0] += 0.1
     with pytest.raises(ValueError, match=rf"rows {k0} and {k1} .* are one particle"):
-        sim.set_orbit_embedding("position", moved)
+        sim.set_embedding("position", moved)
     moved[k1] += 0.1
-    sim.set_orbit_embedding("position", moved)
+    sim.set_embedding("position", moved)
     assert np.allclose(sim.positions()[rows[k0]], x[k0] + 0.1, rtol=0, atol=0)
     # masses are per orbit: two different values on the welded orbits are fine
-    m = sim.orbit_embedding("corner_mass").values
-    sim.set_orbit_embedding("corner_mass", m * np.linspace(1.0, 2.0, len(m)))
+    m = sim.embedding("corner_mass").values
+    sim.set_embedding("corner_mass", m * np.linspace(1.0, 2.0, len(m)))
 
 
 def test_no_input_reaches_a_panic() -> None:

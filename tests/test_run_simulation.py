@@ -137,13 +137,13 @@ def test_set_positions_and_velocities() -> None:
 
 def test_vertex_embeddings() -> None:
     sim = springs()
-    assert np.array_equal(sim.embedding("mass"), sim.masses())
-    assert np.array_equal(sim.embedding("position"), sim.positions())
-    assert np.array_equal(sim.embedding("fixed"), sim.fixed())
+    assert np.array_equal(sim.vertex_field("mass"), sim.masses())
+    assert np.array_equal(sim.vertex_field("position"), sim.positions())
+    assert np.array_equal(sim.vertex_field("fixed"), sim.fixed())
     with pytest.raises(topomech.EmbeddingError, match="not on the vertex orbit <1,2>"):
-        sim.embedding("spring_k")
+        sim.vertex_field("spring_k")
     with pytest.raises(topomech.EmbeddingError, match="nope"):
-        sim.embedding("nope")
+        sim.vertex_field("nope")
 
 
 def test_forces_are_zero_at_rest_and_restoring_when_stretched() -> None:

@@ -43,7 +43,7 @@ class CellCounts(TypedDict):
 
 class EmbeddingValues(NamedTuple):
     """An embedding read one row per orbit (:meth:`GMap.embedding`,
-    :meth:`Simulation.orbit_embedding <topomech.Simulation.orbit_embedding>`)."""
+    :meth:`Simulation.embedding <topomech.Simulation.embedding>`)."""
 
     #: One row per orbit: shape ``(n,)`` float64 / int64 / bool for ``f64`` / ``i64`` /
     #: ``bool``, ``(n, 2)`` / ``(n, 3)`` float64 for ``vec2`` / ``vec3``, ``(n, R, C)`` float64

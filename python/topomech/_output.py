@@ -305,7 +305,7 @@ def field_values(sim: Simulation, name: str) -> npt.NDArray[np.generic]:
     elif name == "force":
         values = sim.forces()
     else:
-        values = sim.embedding(name)
+        values = sim.vertex_field(name)
     a = np.asarray(values)
     if a.dtype == np.bool_:
         a = a.astype(np.uint8)

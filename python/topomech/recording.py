@@ -717,7 +717,7 @@ class Recorder:
         if self.lagged:
             if self._pending is not None:
                 # the step's forces were those of the state before it, at zero damping
-                self._complete(*self._pending, self.sim.embedding("force") - self._external())
+                self._complete(*self._pending, self.sim.vertex_field("force") - self._external())
             self._pending = (x, rest, version)
             self._record_state(x, rest)
         else:

@@ -364,27 +364,28 @@ class Simulation:
         """Sets the velocities from an array-like ``(V, 3)`` of finite numbers."""
         self._core.set_velocities(np.ascontiguousarray(velocities, dtype=np.float64))
 
-    def embedding(self, name: str) -> npt.NDArray[Any]:
-        """The values of a vertex embedding, one row per vertex (``(V,)`` for scalars,
+    def vertex_field(self, name: str) -> npt.NDArray[Any]:
+        """The values of a vertex embedding, one row per vertex (the rows of
+        :meth:`positions`) (``(V,)`` for scalars,
         ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices; masses and forces, ``mass``,
         ``force``, ``f_*``, summed over the orbits of a row). An embedding on another orbit
-        raises :class:`EmbeddingError`; :meth:`orbit_embedding` reads any embedding, one row
-        per orbit."""
+        raises :class:`EmbeddingError`; :meth:`embedding` reads any embedding, one row per
+        orbit; :meth:`set_vertex_field` writes one row per vertex."""
         return self._core.embedding(name)
 
-    def orbit_embedding(self, name: str) -> EmbeddingValues:
+    def embedding(self, name: str) -> EmbeddingValues:
         """The embedding ``name`` of the simulated map, one row per orbit of its orbit type,
         as :meth:`GMap.embedding` returns it: ``(values, darts, orbit)``, rows in increasing
         order of each orbit's smallest dart (not the per-vertex row order of
-        :meth:`embedding`). It reads what no per-vertex array shows: a force on each corner
+        :meth:`vertex_field`). It reads what no per-vertex array shows: a force on each corner
         of an element (``f_corot`` on ``<1,2>`` in 3D), a per-element stiffness (``k_elem``,
         ``(E, 12, 12)``), a volume. Raises :class:`KeyError` for an unknown name, listing the
         embeddings."""
         return EmbeddingValues(*self._core.orbit_embedding(name))
 
-    def set_orbit_embedding(self, name: str, values: Any) -> None:
+    def set_embedding(self, name: str, values: Any) -> None:
         """Writes every value of the stored embedding ``name`` in the layout of
-        :meth:`orbit_embedding` (as :meth:`GMap.set_embedding`); derived embeddings (the
+        :meth:`embedding` (as :meth:`GMap.set_embedding`); derived embeddings (the
         vertex ``mass``, a sum of ``corner_mass``) are recomputed and the next step starts
         from the values written. Nothing is written when it raises: :class:`KeyError`,
         :class:`TypeError`, :class:`ValueError` and :class:`EmbeddingError` as
