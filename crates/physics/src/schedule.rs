@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 
 use topomech_gmap::{Dart, GMap, OrbitType, Value};
-use topomech_rules::{load_sources, Params, Val};
+use topomech_rules::{load_sources_for, Params, Val};
 
 use crate::*;
 
@@ -162,7 +162,7 @@ impl Simulation {
             "scene-generated.tmr".into(),
             generated_rules(dim, &forces, &jvp, &cfg),
         ));
-        let (rules, _warnings) = load_sources(&sources).map_err(|diags| {
+        let (rules, _warnings) = load_sources_for(dim, &sources).map_err(|diags| {
             // a refused predicate is the scene's fault: say so
             let error =
                 |d: &topomech_rules::Diagnostic| d.severity == topomech_rules::Severity::Error;

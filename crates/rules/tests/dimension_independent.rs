@@ -7,8 +7,15 @@ use topomech_rules::{load_sources, load_sources_for, RuleSet};
 
 const COMMON2D: &str = include_str!("../../physics/models/common2d.tmr");
 const COMMON3D: &str = include_str!("../../physics/models/common3d.tmr");
-const STRETCH2D: &str = include_str!("../../physics/models/stretch2d.tmr");
-const STRETCH3D: &str = include_str!("../../physics/models/stretch3d.tmr");
+/// The 2D stretch file as shipped before the two files were merged (a fixture).
+const STRETCH2D: &str = include_str!("stretch2d_before_merge.tmr");
+/// The shipped stretch file, for both dimensions; read as a 3D file when its dimension line
+/// says 3 alone.
+const STRETCH: &str = include_str!("../../physics/models/stretch.tmr");
+
+fn stretch3d() -> String {
+    STRETCH.replace("dimension 2 3", "dimension 3")
+}
 
 fn srcs(common: &str, model: &str) -> Vec<(String, String)> {
     vec![
@@ -31,13 +38,15 @@ fn unplaced(r: &RuleSet) -> Vec<Rule> {
         .collect()
 }
 
-/// The 3D stretch file, said to serve both dimensions and loaded for a 2-map, checks to the
-/// same embeddings and rules (labels, programs, guards) as the 2D file: the two files differ
-/// only by label 3, which a 2-map drops.
+/// The shipped stretch file (one for both dimensions) loaded for a 2-map checks to the same
+/// embeddings and rules (labels, programs, guards) as the 2D file shipped before the merge:
+/// the two files differ only by label 3, which a 2-map drops. Loaded for a 3-map it is the
+/// same file read as `dimension 3`.
 #[test]
-fn the_3d_stretch_file_read_on_a_2_map_is_the_2d_file() {
-    let both = STRETCH3D.replace("dimension 3", "dimension 2 3");
-    assert_ne!(both, STRETCH3D);
+fn the_stretch_file_read_on_a_2_map_is_the_2d_file() {
+    let both = STRETCH.to_string();
+    let stretch3d = stretch3d();
+    assert_ne!(both, stretch3d);
     let (as2, _) = load_sources_for(2, &srcs(COMMON2D, &both)).unwrap();
     let (want2, _) = load_sources(&srcs(COMMON2D, STRETCH2D)).unwrap();
     assert_eq!(as2.dimension(), 2);
@@ -45,7 +54,7 @@ fn the_3d_stretch_file_read_on_a_2_map_is_the_2d_file() {
     assert_eq!(unplaced(&as2), unplaced(&want2));
     // and for a 3-map it is the 3D file
     let (as3, _) = load_sources_for(3, &srcs(COMMON3D, &both)).unwrap();
-    let (want3, _) = load_sources(&srcs(COMMON3D, STRETCH3D)).unwrap();
+    let (want3, _) = load_sources(&srcs(COMMON3D, &stretch3d)).unwrap();
     assert_eq!(as3.embeddings(), want3.embeddings());
     assert_eq!(unplaced(&as3), unplaced(&want3));
     // its models serve both dimensions
@@ -103,14 +112,15 @@ fn what_a_2_map_cannot_read_is_refused_where_it_is() {
 #[test]
 fn a_file_serves_only_its_dimensions() {
     // `dimension 3` alone still refuses a 2-map, naming the file's line
-    let d = load_sources_for(2, &srcs(COMMON3D, STRETCH3D)).unwrap_err();
+    let d = load_sources_for(2, &srcs(COMMON3D, &stretch3d())).unwrap_err();
     assert!(d.iter().all(|x| x.condition == "dimension"));
     assert!(
         d[0].message.contains("serves dimension 3, not dimension 2"),
         "{}",
         d[0]
     );
-    assert_eq!(d[0].pos.line, 3, "{}", d[0]);
+    let lines: Vec<(&str, u32)> = d.iter().map(|x| (x.file.as_str(), x.pos.line)).collect();
+    assert_eq!(lines, vec![("common.tmr", 3), ("stretch.tmr", 7)]);
     // a file without a dimension line serves both when loaded for one
     let bare = format!("{V}rule r {{ left {{ a : <1,2,3> hook }} compute {{ a.w = 1.0 }} }}\n");
     for dim in [2, 3] {
