@@ -378,7 +378,8 @@ pub fn check_sources_for(
             match dim {
                 Some((d, other)) => {
                     for ((name, f), dims) in files.iter().zip(&file_dims) {
-                        if !dims.contains(&d) {
+                        // (a file of one other dimension is refused above)
+                        if dims.len() > 1 && !dims.contains(&d) {
                             let p = f.dimension.map_or(Pos { line: 1, col: 1 }, |x| x.1);
                             let mut c = Ctx {
                                 file: name,
