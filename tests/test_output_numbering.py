@@ -552,3 +552,39 @@ def test_signed_volumes_and_reversal_against_closed_forms() -> None:
             r = signed_volumes(kind, reversed_cells(kind, c), apex + shift)
             np.testing.assert_allclose(r, [-volume], rtol=0, atol=1e-15 if shift == 0 else 1e-9)
         assert sorted(reversed_cells(kind, c)[0].tolist()) == sorted(cell)
+
+
+def test_output_fields_naming_the_always_written_point_data_are_accepted(tmp_path: Path) -> None:
+    """`displacement`, `velocity`, `fixed` and `point_id` are in every output file: naming them
+    in output.fields is accepted (it used to refuse `displacement` as an unknown field) and
+    writes each once, with the same values as without it."""
+    body = """
+[mesh]
+generator = "box"
+element = "tet"
+size = [1.0, 0.25, 0.25]
+cells = [2, 1, 1]
+[[model]]
+kind = "corotational"
+[[fix]]
+where = "x < 1e-9"
+[world]
+gravity = [0.0, -9.81, 0.0]
+[integrator]
+dt = 1e-3
+steps = 3
+[output]
+every = 0
+"""
+    plain = tmp_path / "plain.toml"
+    plain.write_text(body)
+    named = tmp_path / "named.toml"
+    named.write_text(body + 'fields = ["displacement", "velocity", "mass", "fixed", "point_id"]\n')
+    run_scene(plain, tmp_path / "a", preview=False)
+    summary = run_scene(named, tmp_path / "b", preview=False)
+    assert "error" not in summary
+    a = meshio.read(tmp_path / "a" / "final.vtu")
+    b = meshio.read(tmp_path / "b" / "final.vtu")
+    assert set(b.point_data) == set(a.point_data) | {"mass"}
+    for name in ("displacement", "velocity", "fixed", "point_id"):
+        np.testing.assert_array_equal(a.point_data[name], b.point_data[name])

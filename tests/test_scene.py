@@ -83,6 +83,11 @@ def refusal(text: str, tmp_path: Path | None = None) -> topomech.SceneError:
             "unknown key; did you mean 'gravity'?",
         ),
         (BASE + "[output]\nevry = 3\n", "output.evry", "unknown key; did you mean 'every'?"),
+        (
+            BASE.replace('element = "tet"', 'element = "tet"\nlinear = true'),
+            "mesh.linear",
+            'unknown key; write order = "linear"',
+        ),
     ],
 )
 def test_unknown_keys_name_their_path(text: str, key: str, message: str) -> None:

@@ -33,7 +33,7 @@ from topomech._core import (
     TopomechError,
     __version__,
 )
-from topomech._gmap import BuildReport, CellCounts, GMap
+from topomech._gmap import BuildReport, CellCounts, EmbeddingSpec, EmbeddingValues, GMap
 from topomech.io import read_gmap, read_mesh, write_vtu
 from topomech.rules import ApplyReport, RuleInfo, RuleSet
 from topomech.run import run_scene
@@ -54,6 +54,8 @@ __all__ = [
     "CellCounts",
     "DivergenceError",
     "EmbeddingError",
+    "EmbeddingSpec",
+    "EmbeddingValues",
     "FileFormatError",
     "GMap",
     "InternalError",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypedDict, Union
+from typing import TYPE_CHECKING, Any, NamedTuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -17,7 +17,14 @@ from topomech._core import MeshError, TopologyError
 if TYPE_CHECKING:
     import meshio
 
-__all__ = ["BuildReport", "CellCounts", "GMap", "format_option"]
+__all__ = [
+    "BuildReport",
+    "CellCounts",
+    "EmbeddingSpec",
+    "EmbeddingValues",
+    "GMap",
+    "format_option",
+]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -32,6 +39,52 @@ class CellCounts(TypedDict):
     volumes: int
     components: int
     boundary: int
+
+
+class EmbeddingValues(NamedTuple):
+    """An embedding read one row per orbit (:meth:`GMap.embedding`,
+    :meth:`Simulation.orbit_embedding <topomech.Simulation.orbit_embedding>`)."""
+
+    #: One row per orbit: shape ``(n,)`` float64 / int64 / bool for ``f64`` / ``i64`` /
+    #: ``bool``, ``(n, 2)`` / ``(n, 3)`` float64 for ``vec2`` / ``vec3``, ``(n, R, C)`` float64
+    #: for a matrix ``matRxC`` (``mat3`` is ``(n, 3, 3)``).
+    values: npt.NDArray[Any]
+    #: int64 ``(n,)``: the smallest dart id of each orbit, increasing; row k is the orbit of
+    #: ``darts[k]`` (``GMap.orbit(darts[k], orbit)`` lists its darts).
+    darts: npt.NDArray[np.int64]
+    #: The orbit type as written, e.g. ``"<1,2,3>"`` (a vertex of a 3-map).
+    orbit: str
+
+
+class EmbeddingSpec(NamedTuple):
+    """An embedding's declaration (:meth:`GMap.embeddings`)."""
+
+    #: Its name.
+    name: str
+    #: Its value type: ``f64``, ``i64``, ``bool``, ``vec2``, ``vec3``, ``matN`` or ``matRxC``.
+    type: str
+    #: The orbit type its values live on, e.g. ``"<1,2,3>"``.
+    orbit: str
+    #: Whether it is derived (an aggregate of another embedding, recomputed, never written).
+    derived: bool
+
+
+def as_embedding_array(type_: str, values: Any) -> npt.NDArray[Any]:
+    """``values`` as an array of the dtype an embedding of type ``type_`` holds, converting
+    only where nothing is lost or reinterpreted: integers and floats to float64 for real
+    types, integers to int64 for ``i64``. Anything else is passed on unchanged for the
+    kernel to refuse by name (a float array for an ``i64`` embedding, numbers for a
+    ``bool`` one)."""
+    a = np.asarray(values)
+    if type_ == "bool":
+        return a
+    if type_ == "i64":
+        if a.dtype.kind in "iu" and np.can_cast(a.dtype, np.int64, "safe"):
+            return a.astype(np.int64)
+        return a
+    if a.dtype.kind in "iuf":
+        return a.astype(np.float64)
+    return a
 
 
 @dataclass(frozen=True)
@@ -345,6 +398,45 @@ class GMap:
     def unsew(self, i: int, a: int) -> None:
         """Unsews ``a`` along dimension ``i``."""
         self._core.unsew(i, a)
+
+    def embedding(self, name: str) -> EmbeddingValues:
+        """The embedding ``name`` as numpy arrays, one row per orbit of its orbit type:
+        ``(values, darts, orbit)`` (see :class:`EmbeddingValues` for the shapes and dtypes).
+        Rows are the orbits in increasing order of their smallest dart, which ``darts``
+        holds. Every orbit has a value: one that was never written reads 0 (or False). A
+        derived embedding is recomputed first if its source changed.
+
+        Raises :class:`KeyError` for an unknown name (the message lists the map's
+        embeddings).
+
+        >>> g = GMap.from_mesh([[0, 0], [1, 0], [0, 1]], [("triangle", [[0, 1, 2]])])
+        >>> values, darts, orbit = g.embedding("position")
+        >>> values.shape, darts.dtype, orbit
+        ((3, 3), dtype('int64'), '<1,2>')
+        """
+        return EmbeddingValues(*self._core.embedding(name))
+
+    def set_embedding(self, name: str, values: Any) -> None:
+        """Writes every value of the stored embedding ``name``: ``values`` has the shape and
+        row order :meth:`embedding` returns (one row per orbit, by smallest dart). Integer
+        and float arrays are converted to float64 for real types and integer arrays to int64
+        for ``i64``; other dtypes are refused. Derived embeddings are recomputed after the
+        write. Nothing is written when it raises:
+
+        - :class:`KeyError` for an unknown name (listing the map's embeddings);
+        - :class:`TypeError` for a dtype that does not fit (a float array for ``i64``);
+        - :class:`ValueError` for another shape, or a NaN or infinite value (naming the
+          embedding, the first bad row and its dart);
+        - :class:`EmbeddingError` for a derived embedding (write its source)."""
+        specs = {s.name: s for s in self.embeddings()}
+        spec = specs.get(name)
+        a = as_embedding_array(spec.type, values) if spec is not None else np.asarray(values)
+        self._core.set_embedding(name, a)
+
+    def embeddings(self) -> list[EmbeddingSpec]:
+        """Every embedding's name, type, orbit type and whether it is derived, in declaration
+        order."""
+        return [EmbeddingSpec(*e) for e in self._core.embeddings()]
 
     def embedding_names(self) -> list[str]:
         """The embeddings' names."""

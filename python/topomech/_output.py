@@ -264,8 +264,14 @@ def available_fields(sim: Simulation) -> list[str]:
     return names
 
 
+#: The point data every output file has: asked for in ``output.fields``, they are accepted and
+#: not written twice.
+ALWAYS_WRITTEN = ("displacement", "velocity", "fixed", "point_id")
+
+
 def check_fields(sim: Simulation, fields: Sequence[str], source: object = None) -> list[str]:
-    """``fields`` (the scene's ``output.fields``) checked against :func:`available_fields`;
+    """``fields`` (the scene's ``output.fields``) checked against :func:`available_fields`,
+    less the point data every file has anyway (:data:`ALWAYS_WRITTEN`) and repeated names;
     raises :class:`SceneError` naming the key ``output.fields[i]`` of every unknown name (all
     at once) and the available names."""
     from topomech.scene import _Fail
@@ -274,7 +280,7 @@ def check_fields(sim: Simulation, fields: Sequence[str], source: object = None) 
     if not fields:
         return []
     available = available_fields(sim)
-    bad = [(i, f) for i, f in enumerate(fields) if f not in available]
+    bad = [(i, f) for i, f in enumerate(fields) if f not in available and f not in ALWAYS_WRITTEN]
     if bad:
         fail = _Fail(str(source) if source is not None else "<scene>")
         first, rest = bad[0], bad[1:]
@@ -285,9 +291,10 @@ def check_fields(sim: Simulation, fields: Sequence[str], source: object = None) 
             problem += f" (also unknown: {more}{extra})"
         raise fail(
             f"output.fields[{first[0]}]",
-            f"{problem}; available: {', '.join(available)}",
+            f"{problem}; available: {', '.join(available)} (and {', '.join(ALWAYS_WRITTEN)}, "
+            "which every file has)",
         )
-    return fields
+    return list(dict.fromkeys(f for f in fields if f not in ALWAYS_WRITTEN))
 
 
 def field_values(sim: Simulation, name: str) -> npt.NDArray[np.generic]:

@@ -3,8 +3,10 @@
 Each subcommand is a pair of functions: ``_add_NAME(subparsers)`` declares its arguments and
 ``_run_NAME(args) -> exit code`` does the work. Exit codes: 0 success, 1 the input was read but
 fails on its merits (an invalid G-map, a rule the checker refuses, a rule that does not apply,
-a simulation that diverges, a timed cut that misses the object when its time comes), 2 a file
-cannot be read or is refused (a scene included, with an event after the end of the run), or
+a simulation that diverges, a timed cut that misses the object when its time comes, a run
+that cannot write one of its files: a full disk), 2 a file
+cannot be read or is refused (a scene included, with an event after the end of the run, and
+an output directory holding files topomech did not write), or
 the arguments are wrong (the reason goes to stderr, without a traceback); 130 a run
 interrupted by Ctrl-C (what was written stays).
 """
@@ -263,7 +265,12 @@ def _add_run(sub: Any) -> None:
             "cut that separates nothing (misses the object) included (what was written "
             "stays, summary.json has an 'error' entry naming the step, or the event); 2 when "
             "the scene is refused (the reason names the key), an event after the end of the "
-            "run included (also when --steps shortens it)."
+            "run included (also when --steps shortens it), or when DIR holds files topomech "
+            "did not write (see --overwrite). DIR keeps a manifest of what runs wrote there "
+            "(DIR/.topomech-manifest.jsonl): a rerun removes only those files, never "
+            "following a symbolic link. A file that cannot be written (a full disk) stops "
+            "the run with exit 1, the message naming the file; Ctrl-C stops it with exit "
+            "130; either way summary.json says what happened."
         ),
     )
     p.add_argument("scene", metavar="SCENE", nargs="?", help="scene file (.toml) or shipped name")
@@ -281,6 +288,14 @@ def _add_run(sub: Any) -> None:
         dest="preview",
         action="store_false",
         help="no energies, no preview.gif/mp4 and no energy.png (a faster run)",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help=(
+            "write into DIR even when it holds files topomech did not write (files named "
+            "like the outputs are replaced, the others kept)"
+        ),
     )
     p.add_argument("--list", action="store_true", help="list the shipped scenes and exit")
     p.set_defaults(run=_run_run)
@@ -379,9 +394,10 @@ def _run_scene_cli(
     every: int | None,
     quiet: bool,
     preview: bool = True,
+    overwrite: bool = False,
 ) -> tuple[int, Path | None]:
     """Runs a scene for ``run`` and ``demo``: the exit code and the output directory."""
-    from topomech.run import run_scene
+    from topomech.run import OutputError, run_scene
     from topomech.scene import load_scene
 
     out_dir = out
@@ -391,21 +407,24 @@ def _run_scene_cli(
             sc = sc.with_steps(steps, every)
         out_dir = out if out is not None else Path("out") / sc.name
         show = not quiet and sys.stderr.isatty()
-        summary = run_scene(sc, out_dir, progress=show, preview=preview)
-    except SceneError as e:
+        summary = run_scene(sc, out_dir, progress=show, preview=preview, overwrite=overwrite)
+    except (SceneError, OutputError) as e:
         _error(str(e))
         return EXIT_REFUSED, None
     except KeyboardInterrupt:
-        where = f"; what was written is in {out_dir} (see summary.json)" if out_dir else ""
+        # name the folder only when the run left its summary there
+        wrote = out_dir is not None and (out_dir / "summary.json").is_file()
+        where = f"; what was written is in {out_dir} (see summary.json)" if wrote else ""
         _error(f"interrupted{where}")
-        return EXIT_INTERRUPTED, out_dir
+        return EXIT_INTERRUPTED, out_dir if wrote else None
     err = summary.get("error")
     if err is not None:
         _error(f"{sc.name}: {err['message']}")
-        _note(
-            f"stopped after {summary['steps']} of {summary['steps_requested']} steps; "
-            f"what was written is in {out_dir} (summary.json has the error)"
-        )
+        if summary["outputs"].get("summary") is None:
+            kept = f"what was written is in {out_dir}; summary.json could not be written"
+        else:
+            kept = f"what was written is in {out_dir} (summary.json has the error)"
+        _note(f"stopped after {summary['steps']} of {summary['steps_requested']} steps; {kept}")
         return EXIT_INVALID, out_dir
     if not quiet:
         _report(summary, out_dir)
@@ -419,7 +438,9 @@ def _run_run(args: argparse.Namespace) -> int:
     if args.scene is None:
         _error("give a SCENE (a .toml file or a shipped scene's name; --list lists them)")
         return EXIT_REFUSED
-    code, _ = _run_scene_cli(args.scene, args.out, args.steps, args.every, args.quiet, args.preview)
+    code, _ = _run_scene_cli(
+        args.scene, args.out, args.steps, args.every, args.quiet, args.preview, args.overwrite
+    )
     return code
 
 
@@ -443,11 +464,18 @@ def _add_demo(sub: Any) -> None:
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory")
     p.add_argument("--steps", metavar="N", type=_count, help="steps to run (default: the scene's)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar and no report")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into the output directory even when it holds files topomech did not write",
+    )
     p.set_defaults(run=_run_demo)
 
 
 def _run_demo(args: argparse.Namespace) -> int:
-    code, out = _run_scene_cli(DEMO_SCENE, args.out, args.steps, None, args.quiet)
+    code, out = _run_scene_cli(
+        DEMO_SCENE, args.out, args.steps, None, args.quiet, overwrite=args.overwrite
+    )
     if code == EXIT_OK and out is not None and not args.quiet:
         print(f"\nopen {out / 'animation.pvd'} in ParaView to watch the beam bend")
     return code

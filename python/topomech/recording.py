@@ -12,8 +12,11 @@
   the map's darts were relinked (a cut, a fracture): its surface polygons, its edges and,
   for maps of at most :data:`DART_LIMIT` darts, the darts themselves with their alpha
   links, so that the viewer's dart view shows links disappearing.
-  :meth:`Recorder.write_view` writes them as ``view.json`` (the description) and
-  ``view.bin`` (the arrays, little-endian, 4 bytes per value) — see :func:`read_view`.
+  The arrays go to ``view.bin`` (little-endian, 4 bytes per value) as they are recorded;
+  only a few numbers per frame (its time, step, topology and offset in ``view.bin``) stay
+  in memory, so a run's memory does not grow with its number of frames.
+  :meth:`Recorder.write_view` completes them with ``view.json`` (the description) — see
+  :func:`read_view`, which reads the arrays back one at a time.
 - **energies** (:meth:`Recorder.after_step`), at every step: kinetic ``sum m |v|^2 / 2``;
   gravitational ``-sum m g . (x - X)`` (zero at the rest positions ``X``), with the
   potential ``-sum f_ext . (x - X)`` of the external loads (constant forces, like gravity:
@@ -25,17 +28,31 @@
   linear in the positions — linear FEM, mass-tensor — and second order otherwise). The
   forces are the models' forces at zero velocity, so the dashpots of damped springs do no
   work here: what they and the viscous damping dissipate shows as the total
-  ``kinetic + gravitational + elastic`` going down. Written as ``energy.csv``.
+  ``kinetic + gravitational + elastic`` going down. Written as ``energy.csv``, a row per
+  state as soon as its elastic energy is known (flushed at once: the file holds the run so
+  far); :attr:`Recorder.energy` keeps only the last :data:`ENERGY_MEMORY` rows.
+
+With ``out_dir``, :class:`Recorder` writes ``view.bin`` and ``energy.csv`` there directly;
+without, it spools them to temporary files that :meth:`Recorder.write_view` and
+:meth:`Recorder.write_energy` copy (in blocks) to where they are asked.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 import json
 import math
+import os
+import tempfile
+import weakref
+from array import array
+from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -68,6 +85,11 @@ VIEW_VERSIONS = (1, 2)
 FEM_MODELS = {"linear_fem": "linear", "mass_tensor": "linear", "corotational": "corotated"}
 #: ``energy.csv``'s columns.
 ENERGY_COLUMNS = ("step", "time", "kinetic", "gravitational", "elastic", "total")
+#: How many of the last states' energies :attr:`Recorder.energy` keeps in memory (all of them
+#: are in ``energy.csv``).
+ENERGY_MEMORY = 1000
+#: Bytes copied at a time from a spooled file.
+_BLOCK = 1 << 20
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -97,7 +119,8 @@ class ViewError(Exception):
 
 @dataclass
 class Topology:
-    """What frames are drawn on, between two topology changes."""
+    """What frames are drawn on, between two topology changes (its arrays are written to
+    ``view.bin`` when it is recorded; only the current one keeps them in memory)."""
 
     step: int
     n_vertices: int
@@ -113,6 +136,19 @@ class Topology:
     #: None for maps above :data:`DART_LIMIT`.
     darts: dict[str, I64] | None
     n_darts: int
+
+
+@contextlib.contextmanager
+def _naming(out_dir: Path | None, name: str) -> Iterator[None]:
+    """Gives an OSError raised inside (a full disk: a write to an open file says no file name)
+    the name of the file written, ``out_dir / name`` (or the spool's ``name``)."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is not None:
+            raise
+        where = os.fspath(out_dir / name) if out_dir is not None else f"{name} (spooled)"
+        raise OSError(e.errno, e.strerror, where) from e
 
 
 def _components(n: int, links: list[I64], live: npt.NDArray[np.bool_]) -> I64:
@@ -304,7 +340,11 @@ class _State:
 
 
 class Recorder:
-    """Frames and energies of a run (see the module docstring)."""
+    """Frames and energies of a run (see the module docstring).
+
+    ``out_dir``: the run's directory, where ``view.bin`` and ``energy.csv`` are written as
+    frames and steps come (None: temporary files, copied by :meth:`write_view` and
+    :meth:`write_energy`). Raises :class:`OSError` when they cannot be written."""
 
     def __init__(
         self,
@@ -314,8 +354,11 @@ class Recorder:
         energy: bool = True,
         dart_limit: int = DART_LIMIT,
         cells: OutputCells | None = None,
+        out_dir: Path | None = None,
     ) -> None:
         self.sim = sim
+        #: Where ``view.bin`` and ``energy.csv`` are written as the run goes (None: spooled).
+        self.out_dir = Path(out_dir) if out_dir is not None else None
         #: The elements drawn (shared with the run's VTU writer).
         self.cells = cells if cells is not None else OutputCells(sim)
         #: The local origin (m, float64) the recorded float32 positions are relative to:
@@ -348,15 +391,36 @@ class Recorder:
             ],
         )
         self.topologies: list[Topology] = []
-        self.frames: list[dict[str, Any]] = []
-        self.positions: list[npt.NDArray[np.float32]] = []
-        self.fields: dict[str, list[npt.NDArray[np.float32]]] = {"displacement": []}
+        #: The ``view.json`` entries of :attr:`topologies` (their arrays' places in view.bin).
+        self._topology_refs: list[dict[str, Any]] = []
+        #: The fields recorded per frame, in their order in view.bin (after the positions).
+        self.fields: tuple[str, ...] = ("displacement",)
         if self.strain is not None:
-            self.fields["von_mises"] = []
+            self.fields = ("displacement", "von_mises")
         self._topo_version = -1
+        # per frame, a few numbers only: the arrays are in view.bin
+        self._frame_time = array("d")
+        self._frame_step = array("q")
+        self._frame_topology = array("q")
+        self._frame_offset = array("q")
+        self._frame_vertices = array("q")
+        self._field_max: dict[str, float | None] = dict.fromkeys(self.fields)
+        self._low: npt.NDArray[np.float32] | None = None
+        self._high: npt.NDArray[np.float32] | None = None
+        self._bin: IO[bytes] | None = None
+        self._bin_size = 0
         # energies
         self.track_energy = energy
-        self.energy: dict[str, list[float]] = {c: [] for c in ENERGY_COLUMNS}
+        #: The energies of the last :data:`ENERGY_MEMORY` states, by column (every state's
+        #: are in ``energy.csv``).
+        self.energy: dict[str, deque[float]] = {
+            c: deque(maxlen=ENERGY_MEMORY) for c in ENERGY_COLUMNS
+        }
+        #: States recorded whose elastic energy is not known yet (at most two).
+        self._rows: deque[list[float]] = deque()
+        self._csv: IO[str] | None = None
+        self._csv_writer: Any = None
+        self._energy_rows = 0
         self._state: _State | None = None
         self._force: F64 | None = None
         self._elastic = 0.0
@@ -375,6 +439,56 @@ class Recorder:
         )
 
     # -------------------------------------------------------------- frames
+
+    def _bin_file(self) -> IO[bytes]:
+        """``view.bin`` (or its spool), opened at the first array."""
+        if self._bin is None:
+            if self.out_dir is not None:
+                self._bin = (self.out_dir / "view.bin").open("w+b")
+            else:
+                # open for the whole run (closed by close() or when the recorder is collected)
+                self._bin = tempfile.TemporaryFile(prefix="topomech-view-")  # noqa: SIM115
+            weakref.finalize(self, self._bin.close)
+        return self._bin
+
+    def _put(self, arrays: list[tuple[npt.NDArray[Any], str]]) -> list[dict[str, Any]]:
+        """Appends arrays to view.bin (one write); their references for view.json."""
+        refs, chunks = [], []
+        offset = self._bin_size
+        for a, dtype in arrays:
+            arr = np.ascontiguousarray(a, dtype=np.dtype(dtype).newbyteorder("<"))
+            refs.append({"offset": offset, "dtype": dtype, "shape": list(arr.shape)})
+            chunks.append(arr.tobytes())
+            offset += arr.nbytes
+        with _naming(self.out_dir, "view.bin"):
+            self._bin_file().write(b"".join(chunks))
+        self._bin_size = offset
+        return refs
+
+    def _write_topology(self, t: Topology) -> None:
+        names = list(t.darts) if t.darts is not None else []
+        refs = self._put(
+            [(t.face_offsets, "i4"), (t.face_indices, "i4"), (t.edges, "i4")]
+            + [(t.darts[k], "i4") for k in names if t.darts is not None]
+        )
+        self._topology_refs.append(
+            {
+                "step": t.step,
+                "vertices": t.n_vertices,
+                "darts": t.n_darts,
+                "face_offsets": refs[0],
+                "face_indices": refs[1],
+                "edges": refs[2],
+                "dart_table": None if t.darts is None else dict(zip(names, refs[3:])),
+            }
+        )
+        # the topology before this one is in view.bin: its arrays are not needed any more
+        if self.topologies:
+            old = self.topologies[-1]
+            empty = np.zeros(0, dtype=np.int64)
+            old.face_offsets, old.face_indices, old.edges = empty, empty, empty.reshape(0, 2)
+            old.cells, old.rest, old.darts = [], np.zeros((0, 3)), None
+        self.topologies.append(t)
 
     def _topology(self) -> Topology:
         version = self.sim.topology_version
@@ -404,7 +518,7 @@ class Recorder:
             darts=darts,
             n_darts=n_darts,
         )
-        self.topologies.append(topo)
+        self._write_topology(topo)
         self._topo_version = version
         return topo
 
@@ -441,21 +555,39 @@ class Recorder:
             np.add.at(count, idx, 1.0)
         return (total / np.maximum(count, 1.0)).astype(np.float32)
 
+    @property
+    def n_frames(self) -> int:
+        """The number of frames recorded."""
+        return len(self._frame_offset)
+
     def frame(self) -> None:
-        """Records the current state as a frame."""
+        """Records the current state as a frame: its arrays are appended to view.bin at once,
+        a few numbers about it (time, step, topology, offset) kept in memory."""
         topo = self._topology()
         x = self.sim.positions()
-        # everything is computed before anything is appended: an interruption (Ctrl-C) in
-        # between must not leave a frame without its fields
-        disp = np.linalg.norm(x - topo.rest, axis=1).astype(np.float32)
-        stress = self._stress(topo, x) if "von_mises" in self.fields else None
-        self.frames.append(
-            {"time": self.sim.time, "step": self.sim.steps, "topology": len(self.topologies) - 1}
-        )
-        self.positions.append((x - self.origin).astype(np.float32))
-        self.fields["displacement"].append(disp)
-        if stress is not None:
-            self.fields["von_mises"].append(stress)
+        # everything is computed before anything is recorded: an interruption (Ctrl-C) in
+        # between must not leave a frame without its fields (bytes written past the last
+        # frame recorded are cut off by write_view)
+        pos = (x - self.origin).astype(np.float32)
+        values = [np.linalg.norm(x - topo.rest, axis=1).astype(np.float32)]
+        if "von_mises" in self.fields:
+            values.append(self._stress(topo, x))
+        refs = self._put([(pos, "f4")] + [(v, "f4") for v in values])
+        finite = pos[np.isfinite(pos).all(axis=1)]
+        if len(finite):
+            low, high = finite.min(axis=0), finite.max(axis=0)
+            self._low = low if self._low is None else np.minimum(self._low, low)
+            self._high = high if self._high is None else np.maximum(self._high, high)
+        for name, v in zip(self.fields, values):
+            f = v[np.isfinite(v)]
+            if len(f):
+                hi, top = float(f.max()), self._field_max[name]
+                self._field_max[name] = hi if top is None else max(top, hi)
+        self._frame_time.append(float(self.sim.time))
+        self._frame_step.append(int(self.sim.steps))
+        self._frame_topology.append(len(self.topologies) - 1)
+        self._frame_vertices.append(len(pos))
+        self._frame_offset.append(int(refs[0]["offset"]))
 
     # -------------------------------------------------------------- energy
 
@@ -486,12 +618,49 @@ class Recorder:
         """Kinetic and gravitational energy of the current state (its elastic energy is
         appended by :meth:`_complete`, once the force at ``x`` is known)."""
         m = self._mass()
-        e = self.energy
-        e["step"].append(float(self.sim.steps))
-        e["time"].append(self.sim.time)
-        e["kinetic"].append(self.sim.kinetic_energy())
         gravity = float(-(m[:, None] * (x - rest)).sum(axis=0) @ self.gravity)
-        e["gravitational"].append(gravity - float((self._external() * (x - rest)).sum()))
+        row = [
+            float(self.sim.steps),
+            float(self.sim.time),
+            float(self.sim.kinetic_energy()),
+            gravity - float((self._external() * (x - rest)).sum()),
+        ]
+        for c, v in zip(ENERGY_COLUMNS, row):
+            self.energy[c].append(v)
+        self._rows.append(row)
+
+    def _energy_file(self) -> IO[str]:
+        """``energy.csv`` (or its spool), opened with its header at the first row."""
+        if self._csv is None:
+            if self.out_dir is not None:
+                fh: IO[str] = (self.out_dir / "energy.csv").open("w+", newline="", encoding="utf-8")
+            else:
+                fh = tempfile.TemporaryFile(  # noqa: SIM115 (open for the whole run)
+                    "w+", newline="", encoding="utf-8", prefix="topomech-energy-"
+                )
+            weakref.finalize(self, fh.close)
+            self._csv = fh
+            self._csv_writer = csv.writer(fh)
+            self._csv_writer.writerow(ENERGY_COLUMNS)
+        return self._csv
+
+    def _add_elastic(self, elastic: float) -> None:
+        """The elastic energy of the oldest state recorded: its row is complete, written to
+        energy.csv and flushed."""
+        step, time, kinetic, gravitational = self._rows.popleft()
+        total = kinetic + gravitational + elastic
+        self.energy["elastic"].append(elastic)
+        self.energy["total"].append(total)
+        with _naming(self.out_dir, "energy.csv"):
+            fh = self._energy_file()
+            self._csv_writer.writerow(
+                [
+                    int(step),
+                    *(repr(float(v)) for v in (time, kinetic, gravitational, elastic, total)),
+                ]
+            )
+            fh.flush()
+        self._energy_rows += 1
 
     def _complete(self, x: F64, rest: F64, version: int, f: F64) -> None:
         """Adds the work from the last state whose force is known to ``x`` (force ``f``)."""
@@ -507,7 +676,7 @@ class Recorder:
             before = (self._force[src] / copies[src][:, None] * dx).sum()
             work = 0.5 * float(before + (f * dx).sum())
         self._elastic -= work
-        self.energy["elastic"].append(self._elastic)
+        self._add_elastic(self._elastic)
         self._state = _State(x, rest, version)
         self._force = f
 
@@ -533,7 +702,7 @@ class Recorder:
         self._state = _State(x0, rest, self.sim.topology_version)
         self._force = self._elastic_forces()
         self._record_state(x0, rest)
-        self.energy["elastic"].append(self._elastic)
+        self._add_elastic(self._elastic)
         self._pending = None
 
     def after_step(self) -> None:
@@ -563,84 +732,56 @@ class Recorder:
         try:
             self._complete(*pending, self._elastic_forces())
         except TopomechError:
-            for c in ENERGY_COLUMNS:
-                if c != "elastic" and c != "total":
-                    self.energy[c].pop()
+            self._drop_partial()
+
+    def _drop_partial(self) -> None:
+        """Forgets the states whose elastic energy will not be known (an interrupted step)."""
+        while self._rows:
+            self._rows.pop()
+            for c in ("step", "time", "kinetic", "gravitational"):
+                self.energy[c].pop()
 
     # -------------------------------------------------------------- output
 
     def write_energy(self, path: Path) -> bool:
-        """Writes ``energy.csv``; False when no energies were tracked."""
+        """Completes ``energy.csv`` at ``path`` (its rows are already written when ``path`` is
+        ``out_dir/energy.csv``, else copied from the spool); False when no energies were
+        tracked (nothing written then). States whose elastic energy is not known (an
+        interrupted step) are left out."""
         self.finish()
-        e = self.energy
-        cols = ("step", "time", "kinetic", "gravitational", "elastic")
-        n = min(len(e[c]) for c in cols)  # an interrupted step may have left part of a row
-        for c in cols:
-            del e[c][n:]
-        e["total"] = [a + b + c for a, b, c in zip(e["kinetic"], e["gravitational"], e["elastic"])]
-        if not e["step"]:
+        self._drop_partial()
+        if self._csv is None or self._energy_rows == 0:
             return False
-        with path.open("w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(ENERGY_COLUMNS)
-            for row in zip(*(self.energy[c] for c in ENERGY_COLUMNS)):
-                w.writerow([int(row[0]), *(repr(float(v)) for v in row[1:])])
+        self._csv.flush()
+        _copy_to(self._csv, self.out_dir, "energy.csv", Path(path), None)
         return True
 
     def write_view(self, out_dir: Path, events: list[dict[str, Any]] | None = None) -> bool:
-        """Writes ``view.json`` and ``view.bin``; False (nothing written) without frames."""
-        if not self.frames:
+        """Completes the view data in ``out_dir``: ``view.bin`` (already written when
+        ``out_dir`` is the recorder's, else copied from the spool) and ``view.json``, written
+        frame by frame; False (nothing written) without frames."""
+        if self.n_frames == 0 or self._bin is None:
             return False
-        blob = bytearray()
-
-        def put(a: npt.NDArray[Any], dtype: str) -> dict[str, Any]:
-            arr = np.ascontiguousarray(a, dtype=np.dtype(dtype).newbyteorder("<"))
-            ref = {"offset": len(blob), "dtype": dtype, "shape": list(arr.shape)}
-            blob.extend(arr.tobytes())
-            return ref
-
-        topologies = []
-        for t in self.topologies:
-            topologies.append(
-                {
-                    "step": t.step,
-                    "vertices": t.n_vertices,
-                    "darts": t.n_darts,
-                    "face_offsets": put(t.face_offsets, "i4"),
-                    "face_indices": put(t.face_indices, "i4"),
-                    "edges": put(t.edges, "i4"),
-                    "dart_table": None
-                    if t.darts is None
-                    else {k: put(v, "i4") for k, v in t.darts.items()},
-                }
-            )
-        fields_meta: dict[str, Any] = {}
+        out_dir = Path(out_dir)
+        fh = self._bin
+        fh.flush()
+        _copy_to(fh, self.out_dir, "view.bin", out_dir / "view.bin", self._bin_size)
         labels = {
             "displacement": ("displacement magnitude", "m"),
             "von_mises": ("von Mises stress", "Pa"),
         }
-        for name, values in self.fields.items():
-            finite = [v[np.isfinite(v)] for v in values]
-            hi = max((float(v.max()) for v in finite if len(v)), default=0.0)
-            fields_meta[name] = {
+        fields_meta = {
+            name: {
                 "label": labels[name][0],
                 "unit": labels[name][1],
                 "min": 0.0,
-                "max": hi,
+                "max": self._field_max[name] or 0.0,
             }
-        frames = []
-        for k, fr in enumerate(self.frames):
-            frames.append(
-                {
-                    **fr,
-                    "positions": put(self.positions[k], "f4"),
-                    "fields": {n: put(v[k], "f4") for n, v in self.fields.items()},
-                }
-            )
+            for name in self.fields
+        }
         # relative to the origin, like the positions
-        allx = np.concatenate([p[np.isfinite(p).all(axis=1)] for p in self.positions])
-        low = allx.min(axis=0) if len(allx) else np.zeros(3)
-        high = allx.max(axis=0) if len(allx) else np.ones(3)
+        low = self._low if self._low is not None else np.zeros(3)
+        high = self._high if self._high is not None else np.ones(3)
         g = self.gravity
         up = (-g / np.linalg.norm(g)) if np.linalg.norm(g) > 0 else np.array([0.0, 1.0, 0.0])
         meta = {
@@ -655,14 +796,76 @@ class Recorder:
             "default_field": "von_mises" if "von_mises" in self.fields else "displacement",
             "dart_limit": self.dart_limit,
             "events": events or [],
-            "topologies": topologies,
-            "frames": frames,
+            "topologies": self._topology_refs,
             "bin": "view.bin",
-            "bin_bytes": len(blob),
+            "bin_bytes": self._bin_size,
         }
-        (out_dir / "view.bin").write_bytes(bytes(blob))
-        (out_dir / "view.json").write_text(json.dumps(meta), encoding="utf-8")
+        head = json.dumps(meta)
+        with (out_dir / "view.json").open("w", encoding="utf-8") as out:
+            out.write(head[:-1] + ', "frames": [')
+            for k in range(self.n_frames):
+                out.write(", " if k else "")
+                out.write(json.dumps(self._frame_entry(k)))
+            out.write("]}")
         return True
+
+    def close(self) -> None:
+        """Closes view.bin and energy.csv (or their spools); :meth:`write_view` and
+        :meth:`write_energy` must have been called before (they are done otherwise when
+        the recorder is collected)."""
+        for fh in (self._bin, self._csv):
+            if fh is not None:
+                fh.close()
+        self._bin = self._csv = None
+
+    def _frame_entry(self, k: int) -> dict[str, Any]:
+        """Frame ``k``'s entry in view.json: its positions ``(V, 3)`` then each field
+        ``(V,)``, float32, one after the other in view.bin."""
+        n, offset = self._frame_vertices[k], self._frame_offset[k]
+        fields = {}
+        at = offset + 12 * n
+        for name in self.fields:
+            fields[name] = {"offset": at, "dtype": "f4", "shape": [n]}
+            at += 4 * n
+        return {
+            "time": self._frame_time[k],
+            "step": self._frame_step[k],
+            "topology": self._frame_topology[k],
+            "positions": {"offset": offset, "dtype": "f4", "shape": [n, 3]},
+            "fields": fields,
+        }
+
+
+def _copy_to(fh: IO[Any], own_dir: Path | None, name: str, target: Path, size: int | None) -> None:
+    """Makes ``target`` hold the recorded file ``fh`` (``own_dir/name`` when ``own_dir`` is
+    set, else a spool): cut to ``size`` bytes (those of whole frames) when given, copied in
+    blocks when ``target`` is another file."""
+    if own_dir is not None:
+        own = own_dir / name
+        if size is not None and own.stat().st_size != size:
+            fh.truncate(size)
+            fh.seek(size)
+        if target.exists() and own.samefile(target):
+            return
+    at = fh.tell()
+    try:
+        fh.seek(0)
+        out: IO[Any] = (
+            target.open("w", encoding="utf-8", newline="")
+            if isinstance(fh, io.TextIOBase)
+            else target.open("wb")
+        )
+        with out:
+            left = size
+            while left is None or left > 0:
+                block = fh.read(_BLOCK if left is None else min(_BLOCK, left))
+                if not block:
+                    break
+                out.write(block)
+                if left is not None:
+                    left -= len(block)
+    finally:
+        fh.seek(at)
 
 
 # ------------------------------------------------------------------------------ reading
@@ -670,17 +873,38 @@ class Recorder:
 
 @dataclass
 class View:
-    """``view.json`` with its arrays read from ``view.bin``."""
+    """``view.json``, its arrays read from ``view.bin`` when asked, one at a time (a run's
+    frames are never all in memory)."""
 
     meta: dict[str, Any]
-    data: bytes
+    #: ``view.bin``.
+    bin_path: Path
     directory: Path
 
+    @property
+    def data(self) -> bytes:
+        """All of ``view.bin`` (for the viewer page, which inlines it)."""
+        return self.bin_path.read_bytes()
+
     def array(self, ref: dict[str, Any]) -> npt.NDArray[Any]:
+        """The array ``ref`` (``{"offset", "dtype", "shape"}`` of view.json) read from
+        view.bin; raises :class:`ViewError` when the file ends before it."""
         dt = np.dtype(ref["dtype"]).newbyteorder("<")
         count = int(np.prod(ref["shape"])) if ref["shape"] else 1
-        a = np.frombuffer(self.data, dtype=dt, count=count, offset=int(ref["offset"]))
-        return a.reshape(ref["shape"])
+        offset = int(ref["offset"])
+        try:
+            with self.bin_path.open("rb") as fh:
+                fh.seek(offset)
+                raw = fh.read(count * dt.itemsize)
+        except OSError as e:
+            msg = f"{self.bin_path}: cannot read the view data: {e.strerror or e}"
+            raise ViewError(msg) from None
+        if len(raw) != count * dt.itemsize:
+            raise ViewError(
+                f"{self.bin_path}: ends at byte {offset + len(raw)}, an array of view.json "
+                f"ends at {offset + count * dt.itemsize} (truncated or from another run)"
+            )
+        return np.frombuffer(raw, dtype=dt, count=count).reshape(ref["shape"])
 
     @property
     def frames(self) -> list[dict[str, Any]]:
@@ -747,17 +971,18 @@ def read_view(out_dir: Path) -> View:
         )
     bpath = out_dir / str(meta.get("bin", "view.bin"))
     try:
-        data = bpath.read_bytes()
+        with bpath.open("rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
     except OSError as e:
         raise ViewError(f"{bpath}: cannot read the view data: {e.strerror or e}") from None
-    if len(data) != meta.get("bin_bytes"):
+    if size != meta.get("bin_bytes"):
         raise ViewError(
-            f"{bpath}: {len(data)} bytes, view.json expects {meta.get('bin_bytes')} "
+            f"{bpath}: {size} bytes, view.json expects {meta.get('bin_bytes')} "
             "(truncated or from another run)"
         )
     if not meta.get("frames"):
         raise ViewError(f"{jpath}: no frames")
-    return View(meta, data, out_dir)
+    return View(meta, bpath, out_dir)
 
 
 def read_energy(path: Path) -> dict[str, F64]:

@@ -51,10 +51,11 @@ import numpy as np
 
 from topomech import __version__
 from topomech._cells import FlatMesh, to_flat
-from topomech._core import DivergenceError, SimulationError, TopomechError
+from topomech._core import DivergenceError, SceneError, SimulationError, TopomechError
+from topomech._manifest import OutputError, OutputFolder
 from topomech._output import OutputCells, check_fields, field_values
 from topomech.recording import Recorder
-from topomech.scene import Scene, load_scene
+from topomech.scene import Scene, load_scene, name_problem
 
 if TYPE_CHECKING:
     import meshio
@@ -62,7 +63,7 @@ if TYPE_CHECKING:
     from topomech._gmap import PathLike
     from topomech.simulation import Simulation
 
-__all__ = ["Progress", "run_scene", "write_pvd"]
+__all__ = ["OutputError", "Progress", "run_scene", "write_pvd"]
 
 #: The keys every summary has (an ``error`` entry is added when the run fails).
 SUMMARY_KEYS = (
@@ -167,19 +168,17 @@ class _Writer:
 def _input_cells(sc: Scene) -> FlatMesh | None:
     """The cells of the scene's mesh file as the map was built from them (``cell_id``
     numbers them), or None for a generated mesh, a saved map or a file that cannot be read
-    again (the output then orients the cells at rest without them)."""
+    again (the output then orients the cells at rest without them). The file is not read
+    again: :meth:`Scene.file_mesh` keeps what building the simulation read."""
     m = sc.mesh
     if m.file is None or m.file.suffix.lower() == ".tmg":
         return None
-    from topomech.io import read_mesh
-
-    linear = m.linear
     try:
-        # read again: what it had to say was said the first time
+        # read again only when the scene was built elsewhere: what the file had to say was
+        # said the first time
         with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):
             warnings.simplefilter("ignore")
-            read: Any = read_mesh
-            mesh, _ = read(m.file, linear=True) if linear else read(m.file)
+            mesh = sc.file_mesh()
         return to_flat(mesh.points, mesh.cells)
     except (TopomechError, ValueError, TypeError, OSError):
         return None
@@ -259,6 +258,89 @@ def _missed_event(sc: Scene, sim: Simulation, message: str) -> int | None:
     return same[0] if same else None
 
 
+#: What a run is doing, as an interruption or an I/O error reports it (``error.phase``).
+PHASES = {
+    "setup": "setting up (building the simulation, preparing the output folder)",
+    "steps": "stepping",
+    "frames": "writing a frame",
+    "final": "writing final.vtu and animation.pvd",
+    "view": "writing the view data and energies",
+    "previews": "rendering the previews",
+    "summary": "writing summary.json",
+}
+
+
+def _interrupted(phase: str, sim: Simulation | None, steps_requested: int) -> dict[str, Any]:
+    """The summary's ``error`` for a Ctrl-C during ``phase``."""
+    done = sim.steps if sim is not None else 0
+    err: dict[str, Any] = {
+        "type": "interrupted",
+        "message": (f"interrupted while {PHASES[phase]}, after {done} of {steps_requested} steps"),
+        "phase": phase,
+        "steps_done": done,
+    }
+    if phase == "steps":
+        err["step"] = done + 1
+    return err
+
+
+def _failed_path(e: OSError, writing: Sequence[Path]) -> str:
+    """The file an OSError is about: its ``filename``, else the one of the files being
+    written that was touched last (the others of ``writing`` were written before it, or not
+    yet created), else the first of them."""
+    if e.filename is not None:
+        return os.fsdecode(e.filename)
+    best: tuple[int, int] | None = None
+    found: Path | None = None
+    for i, p in enumerate(writing):
+        with contextlib.suppress(OSError):
+            key = (os.lstat(p).st_mtime_ns, i)
+            if best is None or key > best:
+                best, found = key, p
+    if found is None and writing:
+        found = writing[0]
+    return str(found) if found is not None else "(unknown file)"
+
+
+def _io_error(e: OSError, phase: str, writing: Sequence[Path], steps: int) -> dict[str, Any]:
+    """The summary's ``error`` for a file that could not be written."""
+    import errno
+
+    path = _failed_path(e, writing)
+    reason = e.strerror or str(e) or type(e).__name__
+    return {
+        "type": "io",
+        "message": f"{path}: could not be written: {reason} (while {PHASES[phase]})",
+        "path": path,
+        "errno": errno.errorcode.get(e.errno, None) if e.errno is not None else None,
+        "phase": phase,
+        "steps_done": steps,
+    }
+
+
+@contextlib.contextmanager
+def _sigint_held() -> Any:
+    """SIGINT held back (delivered on leaving) in the main thread, where that is possible:
+    the summary of an interruption is written whole."""
+    import signal
+    import threading
+
+    held = False
+    if hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread():
+        with contextlib.suppress(OSError, ValueError):
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            held = True
+    try:
+        yield
+    finally:
+        if held:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def _enter(phase: str) -> None:
+    """Marks the start of ``phase`` (tests replace it to interrupt a run at a given phase)."""
+
+
 def run_scene(
     scene: Scene | PathLike,
     out: PathLike | None = None,
@@ -268,6 +350,7 @@ def run_scene(
     progress: bool | Callable[[int, int], None] = False,
     preview: bool = True,
     video: bool = True,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Runs a scene (a :class:`Scene` or a scene file) and writes its outputs under ``out``
     (default ``out/<scene name>``); ``steps`` and ``every`` override the scene's. Returns the
@@ -282,9 +365,29 @@ def run_scene(
     run and the number of steps that needed load stepping; null for explicit integrators),
     ``frames``, ``wall_seconds`` (the whole run),
     ``step_seconds`` (in steps only), ``steps_per_second``, ``outputs`` and
-    ``topomech_version`` (a number that is not finite, after a divergence, is null); plus
-    ``error`` (``type``, ``message``, and ``step``, ``vertex`` for a divergence, ``event`` for
-    a timed cut that separated nothing) when a step failed.
+    ``topomech_version`` (a number that is not finite, after a divergence, is null; one not
+    known, after an interruption during set-up, is null too); plus ``error`` when the run
+    stopped early: ``type`` and ``message`` always; ``"divergence"`` with ``step`` and
+    ``vertex``; ``"simulation"`` with ``step``; ``"event"`` (a timed cut that separated
+    nothing) with ``step`` and ``event``; ``"io"`` (a file could not be written: a full disk,
+    a file size limit) with ``path`` (the file), ``errno`` (``"ENOSPC"``, ...), ``phase``
+    and ``steps_done``; ``"interrupted"`` (Ctrl-C) with ``phase`` and ``steps_done`` (and
+    ``step``, the step cut short, when the phase is ``"steps"``). The phases are
+    ``setup``, ``steps``, ``frames``, ``final``, ``view``, ``previews``, ``summary``.
+
+    The output folder keeps a manifest, ``.topomech-manifest.jsonl`` (see
+    :mod:`topomech._manifest`): each file is listed there before it is created, and a rerun
+    removes only what it lists, never following a symbolic link. A folder holding files that
+    no manifest lists is refused (:class:`~topomech._manifest.OutputError`, nothing written)
+    unless ``overwrite``: then files named like the outputs are replaced and the others
+    kept. A missing or empty folder is fine.
+
+    After an interruption or an I/O error what was written stays and ``summary.json`` says
+    what happened: after Ctrl-C during the steps or a frame, ``final.vtu`` and the view data
+    are still written (not the previews); after an I/O error nothing more but the summary.
+    A Ctrl-C is raised again (:class:`KeyboardInterrupt`) once the summary is written. When
+    ``summary.json`` itself cannot be written the summary is returned with an ``io`` error
+    naming it (and ``outputs.summary`` null).
 
     ``progress``: True for a progress bar on stderr, or a callable ``(done, total)``.
     ``preview``: track the energies and render ``preview.gif``, ``energy.png`` (and
@@ -292,153 +395,282 @@ def run_scene(
     (``view.json``) are written either way. ``outputs`` names each file written (None for
     those that were not).
     Raises :class:`SceneError` for a scene that is refused (nothing is written then), an
-    event after the end of the run included (with ``steps`` too), and an unknown name in
-    ``output.fields`` (naming ``output.fields[i]`` and the available names).
+    event after the end of the run included (with ``steps`` too), an unknown name in
+    ``output.fields`` (naming ``output.fields[i]`` and the available names) and, without
+    ``out``, a scene name that is not a plain folder name; :class:`OutputError` for an
+    output folder that is refused (see above) or cannot be created.
     """
     t0 = time.perf_counter()
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
     if steps is not None or every is not None:
         sc = sc.with_steps(steps, every)
+    if out is None:
+        problem = name_problem(sc.name)
+        if problem is not None:
+            where = str(sc.path) if sc.path is not None else "<scene>"
+            raise SceneError(f"{where}: name: {problem}")
     out_dir = Path(out) if out is not None else Path("out") / sc.name
-    sim = sc.build()
-    fields = check_fields(sim, getattr(sc, "fields", ()), sc.path)
-
-    out_dir.mkdir(parents=True, exist_ok=True)
+    folder = OutputFolder(out_dir, overwrite=overwrite)
+    folder.check()
     frames_dir = out_dir / "frames"
-    for old in frames_dir.glob("frame_*.vtu") if frames_dir.is_dir() else ():
-        old.unlink()
-    for stale in (
-        "animation.pvd",
-        "final.vtu",
-        "summary.json",
-        "view.json",
-        "view.bin",
-        "viewer.html",
-        "energy.csv",
-        "energy.png",
-        "preview.gif",
-        "preview.mp4",
-    ):
-        (out_dir / stale).unlink(missing_ok=True)
-    cells = OutputCells(sim, _input_cells(sc))
-    writer = _Writer(sim, cells, fields)
-    recorder = Recorder(sim, sc, energy=preview, cells=cells)
+
+    sim: Simulation | None = None
+    recorder: Recorder | None = None
+    writer: _Writer | None = None
     frames: list[tuple[float, str]] = []
-
-    def frame() -> None:
-        frames_dir.mkdir(exist_ok=True)
-        name = f"frame_{len(frames):05d}.vtu"
-        writer.write(frames_dir / name)
-        recorder.frame()
-        frames.append((sim.time, f"frames/{name}"))
-
-    recorder.start()
-
-    if sc.every > 0:
-        frame()
-    bar: Progress | None = None
-    report: Callable[[int, int], None] | None = None
-    if progress is True:
-        bar = Progress(sc.name, sc.steps)
-    elif callable(progress):
-        report = progress
     error: dict[str, Any] | None = None
-    step_seconds = 0.0
-    try:
-        for k in range(1, sc.steps + 1):
-            ts = time.perf_counter()
-            sim.step()
-            step_seconds += time.perf_counter() - ts
-            recorder.after_step()
-            if sc.every > 0 and (k % sc.every == 0 or k == sc.steps):
-                frame()
-            if bar is not None:
-                bar.update(k)
-            if report is not None:
-                report(k, sc.steps)
-    except DivergenceError as e:
-        error = {
-            "type": "divergence",
-            "message": str(e),
-            "step": int(e.step),
-            "vertex": int(e.vertex),
-        }
-    except SimulationError as e:
-        missed = _missed_event(sc, sim, str(e))
-        if missed is None:
-            error = {"type": "simulation", "message": str(e), "step": sim.steps + 1}
-        else:
-            error = {
-                "type": "event",
-                "message": (
-                    f"event[{missed}] ({_describe_event(sc.events[missed])}) separates "
-                    f"nothing at step {sim.steps} (t = {sim.time:g}): it misses the object"
-                ),
-                "step": sim.steps,
-                "event": missed,
-            }
-    except KeyboardInterrupt:
-        error = {"type": "interrupted", "message": "interrupted", "step": sim.steps + 1}
-    finally:
-        if bar is not None:
-            bar.close(sim.steps)
-    writer.write(out_dir / "final.vtu")
-    counts = sim.gmap().cell_counts()  # of the final map: a topology change changes them
-    if frames:
-        write_pvd(out_dir / "animation.pvd", frames)
-    changes = [dict(c) for c in sim.topology_changes()]
-    recorder.finish()
     outputs: dict[str, str | None] = {
-        "view": "view.json" if recorder.write_view(out_dir, changes) else None,
-        "energy": "energy.csv" if recorder.write_energy(out_dir / "energy.csv") else None,
+        "view": None,
+        "energy": None,
         "preview": None,
         "video": None,
         "energy_plot": None,
     }
-    if preview and (error is None or error["type"] != "interrupted"):
-        from topomech.render import render_previews
+    final_written = False
+    step_seconds = 0.0
+    phase = "setup"
+    writing: list[Path] = []  # the files the phase is writing, for an OSError's message
+    bar: Progress | None = None
 
-        outputs.update(render_previews(out_dir, video=video, name=sc.name, events=changes))
+    def enter(name: str, files: Sequence[str] = ()) -> None:
+        """Starts a phase that writes ``files`` (listed in the manifest first)."""
+        nonlocal phase, writing
+        phase = name
+        _enter(name)
+        writing = [folder.add(f) for f in files]
+
+    def stop(e: BaseException) -> None:
+        """Records why the run stops (the first reason counts)."""
+        nonlocal error
+        if error is not None and error["type"] in ("interrupted", "io"):
+            return
+        if isinstance(e, KeyboardInterrupt):
+            new = _interrupted(phase, sim, sc.steps)
+        else:
+            assert isinstance(e, OSError)
+            new = _io_error(e, phase, writing, sim.steps if sim is not None else 0)
+        if error is not None:
+            new["after"] = error  # a divergence, say, whose outputs were being written
+        error = new
+
+    try:
+        _enter("setup")
+        sim = sc.build()
+        fields = check_fields(sim, getattr(sc, "fields", ()), sc.path)
+        folder.prepare()
+        for rel in ("view.bin", "view.json", "energy.csv"):
+            folder.add(rel)  # before the recorder starts: it may write them as it goes
+        cells = OutputCells(sim, _input_cells(sc))
+        writer = _Writer(sim, cells, fields)
+        recorder = Recorder(sim, sc, energy=preview, cells=cells, out_dir=out_dir)
+
+        def frame() -> None:
+            assert writer is not None
+            assert recorder is not None
+            assert sim is not None
+            name = f"frame_{len(frames):05d}.vtu"
+            enter("frames", ["frames"])
+            frames_dir.mkdir(exist_ok=True)
+            enter("frames", [f"frames/{name}"])
+            writer.write(frames_dir / name)
+            recorder.frame()
+            frames.append((sim.time, f"frames/{name}"))
+            enter("steps")
+
+        recorder.start()
+
+        if sc.every > 0:
+            frame()
+        enter("steps")
+        report: Callable[[int, int], None] | None = None
+        if progress is True:
+            bar = Progress(sc.name, sc.steps)
+        elif callable(progress):
+            report = progress
+        try:
+            for k in range(1, sc.steps + 1):
+                ts = time.perf_counter()
+                sim.step()
+                step_seconds += time.perf_counter() - ts
+                recorder.after_step()
+                if sc.every > 0 and (k % sc.every == 0 or k == sc.steps):
+                    frame()
+                if bar is not None:
+                    bar.update(k)
+                if report is not None:
+                    report(k, sc.steps)
+        except DivergenceError as e:
+            error = {
+                "type": "divergence",
+                "message": str(e),
+                "step": int(e.step),
+                "vertex": int(e.vertex),
+            }
+        except SimulationError as e:
+            missed = _missed_event(sc, sim, str(e))
+            if missed is None:
+                error = {"type": "simulation", "message": str(e), "step": sim.steps + 1}
+            else:
+                error = {
+                    "type": "event",
+                    "message": (
+                        f"event[{missed}] ({_describe_event(sc.events[missed])}) separates "
+                        f"nothing at step {sim.steps} (t = {sim.time:g}): it misses the object"
+                    ),
+                    "step": sim.steps,
+                    "event": missed,
+                }
+        finally:
+            if bar is not None:
+                with contextlib.suppress(OSError, ValueError):
+                    bar.close(sim.steps)
+    except (KeyboardInterrupt, OSError) as e:
+        if isinstance(e, OSError) and not folder.prepared:
+            raise  # not one of the run's files (a preparation failure is an OutputError)
+        stop(e)
+
+    # what is left to write after the steps: the final state and the view data (also after a
+    # Ctrl-C during the steps or a frame), then the previews (not after a Ctrl-C)
+    changes: list[dict[str, Any]] = []
+    interrupted_early = error is not None and error["type"] == "interrupted"
+    io_failed = error is not None and error["type"] == "io"
+    in_setup = error is not None and error.get("phase") == "setup"
+    if (
+        sim is not None
+        and writer is not None
+        and recorder is not None
+        and not io_failed
+        and not in_setup
+    ):
+        try:
+            enter("final", ["final.vtu"])
+            writer.write(out_dir / "final.vtu")
+            final_written = True
+            if frames:
+                enter("final", ["animation.pvd"])
+                write_pvd(out_dir / "animation.pvd", frames)
+            changes = [dict(c) for c in sim.topology_changes()]
+            enter("view", ["view.bin", "view.json", "energy.csv"])
+            recorder.finish()
+            outputs["view"] = "view.json" if recorder.write_view(out_dir, changes) else None
+            outputs["energy"] = (
+                "energy.csv" if recorder.write_energy(out_dir / "energy.csv") else None
+            )
+            folder.adopt()
+            if preview and not interrupted_early:
+                enter("previews", ["preview.gif", "preview.mp4", "energy.png"])
+                from topomech.render import render_previews
+
+                outputs.update(render_previews(out_dir, video=video, name=sc.name, events=changes))
+                folder.adopt()
+        except (KeyboardInterrupt, OSError) as e:
+            stop(e)
+    elif sim is not None:
+        changes = [dict(c) for c in sim.topology_changes()]
+
+    summary = _summary(sc, sim, t0, step_seconds, frames, outputs, final_written, changes)
+    if error is not None:
+        summary["error"] = error
+    try:
+        try:
+            if not folder.prepared:  # interrupted during set-up
+                folder.prepare()
+            folder.adopt()
+            enter("summary", ["summary.json"])
+            _write_summary(out_dir / "summary.json", summary)
+        except KeyboardInterrupt as e:
+            stop(e)
+            summary["error"] = error
+            with _sigint_held():
+                _write_summary(folder.add("summary.json"), summary)
+    except OSError as e:
+        stop(e)
+        summary["error"] = error
+        summary["outputs"]["summary"] = None
+    safe: dict[str, Any] = _json_safe(summary)
+    if error is not None and error["type"] == "interrupted":
+        raise KeyboardInterrupt
+    return safe
+
+
+def _write_summary(path: Path, summary: dict[str, Any]) -> None:
+    """Writes ``summary.json``; a file left half-written (by a full disk, a Ctrl-C) is
+    removed."""
+    text = json.dumps(_json_safe(summary), indent=2, allow_nan=False)
+    try:
+        path.write_text(text + "\n", encoding="utf-8")
+    except BaseException:
+        with contextlib.suppress(OSError):
+            path.unlink()
+        raise
+
+
+def _summary(
+    sc: Scene,
+    sim: Simulation | None,
+    t0: float,
+    step_seconds: float,
+    frames: list[tuple[float, str]],
+    outputs: dict[str, str | None],
+    final_written: bool,
+    changes: list[dict[str, Any]],
+) -> dict[str, Any]:
+    """The summary of a run (see :func:`run_scene`); the values a simulation that was never
+    built would give are null."""
+    known: dict[str, Any] = {}
+    if sim is not None:
+        counts = sim.gmap().cell_counts()  # of the final map: a topology change changes them
+        known = {
+            "dimension": sim.dimension,
+            "steps": sim.steps,
+            "time": sim.time,
+            "darts": counts["darts"],
+            "vertices": counts["vertices"],
+            "edges": counts["edges"],
+            "faces": counts["faces"],
+            "volumes": counts["volumes"],
+            "components": counts["components"],
+            "total_mass": sim.total_mass(),
+            "kinetic_energy": sim.kinetic_energy(),
+            "momentum": [float(x) for x in sim.momentum()],
+            "max_displacement": _max_displacement(sim),
+            "solver": sim.solver_report(),
+            "steps_per_second": sim.steps / step_seconds if step_seconds > 0 else None,
+        }
     summary: dict[str, Any] = {
         "scene": str(sc.path) if sc.path is not None else None,
         "name": sc.name,
-        "dimension": sim.dimension,
+        "dimension": None,
         "models": sc.config["models"],
         "integrator": sc.integrator,
         "dt": sc.dt,
-        "steps": sim.steps,
+        "steps": 0,
         "steps_requested": sc.steps,
-        "time": sim.time,
-        "darts": counts["darts"],
-        "vertices": counts["vertices"],
-        "edges": counts["edges"],
-        "faces": counts["faces"],
-        "volumes": counts["volumes"],
-        "components": counts["components"],
+        "time": 0.0,
+        "darts": None,
+        "vertices": None,
+        "edges": None,
+        "faces": None,
+        "volumes": None,
+        "components": None,
         "topology_changes": changes,
-        "total_mass": sim.total_mass(),
-        "kinetic_energy": sim.kinetic_energy(),
-        "momentum": [float(x) for x in sim.momentum()],
-        "max_displacement": _max_displacement(sim),
-        "solver": sim.solver_report(),
+        "total_mass": None,
+        "kinetic_energy": None,
+        "momentum": None,
+        "max_displacement": None,
+        "solver": None,
         "frames": len(frames),
         "wall_seconds": time.perf_counter() - t0,
         "step_seconds": step_seconds,
-        "steps_per_second": sim.steps / step_seconds if step_seconds > 0 else None,
+        "steps_per_second": None,
         "outputs": {
             "summary": "summary.json",
-            "final": "final.vtu",
-            "animation": "animation.pvd" if frames else None,
+            "final": "final.vtu" if final_written else None,
+            "animation": "animation.pvd" if frames and final_written else None,
             **outputs,
             "frames": [f for _, f in frames],
         },
         "topomech_version": __version__,
     }
-    if error is not None:
-        summary["error"] = error
-    summary = _json_safe(summary)
-    text = json.dumps(summary, indent=2, allow_nan=False)
-    (out_dir / "summary.json").write_text(text + "\n", encoding="utf-8")
-    if error is not None and error["type"] == "interrupted":
-        raise KeyboardInterrupt
+    summary.update(known)
     return summary

@@ -133,6 +133,8 @@ else:  # pragma: no cover - exercised on Python 3.9 and 3.10 only
     import tomli as tomllib
 
 if TYPE_CHECKING:
+    import meshio
+
     from topomech._gmap import PathLike
     from topomech.io import ImportedMesh
 
@@ -340,8 +342,17 @@ class _Table:
             if k not in known:
                 close = difflib.get_close_matches(k, known, n=1)
                 hint = f"; did you mean '{close[0]}'?" if close else ""
+                if k in _SPELLED_ELSEWHERE and _SPELLED_ELSEWHERE[k][0] in known:
+                    hint = f"; write {_SPELLED_ELSEWHERE[k][1]}"
                 expected = f" (known: {', '.join(sorted(set(known)))})" if known else ""
                 raise self.fail(self.key(k), f"unknown key{hint}{expected}")
+
+
+#: Keys people write that a scene spells otherwise: the key, the key that is known where
+#: this one is written, and the hint.
+_SPELLED_ELSEWHERE = {
+    "linear": ("order", 'order = "linear" (keep the corner nodes of second-order cells)'),
+}
 
 
 class _Fail:
@@ -356,6 +367,31 @@ class _Fail:
         err.key = key
         err.source = self.source
         return err
+
+
+#: The longest scene name, in UTF-8 bytes (a file name's limit on common file systems).
+MAX_NAME_BYTES = 255
+
+
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot be a scene's name, or None when it can. The name is the output
+    folder's name (``out/<name>``) and is shown in previews, so it must be one plain folder
+    name: not empty, not ``.`` or ``..``, no path separator (``/``, ``\\``) or drive colon,
+    no NUL or other control character, at most :data:`MAX_NAME_BYTES` bytes."""
+    if not name:
+        return "the name is empty"
+    if name in (".", ".."):
+        return f"{_show(name)} is not a folder name (it names a folder above or itself)"
+    for ch in name:
+        if ch in "/\\":
+            return f"{_show(name)} contains a path separator {_show(ch)}: give a plain name"
+        if ch == ":":
+            return f"{_show(name)} contains ':' (a drive or stream separator): give a plain name"
+        if ord(ch) < 32 or ord(ch) == 127:
+            return f"{_show(name)} contains the control character U+{ord(ch):04X}"
+    if len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        return f"the name is longer than {MAX_NAME_BYTES} bytes"
+    return None
 
 
 def _number(
@@ -378,33 +414,27 @@ def _or(items: Sequence[str]) -> str:
     return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} or {items[-1]}"
 
 
-_DIAGNOSTIC = re.compile(r"^.*?:(\d+):(\d+): error\[([\w-]+)\]: (?:rule 'p': )?(.*)$")
+_DIAGNOSTIC = re.compile(r"^.*?:(\d+):(\d+): error\[([\w-]+)\]: (?:rule '\w+': )?(.*)$")
 
 
 def _check_predicate(pred: str, key: str, fail: _Fail) -> str:
-    """Checks a predicate the way the kernel will compile it (a rule's ``where`` guard over
-    ``x``, ``y``, ``z``), so that a bad one is named by its key."""
+    """Checks a predicate the way the kernel will compile it (one expression of the rule
+    language over ``x``, ``y``, ``z``, the guard of a rule built around it, never rule text),
+    so that a bad one is named by its key and the place in it (line and column)."""
     if not pred.strip():
         raise fail(key, "the predicate is empty")
-    src = (
-        "dimension 3\n"
-        "embedding rest : vec3 on <1,2,3>\n"
-        "embedding fixed : bool on <1,2,3>\n"
-        "rule p {\n"
-        "  left { v : <1,2,3> hook }\n"
-        "  where { let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)\n"
-        f"{pred}\n"
-        "  }\n"
-        "  compute { v.fixed = true }\n"
-        "}\n"
-    )
     try:
-        _core.RuleSet.from_source(src, "predicate")
+        _core.check_predicate(pred, key)
     except RuleError as e:
         problems = []
         for line in e.diagnostics:
             m = _DIAGNOSTIC.match(line)
-            problems.append(m.group(4) if m else line)
+            if m is None:
+                problems.append(line)
+                continue
+            row, col = int(m.group(1)), int(m.group(2))
+            at = f"line {row}, column {col}" if row > 1 else f"column {col}"
+            problems.append(f"{at}: {m.group(4)}")
         raise fail(key, f"bad predicate {_show(pred)}: {'; '.join(problems)}") from None
     return pred
 
@@ -475,6 +505,9 @@ class Scene:
     #: :func:`topomech.loads.apply_conditions`): ``held`` (fixes by points or group),
     #: ``loads`` and ``initial``, each entry with its scene key.
     conditions: dict[str, Any] = field(default_factory=dict)
+    #: The mesh file as read (``"mesh"``: the meshio mesh of the kept cells), kept so that a
+    #: run reads the file once: building, the groups of the loads and the output cells.
+    _read: dict[str, Any] = field(default_factory=dict, init=False, compare=False, repr=False)
 
     @property
     def integrator(self) -> str:
@@ -566,6 +599,8 @@ class Scene:
             if imported.mesh is None:
                 # a saved map (.tmg) is taken as written: refuse one that is not a G-map
                 _check_saved_map(imported.gmap, m.file, fail)
+            else:
+                self._read["mesh"] = imported.mesh
             for note in imported.notes:
                 print(f"topomech: note: {m.file.name}: {note}", file=sys.stderr)
             return imported
@@ -614,11 +649,25 @@ class Scene:
         m = self.mesh
         if m.file is None:
             return MeshGroups()
-        from topomech.io import GMAP_SUFFIX, read_mesh
+        from topomech.io import GMAP_SUFFIX
 
         if m.file.suffix.lower() == GMAP_SUFFIX:
             return MeshGroups()  # a saved map keeps its numbering (point_id), not groups
+        return MeshGroups.from_meshio(self.file_mesh())
 
+    def file_mesh(self) -> meshio.Mesh:
+        """The scene's mesh file as read (:func:`topomech.io.read_mesh` with ``mesh.order``:
+        the kept cells and the named sets), read once per scene: :meth:`load_mesh` keeps what
+        it read. Raises :class:`SceneError` naming ``mesh.file`` when the file cannot be read,
+        ValueError for a generated mesh or a saved map (``.tmg``), which have no mesh file."""
+        from topomech.io import GMAP_SUFFIX, read_mesh
+
+        m = self.mesh
+        if m.file is None or m.file.suffix.lower() == GMAP_SUFFIX:
+            raise ValueError("the scene's mesh is not read from a mesh file")
+        cached = self._read.get("mesh")
+        if cached is not None:
+            return cached
         kwargs: dict[str, Any] = {}
         if m.linear:
             kwargs["linear"] = True
@@ -626,7 +675,8 @@ class Scene:
             mesh, _ = read_mesh(m.file, **kwargs)
         except (MeshReadError, MeshError, OSError) as e:
             raise self._fail()("mesh.file", str(e)) from e
-        return MeshGroups.from_meshio(mesh)
+        self._read["mesh"] = mesh
+        return mesh
 
     def _key_of(self, message: str) -> str | None:
         """The key a kernel refusal is about: the first predicate or model kind it quotes."""
@@ -947,6 +997,12 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         raise fail(None, f"invalid TOML: {e}") from None
     top = _Table(data, "", fail)
     name = top.string("name", p.stem if p is not None else "scene")
+    problem = name_problem(name)
+    if problem is not None:
+        given = top.has("name")
+        raise fail(
+            "name", f"{problem}{'' if given else ' (the name comes from the file name: give one)'}"
+        )
     description = top.string("description", "")
 
     if not top.has("mesh"):

@@ -43,7 +43,7 @@ import numpy.typing as npt
 
 from topomech import _core
 from topomech._core import DivergenceError, SimulationError
-from topomech._gmap import GMap
+from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_array
 
 if TYPE_CHECKING:
     from topomech._gmap import PathLike
@@ -340,8 +340,39 @@ class Simulation:
         """The values of a vertex embedding, one row per vertex (``(V,)`` for scalars,
         ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices; masses and forces, ``mass``,
         ``force``, ``f_*``, summed over the orbits of a row). An embedding on another orbit
-        raises :class:`EmbeddingError`; ``gmap().embedding_names()`` lists them all."""
+        raises :class:`EmbeddingError`; :meth:`orbit_embedding` reads any embedding, one row
+        per orbit."""
         return self._core.embedding(name)
+
+    def orbit_embedding(self, name: str) -> EmbeddingValues:
+        """The embedding ``name`` of the simulated map, one row per orbit of its orbit type,
+        as :meth:`GMap.embedding` returns it: ``(values, darts, orbit)``, rows in increasing
+        order of each orbit's smallest dart (not the per-vertex row order of
+        :meth:`embedding`). It reads what no per-vertex array shows: a force on each corner
+        of an element (``f_corot`` on ``<1,2>`` in 3D), a per-element stiffness (``k_elem``,
+        ``(E, 12, 12)``), a volume. Raises :class:`KeyError` for an unknown name, listing the
+        embeddings."""
+        return EmbeddingValues(*self._core.orbit_embedding(name))
+
+    def set_orbit_embedding(self, name: str, values: Any) -> None:
+        """Writes every value of the stored embedding ``name`` in the layout of
+        :meth:`orbit_embedding` (as :meth:`GMap.set_embedding`); derived embeddings (the
+        vertex ``mass``, a sum of ``corner_mass``) are recomputed and the next step starts
+        from the values written. Nothing is written when it raises: :class:`KeyError`,
+        :class:`TypeError`, :class:`ValueError` and :class:`EmbeddingError` as
+        :meth:`GMap.set_embedding`; :class:`ValueError` also when the orbits of one particle
+        (a pinched vertex kept as one row) would get different positions, velocities or other
+        shared vertex values; :class:`SimulationError` for the embeddings that number rows
+        and elements (``particle``, ``point_id``, ``cell_id``, ``vertex0``, ``face0``)."""
+        specs = {s.name: s for s in self.embeddings()}
+        spec = specs.get(name)
+        a = as_embedding_array(spec.type, values) if spec is not None else np.asarray(values)
+        self._core.set_orbit_embedding(name, a)
+
+    def embeddings(self) -> list[EmbeddingSpec]:
+        """Every embedding of the simulated map: name, type, orbit type and whether it is
+        derived, in declaration order."""
+        return [EmbeddingSpec(*e) for e in self._core.embeddings()]
 
     def total_mass(self) -> float:
         """Sum of the vertex masses."""

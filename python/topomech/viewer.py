@@ -21,6 +21,7 @@ import stat
 import sys
 import tempfile
 import threading
+from collections.abc import Callable, Iterator
 from importlib import resources
 from pathlib import Path
 
@@ -40,36 +41,73 @@ def _script_safe(text: str) -> str:
     return text.replace("</", "<\\/")
 
 
-def viewer_html(out_dir: Path) -> str:
-    """The viewer page of a run directory, data inlined; raises :class:`ViewError` when the
-    directory has no readable view data."""
+#: Bytes of view.bin encoded at a time (a multiple of 3: the base64 of the blocks, one after
+#: the other, is that of the whole file).
+_B64_BLOCK = 3 << 14
+
+
+def _page_parts(out_dir: Path) -> Iterator[str]:
+    """The viewer page of a run directory, piece by piece: the template with its markers
+    (``__TITLE__``, ``__META__``, ``__BIN__``, ``__SCRIPT__``, each replaced once, in this
+    order) filled in, view.bin base64-encoded a block at a time. Raises :class:`ViewError`
+    when the directory has no readable view data."""
     view = read_view(Path(out_dir))
     page = _asset("viewer.html")
     title = str(view.meta.get("name", "run"))
-    for key, value in (
-        ("__TITLE__", title.replace("&", "&amp;").replace("<", "&lt;")),
-        ("__META__", _script_safe(json.dumps(view.meta))),
-        ("__BIN__", base64.b64encode(view.data).decode("ascii")),
-        ("__SCRIPT__", _asset("viewer.js")),
-    ):
-        page = page.replace(key, value, 1)
-    return page
+
+    def data() -> Iterator[str]:
+        try:
+            with view.bin_path.open("rb") as fh:
+                while block := fh.read(_B64_BLOCK):
+                    yield base64.b64encode(block).decode("ascii")
+        except OSError as e:
+            msg = f"{view.bin_path}: cannot read the view data: {e.strerror or e}"
+            raise ViewError(msg) from None
+
+    values: list[tuple[str, Callable[[], Iterator[str]]]] = [
+        ("__TITLE__", lambda: iter([title.replace("&", "&amp;").replace("<", "&lt;")])),
+        ("__META__", lambda: iter([_script_safe(json.dumps(view.meta))])),
+        ("__BIN__", data),
+        ("__SCRIPT__", lambda: iter([_asset("viewer.js")])),
+    ]
+    rest = page
+    for key, value in values:
+        head, found, rest = rest.partition(key)
+        yield head
+        if found:
+            yield from value()
+    yield rest
+
+
+def viewer_html(out_dir: Path) -> str:
+    """The viewer page of a run directory, data inlined; raises :class:`ViewError` when the
+    directory has no readable view data."""
+    return "".join(_page_parts(out_dir))
 
 
 def write_viewer(out_dir: Path, path: Path | None = None) -> Path:
-    """Writes the viewer page (default ``OUT_DIR/viewer.html``); returns its path.
+    """Writes the viewer page (default ``OUT_DIR/viewer.html``); returns its path. The page
+    is written piece by piece (view.bin encoded a block at a time), so writing it takes
+    memory for view.json, not for the whole of view.bin.
 
     The page is written to a new file then renamed over the target, so a symlink at the
     target is replaced, never followed. Raises :class:`ViewError` when the directory has no
     readable view data and :class:`OSError` when the page cannot be written."""
     out_dir = Path(out_dir)
-    html = viewer_html(out_dir)
+    parts = _page_parts(out_dir)
+    first = next(parts)  # reads view.json: a directory without view data fails here
     target = Path(path) if path is not None else out_dir / VIEWER_FILE
+    if path is None:
+        from topomech._manifest import register
+
+        register(out_dir, VIEWER_FILE)  # a rerun of the run may then replace it
     fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     tmp = Path(name)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(html)
+            f.write(first)
+            for part in parts:
+                f.write(part)
         tmp.chmod(0o644)
         tmp.replace(target)
     except BaseException:

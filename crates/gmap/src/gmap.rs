@@ -703,6 +703,84 @@ impl GMap {
         })
     }
 
+    /// Writes every value of the stored embedding `id` at once, one value per orbit of its
+    /// orbit type, orbits in the order of [`GMap::orbit_representatives`] (by smallest dart):
+    /// `values` holds `width` reals per orbit (row-major) for a real type, one integer or one
+    /// boolean per orbit otherwise. Counts as one write, then recomputes the stale derived
+    /// embeddings ([`GMap::refresh_derived`]), so that an aggregate of `id` is up to date.
+    ///
+    /// Errors (nothing is written): [`EmbeddingError::Derived`] for a derived embedding,
+    /// [`EmbeddingError::Type`] for values of another type or another count.
+    pub fn set_orbit_values(
+        &mut self,
+        id: EmbeddingId,
+        values: ColumnRef<'_>,
+    ) -> Result<(), EmbeddingError> {
+        let e = self.embedding(id);
+        if e.derived.is_some() {
+            return Err(EmbeddingError::Derived(e.name.clone()));
+        }
+        let w = e.ty.width();
+        let slots: Vec<usize> = self
+            .orbit_representatives(e.orbit)
+            .into_iter()
+            .map(|d| e.slot(d))
+            .collect();
+        let n = slots.len();
+        let (kind, len) = match values {
+            ColumnRef::Real(v) => ("reals", v.len()),
+            ColumnRef::Int(v) => ("integers", v.len()),
+            ColumnRef::Bool(v) => ("booleans", v.len()),
+        };
+        let type_ok = matches!(
+            (&e.values, values),
+            (Column::Real(_), ColumnRef::Real(_))
+                | (Column::Int(_), ColumnRef::Int(_))
+                | (Column::Bool(_), ColumnRef::Bool(_))
+        );
+        let want = if e.ty.is_real() { n * w } else { n };
+        if !type_ok || len != want {
+            return Err(EmbeddingError::Type {
+                name: e.name.clone(),
+                expected: format!(
+                    "{} on {}: {want} {} for its {n} orbits",
+                    e.ty,
+                    e.orbit,
+                    if e.ty.is_real() {
+                        "reals"
+                    } else if e.ty == EmbeddingType::I64 {
+                        "integers"
+                    } else {
+                        "booleans"
+                    }
+                ),
+                got: format!("{len} {kind}"),
+            });
+        }
+        let e = &mut self.embeddings[id.0 as usize];
+        match (&mut e.values, values) {
+            (Column::Real(col), ColumnRef::Real(v)) => {
+                for (k, &s) in slots.iter().enumerate() {
+                    col[s * w..(s + 1) * w].copy_from_slice(&v[k * w..(k + 1) * w]);
+                }
+            }
+            (Column::Int(col), ColumnRef::Int(v)) => {
+                for (k, &s) in slots.iter().enumerate() {
+                    col[s] = v[k];
+                }
+            }
+            (Column::Bool(col), ColumnRef::Bool(v)) => {
+                for (k, &s) in slots.iter().enumerate() {
+                    col[s] = v[k];
+                }
+            }
+            _ => unreachable!("types checked above"),
+        }
+        e.writes += 1;
+        self.refresh_derived();
+        Ok(())
+    }
+
     /// Sets every value of the stored embedding `id` to zero (or false).
     pub fn reset_values(&mut self, id: EmbeddingId) -> Result<(), EmbeddingError> {
         let e = &mut self.embeddings[id.0 as usize];

@@ -835,6 +835,114 @@ fn renamed_copy(target: usize) -> J {
     ])
 }
 
+/// Stable Neo-Hookean and St. Venant-Kirchhoff tetrahedra (`hyperelastic3d.tmr`, written with
+/// generic built-ins only) beside co-rotational ones on the same deformed mesh: the time of one
+/// full step (forces, accumulation, symplectic Euler) and of one Jacobian-vector product (what
+/// each conjugate-gradient iteration of `implicit_euler` and `static` costs), medians of
+/// alternated samples, one thread.
+fn hyperelastic_beside_corotational(target: usize) -> J {
+    use topomech_gmap::generators::{cuboid, BoxElement};
+    use topomech_gmap::mesh::{build, BuildOptions};
+    use topomech_physics::{Config, ModelSpec};
+    let kinds = ["corotational", "neohookean", "stvk"];
+    let (cells, n) = Model::Corotational.cells(target);
+    let mesh = cuboid(
+        [cells[0], cells[1], cells[2]],
+        [cells[0] as f64 / cells[1] as f64, 1.0, 1.0],
+        BoxElement::Tetra,
+    );
+    let mut sims: Vec<Simulation> = kinds
+        .iter()
+        .map(|kind| {
+            let (g, _) = build(&mesh, &BuildOptions::default()).expect("a valid mesh");
+            let cfg = Config {
+                models: vec![ModelSpec {
+                    kind: (*kind).to_string(),
+                    params: std::collections::HashMap::new(),
+                }],
+                young: 1e6,
+                poisson: 0.3,
+                fixed: vec!["x < 1e-9".into()],
+                dt: 1e-6,
+                ..Config::default()
+            };
+            let mut s = Simulation::new(g, cfg).expect("a simulation");
+            let x: Vec<[f64; 3]> = s
+                .vertex_vec3("rest")
+                .expect("rest")
+                .iter()
+                .map(|p| Model::Corotational.deformed(*p))
+                .collect();
+            s.set_vertex_vec3("position", &x).expect("position");
+            s
+        })
+        .collect();
+    let dx: Vec<[f64; 3]> = sims[0]
+        .vertex_vec3("rest")
+        .expect("rest")
+        .iter()
+        .map(|p| [p[1], -p[0], 0.5 * p[2]])
+        .collect();
+    let zero = vec![[0.0; 3]; dx.len()];
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
+    let (steps, jvps) = pool.install(|| {
+        for s in &mut sims {
+            // the first application builds the plans
+            s.step().expect("a step");
+            s.jvp(&dx, &zero).expect("a product");
+        }
+        let time = |s: &mut Simulation, jvp: bool| {
+            let t = Instant::now();
+            let mut k = 0;
+            while k == 0 || t.elapsed().as_secs_f64() < SAMPLE_S {
+                if jvp {
+                    black_box(s.jvp(&dx, &zero).expect("a product"));
+                } else {
+                    s.step().expect("a step");
+                }
+                k += 1;
+            }
+            t.elapsed().as_secs_f64() / f64::from(k)
+        };
+        let mut samples = vec![(Vec::new(), Vec::new()); sims.len()];
+        for _ in 0..MAX_SAMPLES {
+            for (s, (a, b)) in sims.iter_mut().zip(&mut samples) {
+                a.push(time(s, false));
+                b.push(time(s, true));
+            }
+        }
+        let steps: Vec<f64> = samples.iter().map(|(a, _)| median(a)).collect();
+        let jvps: Vec<f64> = samples.iter().map(|(_, b)| median(b)).collect();
+        (steps, jvps)
+    });
+    let mut rows = Vec::new();
+    for (k, kind) in kinds.iter().enumerate() {
+        println!(
+            "  {kind}, {n} tets: step {:.3} ms ({:.2} x co-rotational), jacobian-vector product {:.3} ms ({:.2} x)",
+            steps[k] * 1e3,
+            steps[k] / steps[0],
+            jvps[k] * 1e3,
+            jvps[k] / jvps[0]
+        );
+        rows.push(J::Obj(vec![
+            ("model", J::str(*kind)),
+            ("step_s", J::num(steps[k])),
+            ("jvp_s", J::num(jvps[k])),
+            ("step_ratio", J::num(steps[k] / steps[0])),
+            ("jvp_ratio", J::num(jvps[k] / jvps[0])),
+        ]));
+    }
+    J::Obj(vec![
+        ("elements", J::num(n as f64)),
+        ("element", J::str("tet")),
+        ("reference", J::str("corotational")),
+        ("models", J::Arr(rows)),
+    ])
+}
+
 /// `TOPOMECH_BENCH_PROFILE=model:size:steps` (e.g. `cloth:1e5:200`): builds the case and
 /// takes only engine steps, single-threaded, so that a profiler (`perf record`) sees the steady
 /// step and nothing else; prints the mean time per step.
@@ -949,6 +1057,7 @@ fn main() {
         ),
         ("cases", J::Arr(cases)),
         ("renamed_copy", renamed_copy(20_000)),
+        ("hyperelastic", hyperelastic_beside_corotational(20_000)),
     ]);
     let mut s = String::new();
     results.write(&mut s, 0);

@@ -36,6 +36,7 @@ use topomech_rules::{ApplyError, Diagnostic, Params, RuleSet};
 pub use config::*;
 pub use events::*;
 pub use model::*;
+pub use schedule::check_predicate;
 pub use solve::*;
 pub use state::*;
 

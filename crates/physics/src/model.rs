@@ -33,6 +33,11 @@ const SHIPPED: &[(&str, &[usize], &str)] = &[
     ),
     ("fem3d.tmr", &[3], include_str!("../models/fem3d.tmr")),
     ("fem2d.tmr", &[2], include_str!("../models/fem2d.tmr")),
+    (
+        "hyperelastic3d.tmr",
+        &[3],
+        include_str!("../models/hyperelastic3d.tmr"),
+    ),
 ];
 
 /// A shipped rule file that is not a model file (or is loaded for more than its models).

@@ -1,86 +1,275 @@
 //! Building a simulation: the rules of its models and the glue of a step (accumulation,
 //! fixed and prescribed vertices, material regions, ground), and the set-up they run.
 
-use std::fmt::Write as _;
-
 use topomech_gmap::{Dart, GMap, OrbitType, Value};
-use topomech_rules::{load_sources_for, Params, Val};
+use topomech_rules::value::BinOp;
+use topomech_rules::{ast, build, parser, Params, Val};
 
 use crate::*;
 
-/// The accumulation rules for the given force and Jacobian-vector-product embeddings, and one
-/// rule per fixed predicate.
-pub(crate) fn generated_rules(dim: usize, forces: &[&str], jvp: &[&str], cfg: &Config) -> String {
-    let fixed = &cfg.fixed;
-    let v = if dim == 3 { "<1,2,3>" } else { "<1,2>" };
-    let mut s = format!("dimension {dim}\n");
+/// The glue of a step that reads no user input: the ground rule, shipped as a rule file.
+fn glue_source(dim: usize) -> (String, String) {
+    let text = if dim == 3 {
+        include_str!("../models/glue3d.tmr")
+    } else {
+        include_str!("../models/glue2d.tmr")
+    };
+    (format!("glue{dim}d.tmr"), text.to_string())
+}
+
+/// The label of the built file holding the accumulation rules.
+const ACCUMULATION: &str = "accumulation (built from the models' force embeddings)";
+
+/// What kind of predicate a built glue file holds, for its error messages: the prefix of
+/// its label (the configuration's key) and how the message names it.
+const PREDICATE_KINDS: [(&str, &str); 4] = [
+    ("fixed[", "fixed-vertex"),
+    ("prescribed[", "prescribed-displacement"),
+    ("regions[", "material-region"),
+    ("events[", "cut"),
+];
+
+/// The glue of a step that reads the configuration, built as syntax trees (never as text,
+/// so a predicate is only ever one expression): the accumulation rules summing the given
+/// force and Jacobian-vector-product embeddings into `force` and `df`, and one rule per
+/// fixed predicate (`fix_k`), prescribed displacement (`prescribe_k(d: vec3)`), predicate
+/// cut (`cut_where_k`) and material region (`region_k`). Each predicate's rule is its own
+/// file, labelled by its key (`fixed[0]`, `prescribed[0]`, `events[0]`, `regions[0]`), so
+/// that a diagnostic names the key and the line and column in the predicate.
+///
+/// `glue` is the parsed shipped glue file, whose `dimension` every built file copies.
+/// Errors: a predicate that is not one expression ([`build::parse_expression`]), or a
+/// force name that is not an identifier, as a [`PhysicsError`] naming it.
+pub(crate) fn glue_files(
+    dim: usize,
+    glue: &ast::File,
+    forces: &[&str],
+    jvp: &[&str],
+    cfg: &Config,
+) -> Result<Vec<(String, ast::File)>, PhysicsError> {
+    let file = |rules: Vec<ast::RuleDecl>| build::file(glue, rules);
+    let v_orbit: &[u64] = if dim == 3 { &[1, 2, 3] } else { &[1, 2] };
+    let vertex = || build::graph(vec![build::node("v", v_orbit, true)]);
+    let mut out = Vec::new();
+
+    // accumulation: force = sum of the force embeddings + f_ext; df = sum of the jvp outputs
+    let mut acc = Vec::new();
     for (rule, target, parts) in [
         ("accumulate", "force", forces),
         ("accumulate_jvp", "df", jvp),
     ] {
-        let _ = write!(
-            s,
-            "\nrule {rule} {{\n  left {{ v : {v} hook }}\n  compute {{ v.{target} = vec3(0, 0, 0)"
+        let zero = build::call(
+            "vec3",
+            vec![build::real(0.0), build::real(0.0), build::real(0.0)],
         );
+        let mut sum = zero;
         for f in parts {
-            let _ = write!(s, " + sum{v}(v.{f})");
+            if !build::is_identifier(f) {
+                return Err(PhysicsError::Model(format!(
+                    "force embedding name '{f}' is not an identifier"
+                )));
+            }
+            sum = build::binary(BinOp::Add, sum, build::sum(v_orbit, "v", f));
         }
         if rule == "accumulate" {
             // the external loads: constant, so nothing in the Jacobian
-            s.push_str(" + v.f_ext");
+            sum = build::binary(BinOp::Add, sum, build::read("v", "f_ext"));
         }
-        s.push_str(" }\n}\n");
+        let mut r = build::rule(rule, vertex());
+        r.compute = vec![build::write("v", target, sum)];
+        acc.push(r);
     }
-    for (k, p) in fixed.iter().enumerate() {
-        let _ = write!(
-            s,
-            "\nrule fix_{k} {{\n  left {{ v : {v} hook }}\n  where {{ let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)  {p} }}\n  compute {{ v.fixed = true }}\n}}\n"
-        );
+    out.push((ACCUMULATION.to_string(), file(acc)));
+
+    for (k, p) in cfg.fixed.iter().enumerate() {
+        let label = format!("fixed[{k}]");
+        let mut r = build::rule(&format!("fix_{k}"), vertex());
+        r.guard = Some(glue_guard(&label, p, vec![], &build::read("v", "rest"))?);
+        r.compute = vec![build::write("v", "fixed", build::boolean(true))];
+        out.push((label, file(vec![r])));
     }
     for (k, (p, _)) in cfg.prescribed.iter().enumerate() {
-        let _ = write!(
-            s,
-            "\nrule prescribe_{k}(d: vec3) {{\n  left {{ v : {v} hook }}\n  where {{ let x = x(v.rest)  let y = y(v.rest)  let z = z(v.rest)  {p} }}\n  compute {{ v.fixed = true  v.position = v.rest + d }}\n}}\n"
-        );
+        let label = format!("prescribed[{k}]");
+        let mut r = build::rule(&format!("prescribe_{k}"), vertex());
+        r.params = vec![build::param("d", "vec3")];
+        r.guard = Some(glue_guard(&label, p, vec![], &build::read("v", "rest"))?);
+        r.compute = vec![
+            build::write("v", "fixed", build::boolean(true)),
+            build::write(
+                "v",
+                "position",
+                build::binary(BinOp::Add, build::read("v", "rest"), build::name("d")),
+            ),
+        ];
+        out.push((label, file(vec![r])));
     }
-    let (side, arc, centre) = if dim == 3 {
-        ("<0,1>", 3, "mean<0,1>")
-    } else {
-        ("<0>", 2, "mean<0>")
-    };
+    // a predicate cut opens the faces (3D) or edges (2D) between two elements whose shared
+    // side's current centroid satisfies it
+    let (side, arc): (&[u64], u64) = if dim == 3 { (&[0, 1], 3) } else { (&[0], 2) };
     for (k, e) in cfg.events.iter().enumerate() {
         if let Cut::Where(p) = &e.cut {
-            let _ = write!(
-                s,
-                "\nrule cut_where_{k} {{\n  left  {{ a : {side} hook   b : {side}   a -{arc}- b }}\n  right {{ a : {side}        b : {side} }}\n  where {{ let c = {centre}(a.position)  let x = x(c)  let y = y(c)  let z = z(c)  {p} }}\n}}\n"
-            );
+            let label = format!("events[{k}]");
+            let mut left = build::graph(vec![
+                build::node("a", side, true),
+                build::node("b", side, false),
+            ]);
+            left.arcs.push(build::arc("a", arc, "b"));
+            let right = build::graph(vec![
+                build::node("a", side, false),
+                build::node("b", side, false),
+            ]);
+            let mut r = build::rule(&format!("cut_where_{k}"), left);
+            r.right = Some(right);
+            r.guard = Some(glue_guard(
+                &label,
+                p,
+                vec![("c", build::mean(side, "a", "position"))],
+                &build::name("c"),
+            )?);
+            out.push((label, file(vec![r])));
         }
     }
-    let e = if dim == 3 { "<0,1,2>" } else { "<0,1>" };
-    for (k, r) in cfg.regions.iter().enumerate() {
-        let mut body = String::new();
+    // a material region sets the element data where its rest centroid satisfies it
+    let e_orbit: &[u64] = if dim == 3 { &[0, 1, 2] } else { &[0, 1] };
+    for (k, reg) in cfg.regions.iter().enumerate() {
+        let label = format!("regions[{k}]");
+        let mut r = build::rule(
+            &format!("region_{k}"),
+            build::graph(vec![build::node("e", e_orbit, true)]),
+        );
         for (name, val) in [
-            ("density", r.density),
-            ("young", r.young),
-            ("poisson", r.poisson),
+            ("density", reg.density),
+            ("young", reg.young),
+            ("poisson", reg.poisson),
         ] {
             if let Some(x) = val {
-                let _ = write!(body, " e.{name} = {x:?}");
+                r.compute.push(build::write("e", name, build::real(x)));
             }
         }
-        let _ = write!(
-            s,
-            "\nrule region_{k} {{\n  left {{ e : {e} hook }}\n  where {{ let c = mean{e}(e.rest)  let x = x(c)  let y = y(c)  let z = z(c)  {} }}\n  compute {{{body} }}\n}}\n",
-            r.predicate
-        );
+        r.guard = Some(glue_guard(
+            &label,
+            &reg.predicate,
+            vec![("c", build::mean(e_orbit, "e", "rest"))],
+            &build::name("c"),
+        )?);
+        out.push((label, file(vec![r])));
     }
-    // the ground plane through p with unit normal n: a free vertex below it is projected onto
-    // it and loses its velocity into it (the tangential velocity is kept)
-    let _ = write!(
-        s,
-        "\nrule ground(p: vec3, n: vec3) {{\n  left {{ v : {v} hook }}\n  where !v.fixed && dot(v.position - p, n) < 0.0\n  compute {{\n    v.position = v.position - dot(v.position - p, n) * n\n    v.velocity = v.velocity - min(dot(v.velocity, n), 0.0) * n\n  }}\n}}\n"
+    Ok(out)
+}
+
+/// The guard of a glue rule around a scene's predicate, `{ let <lets...>  let x = x(point)
+/// let y = y(point)  let z = z(point)  <predicate> }`, at the predicate's position; the
+/// predicate is parsed as one expression ([`build::parse_expression`]), `label` naming it in
+/// the diagnostic.
+fn predicate_guard(
+    label: &str,
+    text: &str,
+    mut lets: Vec<(&'static str, ast::Expr)>,
+    point: &ast::Expr,
+) -> Result<ast::Expr, topomech_rules::Diagnostic> {
+    let pred = build::parse_expression(label, text)?;
+    let pos = pred.pos;
+    for c in ["x", "y", "z"] {
+        lets.push((c, build::call(c, vec![point.clone()])));
+    }
+    let mut g = build::let_block(lets, pred);
+    g.pos = pos;
+    Ok(g)
+}
+
+/// [`predicate_guard`], a refusal being the configuration error naming the key.
+fn glue_guard(
+    label: &str,
+    text: &str,
+    lets: Vec<(&'static str, ast::Expr)>,
+    point: &ast::Expr,
+) -> Result<ast::Expr, PhysicsError> {
+    predicate_guard(label, text, lets, point).map_err(|d| bad_predicate(label, text, &[d]))
+}
+
+/// Checks a predicate on the rest position `x`, `y`, `z` exactly as a simulation builds and
+/// checks a fixed vertex's (a 3D `fix` rule's guard): one expression of the rule language
+/// ([`build::parse_expression`]), of type bool, reading only `x`, `y`, `z` and its own `let`
+/// bindings. The same predicate is accepted for prescribed displacements, material regions
+/// (on the element's centroid) and cuts (on the side's centroid).
+///
+/// Errors: every error diagnostic, its `file` being `label` and its line and column the place
+/// in `text` (e.g. rule syntax after the expression: "expected the end of the expression").
+pub fn check_predicate(label: &str, text: &str) -> Result<(), Vec<topomech_rules::Diagnostic>> {
+    const DECLS: &str = "dimension 3
+embedding rest : vec3 on <1,2,3>
+embedding fixed : bool on <1,2,3>
+";
+    let decls = parser::parse(DECLS).expect("static declarations parse");
+    let guard =
+        predicate_guard(label, text, vec![], &build::read("v", "rest")).map_err(|d| vec![d])?;
+    let mut r = build::rule(
+        "fix",
+        build::graph(vec![build::node("v", &[1, 2, 3], true)]),
     );
-    s
+    r.guard = Some(guard);
+    r.compute = vec![build::write("v", "fixed", build::boolean(true))];
+    let f = build::file(&decls, vec![r]);
+    build::load(
+        &[("decls".into(), DECLS.into())],
+        vec![(label.to_string(), f)],
+    )
+    .map(|_| ())
+    .map_err(|diags| {
+        diags
+            .into_iter()
+            .filter(|d| d.severity == topomech_rules::Severity::Error)
+            .collect()
+    })
+}
+
+/// The error for a refused predicate: `bad <kind> predicate <key> "<text>": <where>: <what>`,
+/// one `<where>: <what>` per error diagnostic.
+fn bad_predicate(label: &str, text: &str, diags: &[topomech_rules::Diagnostic]) -> PhysicsError {
+    let kind = PREDICATE_KINDS
+        .iter()
+        .find(|(prefix, _)| label.starts_with(prefix))
+        .map_or("glue", |k| k.1);
+    let msgs: Vec<String> = diags
+        .iter()
+        .filter(|d| d.severity == topomech_rules::Severity::Error)
+        .map(|d| {
+            let at = if d.pos.line > 1 {
+                format!("line {}, column {}", d.pos.line, d.pos.col)
+            } else {
+                format!("column {}", d.pos.col.max(1))
+            };
+            // the built rule's name means nothing to the user: the key names it
+            let msg = match d.message.strip_prefix("rule '") {
+                Some(rest) => rest.split_once("': ").map_or(d.message.as_str(), |x| x.1),
+                None => d.message.as_str(),
+            };
+            format!("{at}: {msg}")
+        })
+        .collect();
+    PhysicsError::Config(format!(
+        "bad {kind} predicate {label} {text:?}: {}",
+        msgs.join("; ")
+    ))
+}
+
+/// The text of the predicate a glue label (`fixed[k]`, ...) names.
+fn predicate_text(cfg: &Config, label: &str) -> String {
+    let Some((key, rest)) = label.split_once('[') else {
+        return String::new();
+    };
+    let k: usize = rest.trim_end_matches(']').parse().unwrap_or(usize::MAX);
+    let text = match key {
+        "fixed" => cfg.fixed.get(k).cloned(),
+        "prescribed" => cfg.prescribed.get(k).map(|p| p.0.clone()),
+        "regions" => cfg.regions.get(k).map(|r| r.predicate.clone()),
+        "events" => cfg.events.get(k).and_then(|e| match &e.cut {
+            Cut::Where(p) => Some(p.clone()),
+            Cut::Plane { .. } => None,
+        }),
+        _ => None,
+    };
+    text.unwrap_or_default()
 }
 
 impl Simulation {
@@ -158,33 +347,31 @@ impl Simulation {
             .iter()
             .flat_map(|o| o.1.iter().map(String::as_str))
             .collect();
-        sources.push((
-            "scene-generated.tmr".into(),
-            generated_rules(dim, &forces, &jvp, &cfg),
-        ));
-        let (rules, _warnings) = load_sources_for(dim, &sources).map_err(|diags| {
-            // a refused predicate is the scene's fault: say so
-            let error =
-                |d: &topomech_rules::Diagnostic| d.severity == topomech_rules::Severity::Error;
-            if diags
-                .iter()
-                .any(|d| d.file == "scene-generated.tmr" && error(d))
-                && !diags
-                    .iter()
-                    .any(|d| d.file != "scene-generated.tmr" && error(d))
-            {
-                let msgs: Vec<String> = diags
-                    .iter()
-                    .filter(|d| d.severity == topomech_rules::Severity::Error)
-                    .map(|d| d.message.clone())
-                    .collect();
-                PhysicsError::Config(format!(
-                    "bad fixed-vertex predicate in {:?}: {}",
-                    cfg.fixed,
-                    msgs.join("; ")
-                ))
-            } else {
-                PhysicsError::Rules(diags)
+        // the glue: shipped where it reads no user input, built as syntax trees where it does
+        let (glue_name, glue_text) = glue_source(dim);
+        let glue = parser::parse(&glue_text).map_err(|e| {
+            PhysicsError::Config(format!(
+                "{glue_name}:{}:{}: {}",
+                e.pos.line, e.pos.col, e.message
+            ))
+        })?;
+        let built = glue_files(dim, &glue, &forces, &jvp, &cfg)?;
+        let labels: Vec<String> = built.iter().map(|(l, _)| l.clone()).collect();
+        sources.push((glue_name, glue_text));
+        let (rules, _warnings) = build::load(&sources, built).map_err(|diags| {
+            // a refused predicate is the scene's fault: say which, and where in it
+            let bad = diags.iter().find(|d| {
+                d.severity == topomech_rules::Severity::Error
+                    && d.file != ACCUMULATION
+                    && labels.contains(&d.file)
+            });
+            match bad {
+                Some(d) => {
+                    let text = predicate_text(&cfg, &d.file);
+                    let mine: Vec<_> = diags.iter().filter(|x| x.file == d.file).cloned().collect();
+                    bad_predicate(&d.file, &text, &mine)
+                }
+                None => PhysicsError::Rules(diags),
             }
         })?;
         let mut defs = Vec::new();

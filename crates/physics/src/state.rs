@@ -586,6 +586,29 @@ impl Simulation {
         self.vertex_vec3_sum("f_ext")
     }
 
+    /// Writes every value of the stored embedding `name`, one per orbit of its orbit type by
+    /// smallest dart ([`GMap::set_orbit_values`], which also recomputes derived embeddings).
+    /// Refuses the embeddings the simulation numbers its rows and elements with (`particle`,
+    /// `point_id`, `cell_id`, `vertex0`, `face0`), naming them.
+    pub fn set_orbit_values(
+        &mut self,
+        name: &str,
+        values: topomech_gmap::ColumnRef<'_>,
+    ) -> Result<(), PhysicsError> {
+        const NUMBERING: [&str; 5] = ["particle", "point_id", "cell_id", "vertex0", "face0"];
+        if NUMBERING.contains(&name) {
+            return Err(PhysicsError::Config(format!(
+                "embedding '{name}' numbers the simulation's rows or elements and cannot be written ({} are set when the simulation is built)",
+                NUMBERING.join(", ")
+            )));
+        }
+        self.sync_rows()?;
+        let id = self.id(name)?;
+        self.g
+            .set_orbit_values(id, values)
+            .map_err(|e| PhysicsError::Config(e.to_string()))
+    }
+
     /// Total mass (sum of the vertex masses).
     pub fn total_mass(&self) -> Result<f64, PhysicsError> {
         Ok(self.vertex_scalar_sum("mass")?.iter().sum())

@@ -306,9 +306,26 @@ pub fn check_sources_for(
     if diags.iter().any(|d| d.severity == Severity::Error) {
         return (None, diags);
     }
+    check_files_for(target, &files)
+}
+
+/// Checks rule files already parsed (or built as syntax trees, see [`crate::build`]), given as
+/// `(file name, syntax tree)`, exactly as [`check_sources`] checks parsed text.
+pub fn check_files(files: &[(String, crate::ast::File)]) -> (Option<Checked>, Vec<Diagnostic>) {
+    check_files_for(None, files)
+}
+
+/// Checks rule files already parsed, for maps of dimension `target` (`None`: inferred), as
+/// [`check_sources_for`] checks parsed text.
+#[allow(clippy::single_match_else, clippy::too_many_lines)]
+pub fn check_files_for(
+    target: Option<usize>,
+    files: &[(String, crate::ast::File)],
+) -> (Option<Checked>, Vec<Diagnostic>) {
+    let mut diags = Vec::new();
     // dimension: each file's dimensions (none written: both), and the one they are checked for
     let mut file_dims: Vec<Vec<usize>> = Vec::new();
-    for (name, f) in &files {
+    for (name, f) in files {
         let mut c = Ctx {
             file: name,
             out: &mut diags,
@@ -395,7 +412,7 @@ pub fn check_sources_for(
                     d
                 }
                 None => {
-                    for (name, f) in &files {
+                    for (name, f) in files {
                         let mut c = Ctx {
                             file: name,
                             out: &mut diags,
@@ -422,8 +439,10 @@ pub fn check_sources_for(
         return (None, diags);
     }
     // on a 2-map, a file that also serves 3-maps has its label 3 dropped (alpha3 is free)
-    if dim == 2 {
-        for ((name, f), dims) in files.iter_mut().zip(&file_dims) {
+    let dropped: Vec<(String, crate::ast::File)>;
+    let files = if dim == 2 && file_dims.iter().any(|d| d.contains(&3)) {
+        let mut owned = files.to_vec();
+        for ((name, f), dims) in owned.iter_mut().zip(&file_dims) {
             if dims.contains(&3) {
                 crate::dims::drop_label3(name, f, &mut diags);
             }
@@ -431,10 +450,14 @@ pub fn check_sources_for(
         if diags.iter().any(|d| d.severity == Severity::Error) {
             return (None, diags);
         }
-    }
+        dropped = owned;
+        &dropped[..]
+    } else {
+        files
+    };
     // embeddings, shared by all files
     let mut embs: Vec<EmbDecl> = Vec::new();
-    for (name, f) in &files {
+    for (name, f) in files {
         let mut c = Ctx {
             file: name,
             out: &mut diags,
@@ -457,7 +480,7 @@ pub fn check_sources_for(
     }
     let mut rules: Vec<Rule> = Vec::new();
     let mut rule_pos: HashMap<String, (String, Pos)> = HashMap::new();
-    for (name, f) in &files {
+    for (name, f) in files {
         let mut c = Ctx {
             file: name,
             out: &mut diags,
@@ -480,7 +503,7 @@ pub fn check_sources_for(
             }
         }
     }
-    let models = crate::model::check_models(&files, &file_dims, &embs, &rules, &mut diags);
+    let models = crate::model::check_models(files, &file_dims, &embs, &rules, &mut diags);
     let ok = !diags.iter().any(|d| d.severity == Severity::Error);
     (
         ok.then_some(Checked {

@@ -23,6 +23,7 @@
 #![warn(missing_docs)]
 
 pub mod ast;
+pub mod build;
 pub mod builtins;
 pub mod check;
 mod compiled;

@@ -31,6 +31,23 @@ pub fn parse(src: &str) -> Result<File, SyntaxError> {
     p.file()
 }
 
+/// Parses `src` as the body of a block with no braces: leading `let` bindings, then one
+/// expression, then the end of the text. Anything after the expression (a `}`, a `rule`, a
+/// second expression) is refused at its position. Used by
+/// [`build::parse_expression`](crate::build::parse_expression).
+pub(crate) fn parse_block_body(src: &str) -> Result<Expr, SyntaxError> {
+    let toks = lex(src).map_err(|e| SyntaxError {
+        pos: e.pos,
+        message: e.message,
+    })?;
+    let mut p = Parser {
+        toks,
+        at: 0,
+        depth: 0,
+    };
+    p.block_body_to_end()
+}
+
 /// A number as written (the lexer reads no sign, so it is never negative).
 fn written(i: i64) -> u64 {
     i.unsigned_abs()
@@ -772,6 +789,39 @@ impl Parser {
             }
         };
         Self::node(pos, kind, h)
+    }
+
+    /// Leading `let` bindings and one expression, then the end of the text.
+    fn block_body_to_end(&mut self) -> R<Expr> {
+        let start = self.pos();
+        let mut stmts = Vec::new();
+        let mut h = 0;
+        while self.is_kw("let") {
+            let spos = self.pos();
+            self.bump();
+            let (name, _) = self.ident("a variable name")?;
+            self.expect_punct("=", "after the variable name")?;
+            let (value, hv) = self.expr_h()?;
+            h = h.max(hv);
+            self.eat_punct(";");
+            stmts.push(Stmt::Let {
+                name,
+                value,
+                pos: spos,
+            });
+        }
+        let (e, he) = self.expr_h()?;
+        if !matches!(self.peek(), Tok::Eof) {
+            return self.err(format!(
+                "expected the end of the expression, found {} (one expression is expected here, after optional 'let' bindings; rule syntax is not allowed)",
+                self.peek().describe()
+            ));
+        }
+        if stmts.is_empty() {
+            Ok(e)
+        } else {
+            Ok(Self::node(start, ExprKind::Block(stmts, Box::new(e)), 1 + h.max(he))?.0)
+        }
     }
 
     /// `{ let x = e; ...; result }` (the `{` is consumed).

@@ -2,13 +2,17 @@
 
 use std::path::PathBuf;
 
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use topomech_gmap::mesh::{self, BuildOptions, Duplicates, Pinched};
-use topomech_gmap::{io, EmbeddingType, GMap, OrbitType};
+use topomech_gmap::{io, ColumnRef, EmbeddingId, EmbeddingType, GMap, OrbitType};
 
-use crate::convert::{dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, rows_to_array, FlatMesh};
+use crate::convert::{
+    array_arg, dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, rows_to_array, shape_str, FlatMesh,
+};
 use crate::errors::{exclusive, guard, shared, value_error, Error, InternalError, Result};
 
 /// A generalized map of dimension 2 (surfaces) or 3 (volumes).
@@ -57,6 +61,236 @@ impl PyGMap {
         }
         r
     }
+}
+
+/// What `embedding` returns to Python: the values (one row per orbit), the smallest dart of
+/// each orbit (int64), and the orbit type as written (`<1,2,3>`).
+pub(crate) type OrbitValuesPy<'py> = (Bound<'py, PyAny>, Bound<'py, PyArray1<i64>>, String);
+
+/// An embedding's values gathered one per orbit, owned: `width` reals per orbit (row-major),
+/// or one integer or boolean per orbit.
+pub(crate) enum Gathered {
+    Real(Vec<f64>),
+    Int(Vec<i64>),
+    Bool(Vec<bool>),
+}
+
+impl Gathered {
+    /// Whether values `a` and `b` (of `w` scalars each when real) are equal, bit for bit.
+    pub(crate) fn rows_equal(&self, w: usize, a: usize, b: usize) -> bool {
+        match self {
+            Gathered::Real(v) => v[a * w..(a + 1) * w]
+                .iter()
+                .zip(&v[b * w..(b + 1) * w])
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
+            Gathered::Int(v) => v[a] == v[b],
+            Gathered::Bool(v) => v[a] == v[b],
+        }
+    }
+
+    pub(crate) fn as_column(&self) -> ColumnRef<'_> {
+        match self {
+            Gathered::Real(v) => ColumnRef::Real(v),
+            Gathered::Int(v) => ColumnRef::Int(v),
+            Gathered::Bool(v) => ColumnRef::Bool(v),
+        }
+    }
+}
+
+/// The values of one embedding, one per orbit of its orbit type, orbits by smallest dart.
+pub(crate) struct OrbitValues {
+    /// The numpy shape: `(n,)`, `(n, 2)`, `(n, 3)` or `(n, R, C)`.
+    shape: Vec<usize>,
+    /// The smallest dart of each orbit, increasing.
+    darts: Vec<i64>,
+    /// The orbit type, as written.
+    orbit: String,
+    values: Gathered,
+}
+
+/// The `KeyError` for an embedding `name` that `g` does not have, listing those it has.
+pub(crate) fn unknown_embedding(g: &GMap, name: &str) -> PyErr {
+    let names: Vec<&str> = g
+        .embeddings()
+        .iter()
+        .map(topomech_gmap::Embedding::name)
+        .collect();
+    PyKeyError::new_err(format!(
+        "no embedding named '{name}'; the map has: {}",
+        if names.is_empty() {
+            "none".to_string()
+        } else {
+            names.join(", ")
+        }
+    ))
+}
+
+/// The id of `name`, or the `KeyError` of [`unknown_embedding`].
+pub(crate) fn embedding_key(g: &GMap, name: &str) -> PyResult<EmbeddingId> {
+    g.embedding_id(name)
+        .ok_or_else(|| unknown_embedding(g, name))
+}
+
+/// The numpy shape of `n` values of type `ty`.
+fn value_shape(ty: EmbeddingType, n: usize) -> Vec<usize> {
+    match ty {
+        EmbeddingType::F64 | EmbeddingType::I64 | EmbeddingType::Bool => vec![n],
+        EmbeddingType::Vec2 => vec![n, 2],
+        EmbeddingType::Vec3 => vec![n, 3],
+        EmbeddingType::Mat { rows, cols } => vec![n, usize::from(rows), usize::from(cols)],
+    }
+}
+
+/// `shape` written with `n` for the row count, as a message shows the expected shape.
+fn shape_pattern(shape: &[usize]) -> String {
+    let mut parts = vec!["n".to_string()];
+    parts.extend(shape[1..].iter().map(ToString::to_string));
+    if parts.len() == 1 {
+        "(n,)".to_string()
+    } else {
+        format!("({})", parts.join(", "))
+    }
+}
+
+/// Reads embedding `id` of `g`, one value per orbit. A derived embedding must be fresh (the
+/// caller refreshes it first).
+pub(crate) fn read_orbit_values(g: &GMap, id: EmbeddingId) -> Result<OrbitValues> {
+    let e = g.embedding(id);
+    if g.is_stale(id) {
+        return Err(Error::EmbeddingInput(format!(
+            "derived embedding '{}' is stale",
+            e.name()
+        )));
+    }
+    let reps = g.orbit_representatives(e.orbit());
+    let w = e.ty().width();
+    let values = match e.column() {
+        ColumnRef::Real(col) => {
+            let mut out = Vec::with_capacity(reps.len() * w);
+            for &d in &reps {
+                let s = e.slot(d);
+                out.extend_from_slice(&col[s * w..(s + 1) * w]);
+            }
+            Gathered::Real(out)
+        }
+        ColumnRef::Int(col) => Gathered::Int(reps.iter().map(|&d| col[e.slot(d)]).collect()),
+        ColumnRef::Bool(col) => Gathered::Bool(reps.iter().map(|&d| col[e.slot(d)]).collect()),
+    };
+    Ok(OrbitValues {
+        shape: value_shape(e.ty(), reps.len()),
+        darts: reps.iter().map(|d| i64::from(d.0)).collect(),
+        orbit: e.orbit().to_string(),
+        values,
+    })
+}
+
+/// The Python tuple `(values, darts, orbit)` of `v`.
+pub(crate) fn orbit_values_to_py<'py>(
+    py: Python<'py>,
+    name: &str,
+    v: OrbitValues,
+) -> PyResult<OrbitValuesPy<'py>> {
+    let darts = v.darts.into_pyarray(py);
+    let values = match v.values {
+        Gathered::Int(x) => x.into_pyarray(py).into_any(),
+        Gathered::Bool(x) => x.into_pyarray(py).into_any(),
+        Gathered::Real(x) => {
+            let a = guard(|| {
+                ArrayD::from_shape_vec(IxDyn(&v.shape), x)
+                    .map_err(|e| value_error(format!("cannot shape '{name}': {e}")))
+            })?;
+            let arr: Bound<'py, PyArrayDyn<f64>> = a.into_pyarray(py);
+            arr.into_any()
+        }
+    };
+    Ok((values, darts, v.orbit))
+}
+
+/// Checks `values` for writing the stored embedding `id` of `g` one value per orbit (the
+/// layout of [`read_orbit_values`]): the dtype (`TypeError`), the shape and finiteness
+/// (`ValueError`, naming the embedding and the first bad row with its dart), and refuses a
+/// derived embedding (`EmbeddingError`). Returns the values and the smallest dart of each
+/// orbit.
+pub(crate) fn orbit_values_arg(
+    g: &GMap,
+    id: EmbeddingId,
+    values: &Bound<'_, PyAny>,
+) -> Result<(Gathered, Vec<topomech_gmap::Dart>)> {
+    let e = g.embedding(id);
+    let name = e.name();
+    if e.derived().is_some() {
+        return Err(Error::EmbeddingInput(format!(
+            "embedding '{name}' is derived (recomputed from its source, never written): write its source instead"
+        )));
+    }
+    let ty = e.ty();
+    let reps = g.orbit_representatives(e.orbit());
+    let n = reps.len();
+    let want = value_shape(ty, n);
+    let what = format!("values for '{name}'");
+    let check_shape = |shape: &[usize]| -> Result<()> {
+        if shape == want.as_slice() {
+            Ok(())
+        } else {
+            Err(value_error(format!(
+                "{what} ({ty} on {}) must have shape {} = {} (one row per orbit), got {}",
+                e.orbit(),
+                shape_pattern(&want),
+                shape_str(&want),
+                shape_str(shape)
+            )))
+        }
+    };
+    let gathered = match ty {
+        EmbeddingType::I64 => {
+            let a = array_arg::<i64>(values, &what, "int64")?;
+            check_shape(a.shape())?;
+            Gathered::Int(a.as_array().iter().copied().collect())
+        }
+        EmbeddingType::Bool => {
+            let a = array_arg::<bool>(values, &what, "bool_")?;
+            check_shape(a.shape())?;
+            Gathered::Bool(a.as_array().iter().copied().collect())
+        }
+        _ => {
+            let a = array_arg::<f64>(values, &what, "float64")?;
+            check_shape(a.shape())?;
+            let flat: Vec<f64> = a.as_array().iter().copied().collect();
+            let w = ty.width();
+            let bad: Vec<usize> = (0..n)
+                .filter(|&k| flat[k * w..(k + 1) * w].iter().any(|x| !x.is_finite()))
+                .collect();
+            if let Some(&k) = bad.first() {
+                return Err(value_error(format!(
+                    "{what} must be finite: row {k} (the orbit of dart {}) is {:?}{}",
+                    reps[k].0,
+                    &flat[k * w..(k + 1) * w],
+                    if bad.len() > 1 {
+                        format!(" ({} rows are not finite)", bad.len())
+                    } else {
+                        String::new()
+                    }
+                )));
+            }
+            Gathered::Real(flat)
+        }
+    };
+    Ok((gathered, reps))
+}
+
+/// The `(name, type, orbit, derived)` of every embedding of `g`, in declaration order.
+pub(crate) fn embedding_specs(g: &GMap) -> Vec<(String, String, String, bool)> {
+    g.embeddings()
+        .iter()
+        .map(|e| {
+            (
+                e.name().to_string(),
+                e.ty().to_string(),
+                e.orbit().to_string(),
+                e.derived().is_some(),
+            )
+        })
+        .collect()
 }
 
 /// The counts of `GMap::cell_counts` as a dict.
@@ -324,6 +558,68 @@ impl PyGMap {
             let a = dart_arg(g, a)?;
             Ok(g.unsew(i, a)?)
         })
+    }
+
+    /// The embedding `name`, one row per orbit of its orbit type: a tuple `(values, darts,
+    /// orbit)`. `darts` is int64 `(n,)`: the smallest dart id of each orbit, increasing (the
+    /// rows' order); `orbit` the orbit type as written (`"<1,2,3>"`). `values` has shape
+    /// `(n,)` float64 / int64 / bool for `f64` / `i64` / `bool`, `(n, 2)` and `(n, 3)` float64
+    /// for `vec2` and `vec3`, `(n, R, C)` float64 for a matrix `matRxC` (row-major). Every
+    /// orbit has a value: one never written reads 0 (or false). A stale derived embedding is
+    /// recomputed first. Raises `KeyError` for an unknown name, listing the map's embeddings.
+    fn embedding<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<OrbitValuesPy<'py>> {
+        let stale = {
+            let this = shared(slf)?;
+            let g = this.map()?;
+            let id = embedding_key(g, name)?;
+            g.is_stale(id)
+        };
+        if stale {
+            let mut this = exclusive(slf)?;
+            this.mutate(py, |g| {
+                g.refresh_derived();
+                Ok(())
+            })?;
+        }
+        let this = shared(slf)?;
+        let g = this.map()?;
+        let id = embedding_key(g, name)?;
+        let v = guard(|| read_orbit_values(g, id))?;
+        orbit_values_to_py(py, name, v)
+    }
+
+    /// Writes every value of the stored embedding `name`, one row per orbit in the order and
+    /// layout that `embedding(name)` returns (same shape; float64 for real types, int64 for
+    /// `i64`, bool for `bool`), then recomputes the derived embeddings. Nothing is written
+    /// when it raises: `KeyError` for an unknown name (listing the map's embeddings),
+    /// `TypeError` for another dtype, `ValueError` for another shape or a non-finite value
+    /// (naming the embedding, the row and its dart), `EmbeddingError` for a derived
+    /// embedding.
+    fn set_embedding(
+        slf: &Bound<'_, Self>,
+        py: Python<'_>,
+        name: &str,
+        values: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
+        let (id, vals) = {
+            let g = this.map()?;
+            let id = embedding_key(g, name)?;
+            let (vals, _) = guard(|| orbit_values_arg(g, id, values))?;
+            (id, vals)
+        };
+        this.mutate(py, |g| Ok(g.set_orbit_values(id, vals.as_column())?))
+    }
+
+    /// Every embedding, in declaration order: `(name, type, orbit, derived)` tuples, e.g.
+    /// `("position", "vec3", "<1,2,3>", False)`.
+    fn embeddings(slf: &Bound<'_, Self>) -> PyResult<Vec<(String, String, String, bool)>> {
+        let this = shared(slf)?;
+        Ok(embedding_specs(this.map()?))
     }
 
     /// The names of the embeddings, in declaration order.

@@ -29,6 +29,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<rules::PyRuleSet>()?;
     m.add_class::<sim::PySimulation>()?;
     m.add_function(wrap_pyfunction!(sim::models, m)?)?;
+    m.add_function(wrap_pyfunction!(rules::check_predicate, m)?)?;
     m.add_function(wrap_pyfunction!(generators::grid, m)?)?;
     m.add_function(wrap_pyfunction!(generators::cuboid, m)?)?;
     m.add_function(wrap_pyfunction!(panic_for_tests, m)?)?;

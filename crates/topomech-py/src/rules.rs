@@ -421,3 +421,13 @@ impl PyRuleSet {
         )
     }
 }
+
+/// Checks a predicate on the rest position `x`, `y`, `z` exactly as a simulation builds a
+/// fixed vertex's rule around it ([`topomech_physics::check_predicate`]): one expression of
+/// the rule language, of type bool. Raises `RuleError` with the diagnostics, `label` as their
+/// file and the line and column in `text`.
+#[pyfunction]
+#[pyo3(signature = (text, label = "predicate"))]
+pub(crate) fn check_predicate(text: &str, label: &str) -> PyResult<()> {
+    guard(|| topomech_physics::check_predicate(label, text).map_err(Error::Rules))
+}

@@ -30,7 +30,10 @@ use crate::convert::{array_arg, rows3_arg, rows_to_array, shape_str, type_name};
 use crate::errors::{
     exclusive, guard, shared, type_error, value_error, Error, InternalError, Result,
 };
-use crate::gmap::PyGMap;
+use crate::gmap::{
+    embedding_key, embedding_specs, orbit_values_arg, orbit_values_to_py, read_orbit_values,
+    OrbitValuesPy, PyGMap,
+};
 
 /// The keys of a configuration, in the order of [`Config`]'s fields.
 const CONFIG_KEYS: &[&str] = &[
@@ -1076,6 +1079,75 @@ impl PySimulation {
         })
     }
 
+    /// The embedding `name` of the simulated map, one row per orbit: the tuple `(values,
+    /// darts, orbit)` of `GMap.embedding` (rows by the smallest dart of each orbit, not the
+    /// per-vertex row order of `embedding`). Reads any orbit type: a corner force `<1,2>`, a
+    /// per-element matrix `<0,1,2>`. Raises `KeyError` for an unknown name, listing the map's
+    /// embeddings.
+    fn orbit_embedding<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<OrbitValuesPy<'py>> {
+        let this = shared(slf)?;
+        let g = this.sim()?.gmap();
+        let id = embedding_key(g, name)?;
+        let v = this.read(|s| {
+            let g = s.gmap();
+            if g.is_stale(id) {
+                // derived values are a cache: recompute them on a copy, the simulation is
+                // only read
+                let mut copy = g.clone();
+                copy.refresh_derived();
+                read_orbit_values(&copy, id)
+            } else {
+                read_orbit_values(g, id)
+            }
+        })?;
+        orbit_values_to_py(py, name, v)
+    }
+
+    /// Writes every value of the stored embedding `name` of the simulated map, in the layout
+    /// of `orbit_embedding(name)` (as `GMap.set_embedding`), then recomputes the derived
+    /// embeddings; the next step starts from the values written. Nothing is written when it
+    /// raises: `KeyError`, `TypeError`, `ValueError` and `EmbeddingError` as
+    /// `GMap.set_embedding`; `ValueError` also when the orbits of one particle (a pinched
+    /// vertex kept as one row) would get different values of a shared vertex quantity
+    /// (`position`, `velocity`, ...; masses and forces are per orbit and may differ);
+    /// `SimulationError` for the embeddings that number rows and elements (`particle`,
+    /// `point_id`, `cell_id`, `vertex0`, `face0`).
+    fn set_orbit_embedding(
+        slf: &Bound<'_, Self>,
+        py: Python<'_>,
+        name: &str,
+        values: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
+        let vals = {
+            let s = this.sim()?;
+            let g = s.gmap();
+            let id = embedding_key(g, name)?;
+            guard(|| {
+                let (vals, reps) = orbit_values_arg(g, id, values)?;
+                let e = g.embedding(id);
+                if e.orbit() == OrbitType::vertex(g.dimension()) && !is_additive(name) {
+                    check_welded(s, name, e.ty().width(), &vals, &reps)?;
+                }
+                Ok(vals)
+            })?
+        };
+        this.run(py, move |sim| {
+            Ok(sim.set_orbit_values(name, vals.as_column())?)
+        })
+    }
+
+    /// Every embedding of the simulated map, in declaration order: `(name, type, orbit,
+    /// derived)` tuples, as `GMap.embeddings`.
+    fn embeddings(slf: &Bound<'_, Self>) -> PyResult<Vec<(String, String, String, bool)>> {
+        let this = shared(slf)?;
+        Ok(embedding_specs(this.sim()?.gmap()))
+    }
+
     /// A copy of the simulated map, with every embedding (positions as they are now).
     fn gmap(slf: &Bound<'_, Self>) -> PyResult<PyGMap> {
         let this = shared(slf)?;
@@ -1147,6 +1219,35 @@ impl PySimulation {
             this.inner.time()
         )
     }
+}
+
+/// Refuses values of a shared vertex quantity that differ between the orbits of one welded row
+/// (`vals` one value of `w` scalars per vertex orbit, orbits by smallest dart `reps`).
+fn check_welded(
+    s: &Simulation,
+    name: &str,
+    w: usize,
+    vals: &crate::gmap::Gathered,
+    reps: &[topomech_gmap::Dart],
+) -> Result<()> {
+    for (row, orbits) in s.welded_rows() {
+        let ks: Vec<usize> = orbits
+            .iter()
+            .filter_map(|d| reps.binary_search(d).ok())
+            .collect();
+        let Some((&k0, rest)) = ks.split_first() else {
+            continue;
+        };
+        for &k in rest {
+            if !vals.rows_equal(w, k0, k) {
+                return Err(value_error(format!(
+                    "values for '{name}': rows {k0} and {k} (the orbits of darts {} and {}) are one particle (vertex row {row}, a pinched vertex kept as one) and must have the same value",
+                    reps[k0].0, reps[k].0
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Rows as int64.

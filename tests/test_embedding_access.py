@@ -1,0 +1,365 @@
+"""Embeddings from Python, one row per orbit (issue 14): ``GMap.embedding`` /
+``GMap.set_embedding`` / ``GMap.embeddings`` and the same on a ``Simulation``
+(``orbit_embedding`` / ``set_orbit_embedding`` / ``embeddings``).
+
+What is checked against what:
+
+- rows: each row's dart is the smallest dart of its orbit (``GMap.orbit``), rows by that dart,
+  one per orbit (the number of vertices from ``cell_counts``); vertex values equal
+  ``GMap.positions`` through ``vertex_labels`` (an independent path in the kernel);
+- physics: a corner force (``f_corot`` on ``<1,2>``, one value per corner of a tetrahedron)
+  summed over each vertex's corners equals ``Simulation.forces()`` (the kernel's own
+  accumulation), and the per-corner masses sum to ``total_mass`` (= density x volume, an
+  analytic value); tolerances are a few ulps of the largest term (only the summation order
+  differs);
+- writes: what is written reads back bit for bit (every embedding type the kernel has:
+  f64, i64, bool, vec2, vec3, square and rectangular matrices) on a map of several thousand
+  orbits, and through ``.tmg`` bytes; a write of ``velocity`` shows in ``velocities()`` and
+  the next step moves each vertex by dt v (symplectic Euler at rest, no load: exact); a write of
+  ``corner_mass`` refreshes the derived ``mass``;
+- refusals: unknown name (KeyError listing the embeddings), wrong shape or dtype, NaN /
+  infinity (naming the embedding, the row and its dart), derived embeddings, numbering
+  embeddings of a simulation, welded particles given two positions; nothing is written by a
+  refused call, and no input turns into an ``InternalError`` (a Rust panic).
+
+Every test here fails on the code before this change (the methods did not exist).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import topomech
+from topomech import EmbeddingError, EmbeddingValues, GMap, InternalError, SimulationError, _core
+
+# two tetrahedra sharing the face (1, 2, 3)
+TET_POINTS = np.array(
+    [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]]
+)
+TETS = [("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, 4]]))]
+
+
+def tet_sim(**kw: object) -> topomech.Simulation:
+    cfg: dict[str, object] = {
+        "models": ["corotational"],
+        "density": 1000.0,
+        "young": 1e5,
+        "poisson": 0.3,
+        "damping": 0.0,
+        "gravity": [0.0, 0.0, 0.0],
+        "integrator": "symplectic_euler",
+        "dt": 1e-3,
+    }
+    cfg.update(kw)
+    return topomech.Simulation(GMap.from_mesh(TET_POINTS, TETS), **cfg)  # type: ignore[arg-type]
+
+
+def box_map(n: int) -> GMap:
+    return GMap.from_flat(*_core.box(n, n, n, 1.0, 1.0, 1.0, "tetra"))
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def test_rows_are_orbits_by_smallest_dart_and_match_positions() -> None:
+    g = GMap.from_mesh(TET_POINTS, TETS)
+    ev = g.embedding("position")
+    assert isinstance(ev, EmbeddingValues)
+    values, darts, orbit = ev
+    assert orbit == "<1,2,3>"
+    assert darts.dtype == np.int64
+    assert values.dtype == np.float64
+    assert values.shape == (g.cell_counts()["vertices"], 3) == (5, 3)
+    assert np.all(np.diff(darts) > 0), "rows in increasing order of their dart"
+    for d in darts:
+        assert d == g.orbit(int(d), orbit).min(), "each row's dart is its orbit's smallest"
+    # every dart belongs to exactly one row's orbit
+    covered = np.sort(np.concatenate([g.orbit(int(d), orbit) for d in darts]))
+    assert np.array_equal(covered, np.arange(g.n_darts))
+    # the same positions as the per-vertex array, through the vertex labels
+    labels = g.vertex_labels()
+    assert np.array_equal(values, g.positions()[labels[darts]])
+
+
+def test_embeddings_lists_names_types_orbits() -> None:
+    sim = tet_sim()
+    specs = {s.name: s for s in sim.embeddings()}
+    assert (specs["position"].type, specs["position"].orbit) == ("vec3", "<1,2,3>")
+    assert specs["mass"].derived
+    assert not specs["corner_mass"].derived
+    assert (specs["k_elem"].type, specs["k_elem"].orbit) == ("mat12", "<0,1,2>")
+    g = sim.gmap()
+    assert [s.name for s in g.embeddings()] == g.embedding_names()
+    assert g.embeddings() == sim.embeddings()
+
+
+def test_matrix_shapes_and_per_element_stiffness() -> None:
+    sim = tet_sim()
+    k, darts, orbit = sim.orbit_embedding("k_elem")
+    assert orbit == "<0,1,2>"
+    assert k.shape == (2, 12, 12)
+    assert len(darts) == 2
+    # a linear elastic stiffness is symmetric and annihilates rigid translations
+    for ke in k:
+        assert np.allclose(ke, ke.T, rtol=0, atol=1e-9 * np.abs(ke).max())
+        for a in range(3):
+            t = np.zeros(12)
+            t[a::3] = 1.0
+            assert np.abs(ke @ t).max() <= 1e-9 * np.abs(ke).max()
+    x_rest, _, _ = sim.orbit_embedding("x_rest")
+    assert x_rest.shape == (2, 12, 1), "a rectangular mat12x1 keeps its (R, C)"
+    dm_inv, _, _ = sim.orbit_embedding("dm_inv")
+    assert dm_inv.shape == (2, 3, 3)
+
+
+def test_corner_forces_sum_to_vertex_forces() -> None:
+    """f_corot lives on the corners <1,2> of each tetrahedron; the vertex force that forces()
+    returns is their sum over the vertex's corners (the models' accumulation)."""
+    sim = tet_sim(gravity=[0.0, 0.0, -9.81])
+    sim.step(5)
+    rng = np.random.default_rng(7)
+    sim.set_positions(sim.positions() + 0.05 * rng.standard_normal((sim.n_vertices, 3)))
+    total = sim.forces()
+    assert np.abs(total).max() > 1.0, "a deformed state has forces"
+    f, darts, orbit = sim.orbit_embedding("f_corot")
+    assert orbit == "<1,2>"
+    assert f.shape == (8, 3), "4 corners per tetrahedron"
+    rows = sim.gmap().vertex_labels()[darts]
+    summed = np.zeros_like(total)
+    np.add.at(summed, rows, f)
+    assert np.allclose(summed, total, rtol=0, atol=1e-12 * np.abs(f).max())
+
+
+def test_masses_sum_to_total_mass() -> None:
+    sim = tet_sim()
+    volume = 1.0 / 6.0 + abs(np.linalg.det(TET_POINTS[[2, 3, 4]] - TET_POINTS[1])) / 6.0
+    m, _, orbit = sim.orbit_embedding("mass")
+    assert orbit == "<1,2,3>"
+    assert np.isclose(m.sum(), sim.total_mass(), rtol=1e-14)
+    assert np.isclose(sim.total_mass(), 1000.0 * volume, rtol=1e-14)
+    cm, _, corner = sim.orbit_embedding("corner_mass")
+    assert corner == "<1,2>"
+    assert np.isclose(cm.sum(), sim.total_mass(), rtol=1e-14)
+
+
+# ---------------------------------------------------------------------------- writing
+
+
+def test_every_embedding_round_trips_exactly_on_thousands_of_orbits() -> None:
+    """Random values written on every stored embedding of a 3D and a 2D simulation's map
+    (f64, i64, bool, vec2, vec3, mat3, mat12, mat12x1, ...) read back bit for bit, directly
+    and through .tmg bytes."""
+    rng = np.random.default_rng(2026)
+    g3 = topomech.Simulation(box_map(6), models=["corotational"]).gmap()
+    g2 = topomech.Simulation(
+        GMap.from_flat(*_core.grid(40, 40, 1.0, 1.0, "quad")), models=["shear_isotropic"]
+    ).gmap()
+    types = set()
+    for g in (g3, g2):
+        written = {}
+        for spec in g.embeddings():
+            if spec.derived:
+                continue
+            values, darts, _ = g.embedding(spec.name)
+            if values.dtype == np.bool_:
+                new = rng.random(values.shape) < 0.5
+            elif values.dtype == np.int64:
+                new = rng.integers(-(2**62), 2**62, values.shape, dtype=np.int64)
+            else:
+                new = rng.standard_normal(values.shape) * 10.0 ** rng.integers(-300, 300)
+            g.set_embedding(spec.name, new)
+            written[spec.name] = (new, darts)
+            types.add(spec.type)
+        back = GMap.from_bytes(g.to_bytes())
+        for name, (new, darts) in written.items():
+            for h in (g, back):
+                values, d, _ = h.embedding(name)
+                assert np.array_equal(d, darts)
+                assert values.dtype == new.dtype, name
+                assert np.array_equal(values, new), name
+        assert g.is_valid()
+    assert {"f64", "i64", "bool", "vec2", "vec3", "mat3", "mat12", "mat12x1"} <= types
+    assert len(g3.embedding("position").darts) == 7**3, "several hundred vertices"
+    assert len(g3.embedding("he_volume").darts) > 5000, "several thousand half-edges"
+
+
+def test_write_velocities_then_step() -> None:
+    sim = tet_sim()
+    v, darts, _ = sim.orbit_embedding("velocity")
+    assert not v.any()
+    rest, rdarts, _ = sim.orbit_embedding("rest")
+    assert np.array_equal(rdarts, darts)
+    new = np.column_stack([rest[:, 1], -rest[:, 0], 0.5 * rest[:, 2]])  # per-orbit values
+    sim.set_orbit_embedding("velocity", new)
+    rows = sim.gmap().vertex_labels()[darts]
+    expect = np.zeros((sim.n_vertices, 3))
+    expect[rows] = new
+    assert np.array_equal(sim.velocities(), expect)
+    x0 = sim.positions()
+    sim.step()
+    # at rest with no load the forces are zero: v stays and x moves by dt v (symplectic Euler)
+    assert np.allclose(sim.velocities(), expect, rtol=0, atol=1e-9)
+    assert np.allclose(sim.positions(), x0 + sim.dt * expect, rtol=0, atol=1e-12)
+
+
+def test_write_positions_matches_set_positions() -> None:
+    a, b = tet_sim(), tet_sim()
+    x, darts, _ = a.orbit_embedding("position")
+    rng = np.random.default_rng(3)
+    x = x + 0.05 * rng.standard_normal(x.shape)
+    a.set_orbit_embedding("position", x)
+    rows = a.gmap().vertex_labels()[darts]
+    per_row = np.zeros((a.n_vertices, 3))
+    per_row[rows] = x
+    b.set_positions(per_row)
+    assert np.array_equal(a.positions(), per_row)
+    assert np.array_equal(a.forces(), b.forces())
+    a.step(3)
+    b.step(3)
+    assert np.array_equal(a.positions(), b.positions())
+
+
+def test_write_corner_mass_refreshes_derived_mass() -> None:
+    sim = tet_sim()
+    m0 = sim.total_mass()
+    cm, _, _ = sim.orbit_embedding("corner_mass")
+    sim.set_orbit_embedding("corner_mass", 2.0 * cm)
+    assert np.isclose(sim.total_mass(), 2.0 * m0, rtol=1e-14)
+    m, _, _ = sim.orbit_embedding("mass")
+    assert np.isclose(m.sum(), 2.0 * m0, rtol=1e-14)
+    g = sim.gmap()
+    g.set_embedding("corner_mass", cm)
+    assert np.isclose(g.embedding("mass").values.sum(), m0, rtol=1e-14)
+
+
+def test_python_lists_and_integer_arrays_are_converted() -> None:
+    g = GMap.from_mesh(TET_POINTS, TETS)
+    x = g.embedding("position").values
+    g.set_embedding("position", np.rint(x * 2).astype(np.int32))
+    assert np.array_equal(g.embedding("position").values, np.rint(x * 2))
+    g.set_embedding("position", (x + 1).tolist())
+    assert np.array_equal(g.embedding("position").values, x + 1)
+
+
+# ---------------------------------------------------------------------------- refusals
+
+
+def test_unknown_name_is_a_key_error_listing_embeddings() -> None:
+    g = GMap.from_mesh(TET_POINTS, TETS)
+    sim = tet_sim()
+    for call in (
+        lambda: g.embedding("velocty"),
+        lambda: g.set_embedding("velocty", np.zeros(3)),
+        lambda: sim.orbit_embedding("velocty"),
+        lambda: sim.set_orbit_embedding("velocty", np.zeros(3)),
+    ):
+        with pytest.raises(KeyError, match=r"no embedding named 'velocty'.*position"):
+            call()
+
+
+def test_wrong_shape_dtype_and_values_are_refused_and_nothing_is_written() -> None:
+    sim = tet_sim()
+    g = sim.gmap()
+    before = g.to_bytes()
+    x = g.embedding("position").values
+    with pytest.raises(
+        ValueError,
+        match=r"'position' \(vec3 on <1,2,3>\) must have shape "
+        r"\(n, 3\) = \(5, 3\).*got \(4, 3\)",
+    ):
+        g.set_embedding("position", x[:4])
+    with pytest.raises(ValueError, match=r"shape \(n, 3\) = \(5, 3\).*got \(15,\)"):
+        g.set_embedding("position", x.ravel())
+    bad = x.copy()
+    bad[3, 1] = np.nan
+    bad[4, 0] = np.inf
+    d3 = int(g.embedding("position").darts[3])
+    with pytest.raises(
+        ValueError,
+        match=rf"'position' must be finite: row 3 \(the orbit of "
+        rf"dart {d3}\).*2 rows are not finite",
+    ):
+        g.set_embedding("position", bad)
+    with pytest.raises(TypeError, match=r"'particle'.*int64.*float64"):
+        g.set_embedding("particle", g.embedding("particle").values + 0.5)
+    with pytest.raises(TypeError, match=r"'fixed'.*bool"):
+        g.set_embedding("fixed", np.zeros(5))
+    with pytest.raises(TypeError, match=r"'position'.*float64"):
+        g.set_embedding("position", np.zeros((5, 3), dtype=bool))
+    with pytest.raises(EmbeddingError, match=r"'mass' is derived"):
+        g.set_embedding("mass", g.embedding("mass").values)
+    assert g.to_bytes() == before, "a refused write changes nothing"
+    # the same refusals on the simulation, plus its numbering and its welded rows
+    x0 = sim.positions()
+    with pytest.raises(ValueError, match=r"must be finite: row 3"):
+        sim.set_orbit_embedding("position", bad)
+    with pytest.raises(EmbeddingError, match=r"'mass' is derived"):
+        sim.set_orbit_embedding("mass", np.ones(5))
+    for name in ("particle", "point_id", "vertex0"):
+        with pytest.raises(SimulationError, match=rf"'{name}' numbers the simulation"):
+            sim.set_orbit_embedding(name, sim.orbit_embedding(name).values)
+    assert np.array_equal(sim.positions(), x0)
+
+
+def test_welded_particle_needs_one_position() -> None:
+    """Two tetrahedra touching only at point 0, kept as one particle (pinched="merge"): two
+    vertex orbits, one row. Giving them two positions is refused; one is accepted."""
+    pts = np.array(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]],
+        dtype=float,
+    )
+    tets = [("tetra", np.array([[0, 1, 2, 3], [0, 4, 6, 5]]))]
+    sim = topomech.Simulation(GMap.from_mesh(pts, tets), models=["corotational"])
+    assert sim.n_vertices == 7
+    x, darts, _ = sim.orbit_embedding("position")
+    assert len(darts) == 8, "the pinched point is two vertex orbits"
+    rows = sim.gmap().vertex_labels()[darts]
+    k0, k1 = np.flatnonzero(rows == rows[np.argmax(np.bincount(rows))])
+    moved = x.copy()
+    moved[k0] += 0.1
+    with pytest.raises(ValueError, match=rf"rows {k0} and {k1} .* are one particle"):
+        sim.set_orbit_embedding("position", moved)
+    moved[k1] += 0.1
+    sim.set_orbit_embedding("position", moved)
+    assert np.allclose(sim.positions()[rows[k0]], x[k0] + 0.1, rtol=0, atol=0)
+    # masses are per orbit: two different values on the welded orbits are fine
+    m = sim.orbit_embedding("corner_mass").values
+    sim.set_orbit_embedding("corner_mass", m * np.linspace(1.0, 2.0, len(m)))
+
+
+def test_no_input_reaches_a_panic() -> None:
+    """Odd inputs to the kernel methods directly (no Python conversion): each is refused with
+    TypeError, ValueError or KeyError, never InternalError (a Rust panic)."""
+    g = box_map(2)
+    core = g.core
+    sim = topomech.Simulation(box_map(2), models=["corotational"])
+    n = len(g.embedding("position").darts)
+    odd = [
+        None,
+        3.0,
+        "position",
+        [[0.0, 0.0, 0.0]] * n,
+        np.zeros(()),
+        np.zeros((n, 3, 1)),
+        np.zeros((0, 3)),
+        np.zeros((n, 3), dtype=np.float32),
+        np.zeros((n, 3), dtype=object),
+        np.zeros((n, 3), dtype=complex),
+        np.zeros((3, n)).T,  # not contiguous: accepted, read in logical order
+        np.zeros((n, 6))[:, ::2],
+        np.full((n, 3), np.nan),
+        np.full((n, 3), -np.inf),
+        np.zeros((n * 3,)),
+    ]
+    for name in ("position", "particle", "fixed", "nope", "", "mass"):
+        for a in odd:
+            for call in (core.set_embedding, sim._core.set_orbit_embedding):
+                try:
+                    call(name, a)  # type: ignore[arg-type]
+                except (TypeError, ValueError, KeyError, EmbeddingError, SimulationError):
+                    pass
+                except InternalError as e:  # pragma: no cover - the failure being tested
+                    pytest.fail(f"{name} {a!r}: a panic crossed: {e}")
+    assert g.is_valid()
+    assert np.isfinite(sim.positions()).all()
