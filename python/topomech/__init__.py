@@ -35,6 +35,7 @@ from topomech._core import (
 )
 from topomech._gmap import BuildReport, CellCounts, EmbeddingSpec, EmbeddingValues, GMap
 from topomech.io import read_gmap, read_mesh, write_vtu
+from topomech.models import Model
 from topomech.rules import ApplyReport, RuleInfo, RuleSet
 from topomech.run import run_scene
 from topomech.scene import Scene, load_scene, shipped_scenes
@@ -61,6 +62,7 @@ __all__ = [
     "InternalError",
     "MeshError",
     "MeshReadError",
+    "Model",
     "ModelInfo",
     "RuleError",
     "RuleInfo",

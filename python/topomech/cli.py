@@ -17,6 +17,7 @@ import argparse
 import io
 import json
 import os
+import re
 import signal
 import sys
 from collections.abc import Sequence
@@ -27,6 +28,7 @@ from topomech import __version__
 from topomech._cells import flat_to_blocks, mesh_figures
 from topomech._core import ApplyError, RuleError, SceneError, TopomechError
 from topomech.io import DUPLICATES, PINCHED, ImportedMesh, import_mesh, write_format, write_gmap
+from topomech.models import Model, shipped_models
 from topomech.rules import ParamValue, RuleSet
 
 __all__ = ["build_parser", "main"]
@@ -593,33 +595,122 @@ def _add_check(sub: Any) -> None:
         help="check rule files (.tmr): one line per problem",
         description=(
             "Load the rule files together (they share their dimension and embeddings) and "
-            "check every rule. Diagnostics go to stdout, one per line, as "
-            "FILE:LINE:COL: error[CONDITION]: message (or warning[CONDITION]). Exit 0 when "
-            "every rule is accepted (warnings allowed), with a last line 'ok: N rules in M "
-            "files'; 1 when the checker refuses something; 2 when a file cannot be read (the "
-            "reason on stderr)."
+            "check every rule and model declaration. Files that declare a model are loaded "
+            "after the shipped common rules of their dimension, as a simulation loads them "
+            "(so they use position, rest, mass, ... without declaring them). Diagnostics go "
+            "to stdout, one per line, as FILE:LINE:COL: error[CONDITION]: message (or "
+            "warning[CONDITION]). Exit 0 when every rule is accepted (warnings allowed), with "
+            "a last line 'ok: N rules in M files' ('ok: N rules and K models in M files (with "
+            "the shipped common rules of dimension D)' for model files); 1 when the checker "
+            "refuses something; 2 when a file cannot be read (the reason on stderr)."
         ),
     )
     p.add_argument("rule_files", metavar="FILE.tmr", nargs="+", type=Path)
     p.set_defaults(run=_run_check)
 
 
+#: A line that starts a model declaration (``model NAME(...) {`` or ``model NAME {``).
+_MODEL_DECLARATION = re.compile(r"^[ \t]*model[ \t]+[A-Za-z_][A-Za-z0-9_]*[ \t]*[({]", re.MULTILINE)
+
+
 def _run_check(args: argparse.Namespace) -> int:
     sources = _read_rule_files(args.rule_files)
     if sources is None:
         return EXIT_REFUSED
+    # model files are checked as a simulation loads them: after the shipped common rules
+    with_models = any(_MODEL_DECLARATION.search(text) for _, text in sources)
     try:
-        rules = RuleSet.from_sources(sources)
+        if with_models:
+            rules = RuleSet.from_model_sources(sources)
+        else:
+            rules = RuleSet.from_sources(sources)
     except RuleError as e:
         for line in [*e.diagnostics, *e.warnings]:
             print(line)
         return EXIT_INVALID
     for line in rules.warnings:
         print(line)
-    n = len(rules.rule_names())
+    names = {name for name, _ in sources}
+    n = sum(1 for r in rules.rule_names() if rules.rule_info(r)["file"] in names)
     warned = f" ({_plural(len(rules.warnings), 'warning')})" if rules.warnings else ""
-    print(f"ok: {_plural(n, 'rule')} in {_plural(len(sources), 'file')}{warned}")
+    if with_models:
+        k = sum(1 for m in rules.models() if m["file"] in names)
+        print(
+            f"ok: {_plural(n, 'rule')} and {_plural(k, 'model')} in "
+            f"{_plural(len(sources), 'file')}{warned} (with the shipped common rules of "
+            f"dimension {rules.dimension})"
+        )
+    else:
+        print(f"ok: {_plural(n, 'rule')} in {_plural(len(sources), 'file')}{warned}")
     return EXIT_OK
+
+
+# ---------------------------------------------------------------------------------- models
+
+
+def _add_models(sub: Any) -> None:
+    p = sub.add_parser(
+        "models",
+        help="list models: the shipped ones, or those rule files declare",
+        description=(
+            "List models with their parameters (type and default; 'required' when none), "
+            "the mesh dimensions they run on, what they need of the mesh, and whether they "
+            "have Jacobian rules (jvp): with them every integrator (explicit_euler, "
+            "symplectic_euler, implicit_euler, static), without them the explicit ones only. "
+            "Without FILE the shipped models; with FILE the models each file declares (it is "
+            "checked with the shipped common rules, as a simulation loads it: a refused file "
+            "prints its diagnostics and exits 1; an unreadable one exits 2)."
+        ),
+    )
+    p.add_argument("files", metavar="FILE.tmr", nargs="*", type=Path)
+    p.add_argument("--json", action="store_true", help="print a JSON list instead")
+    p.set_defaults(run=_run_models)
+
+
+def _run_models(args: argparse.Namespace) -> int:
+    if not args.files:
+        models = shipped_models()
+    else:
+        models = []
+        for path in args.files:
+            try:
+                found = Model.load_all(path)
+            except UnicodeDecodeError as e:
+                _error(f"{path}: cannot read the rule file: not UTF-8 text (byte {e.start})")
+                return EXIT_REFUSED
+            except OSError as e:
+                _error(f"{path}: cannot read the rule file: {e.strerror or e}")
+                return EXIT_REFUSED
+            except RuleError as e:
+                for line in [*e.diagnostics, *e.warnings]:
+                    print(line)
+                return EXIT_INVALID
+            if not found:
+                _note(f"{path}: declares no model")
+            models += found
+    if args.json:
+        print(json.dumps([m.describe() for m in models], indent=2))
+        return EXIT_OK
+    for m in models:
+        where = f"  ({m.file})" if m.file is not None else ""
+        print(f"{m.name}{where}")
+        print(f"  dimensions: {', '.join(str(d) for d in m.dimensions)}")
+        params = [
+            f"{p}: {m.param_types.get(p, 'f64')} = {_show_default(d)}" for p, d in m.params.items()
+        ]
+        print(f"  parameters: {', '.join(params) if params else 'none'}")
+        print(f"  needs: {m.needs or '-'}")
+        jvp = "yes" if m.has_jvp else "no"
+        print(f"  jacobian: {jvp} (integrators: {', '.join(m.integrators)})")
+    return EXIT_OK
+
+
+def _show_default(d: Any) -> str:
+    if d is None:
+        return "required"
+    if isinstance(d, list):
+        return "vec3(" + ", ".join(f"{x:g}" for x in d) + ")"
+    return f"{d:g}"
 
 
 #: The value of ``RULES`` that names the rules shipped with topomech.
@@ -683,7 +774,7 @@ def _add_apply(sub: Any) -> None:
             "on stdout. Exit 0 on success (zero matches with --everywhere included); 1 when "
             "the rule does not match at --at or its application fails; 2 when a file cannot "
             "be read, the rule file is refused (its diagnostics on stderr) or an argument is "
-            "wrong."
+            "wrong; 130 on Ctrl-C (nothing written unless it came while writing)."
         ),
     )
     p.add_argument("input", metavar="INPUT", type=Path, help="mesh file or saved G-map (.tmg)")
@@ -767,12 +858,27 @@ def _check_call(rules: RuleSet, args: argparse.Namespace, spec: str) -> str | No
 
 
 def _run_apply(args: argparse.Namespace) -> int:
+    """``topomech apply``; Ctrl-C exits :data:`EXIT_INTERRUPTED` with one line on stderr."""
+    stage = ["reading the input"]
+    try:
+        return _apply(args, stage)
+    except KeyboardInterrupt:
+        if stage[0] == "writing":
+            _error(f"interrupted while writing {args.out}; it may be incomplete")
+        else:
+            _error(f"interrupted while {stage[0]}; nothing written")
+        return EXIT_INTERRUPTED
+
+
+def _apply(args: argparse.Namespace, stage: list[str]) -> int:
+    """The work of ``topomech apply``; ``stage[0]`` says what it is doing (for Ctrl-C)."""
     try:
         write_format(args.out)
     except ValueError as e:
         _error(str(e))
         return EXIT_REFUSED
     g = _import(args.input, args).gmap
+    stage[0] = "loading the rules"
     rules = _load_rules(args.rules, g.dimension)
     if rules is None:
         return EXIT_REFUSED
@@ -780,7 +886,10 @@ def _run_apply(args: argparse.Namespace) -> int:
     if why is not None:
         _error(why)
         return EXIT_REFUSED
+    stage[0] = f"applying rule {args.rule!r}"
     try:
+        # answers Ctrl-C within milliseconds while matching and evaluating (the engine polls
+        # the signal), raising KeyboardInterrupt with the map unchanged
         report = rules.apply(g, args.rule, args.at, dict(args.param))
     except ApplyError as e:
         _error(str(e))
@@ -794,6 +903,7 @@ def _run_apply(args: argparse.Namespace) -> int:
             print(f"topomech: violation: {v}", file=sys.stderr)
         _error(f"rule {args.rule!r} left an invalid map; nothing written")
         return EXIT_INVALID
+    stage[0] = "writing"
     try:
         write_gmap(g, args.out)
     except ValueError as e:
@@ -812,6 +922,7 @@ def _run_apply(args: argparse.Namespace) -> int:
 SUBCOMMANDS: list[Callable[[Any], None]] = [
     _add_info,
     _add_check,
+    _add_models,
     _add_apply,
     _add_run,
     _add_view,

@@ -99,6 +99,15 @@ class RuleSet:
         return cls(_core.RuleSet.from_sources(list(sources)))
 
     @classmethod
+    def from_model_sources(cls, sources: Sequence[tuple[str, str]]) -> RuleSet:
+        """Checks ``(name, text)`` model files together as a simulation loads them: after
+        the shipped common rules of the dimension they declare (``position``, ``rest``,
+        ``velocity``, ``force``, ``mass``, ``dx``, ``dv``, ``df``, the material, ...), so a
+        model file declares only ``dimension`` and its own embeddings. Raises
+        :class:`RuleError` with every error at its ``FILE:LINE:COL``."""
+        return cls(_core.RuleSet.from_model_sources(list(sources)))
+
+    @classmethod
     def library(cls, dimension: int) -> RuleSet:
         """The modeling rules shipped with topomech for surfaces (2) or volumes (3)."""
         return cls(_core.RuleSet.library(dimension))
@@ -135,6 +144,13 @@ class RuleSet:
             hooks=d["hooks"],
             changes_topology=d["changes_topology"],
         )
+
+    def models(self) -> list[dict[str, Any]]:
+        """The model declarations, in file order: dicts with ``name``, ``file``, ``line``,
+        ``col``, ``params`` (``(name, type, default or None)`` each), ``dimensions``,
+        ``needs`` (str or None), ``forces``, ``jvp_outputs``, ``has_jvp`` and
+        ``per_element``. :class:`topomech.Model` wraps one."""
+        return self._core.models()
 
     # ------------------------------------------------------------------ application
 

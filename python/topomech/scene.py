@@ -18,6 +18,9 @@ the fixed vertices, gravity, the integrator and how often to write frames::
     kind = "corotational"
     young = 1e6                        # young/poisson set the material's
     poisson = 0.3
+    # [[model]]                        # a model from the user's rule file (relative to
+    # file = "anchor.tmr"              #   the scene), name = "..." when it declares
+    # k = 50.0                         #   several; its parameters as keys
 
     [material]
     density = 1000.0                   # per volume in 3D, per area in 2D
@@ -125,6 +128,8 @@ from topomech.loads import (
     compile_expression,
     compile_predicate,
 )
+from topomech.models import Model
+from topomech.models import model_files_of as _model_files_pairs
 from topomech.simulation import ModelInfo, Simulation, available_models
 
 if sys.version_info >= (3, 11):
@@ -507,6 +512,8 @@ class Scene:
     conditions: dict[str, Any] = field(default_factory=dict)
     #: The mesh file as read (``"mesh"``: the meshio mesh of the kept cells), kept so that a
     #: run reads the file once: building, the groups of the loads and the output cells.
+    #: The user's models (``[[model]] file = ...``), by index in ``config["models"]``.
+    user_models: dict[int, Model] = field(default_factory=dict)
     _read: dict[str, Any] = field(default_factory=dict, init=False, compare=False, repr=False)
 
     @property
@@ -623,7 +630,7 @@ class Scene:
         fail = self._fail()
         self.check_events()
         g = self.load_gmap() if gmap is None else gmap
-        _check_models(self.config["models"], g.dimension, fail)
+        _check_models(self.config["models"], g.dimension, fail, self.user_models)
         _check_fracture(self.config.get("fracture"), g, fail)
         try:
             sim = Simulation(g, self.config)
@@ -874,10 +881,21 @@ def _takes(kind: str, dim: int | None) -> list[str]:
     return [*params, *MATERIAL_KEYS_IN_MODEL]
 
 
-def _check_models(models: list[dict[str, Any]], dim: int, fail: _Fail) -> None:
+def _check_models(
+    models: list[dict[str, Any]],
+    dim: int,
+    fail: _Fail,
+    user_models: Mapping[int, Model] | None = None,
+) -> None:
     """Refuses a model that does not exist in dimension ``dim``, or a parameter it does not
-    take there, naming the key."""
+    take there, naming the key (``model[i].file`` for a user's model, by index in
+    ``user_models``)."""
     for i, spec in enumerate(models):
+        user = (user_models or {}).get(i)
+        if user is not None:
+            if dim not in user.dimensions:
+                raise fail(f"model[{i}].file", _wrong_dimension(user, dim))
+            continue
         kind = spec["kind"]
         if not _model_entries(kind, dim):
             entries = _model_entries(kind, None)
@@ -899,20 +917,36 @@ def _check_models(models: list[dict[str, Any]], dim: int, fail: _Fail) -> None:
 
 
 def _models(
-    tables: list[_Table], dim: int | None, fail: _Fail
-) -> tuple[list[dict[str, Any]], dict[str, tuple[str, float]]]:
-    """The models for :class:`Simulation`, and the material values they set (young,
-    poisson), each with the key that set it first. ``dim`` is the mesh's dimension when the
-    scene says it (a generator), else None: the models are checked again once it is known."""
+    tables: list[_Table], dim: int | None, base: Path | None, fail: _Fail
+) -> tuple[list[dict[str, Any]], dict[str, tuple[str, float]], dict[int, Model]]:
+    """The models for :class:`Simulation`, the material values they set (young, poisson),
+    each with the key that set it first, and the user's models (``[[model]] file = ...``)
+    by table index. ``dim`` is the mesh's dimension when the scene says it (a generator),
+    else None: the models are checked again once it is known. Model files are relative to
+    ``base`` (the scene's folder)."""
     if not tables:
-        raise fail("model", "no model: add a [[model]] table with a kind")
+        raise fail("model", "no model: add a [[model]] table with a kind or a file")
     kinds = list(dict.fromkeys(m["kind"] for m in available_models()))
     models: list[dict[str, Any]] = []
     set_by: dict[str, tuple[str, float]] = {}
+    user_models: dict[int, Model] = {}
     for i, t in enumerate(tables):
+        if t.has("file"):
+            if t.has("kind"):
+                raise fail(
+                    t.key("kind"),
+                    "give either kind (a shipped model) or file (a rule file), not both",
+                )
+            user = _user_model(t, i, dim, base, fail)
+            models.append(user.config_entry())
+            user_models[i] = user
+            continue
         kind = t.string("kind")
         if kind is None:
-            raise fail(t.key("kind"), f"missing: the model's kind ({_or(kinds)})")
+            raise fail(
+                t.key("kind"),
+                f"missing: the model's kind ({_or(kinds)}), or file (a rule file declaring it)",
+            )
         if kind not in kinds:
             if kind in PLANNED_MODELS:
                 raise fail(
@@ -950,7 +984,85 @@ def _models(
                 )
             set_by.setdefault(p, (t.key(p), v))
         models.append(spec)
-    return models, set_by
+    return models, set_by, user_models
+
+
+def _user_model(t: _Table, i: int, dim: int | None, base: Path | None, fail: _Fail) -> Model:
+    """The model of a ``[[model]] file = "..."`` table: the file (relative to ``base``) read
+    and checked with the shipped common rules, the model picked by ``name`` (needed when the
+    file declares several), its parameters from the table's other keys. Refusals name
+    ``model[i].file`` (an unreadable or refused file: the checker's ``FILE:LINE:COL`` lines
+    follow), ``model[i].name`` or ``model[i].<param>``."""
+    file = _required_str(t, "file", fail)
+    path = Path(file).expanduser()
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    key = t.key("file")
+    try:
+        declared = Model.load_all(path)
+    except UnicodeDecodeError as e:
+        raise fail(
+            key, f"cannot read the rule file {path}: not UTF-8 text (byte {e.start})"
+        ) from None
+    except OSError as e:
+        raise fail(key, f"cannot read the rule file {path}: {e.strerror or e}") from None
+    except RuleError as e:
+        raise fail(key, f"the rule file is refused:\n{e}") from None
+    if not declared:
+        raise fail(key, f"{path} declares no model")
+    names = ", ".join(m.name for m in declared)
+    name = t.string("name")
+    if name is None:
+        if len(declared) > 1:
+            raise fail(
+                t.key("name"),
+                f"missing: {path} declares several models ({names}); say which with name",
+            )
+        model = declared[0]
+    else:
+        found = [m for m in declared if m.name == name]
+        if not found:
+            raise fail(t.key("name"), f"{path} declares no model '{name}' (it declares: {names})")
+        model = found[0]
+    if dim is not None and dim not in model.dimensions:
+        raise fail(key, _wrong_dimension(model, dim))
+    params = list(model.params)
+    takes = ", ".join(params) if params else "no parameter"
+    for k in t.data:
+        if k in ("file", "name"):
+            continue
+        if k not in params:
+            close = difflib.get_close_matches(k, params, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise fail(t.key(k), f"unknown key{hint} (model '{model.name}' takes {takes})")
+        if model.param_types.get(k) != "f64":
+            raise fail(
+                t.key(k),
+                f"model '{model.name}': '{k}' is a {model.param_types.get(k)}; only f64 "
+                "parameters can be set from a scene",
+            )
+    values: dict[str, float] = {}
+    for p in params:
+        if model.param_types.get(p) == "f64":
+            v = t.number(p)
+            if v is not None:
+                values[p] = v
+    for p, default in model.params.items():
+        if default is None and p not in values:
+            raise fail(
+                t.key(p), f"missing: model '{model.name}' has no default for parameter '{p}'"
+            )
+    return model.with_params(**values)
+
+
+def _model_files_of(models: list[Model]) -> list[tuple[str, str]]:
+    """The ``(file, text)`` pairs of the user's models' rule files, each once."""
+    return _model_files_pairs(list(models))[1]
+
+
+def _wrong_dimension(model: Model, dim: int) -> str:
+    dims = " or ".join(f"{d}D" for d in model.dimensions)
+    return f"model '{model.name}' runs on {dims} meshes, the mesh is {dim}D"
 
 
 def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
@@ -1035,8 +1147,16 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
 
     if poisson is not None:
         _check_poisson(poisson, "material.poisson", fail)
-    models, set_by = _models(top.tables("model"), mesh.dimension, fail)
-    origins += [("model", m["kind"], f"model[{i}].kind") for i, m in enumerate(models)]
+    models, set_by, user_models = _models(top.tables("model"), mesh.dimension, base_dir, fail)
+    model_tables = top.tables("model")
+    for i, m in enumerate(models):
+        if i not in user_models:
+            key = f"model[{i}].kind"
+        elif model_tables[i].has("name"):
+            key = f"model[{i}].name"
+        else:
+            key = f"model[{i}].file"
+        origins.append(("model", m["kind"], key))
     for what, v in (("young", young), ("poisson", poisson)):
         if what in set_by and v is not None and set_by[what][1] != v:
             key, from_model = set_by[what]
@@ -1110,6 +1230,9 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         "events": events,
         "fracture": fracture,
     }
+    model_files = _model_files_of(list(user_models.values()))
+    if model_files:
+        config["model_files"] = model_files
     scene = Scene(
         name=name,
         path=p,
@@ -1122,6 +1245,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         fields=fields,
         origins=tuple(origins),
         conditions={"held": held, "loads": loads, "initial": initial},
+        user_models=user_models,
     )
     scene.check_events()
     return scene

@@ -44,6 +44,7 @@ import numpy.typing as npt
 from topomech import _core
 from topomech._core import DivergenceError, SimulationError
 from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_array
+from topomech.models import Model, model_files_of
 
 if TYPE_CHECKING:
     from topomech._gmap import PathLike
@@ -58,8 +59,9 @@ __all__ = [
     "available_models",
 ]
 
-#: A model as :class:`Simulation` takes it: its kind alone, or ``{"kind": ..., param: value}``.
-ModelArg = Union[str, Mapping[str, Union[str, float]]]
+#: A model as :class:`Simulation` takes it: its kind alone, ``{"kind": ..., param: value}``,
+#: or a :class:`topomech.Model`.
+ModelArg = Union[str, Mapping[str, Union[str, float]], Model]
 
 
 class ModelInfo(TypedDict):
@@ -102,7 +104,9 @@ class TopologyResult:
 
 
 def available_models() -> list[ModelInfo]:
-    """The models this build of topomech ships, with their parameters' defaults.
+    """The models this build of topomech ships, with their parameters' defaults, as dicts
+    (:class:`ModelInfo`); ``topomech.Model.shipped(kind)`` gives one as a
+    :class:`topomech.Model` (with ``has_jvp`` and the integrators it allows).
 
     >>> [m["kind"] for m in available_models()][:2]
     ['stretch_elementary', 'stretch_cumulated']
@@ -113,13 +117,30 @@ def available_models() -> list[ModelInfo]:
     ]
 
 
+def _check_dimensions(models: Any, gmap: Any) -> None:
+    """Refuses a :class:`Model` declared for other dimensions than the map's, naming it and
+    its file (the kernel would only say that the file's dimension differs)."""
+    dim = getattr(gmap, "dimension", None)
+    for i, m in enumerate(models):
+        if isinstance(m, Model) and isinstance(dim, int) and dim not in m.dimensions:
+            dims = " or ".join(f"{d}D" for d in m.dimensions)
+            source = f" ({m.file})" if m.file is not None else ""
+            raise SimulationError(
+                f"models[{i}]: model '{m.name}'{source} runs on {dims} maps, this map is {dim}D"
+            )
+
+
 class Simulation:
     """Physical models on a copy of a G-map, stepped in time.
 
     ``config`` (a dict) or keyword arguments, mirroring the kernel's configuration:
 
-    - ``models``: a list of model kinds or dicts ``{"kind": ..., param: value}``
-      (:func:`available_models` lists them with their parameters);
+    - ``models``: a list of model kinds, dicts ``{"kind": ..., param: value}``
+      (:func:`available_models` lists the shipped ones with their parameters), or
+      :class:`topomech.Model` objects (``Model.load("anchor.tmr").with_params(k=5.0)``: a
+      model from the user's rule file, whose text is passed on as ``model_files``);
+    - ``model_files``: ``(file name, text)`` pairs of the user's rule files declaring the
+      models named by kind (filled in from :class:`topomech.Model` objects);
     - ``density`` (per volume in 3D, per area in 2D), ``young``, ``poisson`` (the material of
       the continuous models), ``damping`` (viscous, 1/s), ``gravity`` (3 numbers);
     - ``fixed``: predicates on the rest position ``x``, ``y``, ``z`` in the rule language
@@ -169,6 +190,13 @@ class Simulation:
         **kwargs: Any,
     ) -> None:
         cfg = dict(config) if config is not None else None
+        for where in (cfg, kwargs):
+            if where is not None and isinstance(where.get("models"), (list, tuple)):
+                _check_dimensions(where["models"], gmap)
+                models, files = model_files_of(list(where["models"]))
+                where["models"] = models
+                if files:
+                    where["model_files"] = [*where.get("model_files", []), *files]
         self._core = _core.Simulation(gmap, cfg, **kwargs)
 
     @classmethod

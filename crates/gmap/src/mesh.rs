@@ -12,6 +12,8 @@
 //! - pinched points (cells touching only at a point) become one particle by default
 //!   ([`Pinched`]);
 //! - duplicate cells are refused, or dropped with [`Duplicates::Merge`];
+//! - cells whose area or volume overflows f64 (or underflows: see [`TINY_SIZE`]) are refused
+//!   as such, not as degenerate;
 //! - degenerate, twisted (Jacobian changing sign between corners, self-intersecting polygon),
 //!   folded (two cells on the same side of their shared face) cells and non-conforming
 //!   interfaces (mismatched diagonals, hanging nodes) are refused, naming every offender.
@@ -324,6 +326,15 @@ pub enum MeshError {
         /// Each cell and what is wrong.
         cells: Vec<(usize, String)>,
     },
+    /// Cells whose area (2D) or volume (3D) is beyond what f64 holds: finite coordinates so
+    /// far apart that `extent^n` overflows, or so close that it underflows below
+    /// [`TINY_SIZE`] (where the relative degeneracy test loses its precision). Not
+    /// degenerate: the remedy is to scale the coordinates.
+    #[error("{} cell(s) too large or too small for f64 (scale the coordinates): {}", cells.len(), listed(cells, |(c, k, why)| format!("cell {c} ({k}): {why}")))]
+    Overflow {
+        /// Each cell, its kind's name and what overflows or underflows.
+        cells: Vec<(usize, &'static str, String)>,
+    },
     /// Cells with negative volume (3D), refused when `reorient` is off.
     #[error("{} inverted cell(s) (negative signed volume): {}", cells.len(), listed(cells, |(c, k, v)| format!("cell {c} ({k}) is inverted (signed volume {v:.3e})")))]
     Inverted {
@@ -489,8 +500,15 @@ pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// The Euclidean norm, scaled by the largest component so that its square neither
+/// overflows nor underflows (finite and non-zero for every finite non-zero vector).
 pub(crate) fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
+    let m = a[0].abs().max(a[1].abs()).max(a[2].abs());
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    let b = [a[0] / m, a[1] / m, a[2] / m];
+    m * dot(b, b).sqrt()
 }
 
 /// The signed volume of a 3D cell (positive when its vertices are in VTK order), computed by
@@ -531,12 +549,15 @@ pub fn corner_jacobians(kind: CellKind, verts: &[usize], points: &[[f64; 3]]) ->
         .collect()
 }
 
-/// The Newell normal of a polygon (twice its vector area).
+/// The Newell normal of a polygon (twice its vector area), computed on the coordinates
+/// relative to its first vertex: translation changes nothing, and the products are of the
+/// order of the polygon's extent squared, whatever the magnitude of its coordinates.
 pub(crate) fn polygon_normal(verts: &[usize], points: &[[f64; 3]]) -> [f64; 3] {
     let mut n = [0.0; 3];
+    let o = points[verts[0]];
     for k in 0..verts.len() {
-        let a = points[verts[k]];
-        let b = points[verts[(k + 1) % verts.len()]];
+        let a = sub(points[verts[k]], o);
+        let b = sub(points[verts[(k + 1) % verts.len()]], o);
         n[0] += (a[1] - b[1]) * (a[2] + b[2]);
         n[1] += (a[2] - b[2]) * (a[0] + b[0]);
         n[2] += (a[0] - b[0]) * (a[1] + b[1]);
@@ -556,6 +577,50 @@ pub(crate) fn max_edge(verts: &[usize], points: &[[f64; 3]]) -> f64 {
 
 /// Relative size under which an area or volume counts as zero.
 const DEGENERATE: f64 = 1e-12;
+
+/// The smallest `extent^n` of a cell (n its dimension) the geometric checks handle: below it,
+/// `DEGENERATE * extent^n` is subnormal and a well-shaped cell could not be told from a flat
+/// one (`f64::MIN_POSITIVE / DEGENERATE`, about 2.2e-296).
+pub const TINY_SIZE: f64 = f64::MIN_POSITIVE / DEGENERATE;
+
+/// The largest difference of one coordinate between two points of a cell: the cell's
+/// extent, computed without squares, so that it is finite for any finite coordinates whose
+/// differences are, and zero only when every point of the cell is at one position.
+pub(crate) fn extent(verts: &[usize], points: &[[f64; 3]]) -> f64 {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for &v in verts {
+        for ((l, h), &x) in lo.iter_mut().zip(&mut hi).zip(&points[v]) {
+            *l = l.min(x);
+            *h = h.max(x);
+        }
+    }
+    (0..3).fold(0.0, |e: f64, a| e.max(hi[a] - lo[a]))
+}
+
+/// Why the area (`dim` 2) or volume (`dim` 3) of a cell of extent `ext` is out of f64's
+/// range, if it is: the squares and triple products of its edge vectors (up to about
+/// `6 extent^n`, with the factor 8 of margin) overflow, or `extent^n` is below [`TINY_SIZE`].
+fn out_of_range(ext: f64, dim: usize, verts: &[usize], points: &[[f64; 3]]) -> Option<String> {
+    let what = if dim == 2 { "area" } else { "volume" };
+    let n = if dim == 2 { 2 } else { 3 };
+    let size = ext.powi(n);
+    let magnitude = verts
+        .iter()
+        .flat_map(|&v| points[v])
+        .fold(0.0_f64, |m, x| m.max(x.abs()));
+    if !(8.0 * size).is_finite() {
+        Some(format!(
+            "its {what} overflows f64 (extent {ext:.3e}, coordinates up to {magnitude:.3e})"
+        ))
+    } else if ext > 0.0 && size < TINY_SIZE {
+        Some(format!(
+            "its {what} underflows f64 (extent {ext:.3e}: extent^{n} = {size:.3e} is below {TINY_SIZE:.1e})"
+        ))
+    } else {
+        None
+    }
+}
 
 /// Relative size (of `l^3`) above which corner Jacobians of both signs make a twisted cell.
 const TWIST: f64 = 1e-10;
@@ -733,10 +798,13 @@ fn polygon_crossing(verts: &[usize], points: &[[f64; 3]]) -> Option<(usize, usiz
 /// 180 degrees (a vertex on a side, as where a polygon meets two smaller neighbours) is fine.
 fn polygon_fold(verts: &[usize], points: &[[f64; 3]]) -> Option<String> {
     let k = verts.len();
+    // the unit normal: products stay of the order of extent^2, so that any cell whose area
+    // is finite is checked without overflow (`n_len > 0`: flat polygons are refused before)
     let n = polygon_normal(verts, points);
     let n_len = norm(n);
+    let n = [n[0] / n_len, n[1] / n_len, n[2] / n_len];
     let l = max_edge(verts, points);
-    let eps = TWIST * l * l * n_len;
+    let eps = TWIST * l * l;
     let p = |j: usize| points[verts[j % k]];
     let mut cf = [0.0; 3];
     for &v in verts {
@@ -767,6 +835,7 @@ fn check_geometry(
 ) -> Result<Vec<Vec<usize>>, MeshError> {
     let points = &mesh.points;
     let mut degenerate = Vec::new();
+    let mut overflow = Vec::new();
     let mut twisted = Vec::new();
     let mut inverted = Vec::new();
     let mut cells = Vec::with_capacity(ids.len());
@@ -779,6 +848,11 @@ fn check_geometry(
             .map(|(_, v)| *v)
         {
             degenerate.push((c, format!("point {v} appears twice")));
+            cells.push(verts.clone());
+            continue;
+        }
+        if let Some(why) = out_of_range(extent(verts, points), dim, verts, points) {
+            overflow.push((c, kind.name(), why));
             cells.push(verts.clone());
             continue;
         }
@@ -842,6 +916,9 @@ fn check_geometry(
         } else {
             cells.push(verts.clone());
         }
+    }
+    if !overflow.is_empty() {
+        return Err(MeshError::Overflow { cells: overflow });
     }
     if !degenerate.is_empty() {
         return Err(MeshError::Degenerate { cells: degenerate });

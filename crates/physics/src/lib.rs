@@ -146,3 +146,12 @@ fn project(v: &mut [[f64; 3]], fixed: &[bool]) {
         }
     }
 }
+
+/// The shipped common rules a model file is loaded with on a map of dimension `dim` (2 or
+/// 3): `(file name, text)`, declaring the embeddings every simulation has (`position`,
+/// `rest`, `velocity`, `force`, `mass`, `dx`, `dv`, `df`, the material, ...). None for
+/// another dimension. Tools that check a user's model file (`topomech check`,
+/// `topomech models`) load it after this, as a simulation does.
+pub fn common_rules(dim: usize) -> Option<(String, &'static str)> {
+    model::model_source("common", dim).map(|text| (format!("common{dim}d.tmr"), text))
+}

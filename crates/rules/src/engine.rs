@@ -90,6 +90,23 @@ pub enum ApplyError {
         /// The value, as the language prints it.
         value: String,
     },
+    /// The caller's interrupt check ([`RuleSet::apply_everywhere_interruptible`]) asked to
+    /// stop. The application stops only where the map is valid: while matches are found or
+    /// values evaluated, before any change to the topology or the values (embeddings the rules
+    /// declare may have been added to the map, zero everywhere, as `prepare` adds them).
+    #[error("rule '{rule}': interrupted while {stage} ({found} match(es) found so far); {applied} match(es) applied, the map is valid")]
+    Interrupted {
+        /// The rule.
+        rule: String,
+        /// What it was doing: `finding matches`, `evaluating`, `planning the new topology`,
+        /// `checking the values written` or `running its compiled plan`.
+        stage: &'static str,
+        /// Matches found before the interruption.
+        found: usize,
+        /// Matches applied: always 0, since an application writes all its matches in one
+        /// batch after every value is evaluated.
+        applied: usize,
+    },
     /// The rewrite was refused by the kernel (should not happen for checked rules; reported,
     /// never a panic).
     #[error("rule '{rule}': {source}")]
@@ -133,6 +150,37 @@ pub struct ApplyReport {
     /// Expression evaluations for writes: one per distinct value written per match, not
     /// one per dart.
     pub evaluations: usize,
+}
+
+/// How much work (darts tried, rows evaluated) passes between two calls of an interrupt
+/// check: a few microseconds of matching, so a check that answers at once stops an
+/// application within milliseconds.
+pub const INTERRUPT_EVERY: usize = 1024;
+
+/// The caller's interrupt check, called once per [`INTERRUPT_EVERY`] units of work.
+struct Poll<'a> {
+    check: &'a dyn Fn() -> bool,
+    work: usize,
+}
+
+impl<'a> Poll<'a> {
+    fn new(check: &'a dyn Fn() -> bool) -> Self {
+        Poll { check, work: 0 }
+    }
+
+    /// Counts `n` units of work; true when the check was due and asks to stop.
+    fn tick(&mut self, n: usize) -> bool {
+        self.work += n;
+        if self.work < INTERRUPT_EVERY {
+            return false;
+        }
+        self.work = 0;
+        (self.check)()
+    }
+}
+
+fn never() -> bool {
+    false
 }
 
 /// Rows of the orbit of `d` with the given labels, breadth-first; `next` as in [`Match`].
@@ -598,7 +646,7 @@ impl RuleSet {
                 });
             }
         }
-        apply_matches(g, &b, &[m])
+        apply_matches(g, &b, &[m], &mut Poll::new(&never))
     }
 
     /// Every non-overlapping match of rule `name` (single-hook rules), in dart order, whose
@@ -610,7 +658,7 @@ impl RuleSet {
         params: &Params,
     ) -> Result<Vec<Match>, ApplyError> {
         let b = self.bind(g, name, params)?;
-        find_all(g, &b)
+        find_all(g, &b, &mut Poll::new(&never))
     }
 
     /// Applies rule `name` at every match at once (see the module docs).
@@ -620,14 +668,30 @@ impl RuleSet {
         name: &str,
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
+        self.apply_everywhere_interruptible(g, name, params, &never)
+    }
+
+    /// [`RuleSet::apply_everywhere`], calling `interrupt` once per [`INTERRUPT_EVERY`] darts
+    /// tried or rows evaluated (and before a compiled plan runs): when it returns true the
+    /// application stops with [`ApplyError::Interrupted`] before changing the topology or
+    /// any value, so the map stays valid. A caller that answers Ctrl-C polls its signal
+    /// flag there.
+    pub fn apply_everywhere_interruptible(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        interrupt: &dyn Fn() -> bool,
+    ) -> Result<ApplyReport, ApplyError> {
+        let poll = &mut Poll::new(interrupt);
         let b = self.bind_for(g, name, params, true)?;
         if b.rule.changes_topology {
-            let ms = find_all(g, &b)?;
+            let ms = find_all(g, &b, poll)?;
             if ms.is_empty() {
                 return Ok(ApplyReport::default());
             }
             let b = self.bind(g, name, params)?;
-            return apply_matches(g, &b, &ms);
+            return apply_matches(g, &b, &ms, poll);
         }
         // a computation rule: reuse its plan while the topology and the guard's inputs stay
         let index = self
@@ -650,7 +714,7 @@ impl RuleSet {
             .get(&index)
             .is_some_and(|p| p.identity == g.identity() && p.reads == reads);
         if !fresh {
-            let matches = find_all(g, &b)?;
+            let matches = find_all(g, &b, poll)?;
             let kind = if matches.is_empty() {
                 PlanKind::Matches(matches)
             } else {
@@ -678,6 +742,14 @@ impl RuleSet {
         let b = self.bind(g, name, params)?;
         match &mut plan.kind {
             PlanKind::Compiled(p) => {
+                if (poll.check)() {
+                    return Err(ApplyError::Interrupted {
+                        rule: name.into(),
+                        stage: "running its compiled plan",
+                        found: p.matches(),
+                        applied: 0,
+                    });
+                }
                 if p.run(g, &b.ids, &b.params).is_ok() {
                     return Ok(ApplyReport {
                         matches: p.matches(),
@@ -687,10 +759,10 @@ impl RuleSet {
                 }
                 // the interpreter reports what failed, with the dart (or applies the rule
                 // where a failure was in a branch the interpreter does not take)
-                let ms = find_all(g, &b)?;
-                apply_matches(g, &b, &ms)
+                let ms = find_all(g, &b, poll)?;
+                apply_matches(g, &b, &ms, poll)
             }
-            PlanKind::Matches(ms) => apply_matches(g, &b, ms),
+            PlanKind::Matches(ms) => apply_matches(g, &b, ms, poll),
         }
     }
 
@@ -805,7 +877,7 @@ fn eval_err(rule: &str, dart: Dart, e: &crate::value::EvalError) -> ApplyError {
     }
 }
 
-fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
+fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyError> {
     let rule = b.rule;
     if rule.hooks.len() != 1 {
         return Err(ApplyError::Hooks {
@@ -858,6 +930,14 @@ fn find_all(g: &GMap, b: &Bound) -> Result<Vec<Match>, ApplyError> {
     let mut key: Vec<u32> = Vec::new();
     let mut out = Vec::new();
     for d in g.darts() {
+        if poll.tick(1) {
+            return Err(ApplyError::Interrupted {
+                rule: rule.name.clone(),
+                stage: "finding matches",
+                found: out.len(),
+                applied: 0,
+            });
+        }
         if used.is_marked(d) {
             continue;
         }
@@ -1013,12 +1093,26 @@ struct Pending {
     values: Vec<Val>,
 }
 
-fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, ApplyError> {
+fn apply_matches(
+    g: &mut GMap,
+    b: &Bound,
+    ms: &[Match],
+    poll: &mut Poll,
+) -> Result<ApplyReport, ApplyError> {
     let rule = b.rule;
     // 1. evaluate every write on the map as it is
     let mut evaluations = 0;
     let mut pending: Vec<Vec<Pending>> = Vec::with_capacity(ms.len());
     for m in ms {
+        // nothing is changed before every value is evaluated: a stop here leaves the map as is
+        if poll.tick(m.rows) {
+            return Err(ApplyError::Interrupted {
+                rule: rule.name.clone(),
+                stage: "evaluating",
+                found: ms.len(),
+                applied: 0,
+            });
+        }
         let mut ev = Eval::new(g, b, m);
         let mut ps = Vec::new();
         for s in &rule.program {
@@ -1079,8 +1173,20 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
     let mut changes = Vec::new();
     let mut fresh = Vec::new();
     let mut remove = Vec::new();
+    let interrupted = |stage| ApplyError::Interrupted {
+        rule: rule.name.clone(),
+        stage,
+        found: ms.len(),
+        applied: 0,
+    };
     if rule.changes_topology {
         for m in ms {
+            // the darts created so far are free (every alpha a fixed point): removing them
+            // leaves the map as it was
+            if poll.tick(m.rows) {
+                undo_fresh(g, &fresh);
+                return Err(interrupted("planning the new topology"));
+            }
             let mut nd_darts = m.darts.clone();
             for (k, nd) in rule.nodes.iter().enumerate() {
                 if nd.left.is_none() {
@@ -1122,12 +1228,22 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
         node_darts = ms.iter().map(|m| m.darts.clone()).collect();
     }
     // 3. one value per orbit of the result: checked on the planned topology, before any change
-    let overlay: HashMap<(usize, Dart), Dart> =
-        changes.iter().map(|&(i, a, b)| ((i, a), b)).collect();
+    let mut overlay: HashMap<(usize, Dart), Dart> = HashMap::with_capacity(changes.len());
+    for chunk in changes.chunks(INTERRUPT_EVERY) {
+        if poll.tick(chunk.len()) {
+            undo_fresh(g, &fresh);
+            return Err(interrupted("planning the new topology"));
+        }
+        overlay.extend(chunk.iter().map(|&(i, a, b)| ((i, a), b)));
+    }
     let mut groups: HashMap<usize, HashMap<Dart, u32>> = HashMap::new();
     let mut written: HashMap<(usize, u32), (Val, Dart)> = HashMap::new();
     let mut conflict = None;
     'outer: for (ps, nd_darts) in pending.iter().zip(&node_darts) {
+        if poll.tick(ps.iter().map(|p| p.values.len()).sum()) {
+            undo_fresh(g, &fresh);
+            return Err(interrupted("checking the values written"));
+        }
         for p in ps {
             let orbit = b.embs[p.emb].orbit;
             let group = groups.entry(p.emb).or_default();
@@ -1155,19 +1271,14 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
             }
         }
     }
-    let undo_fresh = |g: &mut GMap| {
-        for &d in &fresh {
-            let _ = g.remove_dart(d);
-        }
-    };
     if let Some(c) = conflict {
-        undo_fresh(g);
+        undo_fresh(g, &fresh);
         return Err(c);
     }
     // 4. rewrite the topology, then write
     if rule.changes_topology && !ms.is_empty() {
         if let Err(source) = g.rewire(&changes, &fresh, &remove) {
-            undo_fresh(g);
+            undo_fresh(g, &fresh);
             return Err(ApplyError::Rewire {
                 rule: rule.name.clone(),
                 source,
@@ -1200,6 +1311,14 @@ fn apply_matches(g: &mut GMap, b: &Bound, ms: &[Match]) -> Result<ApplyReport, A
         }
     }
     Ok(report)
+}
+
+/// Removes the darts an application created before it stopped (free darts, linked to
+/// nothing yet).
+fn undo_fresh(g: &mut GMap, fresh: &[Dart]) {
+    for &d in fresh {
+        let _ = g.remove_dart(d);
+    }
 }
 
 /// Whether every real of a value is finite (integers and booleans always are).

@@ -313,6 +313,22 @@ pub fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
     })
 }
 
+/// The error for an element whose size measure (`det`) is not finite: a non-finite node
+/// coordinate when there is one, else an overflow of f64 (finite coordinates so far apart
+/// that their products exceed `f64::MAX`), never "degenerate".
+fn beyond_f64<'a>(what: &str, coords: impl Iterator<Item = &'a f64>, det: f64) -> EvalError {
+    let mut magnitude: f64 = 0.0;
+    for &c in coords {
+        if !c.is_finite() {
+            return EvalError(format!("{what}: a node coordinate is {c}"));
+        }
+        magnitude = magnitude.max(c.abs());
+    }
+    EvalError(format!(
+        "{what}: its size overflows f64 (determinant {det:e}, coordinates up to {magnitude:.3e})"
+    ))
+}
+
 /// The linear-elastic stiffness of a tetrahedron (see the module docs).
 pub fn tet_stiffness(x: [[f64; 3]; 4], young: f64, poisson: f64) -> Result<Mat, EvalError> {
     if !(poisson > -1.0 && poisson < 0.5 && young.is_finite()) {
@@ -327,7 +343,14 @@ pub fn tet_stiffness(x: [[f64; 3]; 4], young: f64, poisson: f64) -> Result<Mat, 
         .map(|c| c.iter().map(|v| v * v).sum::<f64>())
         .sum::<f64>()
         .powf(1.5);
-    if det.abs() <= 1e-14 * scale || !det.is_finite() {
+    if !det.is_finite() || !scale.is_finite() {
+        return Err(beyond_f64(
+            "tet_stiffness: tetrahedron",
+            x.iter().flatten(),
+            det,
+        ));
+    }
+    if det.abs() <= 1e-14 * scale {
         return Err(EvalError(format!(
             "tet_stiffness: degenerate tetrahedron (6 V = {det:e})"
         )));
@@ -458,7 +481,10 @@ fn hex_gradients(x: &[[f64; 3]; 8], xi: [f64; 3]) -> Result<([[f64; 3]; 8], f64)
     let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
         - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
         + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
-    if det == 0.0 || !det.is_finite() {
+    if !det.is_finite() {
+        return Err(beyond_f64("hexahedron", x.iter().flatten(), det));
+    }
+    if det == 0.0 {
         return Err(EvalError(format!(
             "hexahedron: the Jacobian determinant is {det:e} (degenerate element)"
         )));
@@ -538,7 +564,14 @@ pub fn tri_stiffness(p: [[f64; 2]; 3], young: f64, poisson: f64, t: f64) -> Resu
     );
     let det = a[0] * b[1] - a[1] * b[0];
     let scale = a[0] * a[0] + a[1] * a[1] + b[0] * b[0] + b[1] * b[1];
-    if det.abs() <= 1e-14 * scale || !det.is_finite() {
+    if !det.is_finite() || !scale.is_finite() {
+        return Err(beyond_f64(
+            "tri_stiffness: triangle",
+            p.iter().flatten(),
+            det,
+        ));
+    }
+    if det.abs() <= 1e-14 * scale {
         return Err(EvalError(format!(
             "tri_stiffness: degenerate triangle (2 A = {det:e})"
         )));

@@ -8,13 +8,18 @@
 //! wrong shape or a non-finite number). A missing or unknown parameter is the rule's business:
 //! `ApplyError`.
 
+use std::cell::Cell;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use numpy::{PyArrayDescrMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyTuple};
 use topomech_gmap::{Dart, GMap};
+use topomech_physics::common_rules;
 use topomech_rules::check::Rule;
+use topomech_rules::model::Model;
 use topomech_rules::{
     library, load_files, load_sources, ApplyError as KernelApplyError, ApplyReport, Diagnostic,
     Params, RuleSet, Ty, Val,
@@ -33,6 +38,31 @@ pub(crate) struct PyRuleSet {
     warnings: Vec<String>,
 }
 
+/// How often an application polls Python's signal handlers (taking the GIL for that).
+const SIGNAL_POLL: Duration = Duration::from_millis(10);
+
+/// The interrupt check of a long application: at most once per [`SIGNAL_POLL`], runs
+/// Python's signal handlers (`Python::check_signals`, with the GIL); when one raises
+/// (`KeyboardInterrupt` for Ctrl-C) keeps the exception in `raised` and asks the engine to
+/// stop.
+fn signal_raised(last: &Cell<Instant>, raised: &Mutex<Option<PyErr>>) -> bool {
+    if last.get().elapsed() < SIGNAL_POLL {
+        return false;
+    }
+    last.set(Instant::now());
+    #[allow(clippy::redundant_closure_for_method_calls)] // the method is not general enough
+    let checked = Python::attach(|py| py.check_signals());
+    match checked {
+        Ok(()) => false,
+        Err(e) => {
+            *raised
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(e);
+            true
+        }
+    }
+}
+
 /// The rule set, or `RuleError` with every diagnostic.
 fn loaded(
     r: std::result::Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>>,
@@ -44,6 +74,70 @@ fn loaded(
         }),
         Err(diags) => Err(Error::Rules(diags)),
     }
+}
+
+/// `sources` after the shipped common rules of the dimension the first of them declares
+/// (unchanged when none declares 2 or 3, or when one of them is that common file already).
+fn with_common_rules(sources: Vec<(String, String)>) -> Vec<(String, String)> {
+    let dim = sources.iter().find_map(|(_, text)| {
+        topomech_rules::parser::parse(text)
+            .ok()
+            .and_then(|f| f.dimension)
+            .and_then(|(n, _)| usize::try_from(n).ok())
+    });
+    let Some((name, text)) = dim.and_then(common_rules) else {
+        return sources;
+    };
+    if sources.iter().any(|(n, _)| *n == name) {
+        return sources;
+    }
+    let mut out = vec![(name, text.to_string())];
+    out.extend(sources);
+    out
+}
+
+/// A parameter's value for Python: a float, an int, a bool or a list of floats.
+fn val_object<'py>(py: Python<'py>, v: &Val) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match v {
+        Val::F(x) => x.into_pyobject(py)?.into_any(),
+        Val::I(x) => x.into_pyobject(py)?.into_any(),
+        Val::B(x) => x.into_pyobject(py)?.to_owned().into_any(),
+        Val::V2(x) => PyList::new(py, x)?.into_any(),
+        Val::V3(x) => PyList::new(py, x)?.into_any(),
+        Val::M(m) => PyList::new(py, &m.data)?.into_any(),
+    })
+}
+
+/// One model declaration as `RuleSet.models` gives it.
+fn model_dict<'py>(py: Python<'py>, m: &Model) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("name", &m.name)?;
+    d.set_item("file", &m.file)?;
+    d.set_item("line", m.pos.line)?;
+    d.set_item("col", m.pos.col)?;
+    let params = PyList::empty(py);
+    for p in &m.params {
+        let default = match &p.default {
+            Some(v) => val_object(py, v)?,
+            None => py.None().into_bound(py),
+        };
+        params.append(PyTuple::new(
+            py,
+            [
+                p.name.clone().into_pyobject(py)?.into_any(),
+                p.ty.to_string().into_pyobject(py)?.into_any(),
+                default,
+            ],
+        )?)?;
+    }
+    d.set_item("params", params)?;
+    d.set_item("dimensions", m.dimensions.clone())?;
+    d.set_item("needs", m.needs.clone())?;
+    d.set_item("forces", m.forces.clone())?;
+    d.set_item("jvp_outputs", m.jvp_outputs.clone())?;
+    d.set_item("has_jvp", !m.jvp.is_empty())?;
+    d.set_item("per_element", m.per_element)?;
+    Ok(d)
 }
 
 /// The `topomech._core.GMap` behind `obj`: the object itself, or its `core` attribute (the
@@ -308,6 +402,23 @@ impl PyRuleSet {
         py.detach(move || guard(|| loaded(load_sources(&sources))))
     }
 
+    /// Checks the texts of model files (`[(name, text), ...]`) as a simulation loads them:
+    /// after the shipped common rules of their dimension (the embeddings every simulation
+    /// has: `position`, `rest`, `velocity`, `force`, `mass`, `dx`, `dv`, `df`, the
+    /// material, ...), so a model file declares only `dimension` and its own embeddings. The
+    /// dimension is the first one a file declares; without one (or with one other than 2 or
+    /// 3) the files are checked alone and the checker says why. Raises `RuleError` listing
+    /// every error at its `FILE:LINE:COL`.
+    #[staticmethod]
+    fn from_model_sources(py: Python<'_>, sources: Vec<(String, String)>) -> PyResult<PyRuleSet> {
+        if sources.is_empty() {
+            return Err(
+                value_error("from_model_sources needs at least one (name, text) pair").into(),
+            );
+        }
+        py.detach(move || guard(|| loaded(load_sources(&with_common_rules(sources)))))
+    }
+
     /// The modeling rules shipped with topomech for `dimension` 2 or 3: split an edge,
     /// triangulate a face, quad subdivision, unsew and sew along the last link, remove a
     /// detached face (2D) or volume (3D). `rule_names` lists them.
@@ -341,6 +452,18 @@ impl PyRuleSet {
         self.inner.rules().iter().map(|r| r.name.clone()).collect()
     }
 
+    /// The model declarations of the files, in file order: dicts `{"name", "file", "line",
+    /// "col", "params": [(name, type, default or None), ...], "dimensions": [int],
+    /// "needs": str or None, "forces": [str], "jvp_outputs": [str], "has_jvp": bool,
+    /// "per_element": bool}`; a default is a float (`f64`) or a list of 3 floats (`vec3`).
+    fn models<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.inner
+            .models()
+            .iter()
+            .map(|m| model_dict(py, m))
+            .collect()
+    }
+
     /// `{"name", "file", "params": [[name, type], ...], "hooks": int, "changes_topology"}`;
     /// `hooks` is the number of darts `apply(..., at=...)` needs.
     fn rule_info<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
@@ -370,7 +493,10 @@ impl PyRuleSet {
     /// else once with its hooks at the darts `at` (one per hook). `params` maps each
     /// parameter to a value: a number, a bool, a list or array of 2 or 3 numbers, or a 2-D
     /// list or array for a matrix. Returns `{"matches", "created", "deleted"}` (darts).
-    /// Raises `ApplyError` (the map unchanged) when the rule does not apply.
+    /// Raises `ApplyError` (the map unchanged) when the rule does not apply. Ctrl-C
+    /// (SIGINT) during an application at every match raises `KeyboardInterrupt` within
+    /// milliseconds (the signal is polled every 10 ms), the map valid and without any of the
+    /// rule's changes.
     #[pyo3(signature = (gmap, name, at = None, params = None))]
     fn apply<'py>(
         &self,
@@ -385,11 +511,23 @@ impl PyRuleSet {
         let report = g.mutate(py, |map| {
             let params = params_arg(rules.rule(name)?, params)?;
             let hooks = at.map(|at| hooks_arg(map, at)).transpose()?;
-            py.detach(|| match hooks {
-                None => rules.apply_everywhere(map, name, &params),
+            let raised: Mutex<Option<PyErr>> = Mutex::new(None);
+            let r = py.detach(|| match hooks {
+                None => {
+                    let last = Cell::new(Instant::now());
+                    let interrupt = || signal_raised(&last, &raised);
+                    rules.apply_everywhere_interruptible(map, name, &params, &interrupt)
+                }
                 Some(h) => rules.apply_at(map, name, &h, &params),
-            })
-            .map_err(Error::from)
+            });
+            let raised = raised
+                .into_inner()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            match (r, raised) {
+                // the engine stopped because a signal handler raised (KeyboardInterrupt)
+                (Err(KernelApplyError::Interrupted { .. }), Some(e)) => Err(Error::Py(e)),
+                (r, _) => r.map_err(Error::from),
+            }
         })?;
         report_dict(py, &report)
     }

@@ -38,6 +38,7 @@ use crate::gmap::{
 /// The keys of a configuration, in the order of [`Config`]'s fields.
 const CONFIG_KEYS: &[&str] = &[
     "models",
+    "model_files",
     "density",
     "young",
     "poisson",
@@ -455,6 +456,24 @@ fn ground_arg(v: &Bound<'_, PyAny>) -> Result<Option<Ground>> {
     Ok(Some(Ground::Plane { point, normal }))
 }
 
+/// A user's model file: `(file name, text)`, the name shown in diagnostics.
+fn model_file_arg(obj: &Bound<'_, PyAny>, i: usize) -> Result<(String, String)> {
+    let what = format!("model_files[{i}]");
+    let items = list_arg(obj, &what)
+        .ok()
+        .filter(|t| t.len() == 2)
+        .ok_or_else(|| {
+            type_error(format!(
+                "{what} must be a (file name, text) pair of str, got {}",
+                type_name(obj)
+            ))
+        })?;
+    Ok((
+        str_arg(&items[0], &format!("{what}[0]"))?,
+        str_arg(&items[1], &format!("{what}[1]"))?,
+    ))
+}
+
 /// A [`Config`] from `{key: value}` entries (unset keys keep [`Config::default`]).
 fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
     let mut cfg = Config::default();
@@ -466,6 +485,13 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
                     .iter()
                     .enumerate()
                     .map(|(i, m)| model_arg(m, i))
+                    .collect::<Result<_>>()?;
+            }
+            "model_files" => {
+                cfg.model_files = list_arg(v, k)?
+                    .iter()
+                    .enumerate()
+                    .map(|(i, f)| model_file_arg(f, i))
                     .collect::<Result<_>>()?;
             }
             "density" => cfg.density = positive(real_arg(v, k)?, k)?,
@@ -1257,7 +1283,8 @@ fn rows_i64(rows: &[usize]) -> Vec<i64> {
         .collect()
 }
 
-/// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "needs"}]`.
+/// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "needs",
+/// "has_jvp"}]`.
 #[pyfunction]
 pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
     shipped_models()
@@ -1274,6 +1301,7 @@ pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
             }
             d.set_item("params", p)?;
             d.set_item("needs", m.needs.as_deref().unwrap_or(""))?;
+            d.set_item("has_jvp", m.has_jvp)?;
             Ok(d)
         })
         .collect()

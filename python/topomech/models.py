@@ -1,0 +1,237 @@
+"""Models as rule files: a model a user writes (``Model.load``) or one topomech ships
+(``Model.shipped``), for :class:`topomech.Simulation` and scenes.
+
+A model is a ``model`` declaration in a rule file (``.tmr``)::
+
+    model anchor(k: f64 = 10.0) {
+      init   anchor_init(k)                 # rules applied once, everywhere, in order
+      step   anchor_force                   # rules applied every step, everywhere, in order
+      forces f_anchor                       # force embeddings summed into each vertex's force
+      jvp    anchor_jvp -> df_anchor        # optional: exact Jacobian-vector product rules
+      needs  "vertices"                     # optional: said when the model matches nothing
+    }
+
+A user's file is loaded after the shipped common rules of its dimension (the embeddings every
+simulation has: ``position``, ``rest``, ``velocity``, ``force``, ``mass``, ``dx``, ``dv``,
+``df``, the material, ...), so it declares only ``dimension`` and its own embeddings. A model
+without ``jvp`` runs with the explicit integrators only (``explicit_euler``,
+``symplectic_euler``); ``implicit_euler`` and ``static`` need its Jacobian rules.
+
+    >>> m = Model.shipped("stretch_elementary")
+    >>> m.params, m.has_jvp
+    ({'stiffness': 1000.0, 'damping': 0.0}, True)
+    >>> m.with_params(stiffness=50.0).values
+    {'stiffness': 50.0}
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Union
+
+from topomech import _core
+
+__all__ = ["EXPLICIT_INTEGRATORS", "INTEGRATORS", "Model", "ParamDefault"]
+
+#: A parameter's default: a number (``f64``), 3 numbers (``vec3``), or None (required).
+ParamDefault = Union[float, list[float], None]
+
+#: The integrators every model runs with.
+EXPLICIT_INTEGRATORS = ("explicit_euler", "symplectic_euler")
+#: Every integrator, in the order the CLI lists them; the last two need Jacobian rules.
+INTEGRATORS = (*EXPLICIT_INTEGRATORS, "implicit_euler", "static")
+
+
+@dataclass(frozen=True)
+class Model:
+    """A model declaration and the parameter values a simulation will run it with.
+
+    Build one with :meth:`load` (a user's rule file) or :meth:`shipped`; give it to
+    ``Simulation(models=[...])`` beside the ``"kind"`` and ``{"kind": ..., param: value}``
+    forms; set parameters with :meth:`with_params`."""
+
+    #: The declared name.
+    name: str
+    #: Each parameter's default, in declaration order (None: required, no default).
+    params: dict[str, ParamDefault]
+    #: Each parameter's type in the rule language (``f64`` or ``vec3``).
+    param_types: dict[str, str]
+    #: The dimensions of the maps it runs on (2: surfaces, 3: volumes).
+    dimensions: tuple[int, ...]
+    #: What it needs of the mesh, as declared (None when the declaration says nothing).
+    needs: str | None
+    #: Whether it has Jacobian rules (``jvp``): then ``implicit_euler`` and ``static`` runs too.
+    has_jvp: bool
+    #: The rule file that declares it, as given to :meth:`load`; None for a shipped model.
+    file: str | None = None
+    #: The parameter values set (:meth:`with_params`); the others keep their defaults.
+    values: dict[str, float] = field(default_factory=dict)
+    #: The rule file's text (read once by :meth:`load`); None for a shipped model.
+    source: str | None = field(default=None, repr=False, compare=False)
+    #: The force embeddings it sums into each vertex's ``force`` (empty for a shipped model).
+    forces: tuple[str, ...] = ()
+
+    @property
+    def integrators(self) -> tuple[str, ...]:
+        """The integrators it runs with: all four with Jacobian rules, else the explicit
+        ones."""
+        return INTEGRATORS if self.has_jvp else EXPLICIT_INTEGRATORS
+
+    @property
+    def missing(self) -> list[str]:
+        """The parameters without a default that :attr:`values` does not set."""
+        return [p for p, d in self.params.items() if d is None and p not in self.values]
+
+    @classmethod
+    def load(
+        cls,
+        path: str | os.PathLike[str],
+        name: str | None = None,
+        params: Mapping[str, float] | None = None,
+    ) -> Model:
+        """The model ``name`` declared in the rule file ``path`` (the file's only model when
+        ``name`` is None), with the parameter values ``params``.
+
+        Raises :class:`OSError` when the file cannot be read, :class:`UnicodeDecodeError`
+        when it is not UTF-8, :class:`topomech.RuleError` when the checker refuses it (one
+        ``FILE:LINE:COL: error[CONDITION]: message`` line per problem), :class:`ValueError`
+        when it declares no model, when ``name`` is None and it declares several, or when it
+        declares no model ``name`` (each naming the file's models), and as
+        :meth:`with_params` for ``params``."""
+        models = cls.load_all(path)
+        file = str(path)
+        names = ", ".join(m.name for m in models)
+        if not models:
+            raise ValueError(f"{file}: declares no model")
+        if name is None:
+            if len(models) > 1:
+                raise ValueError(f"{file}: declares several models ({names}): give a name")
+            model = models[0]
+        else:
+            found = [m for m in models if m.name == name]
+            if not found:
+                raise ValueError(f"{file}: declares no model '{name}' (it declares: {names})")
+            model = found[0]
+        return model.with_params(**dict(params or {}))
+
+    @classmethod
+    def load_all(cls, path: str | os.PathLike[str]) -> list[Model]:
+        """Every model the rule file ``path`` declares, in file order (errors as
+        :meth:`load`; an empty list for a file without models)."""
+        file = str(path)
+        text = Path(path).read_text(encoding="utf-8")
+        rules = _core.RuleSet.from_model_sources([(file, text)])
+        return [cls._from_declaration(m, text) for m in rules.models() if m["file"] == file]
+
+    @classmethod
+    def _from_declaration(cls, m: dict[str, Any], text: str | None) -> Model:
+        return cls(
+            name=str(m["name"]),
+            params={str(p): d for p, _, d in m["params"]},
+            param_types={str(p): str(t) for p, t, _ in m["params"]},
+            dimensions=tuple(int(d) for d in m["dimensions"]),
+            needs=m["needs"],
+            has_jvp=bool(m["has_jvp"]),
+            file=str(m["file"]),
+            source=text,
+            forces=tuple(m["forces"]),
+        )
+
+    @classmethod
+    def shipped(cls, name: str, dimension: int | None = None) -> Model:
+        """The shipped model ``name`` (of ``dimension`` 2 or 3 when its declarations differ
+        between dimensions: the 2D co-rotational triangle has a ``thickness``, the 3D
+        elements have none; without ``dimension`` the first listed). Raises
+        :class:`ValueError` naming the shipped models when there is none."""
+        found = [
+            m
+            for m in shipped_models()
+            if m.name == name and (dimension is None or dimension in m.dimensions)
+        ]
+        if not found:
+            known = ", ".join(dict.fromkeys(m.name for m in shipped_models()))
+            where = f" of dimension {dimension}" if dimension is not None else ""
+            raise ValueError(f"no shipped model '{name}'{where} (shipped: {known})")
+        return found[0]
+
+    def with_params(self, **values: float) -> Model:
+        """A copy with these parameter values set (over those set before). Raises
+        :class:`ValueError` for a parameter the model does not have (naming its
+        parameters), a non-finite value, or a ``vec3`` parameter (not settable yet: it
+        keeps its default), :class:`TypeError` for a value that is not a real number."""
+        out = dict(self.values)
+        for k, v in values.items():
+            if k not in self.params:
+                has = ", ".join(self.params) or "none"
+                raise ValueError(f"model '{self.name}' has no parameter '{k}' (it has: {has})")
+            if self.param_types.get(k, "f64") != "f64":
+                raise ValueError(
+                    f"model '{self.name}': parameter '{k}' is a {self.param_types[k]}; only "
+                    "f64 parameters can be set (it keeps its default)"
+                )
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise TypeError(
+                    f"model '{self.name}': parameter '{k}' must be a real number, "
+                    f"got {type(v).__name__}"
+                )
+            if not math.isfinite(v):
+                raise ValueError(f"model '{self.name}': parameter '{k}' must be finite, got {v}")
+            out[k] = float(v)
+        return replace(self, values=out)
+
+    def config_entry(self) -> dict[str, Any]:
+        """The ``models`` entry :class:`topomech.Simulation` takes: ``{"kind": name, param:
+        value, ...}`` (the values set)."""
+        return {"kind": self.name, **self.values}
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-ready description (``topomech models --json``): name, file, params
+        (``{name: {"type", "default"}}``), dimensions, needs, has_jvp, integrators."""
+        return {
+            "name": self.name,
+            "file": self.file,
+            "params": {
+                p: {"type": self.param_types.get(p, "f64"), "default": d}
+                for p, d in self.params.items()
+            },
+            "dimensions": list(self.dimensions),
+            "needs": self.needs,
+            "has_jvp": self.has_jvp,
+            "integrators": list(self.integrators),
+        }
+
+
+def shipped_models() -> list[Model]:
+    """The models topomech ships, as :class:`Model` objects (one per declaration: a name
+    whose declarations differ between dimensions appears once per dimension set)."""
+    return [
+        Model(
+            name=str(m["kind"]),
+            params={str(k): float(v) for k, v in m["params"].items()},
+            param_types={str(k): "f64" for k in m["params"]},
+            dimensions=tuple(int(d) for d in m["dims"]),
+            needs=str(m["needs"]) or None,
+            has_jvp=bool(m["has_jvp"]),
+        )
+        for m in _core.models()
+    ]
+
+
+def model_files_of(models: list[Any]) -> tuple[list[Any], list[tuple[str, str]]]:
+    """``models`` with each :class:`Model` replaced by its ``{"kind", params}`` entry, and the
+    ``(file, text)`` of the rule files the user's models come from (each once)."""
+    entries: list[Any] = []
+    files: list[tuple[str, str]] = []
+    for m in models:
+        if isinstance(m, Model):
+            entries.append(m.config_entry())
+            new = all(f != m.file for f, _ in files)
+            if m.file is not None and m.source is not None and new:
+                files.append((m.file, m.source))
+        else:
+            entries.append(m)
+    return entries, files
