@@ -12,22 +12,30 @@ use std::collections::HashMap;
 use std::sync::OnceLock;
 
 use topomech_rules::model::{Model, ModelParam};
-use topomech_rules::{load_sources, Params, Val};
+use topomech_rules::{load_sources_for, Params, Val};
 
 use crate::{Config, PhysicsError};
 
-/// The shipped model files: `(file name, dimension, text)`, in the order models are listed.
-const SHIPPED: &[(&str, usize, &str)] = &[
-    ("stretch2d.tmr", 2, include_str!("../models/stretch2d.tmr")),
-    ("stretch3d.tmr", 3, include_str!("../models/stretch3d.tmr")),
-    ("shear2d.tmr", 2, include_str!("../models/shear2d.tmr")),
-    ("shear3d.tmr", 3, include_str!("../models/shear3d.tmr")),
-    ("bending2d.tmr", 2, include_str!("../models/bending2d.tmr")),
-    ("fem3d.tmr", 3, include_str!("../models/fem3d.tmr")),
-    ("fem2d.tmr", 2, include_str!("../models/fem2d.tmr")),
+/// The shipped model files: `(file name, dimensions, text)`, in the order models are listed.
+/// A file serving both dimensions (`dimension 2 3`) is one entry.
+const SHIPPED: &[(&str, &[usize], &str)] = &[
+    (
+        "stretch.tmr",
+        &[2, 3],
+        include_str!("../models/stretch.tmr"),
+    ),
+    ("shear2d.tmr", &[2], include_str!("../models/shear2d.tmr")),
+    ("shear3d.tmr", &[3], include_str!("../models/shear3d.tmr")),
+    (
+        "bending2d.tmr",
+        &[2],
+        include_str!("../models/bending2d.tmr"),
+    ),
+    ("fem3d.tmr", &[3], include_str!("../models/fem3d.tmr")),
+    ("fem2d.tmr", &[2], include_str!("../models/fem2d.tmr")),
     (
         "hyperelastic3d.tmr",
-        3,
+        &[3],
         include_str!("../models/hyperelastic3d.tmr"),
     ),
 ];
@@ -90,33 +98,38 @@ pub fn shipped_models() -> Vec<ShippedModel> {
     static ALL: OnceLock<Vec<ShippedModel>> = OnceLock::new();
     ALL.get_or_init(|| {
         let mut out: Vec<ShippedModel> = Vec::new();
-        for (file, dim, text) in SHIPPED {
-            let common = model_source("common", *dim).expect("shipped");
-            let Ok((rules, _)) = load_sources(&[
-                (format!("common{dim}d.tmr"), common.to_string()),
-                ((*file).to_string(), (*text).to_string()),
-            ]) else {
-                continue;
-            };
-            for m in rules.models() {
-                let needs = m.needs.clone();
-                if let Some(e) = out
-                    .iter_mut()
-                    .find(|e| e.name == m.name && e.params == m.params && e.needs == needs)
-                {
-                    if !e.dimensions.contains(dim) {
-                        e.dimensions.push(*dim);
-                        e.dimensions.sort_unstable();
-                    }
+        for (file, dims, text) in SHIPPED {
+            for dim in *dims {
+                let common = model_source("common", *dim).expect("shipped");
+                let Ok((rules, _)) = load_sources_for(
+                    *dim,
+                    &[
+                        (format!("common{dim}d.tmr"), common.to_string()),
+                        ((*file).to_string(), (*text).to_string()),
+                    ],
+                ) else {
                     continue;
+                };
+                for m in rules.models() {
+                    let needs = m.needs.clone();
+                    if let Some(e) = out
+                        .iter_mut()
+                        .find(|e| e.name == m.name && e.params == m.params && e.needs == needs)
+                    {
+                        if !e.dimensions.contains(dim) {
+                            e.dimensions.push(*dim);
+                            e.dimensions.sort_unstable();
+                        }
+                        continue;
+                    }
+                    out.push(ShippedModel {
+                        name: m.name.clone(),
+                        dimensions: m.dimensions.clone(),
+                        params: m.params.clone(),
+                        needs,
+                        has_jvp: !m.jvp.is_empty(),
+                    });
                 }
-                out.push(ShippedModel {
-                    name: m.name.clone(),
-                    dimensions: m.dimensions.clone(),
-                    params: m.params.clone(),
-                    needs,
-                    has_jvp: !m.jvp.is_empty(),
-                });
             }
         }
         out
@@ -202,19 +215,21 @@ pub(crate) fn model_files(cfg: &Config, dim: usize) -> Result<Vec<(String, Strin
         let found = SHIPPED
             .iter()
             .zip(names)
-            .find(|((_, d, _), n)| *d == dim && n.iter().any(|x| x == kind));
+            .find(|((_, d, _), n)| d.contains(&dim) && n.iter().any(|x| x == kind));
         if let Some(((file, _, text), _)) = found {
             if !out.iter().any(|s| s.0 == *file) {
                 out.push(((*file).to_string(), (*text).to_string()));
             }
             continue;
         }
-        let dims: Vec<usize> = SHIPPED
+        let mut dims: Vec<usize> = SHIPPED
             .iter()
             .zip(names)
             .filter(|(_, n)| n.iter().any(|x| x == kind))
-            .map(|((_, d, _), _)| *d)
+            .flat_map(|((_, d, _), _)| d.iter().copied())
             .collect();
+        dims.sort_unstable();
+        dims.dedup();
         if dims.is_empty() {
             let mut known: Vec<&str> = Vec::new();
             for n in names.iter().chain(&user).flatten() {

@@ -267,8 +267,11 @@ pub struct ModelDecl {
 /// A whole rule file.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct File {
-    /// `dimension n`, with its position.
+    /// `dimension n`, with its position (the first dimension when several are written).
     pub dimension: Option<(u64, Pos)>,
+    /// Every dimension written on the `dimension` line (`dimension 2 3`: the file serves
+    /// 2-maps and 3-maps), with their positions.
+    pub dimensions: Vec<(u64, Pos)>,
     /// Its embeddings.
     pub embeddings: Vec<EmbeddingDecl>,
     /// Its rules.

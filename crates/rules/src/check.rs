@@ -272,8 +272,23 @@ impl Ctx<'_> {
 }
 
 /// Parses and checks rule files given as `(file name, source)`. Returns the checked rules
-/// when no error was found, and every diagnostic (warnings too) either way.
+/// when no error was found, and every diagnostic (warnings too) either way. The dimension is
+/// the one of the files that serve a single dimension (a set of files that all serve several
+/// is refused: use [`check_sources_for`]).
 pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diagnostic>) {
+    check_sources_for(None, sources)
+}
+
+/// Parses and checks rule files for maps of dimension `target` (`None`: inferred as in
+/// [`check_sources`]). A file serves the dimensions of its `dimension` line (`dimension 2 3`:
+/// both; no line: both); loaded for 2-maps, a file that also serves 3-maps has label 3
+/// dropped (`<1,2,3>` means `<1,2>`, a loop `a -3- a` is always true), and an arc `a -3- b`
+/// between two nodes is refused (it can never match: alpha3 is free on a 2-map).
+#[allow(clippy::single_match_else, clippy::too_many_lines)]
+pub fn check_sources_for(
+    target: Option<usize>,
+    sources: &[(String, String)],
+) -> (Option<Checked>, Vec<Diagnostic>) {
     let mut diags = Vec::new();
     let mut files = Vec::new();
     for (name, src) in sources {
@@ -291,44 +306,154 @@ pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diag
     if diags.iter().any(|d| d.severity == Severity::Error) {
         return (None, diags);
     }
-    check_files(&files)
+    check_files_for(target, &files)
 }
 
 /// Checks rule files already parsed (or built as syntax trees, see [`crate::build`]), given as
 /// `(file name, syntax tree)`, exactly as [`check_sources`] checks parsed text.
 pub fn check_files(files: &[(String, crate::ast::File)]) -> (Option<Checked>, Vec<Diagnostic>) {
+    check_files_for(None, files)
+}
+
+/// Checks rule files already parsed, for maps of dimension `target` (`None`: inferred), as
+/// [`check_sources_for`] checks parsed text.
+#[allow(clippy::single_match_else, clippy::too_many_lines)]
+pub fn check_files_for(
+    target: Option<usize>,
+    files: &[(String, crate::ast::File)],
+) -> (Option<Checked>, Vec<Diagnostic>) {
     let mut diags = Vec::new();
-    // dimension
-    let mut dim: Option<(usize, String)> = None;
+    // dimension: each file's dimensions (none written: both), and the one they are checked for
+    let mut file_dims: Vec<Vec<usize>> = Vec::new();
     for (name, f) in files {
         let mut c = Ctx {
             file: name,
             out: &mut diags,
         };
-        match f.dimension {
-            None => c.error(
-                Pos { line: 1, col: 1 },
-                "dimension",
-                "the file does not say 'dimension 2' or 'dimension 3'".into(),
-            ),
-            Some((n, p)) if n != 2 && n != 3 => c.error(
-                p,
-                "dimension",
-                format!("dimension {n} is not supported: use 2 (surfaces) or 3 (volumes)"),
-            ),
-            Some((n, p)) => match &dim {
-                Some((d, other)) if *d as u64 != n => c.error(
+        let mut v = Vec::new();
+        for &(n, p) in &f.dimensions {
+            if n == 2 || n == 3 {
+                v.push(n as usize);
+            } else {
+                c.error(
                     p,
                     "dimension",
-                    format!("dimension {n} differs from dimension {d} of {other}"),
-                ),
-                Some(_) => {}
-                None => dim = Some((n as usize, name.clone())), // 2 or 3
-            },
+                    format!("dimension {n} is not supported: use 2 (surfaces) or 3 (volumes)"),
+                );
+            }
         }
+        if f.dimensions.is_empty() {
+            v = vec![2, 3];
+        }
+        v.sort_unstable();
+        file_dims.push(v);
     }
-    let Some((dim, _)) = dim else {
+    if diags.iter().any(|d| d.severity == Severity::Error) {
         return (None, diags);
+    }
+    let dim = match target {
+        Some(t) => {
+            for ((name, f), dims) in files.iter().zip(&file_dims) {
+                if !dims.contains(&t) {
+                    let p = f.dimension.map_or(Pos { line: 1, col: 1 }, |d| d.1);
+                    let mut c = Ctx {
+                        file: name,
+                        out: &mut diags,
+                    };
+                    c.error(
+                        p,
+                        "dimension",
+                        format!(
+                            "the file serves dimension {}, not dimension {t} (the dimension the rules are loaded for)",
+                            dims.iter().map(ToString::to_string).collect::<Vec<_>>().join(" ")
+                        ),
+                    );
+                }
+            }
+            t
+        }
+        None => {
+            // inferred from the files that serve one dimension
+            let mut dim: Option<(usize, String)> = None;
+            for ((name, f), dims) in files.iter().zip(&file_dims) {
+                let [n] = dims[..] else { continue };
+                let p = f.dimension.map_or(Pos { line: 1, col: 1 }, |d| d.1);
+                let mut c = Ctx {
+                    file: name,
+                    out: &mut diags,
+                };
+                match &dim {
+                    Some((d, other)) if *d != n => c.error(
+                        p,
+                        "dimension",
+                        format!("dimension {n} differs from dimension {d} of {other}"),
+                    ),
+                    Some(_) => {}
+                    None => dim = Some((n, name.clone())),
+                }
+            }
+            match dim {
+                Some((d, other)) => {
+                    for ((name, f), dims) in files.iter().zip(&file_dims) {
+                        // (a file of one other dimension is refused above)
+                        if dims.len() > 1 && !dims.contains(&d) {
+                            let p = f.dimension.map_or(Pos { line: 1, col: 1 }, |x| x.1);
+                            let mut c = Ctx {
+                                file: name,
+                                out: &mut diags,
+                            };
+                            c.error(
+                                p,
+                                "dimension",
+                                format!("the file does not serve dimension {d} of {other}"),
+                            );
+                        }
+                    }
+                    d
+                }
+                None => {
+                    for (name, f) in files {
+                        let mut c = Ctx {
+                            file: name,
+                            out: &mut diags,
+                        };
+                        match f.dimension {
+                            None => c.error(
+                                Pos { line: 1, col: 1 },
+                                "dimension",
+                                "the file does not say 'dimension 2' or 'dimension 3', and no other file fixes the dimension: load the rules for a dimension (load_sources_for)".into(),
+                            ),
+                            Some((_, p)) => c.error(
+                                p,
+                                "dimension",
+                                "the files serve several dimensions and none fixes one: load the rules for a dimension (load_sources_for)".into(),
+                            ),
+                        }
+                    }
+                    return (None, diags);
+                }
+            }
+        }
+    };
+    if diags.iter().any(|d| d.severity == Severity::Error) {
+        return (None, diags);
+    }
+    // on a 2-map, a file that also serves 3-maps has its label 3 dropped (alpha3 is free)
+    let dropped: Vec<(String, crate::ast::File)>;
+    let files = if dim == 2 && file_dims.iter().any(|d| d.contains(&3)) {
+        let mut owned = files.to_vec();
+        for ((name, f), dims) in owned.iter_mut().zip(&file_dims) {
+            if dims.contains(&3) {
+                crate::dims::drop_label3(name, f, &mut diags);
+            }
+        }
+        if diags.iter().any(|d| d.severity == Severity::Error) {
+            return (None, diags);
+        }
+        dropped = owned;
+        &dropped[..]
+    } else {
+        files
     };
     // embeddings, shared by all files
     let mut embs: Vec<EmbDecl> = Vec::new();
@@ -378,7 +503,6 @@ pub fn check_files(files: &[(String, crate::ast::File)]) -> (Option<Checked>, Ve
             }
         }
     }
-    let file_dims: Vec<Vec<usize>> = files.iter().map(|_| vec![dim]).collect();
     let models = crate::model::check_models(files, &file_dims, &embs, &rules, &mut diags);
     let ok = !diags.iter().any(|d| d.severity == Severity::Error);
     (

@@ -27,6 +27,7 @@ pub mod build;
 pub mod builtins;
 pub mod check;
 mod compiled;
+mod dims;
 pub mod engine;
 pub mod lexer;
 pub mod mechanics;
@@ -47,6 +48,22 @@ pub fn load_sources(
     sources: &[(String, String)],
 ) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
     let (checked, diags) = check::check_sources(sources);
+    match checked {
+        Some(c) => Ok((RuleSet::new(c), diags)),
+        None => Err(diags),
+    }
+}
+
+/// Parses and checks rule sources `(file name, text)` for maps of dimension `dim` (2 or 3).
+/// A file serves the dimensions of its `dimension` line: `dimension 2 3` (or no line) serves
+/// both, and on a 2-map its label 3 is dropped (`<1,2,3>` means `<1,2>`); an arc `a -3- b`
+/// between two nodes is refused there (it can never match). A file that does not serve `dim`
+/// is refused. On success: the rule set and its warnings; otherwise every diagnostic.
+pub fn load_sources_for(
+    dim: usize,
+    sources: &[(String, String)],
+) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
+    let (checked, diags) = check::check_sources_for(Some(dim), sources);
     match checked {
         Some(c) => Ok((RuleSet::new(c), diags)),
         None => Err(diags),

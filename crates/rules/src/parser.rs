@@ -150,7 +150,7 @@ impl Parser {
                 Tok::Eof => return Ok(f),
                 Tok::Ident(k) if k == "dimension" => {
                     let p = self.bump().1;
-                    let (n, _) = self.int("a dimension (2 or 3)")?;
+                    let (n, npos) = self.int("a dimension (2 or 3)")?;
                     if f.dimension.is_some() {
                         return Err(SyntaxError {
                             pos: p,
@@ -158,6 +158,17 @@ impl Parser {
                         });
                     }
                     f.dimension = Some((written(n), p));
+                    f.dimensions.push((written(n), npos));
+                    while let Tok::Int(m) = self.peek().clone() {
+                        let mpos = self.bump().1;
+                        if f.dimensions.iter().any(|d| d.0 == written(m)) {
+                            return Err(SyntaxError {
+                                pos: mpos,
+                                message: format!("dimension {m} is written twice"),
+                            });
+                        }
+                        f.dimensions.push((written(m), mpos));
+                    }
                     self.eat_punct(";");
                 }
                 Tok::Ident(k) if k == "embedding" => {

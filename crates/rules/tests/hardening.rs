@@ -296,12 +296,8 @@ const SHIPPED: &[(&str, &str)] = &[
         include_str!("../../physics/models/shear3d.tmr"),
     ),
     (
-        "stretch2d.tmr",
-        include_str!("../../physics/models/stretch2d.tmr"),
-    ),
-    (
-        "stretch3d.tmr",
-        include_str!("../../physics/models/stretch3d.tmr"),
+        "stretch.tmr",
+        include_str!("../../physics/models/stretch.tmr"),
     ),
     (
         "topology2d.tmr",
