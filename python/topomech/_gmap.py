@@ -184,6 +184,10 @@ class GMap:
     ) -> GMap:
         """From the kernel's flat layout (see :mod:`topomech._cells`); options as
         :meth:`from_mesh`."""
+        if not isinstance(reorient, (bool, np.bool_)):
+            raise TypeError(
+                f"reorient must be True or False, got {reorient!r} ({type(reorient).__name__})"
+            )
         core, report = _core.GMap.from_flat(
             np.ascontiguousarray(points, dtype=np.float64),
             list(kinds),
@@ -254,17 +258,27 @@ class GMap:
         *,
         pinched: str = "merge",
         duplicates: str = "refuse",
+        linear: bool = False,
         _style: str = "python",
     ) -> GMap:
         """From a ``meshio.Mesh``, keeping the cells of the highest dimension (the lower
         dimensional ones, such as the boundary triangles Gmsh writes beside tetrahedra, are
-        dropped with a warning naming them). Options and errors as :meth:`from_mesh`."""
-        from topomech.io import select_cells
+        dropped with a warning naming them). Second-order cells (``tetra10``, ``triangle6``,
+        ...) are refused (:class:`MeshError` naming them and ``linear=True``) unless
+        ``linear=True``, which keeps their corner nodes (a warning says how many). Other
+        options and errors as :meth:`from_mesh`."""
+        from topomech.io import _linearize, select_cells
 
+        if not isinstance(linear, (bool, np.bool_)):
+            raise TypeError(f"linear must be True or False, got {linear!r}")
         kept, dropped = select_cells(mesh.cells)
         if dropped:
             what = ", ".join(map(str, dropped))
             warnings.warn(f"dropped {what}: lower-dimensional cells", stacklevel=2)
+        notes: list[str] = []
+        kept = _linearize(list(kept), range(len(kept)), bool(linear), notes, _style)
+        for note in notes:
+            warnings.warn(note, stacklevel=2)
         return cls.from_mesh(
             mesh.points,
             kept,
