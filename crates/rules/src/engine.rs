@@ -1529,7 +1529,13 @@ fn mean_of(values: &[Value]) -> Value {
         Value::Int(_) => {
             let s: i128 = values
                 .iter()
-                .map(|v| if let Value::Int(i) = v { *i as i128 } else { 0 })
+                .map(|v| {
+                    if let Value::Int(i) = v {
+                        i128::from(*i)
+                    } else {
+                        0
+                    }
+                })
                 .sum();
             Value::Int(s.div_euclid(n as i128) as i64)
         }

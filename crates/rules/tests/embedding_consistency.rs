@@ -10,6 +10,9 @@
 //! (plain arithmetic on the values read), and compared exactly or to 1e-12 (a mean of a few
 //! numbers of order 1 rounds at 1e-16).
 
+// values copied from the map are compared bit for bit on purpose (a copy is exact)
+#![allow(clippy::float_cmp)]
+
 use std::collections::HashMap;
 
 use topomech_gmap::generators::{grid, GridElement};
@@ -91,8 +94,12 @@ fn setup(with_error: bool) -> (GMap, RuleSet) {
     let darts: Vec<Dart> = g.darts().collect();
     for d in darts {
         let other = g.alpha(1, d);
-        g.set_value(corner, d, &Value::Real(vec![1.0 + d.0.min(other.0) as f64]))
-            .unwrap();
+        g.set_value(
+            corner,
+            d,
+            &Value::Real(vec![1.0 + f64::from(d.0.min(other.0))]),
+        )
+        .unwrap();
     }
     (g, rules)
 }
