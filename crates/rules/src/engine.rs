@@ -5,12 +5,14 @@
 //! explicit arcs, and must show the node's orbit type (relabelled) and arcs on those darts.
 //! Application evaluates every expression on the map as it was before the rule (values
 //! are read before any write), then rewrites the topology in one batch
-//! ([`GMap::rewire`]), then writes the values. Global application finds every match first,
-//! then applies them all. The matches of a rule that changes the topology never overlap (the
-//! whole footprint of a match is marked); those of a computation rule may share darts, since a
-//! force pattern reads its neighbours (the paper's angular springs match two whole faces per
-//! edge), but no match is applied twice: a match found again from another hook dart — the
-//! same footprint — is skipped. Two matches writing different values to one orbit are refused.
+//! ([`GMap::rewire`]), then writes the values; the embeddings of the map the rule does not
+//! write on an orbit made only of new darts get a value by their policy (`fill_new_orbits`).
+//! Global application finds every match first, then applies them all. The matches of a rule
+//! that changes the topology never overlap (the whole footprint of a match is marked); those
+//! of a computation rule may share darts, since a force pattern reads its neighbours (the
+//! paper's angular springs match two whole faces per edge), but no match is applied twice: a
+//! match found again from another hook dart — the same footprint — is skipped. Two matches
+//! writing different values to one orbit are refused.
 
 use std::collections::HashMap;
 use std::fmt;
@@ -111,7 +113,8 @@ pub enum ApplyError {
     },
     /// A topology-changing rule would create orbits made only of new darts where an
     /// embedding of the map gets no value: the rule does not write it there and its policy
-    /// gives none (see [`fill_new_orbits`]). Nothing was changed.
+    /// gives none (`error`, or no old orbit to take it from; README, "Embeddings the rule's
+    /// file does not declare"). Nothing was changed.
     #[error("rule '{rule}' creates {orbit} orbits made only of new darts (e.g. at dart {dart}), where embedding '{embedding}' ({ty} on {orbit}, policy {policy}) has no value: {reason}; declare it in the rule's file and write it, or give it policy sum")]
     NoValue {
         /// The rule.
