@@ -5,17 +5,21 @@
 //! explicit arcs, and must show the node's orbit type (relabelled) and arcs on those darts.
 //! Application evaluates every expression on the map as it was before the rule (values
 //! are read before any write), then rewrites the topology in one batch
-//! ([`GMap::rewire`]), then writes the values. Global application finds every match first,
-//! then applies them all. The matches of a rule that changes the topology never overlap (the
-//! whole footprint of a match is marked); those of a computation rule may share darts, since a
-//! force pattern reads its neighbours (the paper's angular springs match two whole faces per
-//! edge), but no match is applied twice: a match found again from another hook dart — the
-//! same footprint — is skipped. Two matches writing different values to one orbit are refused.
+//! ([`GMap::rewire`]), then writes the values; the embeddings of the map the rule does not
+//! write on an orbit made only of new darts get a value by their policy (`fill_new_orbits`).
+//! Global application finds every match first, then applies them all. The matches of a rule
+//! that changes the topology never overlap (the whole footprint of a match is marked); those
+//! of a computation rule may share darts, since a force pattern reads its neighbours (the
+//! paper's angular springs match two whole faces per edge), but no match is applied twice: a
+//! match found again from another hook dart — the same footprint — is skipped. Two matches
+//! writing different values to one orbit are refused.
 
 use std::collections::HashMap;
 use std::fmt;
 
-use topomech_gmap::{Dart, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType, RewireError, Value};
+use topomech_gmap::{
+    Dart, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType, Policy, RewireError, Value,
+};
 
 use crate::ast::AggKind;
 use crate::builtins;
@@ -106,6 +110,27 @@ pub enum ApplyError {
         /// Matches applied: always 0, since an application writes all its matches in one
         /// batch after every value is evaluated.
         applied: usize,
+    },
+    /// A topology-changing rule would create orbits made only of new darts where an
+    /// embedding of the map gets no value: the rule does not write it there and its policy
+    /// gives none (`error`, or no old orbit to take it from; README, "Embeddings the rule's
+    /// file does not declare"). Nothing was changed.
+    #[error("rule '{rule}' creates {orbit} orbits made only of new darts (e.g. at dart {dart}), where embedding '{embedding}' ({ty} on {orbit}, policy {policy}) has no value: {reason}; declare it in the rule's file and write it, or give it policy sum")]
+    NoValue {
+        /// The rule.
+        rule: String,
+        /// The embedding of the map.
+        embedding: String,
+        /// Its value type.
+        ty: EmbeddingType,
+        /// Its orbit type.
+        orbit: OrbitType,
+        /// Its policy: `copy`, `mean`, `sum` or `error`.
+        policy: &'static str,
+        /// A new dart of such an orbit.
+        dart: Dart,
+        /// Why the policy gives no value.
+        reason: String,
     },
     /// The rewrite was refused by the kernel (should not happen for checked rules; reported,
     /// never a panic).
@@ -1275,7 +1300,36 @@ fn apply_matches(
         undo_fresh(g, &fresh);
         return Err(c);
     }
-    // 4. rewrite the topology, then write
+    // 4. a value for every embedding of the map on the orbits made only of new darts that
+    // the rule does not write, planned before any change (a refusal changes nothing)
+    let filled = if rule.changes_topology && !fresh.is_empty() {
+        let mut origin: HashMap<Dart, Dart> = HashMap::with_capacity(fresh.len());
+        for (m, nd_darts) in ms.iter().zip(&node_darts) {
+            let hook = &m.darts[rule.hooks[0]];
+            for (k, nd) in rule.nodes.iter().enumerate() {
+                if nd.left.is_none() {
+                    for (r, &x) in nd_darts[k].iter().enumerate() {
+                        origin.insert(x, hook[r]);
+                    }
+                }
+            }
+        }
+        let mut written_darts: HashMap<EmbeddingId, std::collections::HashSet<Dart>> =
+            HashMap::new();
+        for ((emb, _), (_, x)) in &written {
+            written_darts.entry(b.ids[*emb]).or_default().insert(*x);
+        }
+        match fill_new_orbits(g, &rule.name, &overlay, &fresh, &origin, &written_darts) {
+            Ok(f) => f,
+            Err(e) => {
+                undo_fresh(g, &fresh);
+                return Err(e);
+            }
+        }
+    } else {
+        Vec::new()
+    };
+    // 5. rewrite the topology, then write
     if rule.changes_topology && !ms.is_empty() {
         if let Err(source) = g.rewire(&changes, &fresh, &remove) {
             undo_fresh(g, &fresh);
@@ -1284,6 +1338,10 @@ fn apply_matches(
                 source,
             });
         }
+    }
+    for (id, d, v) in filled {
+        g.set_value(id, d, &v)
+            .map_err(|e| ApplyError::Map(e.to_string()))?;
     }
     let written: HashMap<(usize, usize), Val> = written
         .into_iter()
@@ -1311,6 +1369,195 @@ fn apply_matches(
         }
     }
     Ok(report)
+}
+
+/// The values of the embeddings of the map on the orbits made only of new darts that the rule
+/// does not write: Jerboa's condition that every embedding of the modeler gets a value on every
+/// orbit of the result (Belhaouari et al., "Jerboa: a graph transformation library for
+/// topology-based geometric modeling", ICGT 2014, section 4), checked when the rule is applied
+/// since the map may carry embeddings the rule's file does not declare.
+///
+/// Every new dart is a copy of the hook's dart of its row (a created node has one dart per row
+/// of the hook orbit): its *origin*. For each non-derived embedding, an orbit of the planned
+/// result (`overlay` over `g`) made only of `fresh` darts, none of which the rule writes, gets
+/// its value from the old orbits of its darts' origins, by the embedding's policy:
+/// - `copy`: the value of the first origin (the origin of the orbit's first new dart in
+///   creation order), as a merge under `copy` keeps the first value;
+/// - `mean`: the mean of the distinct origin orbits' values (integers: floored; booleans: any);
+/// - `sum`: zero, its neutral value, so every total over the map is kept (the origins keep
+///   their values);
+/// - `error`: refused (the new orbit would split its origin).
+///
+/// Orbits that hold an old dart are left to [`GMap::rewire`] (merged or split by the policy);
+/// derived embeddings are recomputed when read; the vertex numbering `particle`/`point_id`
+/// (i64 on the vertex orbit) is numbered by [`GMap::rewire`]. Returns `(embedding, new dart,
+/// value)` to write after the rewrite, or [`ApplyError::NoValue`].
+fn fill_new_orbits(
+    g: &GMap,
+    rule: &str,
+    overlay: &HashMap<(usize, Dart), Dart>,
+    fresh: &[Dart],
+    origin: &HashMap<Dart, Dart>,
+    written: &HashMap<EmbeddingId, std::collections::HashSet<Dart>>,
+) -> Result<Vec<(EmbeddingId, Dart, Value)>, ApplyError> {
+    let is_fresh: std::collections::HashSet<Dart> = fresh.iter().copied().collect();
+    // the orbits made only of new darts, once per orbit type
+    let mut partitions: HashMap<OrbitType, Vec<Vec<Dart>>> = HashMap::new();
+    let mut out = Vec::new();
+    let vertex = OrbitType::vertex(g.dimension());
+    for (k, e) in g.embeddings().iter().enumerate() {
+        let id = EmbeddingId(k as u32);
+        if e.derived().is_some() {
+            continue;
+        }
+        if e.orbit() == vertex
+            && e.ty() == EmbeddingType::I64
+            && (e.name() == "particle" || e.name() == "point_id")
+        {
+            continue;
+        }
+        let o = e.orbit();
+        let orbits = partitions
+            .entry(o)
+            .or_insert_with(|| new_only_orbits(g, overlay, fresh, &is_fresh, o));
+        let w = written.get(&id);
+        for orbit in orbits.iter() {
+            if let Some(w) = w {
+                if orbit.iter().any(|d| w.contains(d)) {
+                    continue;
+                }
+            }
+            let first = orbit[0];
+            let refuse = |reason: String| ApplyError::NoValue {
+                rule: rule.to_string(),
+                embedding: e.name().to_string(),
+                ty: e.ty(),
+                orbit: o,
+                policy: e.policy().name(),
+                dart: first,
+                reason,
+            };
+            // distinct old orbits of the origins, in the order of the new darts
+            let mut slots: Vec<usize> = Vec::new();
+            let mut values: Vec<Value> = Vec::new();
+            for d in orbit {
+                if let Some(&src) = origin.get(d) {
+                    let s = e.slot(src);
+                    if !slots.contains(&s) {
+                        slots.push(s);
+                        values.push(
+                            g.value(id, src)
+                                .map_err(|x| ApplyError::Map(x.to_string()))?,
+                        );
+                    }
+                }
+            }
+            let v = match e.policy() {
+                Policy::Sum => zero_of(e.ty()),
+                Policy::Error => {
+                    return Err(refuse(
+                        "policy error refuses to split an orbit into new ones".to_string(),
+                    ))
+                }
+                _ if values.is_empty() => {
+                    return Err(refuse(
+                        "its darts copy no old dart, and the policy has no neutral value"
+                            .to_string(),
+                    ))
+                }
+                Policy::Copy => values[0].clone(),
+                Policy::Mean => mean_of(&values),
+            };
+            out.push((id, first, v));
+        }
+    }
+    Ok(out)
+}
+
+/// The orbits of type `o` in the planned result that are made only of `fresh` darts, each
+/// listed from its first new dart in creation order.
+fn new_only_orbits(
+    g: &GMap,
+    overlay: &HashMap<(usize, Dart), Dart>,
+    fresh: &[Dart],
+    is_fresh: &std::collections::HashSet<Dart>,
+    o: OrbitType,
+) -> Vec<Vec<Dart>> {
+    let mut seen: std::collections::HashSet<Dart> = std::collections::HashSet::new();
+    let mut out = Vec::new();
+    for &d in fresh {
+        if !seen.insert(d) {
+            continue;
+        }
+        let mut darts = vec![d];
+        let mut only_new = true;
+        let mut at = 0;
+        while at < darts.len() {
+            let y = darts[at];
+            at += 1;
+            for i in o.dims() {
+                if i > g.dimension() {
+                    continue;
+                }
+                let z = overlay
+                    .get(&(i, y))
+                    .copied()
+                    .unwrap_or_else(|| g.alpha(i, y));
+                if seen.insert(z) {
+                    only_new &= is_fresh.contains(&z);
+                    darts.push(z);
+                }
+            }
+        }
+        if only_new {
+            out.push(darts);
+        }
+    }
+    out
+}
+
+/// The zero of a type (the neutral value of `sum`).
+fn zero_of(t: EmbeddingType) -> Value {
+    match t {
+        EmbeddingType::I64 => Value::Int(0),
+        EmbeddingType::Bool => Value::Bool(false),
+        other => Value::Real(vec![0.0; other.width()]),
+    }
+}
+
+/// The mean of values of one type: reals component-wise, integers floored, booleans any.
+fn mean_of(values: &[Value]) -> Value {
+    let n = values.len();
+    match &values[0] {
+        Value::Int(_) => {
+            let s: i128 = values
+                .iter()
+                .map(|v| {
+                    if let Value::Int(i) = v {
+                        i128::from(*i)
+                    } else {
+                        0
+                    }
+                })
+                .sum();
+            Value::Int(s.div_euclid(n as i128) as i64)
+        }
+        Value::Bool(_) => Value::Bool(values.iter().any(|v| matches!(v, Value::Bool(true)))),
+        Value::Real(first) => {
+            let mut acc = vec![0.0; first.len()];
+            for v in values {
+                if let Value::Real(x) = v {
+                    for (a, y) in acc.iter_mut().zip(x) {
+                        *a += y;
+                    }
+                }
+            }
+            for a in &mut acc {
+                *a /= n as f64;
+            }
+            Value::Real(acc)
+        }
+    }
 }
 
 /// Removes the darts an application created before it stopped (free darts, linked to
