@@ -86,6 +86,9 @@ BAD_NAMES = {
     "empty": "",
     "drive": "C:x",
     "control": "a\\nb",
+    "blank": " ",
+    "trailing-blank": "x ",
+    "leading-dash": "-rf",
 }
 
 
@@ -205,6 +208,21 @@ def test_a_folder_with_files_no_run_wrote_is_refused(
     assert "--overwrite" in err
     assert files_under(out) == {"notes.txt", "final.vtu"}
     assert (out / "final.vtu").read_text() == "my own final.vtu"
+
+
+def test_a_damaged_manifest_is_named_as_such(tmp_path: Path) -> None:
+    """A manifest that cannot be read (here, garbage bytes) makes the folder refused (its
+    files cannot be told apart), and the message says the manifest is the problem, not that
+    topomech's own outputs were written by someone else."""
+    out = tmp_path / "o"
+    scene = springs(tmp_path)
+    run_scene(scene, out, preview=False)
+    (out / MANIFEST).write_bytes(b"garbage\xff")
+    with pytest.raises(OutputError) as e:
+        run_scene(scene, out, preview=False)
+    assert f"its manifest ({MANIFEST}) cannot be read" in str(e.value)
+    assert "did not write" not in str(e.value)
+    assert "--overwrite" in str(e.value)
 
 
 def test_a_refusal_names_a_few_files_and_counts_the_rest(tmp_path: Path) -> None:

@@ -62,3 +62,15 @@ def test_from_meshio_linear_keeps_the_corner_nodes() -> None:
     assert (counts["darts"], counts["vertices"], counts["volumes"]) == (24, 4, 1)
     x = g.positions()
     assert sorted(map(tuple, np.round(x, 12))) == sorted(map(tuple, POINTS))
+
+
+def test_a_saved_map_that_is_not_one_is_refused_naming_the_file(tmp_path: Path) -> None:
+    """`GMap.load` and `topomech info` on bytes that are no .tmg file name the file (before:
+    'not a topomech G-map file (bad magic header)' with no path)."""
+    from topomech import FileFormatError, cli
+
+    bad = tmp_path / "bad.tmg"
+    bad.write_bytes(b"xx")
+    with pytest.raises(FileFormatError, match=rf"^{bad}: not a topomech G-map file"):
+        GMap.load(bad)
+    assert cli.main(["info", str(bad)]) == 2

@@ -12,7 +12,7 @@ import numpy.typing as npt
 
 from topomech import _core
 from topomech._cells import FlatMesh, flat_to_blocks, to_flat
-from topomech._core import MeshError, TopologyError
+from topomech._core import FileFormatError, MeshError, TopologyError
 
 if TYPE_CHECKING:
     import meshio
@@ -297,7 +297,13 @@ class GMap:
         is not a regular file (a directory, or an endless stream such as ``/dev/zero`` or a
         FIFO, refused before reading), and for a truncated or corrupt file (as
         :meth:`from_bytes`)."""
-        return cls(_core.GMap.load(os.fspath(path)))
+        p = os.fspath(path)
+        try:
+            return cls(_core.GMap.load(p))
+        except FileFormatError as e:
+            if p in str(e):
+                raise
+            raise FileFormatError(f"{p}: {e}") from None
 
     @classmethod
     def from_bytes(cls, data: bytes) -> GMap:

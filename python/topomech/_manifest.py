@@ -103,6 +103,21 @@ def read_manifest(out_dir: Path) -> list[str] | None:
     return entries
 
 
+def manifest_damaged(out_dir: Path) -> bool:
+    """Whether ``out_dir`` has a manifest that cannot be read: not this version's header
+    (another program's file, or damaged), undecodable, or unreadable."""
+    path = out_dir / MANIFEST
+    if not os.path.lexists(path):
+        return False
+    if path.is_symlink() or not path.is_file():
+        return True
+    try:
+        first = path.read_bytes().split(b"\n", 1)[0]
+        return bool(json.loads(first.decode("utf-8")) != HEADER)
+    except (OSError, UnicodeDecodeError, ValueError):
+        return True
+
+
 def _under_link(out_dir: Path, rel: str) -> bool:
     """Whether a folder on the way from ``out_dir`` to ``rel`` is a symbolic link (or not a
     folder): deleting there would act outside the output folder."""
@@ -199,8 +214,15 @@ class OutputFolder:
             more = len(self._foreign) - MAX_SHOWN
             if more > 0:
                 shown += f" and {more} more"
+            why = (
+                f"its manifest ({MANIFEST}) cannot be read (damaged, or not written by this "
+                f"version of topomech), so topomech cannot tell its own files from others "
+                f"({shown})"
+                if manifest_damaged(p)
+                else f"the output folder holds files topomech did not write ({shown})"
+            )
             raise OutputError(
-                f"{p}: the output folder holds files topomech did not write ({shown}); "
+                f"{p}: {why}; "
                 "give --overwrite (overwrite=True) to write there anyway (files named like "
                 "the outputs are then replaced, the others kept), or choose another folder "
                 "with --out"

@@ -382,7 +382,8 @@ def name_problem(name: str) -> str | None:
     """Why ``name`` cannot be a scene's name, or None when it can. The name is the output
     folder's name (``out/<name>``) and is shown in previews, so it must be one plain folder
     name: not empty, not ``.`` or ``..``, no path separator (``/``, ``\\``) or drive colon,
-    no NUL or other control character, at most :data:`MAX_NAME_BYTES` bytes."""
+    no NUL or other control character, no leading or trailing blank, no leading ``-``, at most
+    :data:`MAX_NAME_BYTES` bytes."""
     if not name:
         return "the name is empty"
     if name in (".", ".."):
@@ -394,6 +395,12 @@ def name_problem(name: str) -> str | None:
             return f"{_show(name)} contains ':' (a drive or stream separator): give a plain name"
         if ord(ch) < 32 or ord(ch) == 127:
             return f"{_show(name)} contains the control character U+{ord(ch):04X}"
+    if not name.strip():
+        return "the name is only blanks"
+    if name != name.strip():
+        return f"{_show(name)} begins or ends with a blank: a folder name that is easy to miss"
+    if name.startswith("-"):
+        return f"{_show(name)} begins with '-': a shell would read the folder as an option"
     if len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
         return f"the name is longer than {MAX_NAME_BYTES} bytes"
     return None
