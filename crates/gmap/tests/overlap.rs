@@ -356,3 +356,26 @@ fn jittered_unstructured_box_is_accepted() {
     }
     accepted(&m, "jittered box");
 }
+
+/// The import time of the kernel benchmark's box (101,400 tetrahedra), median of 5 builds:
+/// `cargo test --release -p topomech-gmap --test overlap -- --ignored --nocapture`.
+#[test]
+#[ignore = "timing, run in release by hand"]
+fn import_time_of_a_100k_tetrahedron_box() {
+    let m = cuboid([26, 26, 25], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let mut times: Vec<f64> = (0..5)
+        .map(|_| {
+            let t = std::time::Instant::now();
+            let (g, _) = build(&m, &BuildOptions::default()).expect("conforming");
+            std::hint::black_box(g);
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_unstable_by(f64::total_cmp);
+    println!(
+        "build of {} tetrahedra: {:.1} ms (median of 5)",
+        m.cells.len(),
+        1e3 * times[2]
+    );
+    assert_eq!(m.cells.len(), 101_400);
+}

@@ -7,11 +7,11 @@
 //!
 //! Candidate pairs come from a hierarchy of uniform grids over the cells' bounding boxes
 //! (level `L` has buckets of `h 2^L`, `h` the median cell extent, and holds the cells of
-//! extent in `(h 2^(L-1), h 2^L]`), so each cell lies in at most 27 buckets of its level and
+//! extent within a factor `sqrt 2` of it), so each cell lies in at most 27 buckets of its level and
 //! the cost stays linear for well-spread meshes, graded ones included. Each candidate pair is
 //! decided exactly enough with the separating axis theorem on a decomposition of each cell
 //! into simplices (Ericson, *Real-Time Collision Detection*, 2005, sections 4.4 and 5.2.1;
-//! Gottschalk, Lin, Manocha, *OBBTree*, SIGGRAPH 1996):
+//! Gottschalk, Lin, Manocha, *`OBBTree`*, SIGGRAPH 1996):
 //! - a tetrahedron is itself; a hexahedron, wedge or pyramid is the fan of tetrahedra from
 //!   its vertex centroid to the triangles of its faces, a quadrilateral face being the four
 //!   triangles from its vertex centroid (two cells sharing a face decompose it the same way,
@@ -48,9 +48,9 @@ impl Aabb {
             hi: [f64::NEG_INFINITY; 3],
         };
         for p in pts {
-            for a in 0..3 {
-                b.lo[a] = b.lo[a].min(p[a]);
-                b.hi[a] = b.hi[a].max(p[a]);
+            for ((l, h), x) in b.lo.iter_mut().zip(&mut b.hi).zip(p) {
+                *l = l.min(x);
+                *h = h.max(x);
             }
         }
         b
@@ -100,24 +100,31 @@ pub(crate) fn overlapping_cells(
         .map(|c| Aabb::of(c.iter().map(|&v| points[v])))
         .collect();
     let exts: Vec<f64> = boxes.iter().map(Aabb::extent).collect();
-    let mut sorted: Vec<f64> = exts.clone();
-    sorted.sort_unstable_by(f64::total_cmp);
-    let h = sorted[n / 2];
+    let median = |mut v: Vec<f64>| *v.select_nth_unstable_by(n / 2, f64::total_cmp).1;
+    let h = median(exts.clone());
     if !(h.is_finite() && h > 0.0) {
         return Vec::new();
     }
     let log_h = h.log2();
+    // the buckets' side along each axis: the median width of the boxes along it (a box
+    // grid's cells then fit their buckets exactly), at least h / 4 so that a cell spans at
+    // most 7 buckets per axis of its level
+    let mut log_side = [log_h; 3];
+    for &a in box_axes {
+        let w = median(boxes.iter().map(|b| b.hi[a] - b.lo[a]).collect());
+        log_side[a] = w.max(h / 4.0).log2();
+    }
     let mut origin = [f64::INFINITY; 3];
     for b in &boxes {
-        for a in 0..3 {
-            origin[a] = origin[a].min(b.lo[a]);
+        for (o, x) in origin.iter_mut().zip(b.lo) {
+            *o = o.min(x);
         }
     }
-    // level of each cell: the smallest L with extent <= h 2^L
+    // level of each cell: the L with extent within a factor sqrt 2 of h 2^L
     let levels: Vec<i32> = exts
         .iter()
         .map(|&e| {
-            let l = (e.log2() - log_h).ceil();
+            let l = (e.log2() - log_h).round();
             if l.is_finite() {
                 l.clamp(-4000.0, 4000.0) as i32
             } else {
@@ -128,23 +135,30 @@ pub(crate) fn overlapping_cells(
     let mut level_list: Vec<i32> = levels.clone();
     level_list.sort_unstable();
     level_list.dedup();
-    let range = |b: &Aabb, level: i32, pad: f64| -> ([i64; 3], [i64; 3]) {
-        let s = (log_h + f64::from(level)).exp2();
+    // the buckets a box shrunk by half its tolerance reaches into with a positive width:
+    // two boxes overlapping by more than the sum of their shrinkings on every axis share the
+    // bucket of a point inside both (so a box that fits a bucket exactly stays in it); a
+    // planar 2D mesh is bucketed in its plane only
+    let range = |c: usize, level: i32| -> ([i64; 3], [i64; 3]) {
+        let (b, shrink) = (&boxes[c], 0.5 * TOL * exts[c]);
         let (mut lo, mut hi) = ([0i64; 3], [0i64; 3]);
-        for a in 0..3 {
-            lo[a] = ((b.lo[a] - pad - origin[a]) / s).floor() as i64;
-            hi[a] = ((b.hi[a] + pad - origin[a]) / s).floor() as i64;
-            // a cell spans at most 3 buckets of its level (fewer above): a saturated
+        for &a in box_axes {
+            let s = (log_side[a] + f64::from(level)).exp2();
+            let x0 = b.lo[a] + shrink - origin[a];
+            let x1 = (b.hi[a] - shrink - origin[a]).max(x0);
+            lo[a] = (x0 / s).floor() as i64;
+            hi[a] = ((x1 / s).ceil() as i64 - 1).max(lo[a]);
+            // a cell spans at most 7 buckets of its level per axis (fewer above): a saturated
             // division (coordinates far beyond the bucket size) must not make it more
-            hi[a] = hi[a].min(lo[a].saturating_add(3));
+            hi[a] = hi[a].min(lo[a].saturating_add(8));
         }
         (lo, hi)
     };
-    let pad = |c: usize| TOL * exts[c];
+    let ranges: Vec<([i64; 3], [i64; 3])> = (0..n).map(|c| range(c, levels[c])).collect();
     // one grid per level: bucket -> cells of that level
     let mut grids: FxMap<i32, FxMap<[i64; 3], Vec<u32>>> = fx_map(level_list.len());
     for c in 0..n {
-        let (lo, hi) = range(&boxes[c], levels[c], pad(c));
+        let (lo, hi) = ranges[c];
         let grid = grids.entry(levels[c]).or_insert_with(|| fx_map(0));
         for x in lo[0]..=hi[0] {
             for y in lo[1]..=hi[1] {
@@ -155,22 +169,55 @@ pub(crate) fn overlapping_cells(
         }
     }
     let mut pairs = Vec::new();
+    let mut test = |a: usize, b: usize| {
+        // boxes overlapping by at most the sum of their shrinkings are not in one bucket
+        if !boxes[a].overlaps(&boxes[b], 0.5 * TOL * (exts[a] + exts[b]), box_axes)
+            || share_face(&cells[a], kinds[a], &cells[b], kinds[b], dim)
+        {
+            return;
+        }
+        // the rounding of projections grows with the coordinates' differences
+        let tol = TOL * exts[a].min(exts[b]) + 1e3 * f64::EPSILON * exts[a].max(exts[b]);
+        let hit = match plane {
+            Some(axes) => overlap_2d(
+                points, &cells[a], &cells[b], &boxes[a], &boxes[b], axes, tol,
+            ),
+            None => overlap_3d(
+                points, &cells[a], kinds[a], &cells[b], kinds[b], &boxes[a], &boxes[b], tol,
+            ),
+        };
+        if hit {
+            let (x, y) = (ids[a], ids[b]);
+            pairs.push((x.min(y), x.max(y)));
+        }
+    };
+    // pairs of one level: within each bucket, each pair once (in the first bucket the two
+    // ranges share)
+    for grid in grids.values() {
+        for (key, bucket) in grid {
+            for (k, &i) in bucket.iter().enumerate() {
+                for &j in &bucket[k + 1..] {
+                    let (ra, rb) = (&ranges[i as usize], &ranges[j as usize]);
+                    let first = [0, 1, 2].map(|a| ra.0[a].max(rb.0[a]));
+                    if first == *key {
+                        test(i as usize, j as usize);
+                    }
+                }
+            }
+        }
+    }
+    // pairs of two levels: the smaller cell looks into the larger cells' grids
     let mut candidates: Vec<u32> = Vec::new();
-    for a in 0..n {
-        // a finds the cells of its level and above; a pair of one level is taken once
+    for (a, &level_a) in levels.iter().enumerate() {
         candidates.clear();
-        for &level in level_list.iter().filter(|&&l| l >= levels[a]) {
+        for &level in level_list.iter().filter(|&&l| l > level_a) {
             let grid = &grids[&level];
-            let (lo, hi) = range(&boxes[a], level, pad(a));
+            let (lo, hi) = range(a, level);
             for x in lo[0]..=hi[0] {
                 for y in lo[1]..=hi[1] {
                     for z in lo[2]..=hi[2] {
                         if let Some(bucket) = grid.get(&[x, y, z]) {
-                            candidates.extend(
-                                bucket
-                                    .iter()
-                                    .filter(|&&b| levels[b as usize] > levels[a] || b as usize > a),
-                            );
+                            candidates.extend_from_slice(bucket);
                         }
                     }
                 }
@@ -179,28 +226,7 @@ pub(crate) fn overlapping_cells(
         candidates.sort_unstable();
         candidates.dedup();
         for &b in &candidates {
-            let b = b as usize;
-            let tol = TOL * exts[a].min(exts[b]);
-            if !boxes[a].overlaps(&boxes[b], tol, box_axes) {
-                continue;
-            }
-            if share_face(&cells[a], kinds[a], &cells[b], kinds[b], dim) {
-                continue;
-            }
-            // the rounding of projections grows with the coordinates' differences
-            let tol = tol + 1e3 * f64::EPSILON * exts[a].max(exts[b]);
-            let hit = match plane {
-                Some(axes) => overlap_2d(
-                    points, &cells[a], &cells[b], &boxes[a], &boxes[b], axes, tol,
-                ),
-                None => overlap_3d(
-                    points, &cells[a], kinds[a], &cells[b], kinds[b], &boxes[a], &boxes[b], tol,
-                ),
-            };
-            if hit {
-                let (x, y) = (ids[a], ids[b]);
-                pairs.push((x.min(y), x.max(y)));
-            }
+            test(a, b as usize);
         }
     }
     pairs.sort_unstable();
@@ -259,13 +285,22 @@ fn share_face(a: &[usize], ka: CellKind, b: &[usize], kb: CellKind, dim: usize) 
     if common < 3 {
         return false;
     }
+    if ka == CellKind::Tetra && kb == CellKind::Tetra {
+        // any 3 points of a tetrahedron are a face
+        return true;
+    }
     let key = |verts: &[usize], lf: &[usize]| {
-        let mut k: Vec<usize> = lf.iter().map(|&l| verts[l]).collect();
+        let mut k = [usize::MAX; 4];
+        for (j, &l) in lf.iter().enumerate() {
+            k[j] = verts[l];
+        }
         k.sort_unstable();
         k
     };
-    let fb: Vec<Vec<usize>> = local_faces(kb).iter().map(|lf| key(b, lf)).collect();
-    local_faces(ka).iter().any(|lf| fb.contains(&key(a, lf)))
+    local_faces(ka).iter().any(|la| {
+        let k = key(a, la);
+        local_faces(kb).iter().any(|lb| key(b, lb) == k)
+    })
 }
 
 fn mean(pts: impl Iterator<Item = [f64; 3]>) -> [f64; 3] {
@@ -314,6 +349,11 @@ fn overlap_3d(
     bb: &Aabb,
     tol: f64,
 ) -> bool {
+    let p = |v: usize| points[v];
+    if ka == CellKind::Tetra && kb == CellKind::Tetra {
+        let s = [p(a[0]), p(a[1]), p(a[2]), p(a[3])];
+        return !separated_tets(&s, &[p(b[0]), p(b[1]), p(b[2]), p(b[3])], tol);
+    }
     let (mut ta, mut tb) = (Vec::new(), Vec::new());
     tetrahedra(points, a, ka, &mut ta);
     tetrahedra(points, b, kb, &mut tb);
@@ -334,6 +374,8 @@ fn overlap_3d(
 /// one cross product of an edge of each separates them (projections overlapping by at most
 /// `tol`).
 fn separated_tets(s: &[[f64; 3]; 4], t: &[[f64; 3]; 4], tol: f64) -> bool {
+    const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+    const FACES: [(usize, usize, usize); 4] = [(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)];
     // coordinates relative to a common origin, scaled to about 1: the projections' rounding
     // stays small and the squares of the axes neither overflow (1e100) nor underflow (1e-100)
     let o = s[0];
@@ -348,8 +390,6 @@ fn separated_tets(s: &[[f64; 3]; 4], t: &[[f64; 3]; 4], tol: f64) -> bool {
     let s = s.map(|p| sub(p, o).map(|x| x / m));
     let t = t.map(|p| sub(p, o).map(|x| x / m));
     let tol = tol / m;
-    const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
-    const FACES: [(usize, usize, usize); 4] = [(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)];
     let separates = |axis: [f64; 3]| {
         let l = norm(axis);
         if !(l > 0.0 && l.is_finite()) {
