@@ -379,3 +379,41 @@ fn import_time_of_a_100k_tetrahedron_box() {
     );
     assert_eq!(m.cells.len(), 101_400);
 }
+
+/// The import time of the kernel benchmark's box with its interior points jittered by up to
+/// 8% of the spacing (bounding boxes of neighbours overlap, as in unstructured meshes).
+#[test]
+#[ignore = "timing, run in release by hand"]
+fn import_time_of_a_jittered_100k_tetrahedron_box() {
+    let mut m = cuboid([26, 26, 25], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let mut state: u64 = 0x9e37_79b9_7f4a_7c15;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for p in &mut m.points {
+        let inside = p.iter().all(|&x| x > 1e-9 && x < 1.0 - 1e-9);
+        let d = [next(), next(), next()];
+        if inside {
+            for a in 0..3 {
+                p[a] += 0.16 / 26.0 * d[a];
+            }
+        }
+    }
+    let mut times: Vec<f64> = (0..5)
+        .map(|_| {
+            let t = std::time::Instant::now();
+            let (g, _) = build(&m, &BuildOptions::default()).expect("conforming");
+            std::hint::black_box(g);
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_unstable_by(f64::total_cmp);
+    println!(
+        "build of {} jittered tetrahedra: {:.1} ms (median of 5)",
+        m.cells.len(),
+        1e3 * times[2]
+    );
+}

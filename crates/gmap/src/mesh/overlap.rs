@@ -387,28 +387,31 @@ fn separated_tets(s: &[[f64; 3]; 4], t: &[[f64; 3]; 4], tol: f64) -> bool {
     if !(m > 0.0 && m.is_finite()) {
         return false;
     }
-    let s = s.map(|p| sub(p, o).map(|x| x / m));
-    let t = t.map(|p| sub(p, o).map(|x| x / m));
-    let tol = tol / m;
+    let inv = 1.0 / m;
+    let s = s.map(|p| sub(p, o).map(|x| x * inv));
+    let t = t.map(|p| sub(p, o).map(|x| x * inv));
+    let tol2 = (tol * inv) * (tol * inv);
+    // whether the projections on `axis` (not normalised: lengths compared squared, no square
+    // root) overlap by at most `tol`; a zero axis separates nothing
     let separates = |axis: [f64; 3]| {
-        let l = norm(axis);
-        if !(l > 0.0 && l.is_finite()) {
+        let l2 = dot(axis, axis);
+        if !(l2 > 0.0 && l2.is_finite()) {
             return false;
         }
-        let u = [axis[0] / l, axis[1] / l, axis[2] / l];
         let (mut s0, mut s1) = (f64::INFINITY, f64::NEG_INFINITY);
         for p in &s {
-            let x = dot(*p, u);
+            let x = dot(*p, axis);
             s0 = s0.min(x);
             s1 = s1.max(x);
         }
         let (mut t0, mut t1) = (f64::INFINITY, f64::NEG_INFINITY);
         for p in &t {
-            let x = dot(*p, u);
+            let x = dot(*p, axis);
             t0 = t0.min(x);
             t1 = t1.max(x);
         }
-        s1.min(t1) - s0.max(t0) <= tol
+        let overlap = s1.min(t1) - s0.max(t0);
+        overlap <= 0.0 || overlap * overlap <= tol2 * l2
     };
     for q in [&s, &t] {
         for (i, j, k) in FACES {
@@ -417,14 +420,15 @@ fn separated_tets(s: &[[f64; 3]; 4], t: &[[f64; 3]; 4], tol: f64) -> bool {
             }
         }
     }
-    for (i, j) in EDGES {
-        let e = sub(s[j], s[i]);
-        let le = norm(e);
-        for (k, m) in EDGES {
-            let f = sub(t[m], t[k]);
-            let c = cross(e, f);
+    let es = EDGES.map(|(i, j)| sub(s[j], s[i]));
+    let et = EDGES.map(|(i, j)| sub(t[j], t[i]));
+    let lt = et.map(|f| dot(f, f));
+    for e in es {
+        let le = dot(e, e);
+        for (f, &lf) in et.iter().zip(&lt) {
+            let c = cross(e, *f);
             // parallel edges give no axis of their own
-            if norm(c) <= 1e-12 * le * norm(f) {
+            if dot(c, c) <= 1e-24 * le * lf {
                 continue;
             }
             if separates(c) {
