@@ -28,7 +28,7 @@
 //! only overlap where they are coplanar, which the boundary-side check of `conform` covers
 //! for faces that touch.
 
-use super::{cross, dot, fx_map, local_faces, norm, polygon_normal, sub, CellKind, FxMap};
+use super::{cross, dot, fx_map, local_faces, polygon_normal, sub, CellKind, FxMap};
 
 /// Relative tolerance (of the smaller cell's extent) for a penetration that still counts as
 /// touching: the same as `conform`'s "on the same plane / overlapping".
