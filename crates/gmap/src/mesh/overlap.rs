@@ -413,9 +413,25 @@ fn separated_tets(s: &[[f64; 3]; 4], t: &[[f64; 3]; 4], tol: f64) -> bool {
         let overlap = s1.min(t1) - s0.max(t0);
         overlap <= 0.0 || overlap * overlap <= tol2 * l2
     };
-    for q in [&s, &t] {
-        for (i, j, k) in FACES {
-            if separates(cross(sub(q[j], q[i]), sub(q[k], q[i]))) {
+    // a face plane separates when the other tetrahedron lies beyond it (outward): only that
+    // side needs testing (the facets of the Minkowski difference from faces have these
+    // outward normals; Ericson 2005, 5.2.1), 4 projections instead of 8
+    for (q, r) in [(&s, &t), (&t, &s)] {
+        for (f, (i, j, k)) in FACES.into_iter().enumerate() {
+            let mut n = cross(sub(q[j], q[i]), sub(q[k], q[i]));
+            let l2 = dot(n, n);
+            if !(l2 > 0.0 && l2.is_finite()) {
+                continue;
+            }
+            // the vertex off this face is FACES' complement: 3, 2, 1, 0
+            if dot(n, sub(q[3 - f], q[i])) > 0.0 {
+                n = n.map(|x| -x);
+            }
+            let d = r
+                .iter()
+                .map(|p| dot(sub(*p, q[i]), n))
+                .fold(f64::INFINITY, f64::min);
+            if d >= 0.0 || d * d <= tol2 * l2 {
                 return true;
             }
         }
