@@ -240,8 +240,9 @@ class GMap:
           ``report.merged_duplicates``).
 
         Raises :class:`MeshError` naming every offending cell or point (degenerate, twisted,
-        folded, duplicate cells, non-conforming interfaces, ...); when an option would accept
-        the mesh the message says which and ``MeshError.option`` holds ``(name, value)``.
+        folded, duplicate, overlapping cells, non-conforming interfaces, ...); when an option
+        would accept the mesh the message says which and ``MeshError.option`` holds
+        ``(name, value)``.
         Raises ``ValueError`` for an unknown ``pinched`` or ``duplicates`` value.
         """
         flat = to_flat(points, cells, kind)

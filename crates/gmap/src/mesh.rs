@@ -16,9 +16,12 @@
 //!   as such, not as degenerate;
 //! - degenerate, twisted (Jacobian changing sign between corners, self-intersecting polygon),
 //!   folded (two cells on the same side of their shared face) cells and non-conforming
-//!   interfaces (mismatched diagonals, hanging nodes) are refused, naming every offender.
+//!   interfaces (mismatched diagonals, hanging nodes) are refused, naming every offender;
+//! - cells whose interiors overlap without sharing a face (3D; in a planar 2D mesh, an edge)
+//!   are refused ([`MeshError::Overlapping`]); non-planar surfaces are not checked for it.
 
 mod conform;
+mod overlap;
 
 use crate::embedding::Column;
 use crate::{Dart, EmbeddingType, GMap, OrbitType, Policy};
@@ -391,6 +394,15 @@ pub enum MeshError {
     NonConforming {
         /// Each pair of faces.
         pairs: Vec<FacePair>,
+    },
+    /// Cells whose interiors intersect without sharing a face (3D) or an edge (planar 2D
+    /// meshes): two interpenetrating tetrahedra, a cell inside another, a triangle lying
+    /// across others. Found by the separating axis theorem on simplices; see
+    /// `mesh/overlap.rs`.
+    #[error("{} overlapping pair(s) of cells (their interiors intersect): {}", pairs.len(), listed(pairs, |(a, b)| format!("cells {a} and {b}")))]
+    Overlapping {
+        /// (cell, cell), the smaller index first, sorted.
+        pairs: Vec<(usize, usize)>,
     },
     /// A map that cannot be turned back into cells.
     #[error("cannot extract cells: {0}")]
@@ -1283,6 +1295,11 @@ fn build_surface(
     if !pairs.is_empty() {
         return Err(MeshError::NonConforming { pairs });
     }
+    let kinds = vec![CellKind::Polygon; cells.len()];
+    let pairs = overlap::overlapping_cells(points, &cells, &kinds, ids, 2);
+    if !pairs.is_empty() {
+        return Err(MeshError::Overlapping { pairs });
+    }
     let mut g = GMap::new(2).expect("2 is supported");
     let mut faces = Vec::with_capacity(cells.len());
     let mut vert_of_dart = Vec::new();
@@ -1569,6 +1586,10 @@ fn build_volume(
     let pairs = conform::overlapping(points, &boundary);
     if !pairs.is_empty() {
         return Err(MeshError::NonConforming { pairs });
+    }
+    let pairs = overlap::overlapping_cells(points, cells, &kinds, ids, 3);
+    if !pairs.is_empty() {
+        return Err(MeshError::Overlapping { pairs });
     }
     Ok(Built {
         g,
