@@ -40,6 +40,9 @@ pub enum RewireError {
         /// Dimension.
         dim: usize,
     },
+    /// The caller's interrupt check asked to stop ([`GMap::rewire_interruptible`]).
+    #[error("interrupted while rewriting the topology")]
+    Interrupted,
     /// An embedding with the `error` policy would merge different values or split.
     #[error("embedding '{embedding}' has policy 'error' and the rewrite would {what} its orbit at {dart}")]
     Policy {
@@ -52,21 +55,71 @@ pub enum RewireError {
     },
 }
 
+/// [`GMap::rewire_interruptible`] calls its interrupt check once per this many links checked
+/// or orbits planned.
+pub const REWIRE_CHECK_EVERY: usize = 1024;
+
+/// The caller's interrupt check, called once per [`REWIRE_CHECK_EVERY`] units of work.
+struct Poll<'a> {
+    interrupt: &'a dyn Fn() -> bool,
+    work: usize,
+}
+
+impl Poll<'_> {
+    /// Counts `n` units of work; true when the check was due and asks to stop.
+    fn tick(&mut self, n: usize) -> bool {
+        self.work += n;
+        if self.work < REWIRE_CHECK_EVERY {
+            return false;
+        }
+        self.work = 0;
+        (self.interrupt)()
+    }
+}
+
 impl GMap {
     /// Applies `changes` (`alpha_dim(a) := b`, both directions must be listed or already hold),
     /// then removes `remove` (each must end up free in every dimension), then re-slots the
     /// embeddings around the changed darts. `fresh` lists darts created by the caller just
     /// before: their (default) values do not take part in merges.
+    ///
+    /// Cost: proportional to the batch and to the orbits it touches (times the number of
+    /// embeddings), not to the map.
+    ///
+    /// # Errors
+    /// [`RewireError`] when the batch is refused; the map is then left unchanged.
     pub fn rewire(
         &mut self,
         changes: &[(usize, Dart, Dart)],
         fresh: &[Dart],
         remove: &[Dart],
     ) -> Result<(), RewireError> {
+        self.rewire_interruptible(changes, fresh, remove, &|| false)
+    }
+
+    /// [`GMap::rewire`], calling `interrupt` once per [`REWIRE_CHECK_EVERY`] links checked or
+    /// orbits planned, up to the point where the map starts to change for good (every check
+    /// passed, every embedding planned; what follows costs about as much as one planning
+    /// pass). When it returns true the call stops with [`RewireError::Interrupted`] and the
+    /// map is left as it was (links, slots, values and version).
+    ///
+    /// # Errors
+    /// [`RewireError::Interrupted`], or any error of [`GMap::rewire`].
+    pub fn rewire_interruptible(
+        &mut self,
+        changes: &[(usize, Dart, Dart)],
+        fresh: &[Dart],
+        remove: &[Dart],
+        interrupt: &dyn Fn() -> bool,
+    ) -> Result<(), RewireError> {
+        let mut poll = Poll { interrupt, work: 0 };
         if changes.is_empty() && fresh.is_empty() && remove.is_empty() {
             return Ok(()); // nothing changes: the version stays, caches stay valid
         }
         for &(i, a, b) in changes {
+            if poll.tick(1) {
+                return Err(RewireError::Interrupted);
+            }
             self.check_dim(i)?;
             self.check_dart(a)?;
             self.check_dart(b)?;
@@ -86,6 +139,10 @@ impl GMap {
         // involution now: that covers every dart whose link or whose partner's link changed
         let mut broken = None;
         'check: for &(i, a, prev) in &old {
+            if poll.tick(1) {
+                broken = Some(RewireError::Interrupted);
+                break 'check;
+            }
             for x in [a, prev] {
                 let y = self.alpha[i][x as usize];
                 let back = self.alpha[i][y as usize];
@@ -114,7 +171,6 @@ impl GMap {
             self.undo_links(&old);
             return Err(err);
         }
-        self.version += 1;
         let mut seeds: Vec<Dart> = Vec::with_capacity(2 * old.len() + fresh.len());
         for &(_, a, prev) in &old {
             seeds.push(Dart(a));
@@ -124,7 +180,7 @@ impl GMap {
         let cap = self.capacity();
         with_marks(cap, |removed| {
             with_marks(cap, |is_fresh| {
-                self.reslot_all(&old, seeds, fresh, remove, removed, is_fresh)
+                self.reslot_all(&old, seeds, fresh, remove, removed, is_fresh, &mut poll)
             })
         })
     }
@@ -139,6 +195,7 @@ impl GMap {
         remove: &[Dart],
         removed: &mut Marks,
         is_fresh: &mut Marks,
+        poll: &mut Poll<'_>,
     ) -> Result<(), RewireError> {
         for &d in remove {
             removed.mark(d);
@@ -155,19 +212,22 @@ impl GMap {
         let mut plans = Vec::new();
         for k in 0..self.embeddings.len() {
             let e = &self.embeddings[k];
-            if e.is_direct() || (!(0..4).any(|i| dims[i] && e.orbit.contains(i)) && fresh.is_empty()) {
+            if e.is_direct()
+                || (!(0..4).any(|i| dims[i] && e.orbit.contains(i)) && fresh.is_empty())
+            {
                 plans.push(None);
                 continue;
             }
-            match self.plan_reslot(k, &seeds, removed, is_fresh) {
+            match self.plan_reslot(k, &seeds, removed, is_fresh, poll) {
                 Ok(p) => plans.push(Some(p)),
                 Err(err) => {
                     self.undo_links(old);
-                    self.version += 1;
                     return Err(err);
                 }
             }
         }
+        // from here on the map changes for good
+        self.version += 1;
         for (k, plan) in plans.into_iter().enumerate() {
             if let Some(p) = plan {
                 self.apply_reslot(k, p);
@@ -264,8 +324,11 @@ impl GMap {
         seeds: &[Dart],
         removed: &Marks,
         fresh: &Marks,
+        poll: &mut Poll<'_>,
     ) -> Result<Reslot, RewireError> {
-        with_marks(self.capacity(), |m| self.plan_reslot_marked(k, seeds, removed, fresh, m))
+        with_marks(self.capacity(), |m| {
+            self.plan_reslot_marked(k, seeds, removed, fresh, m, poll)
+        })
     }
 
     fn plan_reslot_marked(
@@ -275,6 +338,7 @@ impl GMap {
         removed: &Marks,
         fresh: &Marks,
         m: &mut Marks,
+        poll: &mut Poll<'_>,
     ) -> Result<Reslot, RewireError> {
         let e = &self.embeddings[k];
         let mut plan = Reslot::default();
@@ -284,6 +348,9 @@ impl GMap {
         for &sd in seeds {
             if m.is_marked(sd) {
                 continue;
+            }
+            if poll.tick(1) {
+                return Err(RewireError::Interrupted);
             }
             darts.clear();
             self.visit_orbit(sd, e.orbit, m, |d| darts.push(d));
