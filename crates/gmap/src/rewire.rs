@@ -171,26 +171,19 @@ impl GMap {
             self.undo_links(&old);
             return Err(err);
         }
-        let mut seeds: Vec<Dart> = Vec::with_capacity(2 * old.len() + fresh.len());
-        for &(_, a, prev) in &old {
-            seeds.push(Dart(a));
-            seeds.push(Dart(prev));
-        }
-        seeds.extend_from_slice(fresh);
         let cap = self.capacity();
         with_marks(cap, |removed| {
             with_marks(cap, |is_fresh| {
-                self.reslot_all(&old, seeds, fresh, remove, removed, is_fresh, &mut poll)
+                self.reslot_all(&old, fresh, remove, removed, is_fresh, &mut poll)
             })
         })
     }
 
     /// The second half of [`GMap::rewire`], on the new links (`old` holds the previous ones):
-    /// re-slots every embedding around `seeds`, numbers the fresh vertices, removes `remove`.
+    /// re-slots every embedding around the changed darts, numbers the fresh vertices, removes `remove`.
     fn reslot_all(
         &mut self,
         old: &[(usize, u32, u32)],
-        mut seeds: Vec<Dart>,
         fresh: &[Dart],
         remove: &[Dart],
         removed: &mut Marks,
@@ -200,6 +193,14 @@ impl GMap {
         for &d in remove {
             removed.mark(d);
         }
+        // the orbits to re-slot: around every dart whose link changed, its earlier partners,
+        // and the fresh darts
+        let mut seeds: Vec<Dart> = Vec::with_capacity(2 * old.len() + fresh.len());
+        for &(_, a, prev) in old {
+            seeds.push(Dart(a));
+            seeds.push(Dart(prev));
+        }
+        seeds.extend_from_slice(fresh);
         seeds.retain(|d| !removed.is_marked(*d));
         for &d in fresh {
             is_fresh.mark(d);
@@ -230,7 +231,7 @@ impl GMap {
         self.version += 1;
         for (k, plan) in plans.into_iter().enumerate() {
             if let Some(p) = plan {
-                self.apply_reslot(k, p);
+                self.apply_reslot(k, &p);
             }
         }
         self.number_fresh_vertices(fresh, removed, is_fresh);
@@ -405,7 +406,7 @@ impl GMap {
         Ok(plan)
     }
 
-    fn apply_reslot(&mut self, k: usize, plan: Reslot) {
+    fn apply_reslot(&mut self, k: usize, plan: &Reslot) {
         let e = &mut self.embeddings[k];
         let w = e.ty.width();
         let policy = if e.derived.is_some() {
@@ -494,7 +495,7 @@ struct Reslot {
     parts: Vec<usize>,
 }
 
-/// A multiplicative hash for slot numbers (the default SipHash costs more than the rest of
+/// A multiplicative hash for slot numbers (the default `SipHash` costs more than the rest of
 /// a re-slotting); keys are slot indices, not adversarial input.
 #[derive(Default, Clone, Copy)]
 struct SlotHasher(u64);

@@ -96,7 +96,8 @@ fn unsew_all_splits_values_as_the_policies_say() {
     for d in g.darts() {
         assert_eq!(g.real(pos, d), g0.real(pos, d), "position at dart {d}");
         let p = g.real(pos, d);
-        let on_side = |x: f64| x == 0.0 || x == n as f64;
+        // grid coordinates are whole numbers 0..=n
+        let on_side = |x: f64| x < 0.5 || x > n as f64 - 0.5;
         let faces_around = match (on_side(p[0]), on_side(p[1])) {
             (true, true) => 1.0,
             (true, false) | (false, true) => 2.0,
@@ -154,7 +155,7 @@ fn interrupted_rewire_leaves_the_map_as_it_was() {
 /// Not a check: prints the unsew-all batch time for growing grids (release build:
 /// `cargo test --release -p topomech-gmap --test rewire_scaling -- --ignored --nocapture`).
 #[test]
-#[ignore]
+#[ignore = "a timing report, run by hand in a release build"]
 fn report_unsew_all_times() {
     for n in [50, 100, 150, 250] {
         let (t, links) = seconds_per_link(n, 1);

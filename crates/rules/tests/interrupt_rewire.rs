@@ -6,7 +6,7 @@
 //! topology", nothing applied, and the map valid and unchanged: the same darts with the same
 //! links, the same cell counts, the same position slots and values bit for bit. (The darts
 //! the application created and removed again stay as free capacity, so the `.tmg` bytes and
-//! the column length may differ; crates/gmap/tests/rewire_scaling.rs compares the bytes of
+//! the column length may differ; `crates/gmap/tests/rewire_scaling.rs` compares the bytes of
 //! an interrupted `rewire_interruptible` alone.)
 
 use std::cell::Cell;
