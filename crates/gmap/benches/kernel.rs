@@ -1,12 +1,13 @@
 //! Kernel benchmark: building the G-map of a ~100k-tetrahedron box, its memory per dart, and
-//! orbit traversals over it. Prints the median of repeated runs (`cargo bench`).
+//! orbit traversals over it, and batch rewrites (`GMap::rewire`) of one face and of every face.
+//! Prints the median of repeated runs (`cargo bench`).
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use topomech_gmap::generators::{cuboid, BoxElement};
 use topomech_gmap::mesh::{build, BuildOptions};
-use topomech_gmap::OrbitType;
+use topomech_gmap::{Dart, GMap, OrbitType};
 
 fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
     let mut t: Vec<f64> = (0..runs)
@@ -14,6 +15,23 @@ fn median_seconds(runs: usize, mut f: impl FnMut()) -> f64 {
             let s = Instant::now();
             f();
             s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[runs / 2]
+}
+
+/// Median seconds of `g.clone().rewire(changes)`, the clone not timed.
+fn rewire_seconds(runs: usize, g: &GMap, changes: &[(usize, Dart, Dart)]) -> f64 {
+    let mut t: Vec<f64> = (0..runs)
+        .map(|_| {
+            let mut h = g.clone();
+            let s = Instant::now();
+            h.rewire(changes, &[], &[])
+                .expect("an unsew is a valid batch");
+            let e = s.elapsed().as_secs_f64();
+            black_box(h);
+            e
         })
         .collect();
     t.sort_by(f64::total_cmp);
@@ -64,4 +82,23 @@ fn main() {
         "  is_valid (all invariants)              {:8.1} ms",
         s * 1e3
     );
+    // unsew (alpha3 := identity) one inner face, then every inner face: the cost per link
+    // should be about the same (a rewrite costs what it changes, not the map)
+    let sewn: Vec<Dart> = g.darts().filter(|&d| !g.is_free(3, d)).collect();
+    // a face orbit <0,1,3> holds the darts of both its sides
+    let one: Vec<(usize, Dart, Dart)> = g
+        .orbit(sewn[0], OrbitType::face(3))
+        .into_iter()
+        .map(|d| (3, d, d))
+        .collect();
+    let all: Vec<(usize, Dart, Dart)> = sewn.iter().map(|&d| (3, d, d)).collect();
+    for (name, changes, runs) in [("one face", &one, 5), ("every face", &all, 3)] {
+        let s = rewire_seconds(runs, &g, changes);
+        println!(
+            "  rewire: unsew {name:10} {:9} links {:8.3} ms   {:6.1} ns/link",
+            changes.len(),
+            s * 1e3,
+            s * 1e9 / changes.len() as f64
+        );
+    }
 }

@@ -35,5 +35,5 @@ pub use error::{EmbeddingError, GMapError, LinkError, SewError};
 pub use gmap::{CellCounts, GMap, MAX_DARTS};
 pub use marks::Marks;
 pub use orbit::{OrbitType, OrbitTypeError, MAX_DIM};
-pub use rewire::RewireError;
+pub use rewire::{RewireError, REWIRE_CHECK_EVERY};
 pub use valid::Violation;

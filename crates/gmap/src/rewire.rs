@@ -8,9 +8,10 @@
 //! caller writes them.
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 use crate::embedding::{Column, ColumnRef, EmbeddingType, Policy, Value};
-use crate::marks::Marks;
+use crate::marks::{with_marks, Marks};
 use crate::{Dart, GMap, LinkError, OrbitType};
 
 /// Why a batch was refused; the map is left unchanged.
@@ -39,6 +40,9 @@ pub enum RewireError {
         /// Dimension.
         dim: usize,
     },
+    /// The caller's interrupt check asked to stop ([`GMap::rewire_interruptible`]).
+    #[error("interrupted while rewriting the topology")]
+    Interrupted,
     /// An embedding with the `error` policy would merge different values or split.
     #[error("embedding '{embedding}' has policy 'error' and the rewrite would {what} its orbit at {dart}")]
     Policy {
@@ -51,106 +55,186 @@ pub enum RewireError {
     },
 }
 
+/// [`GMap::rewire_interruptible`] calls its interrupt check once per this many links checked
+/// or orbits planned.
+pub const REWIRE_CHECK_EVERY: usize = 1024;
+
+/// The caller's interrupt check, called once per [`REWIRE_CHECK_EVERY`] units of work.
+struct Poll<'a> {
+    interrupt: &'a dyn Fn() -> bool,
+    work: usize,
+}
+
+impl Poll<'_> {
+    /// Counts `n` units of work; true when the check was due and asks to stop.
+    fn tick(&mut self, n: usize) -> bool {
+        self.work += n;
+        if self.work < REWIRE_CHECK_EVERY {
+            return false;
+        }
+        self.work = 0;
+        (self.interrupt)()
+    }
+}
+
 impl GMap {
     /// Applies `changes` (`alpha_dim(a) := b`, both directions must be listed or already hold),
     /// then removes `remove` (each must end up free in every dimension), then re-slots the
     /// embeddings around the changed darts. `fresh` lists darts created by the caller just
     /// before: their (default) values do not take part in merges.
+    ///
+    /// Cost: proportional to the batch and to the orbits it touches (times the number of
+    /// embeddings), not to the map.
+    ///
+    /// # Errors
+    /// [`RewireError`] when the batch is refused; the map is then left unchanged.
     pub fn rewire(
         &mut self,
         changes: &[(usize, Dart, Dart)],
         fresh: &[Dart],
         remove: &[Dart],
     ) -> Result<(), RewireError> {
+        self.rewire_interruptible(changes, fresh, remove, &|| false)
+    }
+
+    /// [`GMap::rewire`], calling `interrupt` once per [`REWIRE_CHECK_EVERY`] links checked or
+    /// orbits planned, up to the point where the map starts to change for good (every check
+    /// passed, every embedding planned; what follows costs about as much as one planning
+    /// pass). When it returns true the call stops with [`RewireError::Interrupted`] and the
+    /// map is left as it was (links, slots, values and version).
+    ///
+    /// # Errors
+    /// [`RewireError::Interrupted`], or any error of [`GMap::rewire`].
+    pub fn rewire_interruptible(
+        &mut self,
+        changes: &[(usize, Dart, Dart)],
+        fresh: &[Dart],
+        remove: &[Dart],
+        interrupt: &dyn Fn() -> bool,
+    ) -> Result<(), RewireError> {
+        let mut poll = Poll { interrupt, work: 0 };
         if changes.is_empty() && fresh.is_empty() && remove.is_empty() {
             return Ok(()); // nothing changes: the version stays, caches stay valid
         }
-        let mut new: HashMap<(usize, u32), u32> = HashMap::with_capacity(changes.len());
         for &(i, a, b) in changes {
+            if poll.tick(1) {
+                return Err(RewireError::Interrupted);
+            }
             self.check_dim(i)?;
             self.check_dart(a)?;
             self.check_dart(b)?;
-            new.insert((i, a.0), b.0);
         }
-        let after = |i: usize, x: u32| {
-            new.get(&(i, x))
-                .copied()
-                .unwrap_or(self.alpha[i][x as usize])
-        };
-        // every dart whose link changes, and its old partner, must be in an involution after
-        for &(i, a, _) in changes {
-            for x in [a.0, self.alpha[i][a.index()]] {
-                let y = after(i, x);
-                let back = after(i, y);
+        for &d in remove {
+            self.check_dart(d)?;
+        }
+        // apply the links in order (a later change of the same link wins), remembering each
+        // overwritten value: undone in reverse order, they give back the map as it was
+        let mut old: Vec<(usize, u32, u32)> = Vec::with_capacity(changes.len());
+        for &(i, a, b) in changes {
+            let slot = &mut self.alpha[i][a.index()];
+            old.push((i, a.0, *slot));
+            *slot = b.0;
+        }
+        // every dart whose link changed, and each of its earlier partners, must be in an
+        // involution now: that covers every dart whose link or whose partner's link changed
+        let mut broken = None;
+        'check: for &(i, a, prev) in &old {
+            if poll.tick(1) {
+                broken = Some(RewireError::Interrupted);
+                break 'check;
+            }
+            for x in [a, prev] {
+                let y = self.alpha[i][x as usize];
+                let back = self.alpha[i][y as usize];
                 if back != x {
-                    return Err(RewireError::NotInvolution {
+                    broken = Some(RewireError::NotInvolution {
                         dim: i,
                         a: Dart(x),
                         b: Dart(y),
                         back: Dart(back),
                     });
+                    break 'check;
                 }
             }
         }
-        for &d in remove {
-            self.check_dart(d)?;
-            for i in 0..=3 {
-                if after(i, d.0) != d.0 {
-                    return Err(RewireError::RemovedLinked { dart: d, dim: i });
+        if broken.is_none() {
+            'removed: for &d in remove {
+                for i in 0..=3 {
+                    if self.alpha[i][d.index()] != d.0 {
+                        broken = Some(RewireError::RemovedLinked { dart: d, dim: i });
+                        break 'removed;
+                    }
                 }
             }
         }
-        let old: Vec<(usize, u32, u32)> = new
-            .keys()
-            .map(|&(i, a)| (i, a, self.alpha[i][a as usize]))
-            .collect();
-        for (&(i, a), &b) in &new {
-            self.alpha[i][a as usize] = b;
+        if let Some(err) = broken {
+            self.undo_links(&old);
+            return Err(err);
         }
-        self.version += 1;
-        let mut seeds: Vec<Dart> = new.keys().map(|&(_, a)| Dart(a)).collect();
-        seeds.extend(old.iter().map(|&(_, _, b)| Dart(b)));
-        seeds.extend_from_slice(fresh);
-        let mut removed = Marks::with_capacity(self.capacity());
+        let cap = self.capacity();
+        with_marks(cap, |removed| {
+            with_marks(cap, |is_fresh| {
+                self.reslot_all(&old, fresh, remove, removed, is_fresh, &mut poll)
+            })
+        })
+    }
+
+    /// The second half of [`GMap::rewire`], on the new links (`old` holds the previous ones):
+    /// re-slots every embedding around the changed darts, numbers the fresh vertices, removes `remove`.
+    fn reslot_all(
+        &mut self,
+        old: &[(usize, u32, u32)],
+        fresh: &[Dart],
+        remove: &[Dart],
+        removed: &mut Marks,
+        is_fresh: &mut Marks,
+        poll: &mut Poll<'_>,
+    ) -> Result<(), RewireError> {
         for &d in remove {
             removed.mark(d);
         }
+        // the orbits to re-slot: around every dart whose link changed, its earlier partners,
+        // and the fresh darts
+        let mut seeds: Vec<Dart> = Vec::with_capacity(2 * old.len() + fresh.len());
+        for &(_, a, prev) in old {
+            seeds.push(Dart(a));
+            seeds.push(Dart(prev));
+        }
+        seeds.extend_from_slice(fresh);
         seeds.retain(|d| !removed.is_marked(*d));
-        let mut is_fresh = Marks::with_capacity(self.capacity());
         for &d in fresh {
             is_fresh.mark(d);
         }
-        let dims: Vec<usize> = {
-            let mut v: Vec<usize> = new.keys().map(|&(i, _)| i).collect();
-            v.sort_unstable();
-            v.dedup();
-            v
-        };
+        let mut dims = [false; 4];
+        for &(i, _, _) in old {
+            dims[i] = true;
+        }
         // plan every embedding first, so a refusal leaves everything as it was
         let mut plans = Vec::new();
         for k in 0..self.embeddings.len() {
             let e = &self.embeddings[k];
-            if e.is_direct() || (!dims.iter().any(|&i| e.orbit.contains(i)) && fresh.is_empty()) {
+            if e.is_direct()
+                || (!(0..4).any(|i| dims[i] && e.orbit.contains(i)) && fresh.is_empty())
+            {
                 plans.push(None);
                 continue;
             }
-            match self.plan_reslot(k, &seeds, &removed, &is_fresh) {
+            match self.plan_reslot(k, &seeds, removed, is_fresh, poll) {
                 Ok(p) => plans.push(Some(p)),
                 Err(err) => {
-                    for &(i, a, b) in &old {
-                        self.alpha[i][a as usize] = b;
-                    }
-                    self.version += 1;
+                    self.undo_links(old);
                     return Err(err);
                 }
             }
         }
+        // from here on the map changes for good
+        self.version += 1;
         for (k, plan) in plans.into_iter().enumerate() {
             if let Some(p) = plan {
-                self.apply_reslot(k, p);
+                self.apply_reslot(k, &p);
             }
         }
-        self.number_fresh_vertices(fresh, &removed);
+        self.number_fresh_vertices(fresh, removed, is_fresh);
         for &d in remove {
             let iu = d.index();
             self.alive[iu] = false;
@@ -171,7 +255,7 @@ impl GMap {
     /// embeddings of [`crate::mesh::build`]): `particle` the next row after every row in use,
     /// `point_id` -1 (no input point). Without this they would hold the default 0 and read as
     /// a copy of row 0. Orbits that also hold older darts keep their value (copy policy).
-    fn number_fresh_vertices(&mut self, fresh: &[Dart], removed: &Marks) {
+    fn number_fresh_vertices(&mut self, fresh: &[Dart], removed: &Marks, is_fresh: &Marks) {
         if fresh.is_empty() {
             return;
         }
@@ -186,22 +270,19 @@ impl GMap {
         if particle.is_none() && point_id.is_none() {
             return;
         }
-        let mut is_fresh = Marks::with_capacity(self.capacity());
-        for &d in fresh {
-            is_fresh.mark(d);
-        }
-        let mut seen = Marks::with_capacity(self.capacity());
         let mut created = Vec::new();
-        for &d in fresh {
-            if seen.is_marked(d) || removed.is_marked(d) || !self.is_alive(d) {
-                continue;
+        with_marks(self.capacity(), |seen| {
+            for &d in fresh {
+                if seen.is_marked(d) || removed.is_marked(d) || !self.is_alive(d) {
+                    continue;
+                }
+                let mut all_fresh = true;
+                self.visit_orbit(d, o, seen, |x| all_fresh &= is_fresh.is_marked(x));
+                if all_fresh {
+                    created.push(d);
+                }
             }
-            let mut all_fresh = true;
-            self.visit_orbit(d, o, &mut seen, |x| all_fresh &= is_fresh.is_marked(x));
-            if all_fresh {
-                created.push(d);
-            }
-        }
+        });
         if created.is_empty() {
             return;
         }
@@ -229,62 +310,103 @@ impl GMap {
         }
     }
 
+    /// Puts back the links `old` recorded (`(dim, dart, previous partner)`), last first.
+    fn undo_links(&mut self, old: &[(usize, u32, u32)]) {
+        for &(i, a, b) in old.iter().rev() {
+            self.alpha[i][a as usize] = b;
+        }
+    }
+
     /// The new orbits of embedding `k` around `seeds`, with the old slots each one covers.
+    /// Costs the size of those orbits (one hash lookup per old dart), not the map's.
     fn plan_reslot(
         &self,
         k: usize,
         seeds: &[Dart],
         removed: &Marks,
         fresh: &Marks,
+        poll: &mut Poll<'_>,
+    ) -> Result<Reslot, RewireError> {
+        with_marks(self.capacity(), |m| {
+            self.plan_reslot_marked(k, seeds, removed, fresh, m, poll)
+        })
+    }
+
+    fn plan_reslot_marked(
+        &self,
+        k: usize,
+        seeds: &[Dart],
+        removed: &Marks,
+        fresh: &Marks,
+        m: &mut Marks,
+        poll: &mut Poll<'_>,
     ) -> Result<Reslot, RewireError> {
         let e = &self.embeddings[k];
-        let mut m = Marks::with_capacity(self.capacity());
-        let mut orbits: Vec<(Vec<Dart>, Vec<usize>)> = Vec::new();
-        let mut parts: HashMap<usize, usize> = HashMap::new();
+        let mut plan = Reslot::default();
+        // old slot -> its index in `plan.olds`
+        let mut index: SlotMap = SlotMap::default();
+        let mut darts = Vec::new();
         for &sd in seeds {
             if m.is_marked(sd) {
                 continue;
             }
-            let mut darts = Vec::new();
-            self.visit_orbit(sd, e.orbit, &mut m, |d| darts.push(d));
-            let mut slots: Vec<usize> = Vec::new();
+            if poll.tick(1) {
+                return Err(RewireError::Interrupted);
+            }
+            darts.clear();
+            self.visit_orbit(sd, e.orbit, m, |d| darts.push(d));
+            let first_slot = plan.slots.len();
             for &d in &darts {
                 if removed.is_marked(d) || fresh.is_marked(d) {
                     continue;
                 }
                 let s = e.slot(d);
-                if !slots.contains(&s) {
-                    slots.push(s);
+                let q = *index.entry(s).or_insert_with(|| {
+                    plan.olds.push(s);
+                    plan.parts.push(0);
+                    plan.olds.len() - 1
+                });
+                if !plan.slots[first_slot..].contains(&q) {
+                    plan.slots.push(q);
+                    plan.parts[q] += 1;
                 }
             }
-            for &s in &slots {
-                *parts.entry(s).or_insert(0) += 1;
-            }
-            orbits.push((darts, slots));
+            let first_dart = plan.darts.len();
+            plan.darts.extend_from_slice(&darts);
+            plan.orbits.push(Orbit {
+                darts: first_dart..plan.darts.len(),
+                slots: first_slot..plan.slots.len(),
+            });
         }
         if e.policy == Policy::Error && e.derived.is_none() {
             let w = e.ty.width();
-            for (darts, slots) in &orbits {
-                if slots.iter().any(|&s| !e.values.slots_equal(w, slots[0], s)) {
+            for o in &plan.orbits {
+                let slots = &plan.slots[o.slots.clone()];
+                let dart = plan.darts[o.darts.start];
+                let s0 = slots.first().map(|&q| plan.olds[q]);
+                if slots
+                    .iter()
+                    .any(|&q| !e.values.slots_equal(w, s0.unwrap_or(0), plan.olds[q]))
+                {
                     return Err(RewireError::Policy {
                         embedding: e.name.clone(),
-                        dart: darts[0],
+                        dart,
                         what: "merge",
                     });
                 }
-                if slots.iter().any(|s| parts[s] > 1) {
+                if slots.iter().any(|&q| plan.parts[q] > 1) {
                     return Err(RewireError::Policy {
                         embedding: e.name.clone(),
-                        dart: darts[0],
+                        dart,
                         what: "split",
                     });
                 }
             }
         }
-        Ok(Reslot { orbits, parts })
+        Ok(plan)
     }
 
-    fn apply_reslot(&mut self, k: usize, plan: Reslot) {
+    fn apply_reslot(&mut self, k: usize, plan: &Reslot) {
         let e = &mut self.embeddings[k];
         let w = e.ty.width();
         let policy = if e.derived.is_some() {
@@ -292,16 +414,17 @@ impl GMap {
         } else {
             e.policy
         };
-        // values are combined from a snapshot of the old slots
-        let olds: Vec<usize> = plan.parts.keys().copied().collect();
-        let snapshot = e.values.clone_slots(w, &olds);
-        let at = |s: usize| olds.iter().position(|&x| x == s).expect("planned");
-        let mut reused: HashMap<usize, bool> = HashMap::new();
+        // values are combined from a snapshot of the old slots: old slot `plan.olds[q]` is
+        // row `q` of the snapshot
+        let snapshot = e.values.clone_slots(w, &plan.olds);
+        let mut reused = vec![false; plan.olds.len()];
         let mut emptied: Vec<usize> = Vec::new();
-        for (darts, slots) in plan.orbits {
-            let target = if let Some(&s) = slots.iter().find(|s| !reused.contains_key(s)) {
-                reused.insert(s, true);
-                s
+        let mut rows: Vec<usize> = Vec::new();
+        for o in &plan.orbits {
+            let slots = &plan.slots[o.slots.clone()];
+            let target = if let Some(&q) = slots.iter().find(|&&q| !reused[q]) {
+                reused[q] = true;
+                plan.olds[q]
             } else {
                 e.alloc_slot(0) as usize
             };
@@ -312,14 +435,18 @@ impl GMap {
                     Column::Bool(_) => crate::Value::Bool(false),
                 };
                 e.values.set(w, target, &zero);
+            } else if matches!(policy, Policy::Copy | Policy::Error) {
+                // the merge copies the first slot
+                e.values.set(w, target, &snapshot.get(w, slots[0]));
             } else {
-                let mut scratch =
-                    snapshot.clone_slots(w, &slots.iter().map(|&s| at(s)).collect::<Vec<_>>());
+                rows.clear();
+                rows.extend_from_slice(slots);
+                let mut scratch = snapshot.clone_slots(w, &rows);
                 if policy == Policy::Sum {
-                    for (q, s) in slots.iter().enumerate() {
-                        let parts = plan.parts[s];
+                    for (r, &q) in slots.iter().enumerate() {
+                        let parts = plan.parts[q];
                         if parts > 1 {
-                            scratch.scale(w, q, parts);
+                            scratch.scale(w, r, parts);
                         }
                     }
                 }
@@ -327,7 +454,7 @@ impl GMap {
                 scratch.merge(w, policy, &idx, 0);
                 e.values.set(w, target, &scratch.get(w, 0));
             }
-            for &d in &darts {
+            for &d in &plan.darts[o.darts.clone()] {
                 let s = e.slot_of[d.index()] as usize;
                 if s != target {
                     e.slot_use[s] -= 1;
@@ -347,12 +474,53 @@ impl GMap {
     }
 }
 
-struct Reslot {
-    /// Each new orbit: its darts and the distinct old slots among its old darts.
-    orbits: Vec<(Vec<Dart>, Vec<usize>)>,
-    /// Old slot -> number of new orbits covering it.
-    parts: HashMap<usize, usize>,
+/// One new orbit of a [`Reslot`]: ranges into its `darts` and `slots`.
+struct Orbit {
+    darts: std::ops::Range<usize>,
+    slots: std::ops::Range<usize>,
 }
+
+/// The plan of one embedding's re-slotting, in flat arrays (no allocation per orbit).
+#[derive(Default)]
+struct Reslot {
+    /// Each new orbit.
+    orbits: Vec<Orbit>,
+    /// The darts of every new orbit, one after the other.
+    darts: Vec<Dart>,
+    /// The distinct old slots among each new orbit's old darts, as indices into `olds`.
+    slots: Vec<usize>,
+    /// The old slots taking part, each once.
+    olds: Vec<usize>,
+    /// For each entry of `olds`: the number of new orbits covering it.
+    parts: Vec<usize>,
+}
+
+/// A multiplicative hash for slot numbers (the default `SipHash` costs more than the rest of
+/// a re-slotting); keys are slot indices, not adversarial input.
+#[derive(Default, Clone, Copy)]
+struct SlotHasher(u64);
+
+impl Hasher for SlotHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u64(&mut self, n: u64) {
+        self.0 = (self.0.rotate_left(5) ^ n).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+
+    fn write_usize(&mut self, n: usize) {
+        self.write_u64(n as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+type SlotMap = HashMap<usize, usize, BuildHasherDefault<SlotHasher>>;
 
 impl Column {
     /// Divides slot `q` by `parts` (a share of a split sum); integers take the floor share.

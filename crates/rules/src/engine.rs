@@ -1331,8 +1331,11 @@ fn apply_matches(
     };
     // 5. rewrite the topology, then write
     if rule.changes_topology && !ms.is_empty() {
-        if let Err(source) = g.rewire(&changes, &fresh, &remove) {
+        if let Err(source) = g.rewire_interruptible(&changes, &fresh, &remove, poll.check) {
             undo_fresh(g, &fresh);
+            if source == RewireError::Interrupted {
+                return Err(interrupted("rewriting the topology"));
+            }
             return Err(ApplyError::Rewire {
                 rule: rule.name.clone(),
                 source,

@@ -169,7 +169,8 @@ fn interrupted_computation_rule_writes_no_value() {
 #[test]
 fn interrupted_after_darts_were_created_removes_them() {
     // count the checks of a whole application, then stop at each of the last ones: those
-    // come after the new darts are created (planning the new topology, checking the values)
+    // come after the new darts are created (planning the new topology, checking the values,
+    // preparing the rewrite)
     let rules = library2();
     let mut probe = quad_map(30);
     let calls = Cell::new(0usize);
@@ -197,9 +198,12 @@ fn interrupted_after_darts_were_created_removes_them() {
         assert_eq!(g.cell_counts(), counts, "created darts left behind");
     }
     assert!(
-        stages
-            .iter()
-            .any(|s| *s == "planning the new topology" || *s == "checking the values written"),
+        stages.iter().all(|s| [
+            "planning the new topology",
+            "checking the values written",
+            "rewriting the topology"
+        ]
+        .contains(s)),
         "{stages:?}"
     );
 }
