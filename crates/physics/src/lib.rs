@@ -148,10 +148,23 @@ fn project(v: &mut [[f64; 3]], fixed: &[bool]) {
 }
 
 /// The shipped common rules a model file is loaded with on a map of dimension `dim` (2 or
-/// 3): `(file name, text)`, declaring the embeddings every simulation has (`position`,
-/// `rest`, `velocity`, `force`, `mass`, `dx`, `dv`, `df`, the material, ...). None for
+/// 3): `(file name, text)`, declaring the material and the masses (`density`, `young`,
+/// `poisson`, `mass`, ...) on that dimension's element orbit; it is loaded after
+/// [`prelude_rules`]. None for
 /// another dimension. Tools that check a user's model file (`topomech check`,
 /// `topomech models`) load it after this, as a simulation does.
 pub fn common_rules(dim: usize) -> Option<(String, &'static str)> {
     model::model_source("common", dim).map(|text| (format!("common{dim}d.tmr"), text))
+}
+
+/// The shipped prelude, `("prelude.tmr", text)`: the embeddings every simulation has that are
+/// the same in both dimensions (`position`, `rest`, `velocity`, `force`, `fixed`, `f_ext`,
+/// `dx`, `dv`, `df`, `vertex0`), `init_rest` and the integrators; a `dimension 2 3` file.
+/// Every simulation and every model file is loaded with it first, then with
+/// [`common_rules`] of its dimension (the material and the masses, on the element orbit).
+pub fn prelude_rules() -> (String, &'static str) {
+    (
+        "prelude.tmr".to_string(),
+        model::model_source("prelude", 3).expect("shipped"),
+    )
 }

@@ -2,8 +2,8 @@
 //! files given in [`Config::model_files`]), and what a simulation runs of them.
 //!
 //! A model is found by name: first in the user's files, then in the shipped files of the
-//! map's dimension. Its file is loaded with the shipped common rules of that dimension (the
-//! embeddings every simulation has: `position`, `rest`, `velocity`, `force`, `mass`, `dx`,
+//! map's dimension. Its file is loaded with the shipped prelude (`prelude.tmr`, both
+//! dimensions) and the common rules of that dimension (the embeddings every simulation has: `position`, `rest`, `velocity`, `force`, `mass`, `dx`,
 //! `dv`, `df`, the material, ...), so a user's file declares only its own embeddings. The
 //! declaration's `init` calls run once at set-up, its `step` calls every step, its `forces`
 //! are summed into `force`, its `jvp` calls and outputs make the Jacobian-vector product.
@@ -43,6 +43,7 @@ const SHIPPED: &[(&str, &[usize], &str)] = &[
 /// A shipped rule file that is not a model file (or is loaded for more than its models).
 pub(crate) fn model_source(file: &str, dim: usize) -> Option<&'static str> {
     Some(match (file, dim) {
+        ("prelude", 2 | 3) => include_str!("../models/prelude.tmr"),
         ("common", 2) => include_str!("../models/common2d.tmr"),
         ("common", 3) => include_str!("../models/common3d.tmr"),
         ("topology", 2) => include_str!("../models/topology2d.tmr"),
@@ -101,9 +102,11 @@ pub fn shipped_models() -> Vec<ShippedModel> {
         for (file, dims, text) in SHIPPED {
             for dim in *dims {
                 let common = model_source("common", *dim).expect("shipped");
+                let prelude = model_source("prelude", *dim).expect("shipped");
                 let Ok((rules, _)) = load_sources_for(
                     *dim,
                     &[
+                        ("prelude.tmr".to_string(), prelude.to_string()),
                         (format!("common{dim}d.tmr"), common.to_string()),
                         ((*file).to_string(), (*text).to_string()),
                     ],

@@ -294,6 +294,10 @@ impl Simulation {
         }
         let mut sources = vec![
             (
+                "prelude.tmr".to_string(),
+                model_source("prelude", dim).expect("shipped").to_string(),
+            ),
+            (
                 format!("common{dim}d.tmr"),
                 model_source("common", dim).expect("shipped").to_string(),
             ),

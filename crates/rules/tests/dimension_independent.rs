@@ -5,6 +5,7 @@
 use topomech_rules::check::Rule;
 use topomech_rules::{load_sources, load_sources_for, RuleSet};
 
+const PRELUDE: &str = include_str!("../../physics/models/prelude.tmr");
 const COMMON2D: &str = include_str!("../../physics/models/common2d.tmr");
 const COMMON3D: &str = include_str!("../../physics/models/common3d.tmr");
 /// The 2D stretch file as shipped before the two files were merged (a fixture).
@@ -19,6 +20,7 @@ fn stretch3d() -> String {
 
 fn srcs(common: &str, model: &str) -> Vec<(String, String)> {
     vec![
+        ("prelude.tmr".to_string(), PRELUDE.to_string()),
         ("common.tmr".to_string(), common.to_string()),
         ("stretch.tmr".to_string(), model.to_string()),
     ]
@@ -120,7 +122,7 @@ fn a_file_serves_only_its_dimensions() {
         d[0]
     );
     let lines: Vec<(&str, u32)> = d.iter().map(|x| (x.file.as_str(), x.pos.line)).collect();
-    assert_eq!(lines, vec![("common.tmr", 3), ("stretch.tmr", 7)]);
+    assert_eq!(lines, vec![("common.tmr", 4), ("stretch.tmr", 7)]);
     // a file without a dimension line serves both when loaded for one
     let bare = format!("{V}rule r {{ left {{ a : <1,2,3> hook }} compute {{ a.w = 1.0 }} }}\n");
     for dim in [2, 3] {

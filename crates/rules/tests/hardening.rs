@@ -286,6 +286,10 @@ const SHIPPED: &[(&str, &str)] = &[
         include_str!("../../physics/models/common3d.tmr"),
     ),
     ("fem2d.tmr", include_str!("../../physics/models/fem2d.tmr")),
+    (
+        "prelude.tmr",
+        include_str!("../../physics/models/prelude.tmr"),
+    ),
     ("fem3d.tmr", include_str!("../../physics/models/fem3d.tmr")),
     (
         "shear2d.tmr",
@@ -491,7 +495,10 @@ fn shipped_rule_files_still_load() {
     for dim in [2, 3] {
         let mut sources: Vec<(String, String)> = SHIPPED
             .iter()
-            .filter(|(n, _)| n.contains(&format!("{dim}d")) && !n.starts_with("modeling"))
+            .filter(|(n, _)| {
+                (n.contains(&format!("{dim}d")) || *n == "prelude.tmr")
+                    && !n.starts_with("modeling")
+            })
             .map(|(n, t)| ((*n).to_string(), (*t).to_string()))
             .collect();
         sources.sort();

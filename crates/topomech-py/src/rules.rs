@@ -17,7 +17,7 @@ use numpy::{PyArrayDescrMethods, PyReadonlyArrayDyn, PyUntypedArray, PyUntypedAr
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyTuple};
 use topomech_gmap::{Dart, GMap};
-use topomech_physics::common_rules;
+use topomech_physics::{common_rules, prelude_rules};
 use topomech_rules::check::Rule;
 use topomech_rules::model::Model;
 use topomech_rules::{
@@ -76,8 +76,9 @@ fn loaded(
     }
 }
 
-/// `sources` after the shipped common rules of the dimension the first of them declares
-/// (unchanged when none declares 2 or 3, or when one of them is that common file already).
+/// `sources` after the shipped prelude and the common rules of the dimension the first of them
+/// declares (unchanged when none declares 2 or 3, or when one of them is that common file
+/// already).
 fn with_common_rules(sources: Vec<(String, String)>) -> Vec<(String, String)> {
     let dim = sources.iter().find_map(|(_, text)| {
         topomech_rules::parser::parse(text)
@@ -91,7 +92,12 @@ fn with_common_rules(sources: Vec<(String, String)>) -> Vec<(String, String)> {
     if sources.iter().any(|(n, _)| *n == name) {
         return sources;
     }
-    let mut out = vec![(name, text.to_string())];
+    let mut out = Vec::new();
+    let (pname, ptext) = prelude_rules();
+    if !sources.iter().any(|(n, _)| *n == pname) {
+        out.push((pname, ptext.to_string()));
+    }
+    out.push((name, text.to_string()));
     out.extend(sources);
     out
 }

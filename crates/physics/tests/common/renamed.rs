@@ -5,6 +5,8 @@
 use topomech_rules::check::check_sources;
 use topomech_rules::RuleSet;
 
+/// The shipped prelude (both dimensions).
+pub const PRELUDE: &str = include_str!("../../models/prelude.tmr");
 /// The shipped 3D common rules.
 pub const COMMON3D: &str = include_str!("../../models/common3d.tmr");
 /// The shipped 3D FEM rules.
@@ -23,9 +25,11 @@ pub fn renamed_fem3d() -> String {
         .replace("fem_init", "my_init")
 }
 
-/// The rule set of the shipped common rules and the FEM rules `text`, read as file `file`.
+/// The rule set of the shipped prelude, the 3D common rules and the FEM rules `text`, read as
+/// file `file`.
 pub fn load_with_common3d(text: &str, file: &str) -> RuleSet {
     let (checked, diags) = check_sources(&[
+        ("prelude.tmr".to_string(), PRELUDE.to_string()),
         ("common3d.tmr".to_string(), COMMON3D.to_string()),
         (file.to_string(), text.to_string()),
     ]);
