@@ -613,35 +613,55 @@ def _add_check(sub: Any) -> None:
 _MODEL_DECLARATION = re.compile(r"^[ \t]*model[ \t]+[A-Za-z_][A-Za-z0-9_]*[ \t]*[({]", re.MULTILINE)
 
 
+def _check_dimensions(sources: list[tuple[str, str]]) -> list[int | None]:
+    """The dimensions to check rule files for: [None] when a file fixes one dimension (the
+    checker then says which, and refuses files that disagree), [2, 3] when every file serves
+    both (``dimension 2 3``, or no dimension line)."""
+    dims = [set(RuleSet.file_dimensions(text)) or {2, 3} for _, text in sources]
+    common = set.intersection(*dims) if dims else set()
+    return [2, 3] if common == {2, 3} else [None]
+
+
 def _run_check(args: argparse.Namespace) -> int:
     sources = _read_rule_files(args.rule_files)
     if sources is None:
         return EXIT_REFUSED
     # model files are checked as a simulation loads them: after the shipped common rules
     with_models = any(_MODEL_DECLARATION.search(text) for _, text in sources)
-    try:
-        if with_models:
-            rules = RuleSet.from_model_sources(sources)
-        else:
-            rules = RuleSet.from_sources(sources)
-    except RuleError as e:
-        for line in [*e.diagnostics, *e.warnings]:
-            print(line)
+    dims = _check_dimensions(sources)
+    checked: list[RuleSet] = []
+    failed = False
+    for dim in dims:
+        try:
+            if with_models:
+                checked.append(RuleSet.from_model_sources(sources, dim))
+            else:
+                checked.append(RuleSet.from_sources(sources, dim))
+        except RuleError as e:
+            if dim is not None:
+                print(f"for dimension {dim} (the files serve 2-maps and 3-maps):")
+            for line in [*e.diagnostics, *e.warnings]:
+                print(line)
+            failed = True
+    if failed:
         return EXIT_INVALID
+    rules = checked[0]
     for line in rules.warnings:
         print(line)
     names = {name for name, _ in sources}
     n = sum(1 for r in rules.rule_names() if rules.rule_info(r)["file"] in names)
     warned = f" ({_plural(len(rules.warnings), 'warning')})" if rules.warnings else ""
+    which = "dimensions 2 and 3" if len(dims) == 2 else f"dimension {rules.dimension}"
     if with_models:
         k = sum(1 for m in rules.models() if m["file"] in names)
         print(
             f"ok: {_plural(n, 'rule')} and {_plural(k, 'model')} in "
             f"{_plural(len(sources), 'file')}{warned} (with the shipped common rules of "
-            f"dimension {rules.dimension})"
+            f"{which})"
         )
     else:
-        print(f"ok: {_plural(n, 'rule')} in {_plural(len(sources), 'file')}{warned}")
+        checked_for = f" (checked for {which})" if len(dims) == 2 else ""
+        print(f"ok: {_plural(n, 'rule')} in {_plural(len(sources), 'file')}{warned}{checked_for}")
     return EXIT_OK
 
 

@@ -94,18 +94,33 @@ class RuleSet:
         return cls(_core.RuleSet.from_source(text, name))
 
     @classmethod
-    def from_sources(cls, sources: Sequence[tuple[str, str]]) -> RuleSet:
-        """Checks ``(name, text)`` rule files together."""
-        return cls(_core.RuleSet.from_sources(list(sources)))
+    def from_sources(
+        cls, sources: Sequence[tuple[str, str]], dimension: int | None = None
+    ) -> RuleSet:
+        """Checks ``(name, text)`` rule files together, for ``dimension`` (2 or 3: needed
+        when every file serves both, with ``dimension 2 3`` or no dimension line; by default
+        the dimension the files say). Raises :class:`RuleError` with every error at its
+        ``FILE:LINE:COL``, ValueError for another dimension."""
+        return cls(_core.RuleSet.from_sources(list(sources), dimension))
+
+    @staticmethod
+    def file_dimensions(text: str) -> list[int]:
+        """The dimensions a rule file's ``dimension`` line names (``[2, 3]`` for
+        ``dimension 2 3``); empty when it names none (the file serves both) or does not
+        parse."""
+        return [int(d) for d in _core.RuleSet.file_dimensions(text)]
 
     @classmethod
-    def from_model_sources(cls, sources: Sequence[tuple[str, str]]) -> RuleSet:
+    def from_model_sources(
+        cls, sources: Sequence[tuple[str, str]], dimension: int | None = None
+    ) -> RuleSet:
         """Checks ``(name, text)`` model files together as a simulation loads them: after
         the shipped common rules of the dimension they declare (``position``, ``rest``,
         ``velocity``, ``force``, ``mass``, ``dx``, ``dv``, ``df``, the material, ...), so a
         model file declares only ``dimension`` and its own embeddings. Raises
-        :class:`RuleError` with every error at its ``FILE:LINE:COL``."""
-        return cls(_core.RuleSet.from_model_sources(list(sources)))
+        :class:`RuleError` with every error at its ``FILE:LINE:COL``. ``dimension`` as
+        :meth:`from_sources`."""
+        return cls(_core.RuleSet.from_model_sources(list(sources), dimension))
 
     @classmethod
     def library(cls, dimension: int) -> RuleSet:

@@ -21,7 +21,7 @@ use topomech_physics::{common_rules, prelude_rules};
 use topomech_rules::check::Rule;
 use topomech_rules::model::Model;
 use topomech_rules::{
-    library, load_files, load_sources, ApplyError as KernelApplyError, ApplyReport, Diagnostic,
+    library, load_files, load_sources, load_sources_for, ApplyError as KernelApplyError, ApplyReport, Diagnostic,
     Params, RuleSet, Ty, Val,
 };
 
@@ -79,12 +79,14 @@ fn loaded(
 /// `sources` after the shipped prelude and the common rules of the dimension the first of them
 /// declares (unchanged when none declares 2 or 3, or when one of them is that common file
 /// already).
-fn with_common_rules(sources: Vec<(String, String)>) -> Vec<(String, String)> {
-    let dim = sources.iter().find_map(|(_, text)| {
-        topomech_rules::parser::parse(text)
-            .ok()
-            .and_then(|f| f.dimension)
-            .and_then(|(n, _)| usize::try_from(n).ok())
+fn with_common_rules(sources: Vec<(String, String)>, dim: Option<usize>) -> Vec<(String, String)> {
+    let dim = dim.or_else(|| {
+        sources.iter().find_map(|(_, text)| {
+            topomech_rules::parser::parse(text)
+                .ok()
+                .and_then(|f| f.dimension)
+                .and_then(|(n, _)| usize::try_from(n).ok())
+        })
     });
     let Some((name, text)) = dim.and_then(common_rules) else {
         return sources;
@@ -100,6 +102,15 @@ fn with_common_rules(sources: Vec<(String, String)>) -> Vec<(String, String)> {
     out.push((name, text.to_string()));
     out.extend(sources);
     out
+}
+
+/// A `dimension` argument: None, 2 or 3.
+fn rule_dimension(dimension: Option<i64>) -> Result<Option<usize>> {
+    match dimension {
+        None => Ok(None),
+        Some(d @ (2 | 3)) => Ok(usize::try_from(d).ok()),
+        Some(d) => Err(value_error(format!("dimension must be 2 or 3, got {d}"))),
+    }
 }
 
 /// A parameter's value for Python: a float, an int, a bool or a list of floats.
@@ -399,13 +410,37 @@ impl PyRuleSet {
         py.detach(move || guard(|| loaded(load_sources(&[source]))))
     }
 
-    /// Checks the texts of several rule files together: `[(name, text), ...]`.
+    /// Checks the texts of several rule files together: `[(name, text), ...]`, for
+    /// `dimension` (2 or 3; needed when every file serves both, `dimension 2 3` or no
+    /// dimension line; by default the dimension the files say).
     #[staticmethod]
-    fn from_sources(py: Python<'_>, sources: Vec<(String, String)>) -> PyResult<PyRuleSet> {
+    #[pyo3(signature = (sources, dimension=None))]
+    fn from_sources(
+        py: Python<'_>,
+        sources: Vec<(String, String)>,
+        dimension: Option<i64>,
+    ) -> PyResult<PyRuleSet> {
         if sources.is_empty() {
             return Err(value_error("from_sources needs at least one (name, text) pair").into());
         }
-        py.detach(move || guard(|| loaded(load_sources(&sources))))
+        let dim = rule_dimension(dimension)?;
+        py.detach(move || {
+            guard(|| {
+                loaded(match dim {
+                    Some(d) => load_sources_for(d, &sources),
+                    None => load_sources(&sources),
+                })
+            })
+        })
+    }
+
+    /// The dimensions a rule file's `dimension` line names (`[2, 3]` for `dimension 2 3`),
+    /// empty when it has none (the file then serves both) or does not parse.
+    #[staticmethod]
+    fn file_dimensions(text: &str) -> Vec<u64> {
+        topomech_rules::parser::parse(text)
+            .map(|f| f.dimensions.iter().map(|(n, _)| *n).collect())
+            .unwrap_or_default()
     }
 
     /// Checks the texts of model files (`[(name, text), ...]`) as a simulation loads them:
@@ -416,13 +451,27 @@ impl PyRuleSet {
     /// 3) the files are checked alone and the checker says why. Raises `RuleError` listing
     /// every error at its `FILE:LINE:COL`.
     #[staticmethod]
-    fn from_model_sources(py: Python<'_>, sources: Vec<(String, String)>) -> PyResult<PyRuleSet> {
+    #[pyo3(signature = (sources, dimension=None))]
+    fn from_model_sources(
+        py: Python<'_>,
+        sources: Vec<(String, String)>,
+        dimension: Option<i64>,
+    ) -> PyResult<PyRuleSet> {
         if sources.is_empty() {
             return Err(
                 value_error("from_model_sources needs at least one (name, text) pair").into(),
             );
         }
-        py.detach(move || guard(|| loaded(load_sources(&with_common_rules(sources)))))
+        let dim = rule_dimension(dimension)?;
+        py.detach(move || {
+            guard(|| {
+                let sources = with_common_rules(sources, dim);
+                loaded(match dim {
+                    Some(d) => load_sources_for(d, &sources),
+                    None => load_sources(&sources),
+                })
+            })
+        })
     }
 
     /// The modeling rules shipped with topomech for `dimension` 2 or 3: split an edge,
