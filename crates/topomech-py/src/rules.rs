@@ -21,8 +21,8 @@ use topomech_physics::{common_rules, prelude_rules};
 use topomech_rules::check::Rule;
 use topomech_rules::model::Model;
 use topomech_rules::{
-    library, load_files, load_sources, load_sources_for, ApplyError as KernelApplyError, ApplyReport, Diagnostic,
-    Params, RuleSet, Ty, Val,
+    library, load_files, load_sources, load_sources_for, ApplyError as KernelApplyError,
+    ApplyReport, Diagnostic, Params, RuleSet, Ty, Val,
 };
 
 use crate::convert::{dart_arg, shape_str, type_name};
