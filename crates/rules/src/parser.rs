@@ -791,9 +791,8 @@ impl Parser {
         Self::node(pos, kind, h)
     }
 
-    /// Leading `let` bindings and one expression, then the end of the text.
-    fn block_body_to_end(&mut self) -> R<Expr> {
-        let start = self.pos();
+    /// `let x = e;` bindings (the `;` optional), with the height of their values.
+    fn let_bindings(&mut self) -> R<(Vec<Stmt>, u32)> {
         let mut stmts = Vec::new();
         let mut h = 0;
         while self.is_kw("let") {
@@ -810,6 +809,13 @@ impl Parser {
                 pos: spos,
             });
         }
+        Ok((stmts, h))
+    }
+
+    /// Leading `let` bindings and one expression, then the end of the text.
+    fn block_body_to_end(&mut self) -> R<Expr> {
+        let start = self.pos();
+        let (stmts, h) = self.let_bindings()?;
         let (e, he) = self.expr_h()?;
         if !matches!(self.peek(), Tok::Eof) {
             return self.err(format!(
@@ -826,22 +832,7 @@ impl Parser {
 
     /// `{ let x = e; ...; result }` (the `{` is consumed).
     fn block(&mut self, pos: Pos) -> R<(Expr, u32)> {
-        let mut stmts = Vec::new();
-        let mut h = 0;
-        while self.is_kw("let") {
-            let spos = self.pos();
-            self.bump();
-            let (name, _) = self.ident("a variable name")?;
-            self.expect_punct("=", "after the variable name")?;
-            let (value, hv) = self.expr_h()?;
-            h = h.max(hv);
-            self.eat_punct(";");
-            stmts.push(Stmt::Let {
-                name,
-                value,
-                pos: spos,
-            });
-        }
+        let (stmts, h) = self.let_bindings()?;
         let (e, he) = self.expr_h()?;
         self.expect_punct("}", "to close the block")?;
         if stmts.is_empty() {
