@@ -60,8 +60,12 @@ fn seconds_per_link(n: usize, runs: usize) -> (f64, usize) {
 /// cost more per link the bigger the batch (6.7 s of `triangulate_face` on a 150 x 150 grid,
 /// release build). Now the cost per link must stay within 3 x between batches of 6 960 and
 /// 114 240 links (the bound leaves room for cache effects and a shared machine; the quadratic
-/// code measured 5.2 x here in a debug build, the fixed one under 1.5 x).
+/// code measured 5.2 x here in a debug build, the fixed one under 1.5 x). A timing, so not in
+/// `make test` (speed lives in benchmarks: `make bench` times unsewing one face and every face
+/// of the 100k-tet box); run it with `cargo test -p topomech-gmap --test rewire_scaling --
+/// --ignored`.
 #[test]
+#[ignore = "a timing: run with --ignored; make bench measures the rewrite"]
 fn time_per_changed_link_is_flat_in_the_batch_size() {
     let (small, ns) = seconds_per_link(30, 5);
     let (big, nb) = seconds_per_link(120, 3);
