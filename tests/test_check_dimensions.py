@@ -89,3 +89,13 @@ def test_an_empty_file_is_not_answered_with_an_api_name(
     rc, out = check(tmp_path, "", capsys)
     assert "load_sources_for" not in out
     assert rc == 0
+
+
+def test_the_same_error_in_both_dimensions_is_said_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A syntax error does not depend on the dimension: one line, no per-dimension header."""
+    rc, out = check(tmp_path, BOTH.replace("compute {", "compute {{"), capsys)
+    assert rc == 1
+    assert "for dimension" not in out
+    assert len([x for x in out.splitlines() if "error[syntax]" in x]) == 1, out

@@ -630,7 +630,7 @@ def _run_check(args: argparse.Namespace) -> int:
     with_models = any(_MODEL_DECLARATION.search(text) for _, text in sources)
     dims = _check_dimensions(sources)
     checked: list[RuleSet] = []
-    failed = False
+    failures: list[tuple[int | None, list[str]]] = []
     for dim in dims:
         try:
             if with_models:
@@ -638,12 +638,15 @@ def _run_check(args: argparse.Namespace) -> int:
             else:
                 checked.append(RuleSet.from_sources(sources, dim))
         except RuleError as e:
-            if dim is not None:
+            failures.append((dim, [*e.diagnostics, *e.warnings]))
+    if failures:
+        # the same diagnostics for both dimensions (a syntax error, say) are said once
+        same = len(failures) == len(dims) and all(f[1] == failures[0][1] for f in failures)
+        for dim, lines in failures[:1] if same else failures:
+            if dim is not None and not same:
                 print(f"for dimension {dim} (the files serve 2-maps and 3-maps):")
-            for line in [*e.diagnostics, *e.warnings]:
+            for line in lines:
                 print(line)
-            failed = True
-    if failed:
         return EXIT_INVALID
     rules = checked[0]
     for line in rules.warnings:
