@@ -68,8 +68,10 @@ browser: $(VENV_STAMP)
 docs-pictures: $(DEVELOP_STAMP)
 	$(VPY) scripts/make_docs_pictures.py
 
+# --overwrite: out/demo may hold the outputs of a version that kept no manifest (they are
+# replaced; other files there are kept)
 demo: $(DEVELOP_STAMP)
-	$(VENV)/bin/topomech demo
+	$(VENV)/bin/topomech demo --overwrite
 
 # Under 10 minutes on 2 cores: the engine bench skips, and records as skipped, a size that the
 # previous one predicts over its budget (TOPOMECH_BENCH_* variables: crates/physics/benches/engine.rs).
