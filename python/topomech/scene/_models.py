@@ -1,0 +1,262 @@
+"""The ``[[model]]`` tables of a scene: a shipped model by ``kind`` with its parameters, or a
+model of the user's rule file (``file = "..."``, ``name = "..."`` when it declares several),
+and the check of the models against the mesh's dimension once it is known (the Rust side:
+``crates/physics/src/model.rs``).
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from topomech._core import RuleError, SceneError
+from topomech.models import Model
+from topomech.models import model_files_of as _model_files_pairs
+from topomech.scene._table import _Fail, _or, _required_str, _Table
+from topomech.simulation import ModelInfo, available_models
+
+#: Models of the paper that scenes may name but this build does not ship yet.
+PLANNED_MODELS = (
+    "shear_isotropic",
+    "shear_anisotropic",
+    "shear_volumic",
+    "bending_linear",
+    "bending_angular",
+)
+
+
+#: Keys of a model table that set the material rather than the model.
+MATERIAL_KEYS_IN_MODEL = ("young", "poisson")
+
+
+def _model_entries(kind: str, dim: int | None) -> list[ModelInfo]:
+    """The catalogue's entries for ``kind`` (one per set of dimensions), those of dimension
+    ``dim`` only when it is known."""
+    return [
+        m for m in available_models() if m["kind"] == kind and (dim is None or dim in m["dims"])
+    ]
+
+
+def _takes(kind: str, dim: int | None) -> list[str]:
+    """The keys a ``[[model]]`` table of ``kind`` may have beside ``kind``."""
+    params: list[str] = []
+    for m in _model_entries(kind, dim):
+        params += [p for p in m["params"] if p not in params]
+    return [*params, *MATERIAL_KEYS_IN_MODEL]
+
+
+def _check_models(
+    models: list[dict[str, Any]],
+    dim: int,
+    fail: _Fail,
+    user_models: Mapping[int, Model] | None = None,
+) -> None:
+    """Refuses a model that does not exist in dimension ``dim``, or a parameter it does not
+    take there, naming the key (``model[i].file`` for a user's model, by index in
+    ``user_models``)."""
+    for i, spec in enumerate(models):
+        user = (user_models or {}).get(i)
+        if user is not None:
+            if dim not in user.dimensions:
+                raise fail(f"model[{i}].file", _wrong_dimension(user, dim))
+            continue
+        kind = spec["kind"]
+        if not _model_entries(kind, dim):
+            entries = _model_entries(kind, None)
+            dims = sorted({d for m in entries for d in m["dims"]})
+            needs = " or ".join(m["needs"] for m in entries)
+            want = " or ".join(f"{d}D" for d in dims)
+            raise fail(
+                f"model[{i}].kind",
+                f"model '{kind}' needs a {want} mesh ({needs}), the mesh is {dim}D",
+            )
+        takes = _takes(kind, dim)
+        for p in spec:
+            if p != "kind" and p not in takes:
+                raise fail(
+                    f"model[{i}].{p}",
+                    f"model '{kind}' takes no parameter '{p}' on a {dim}D mesh "
+                    f"(it takes {', '.join(takes)})",
+                )
+
+
+def _models(
+    tables: list[_Table], dim: int | None, base: Path | None, fail: _Fail
+) -> tuple[list[dict[str, Any]], dict[str, tuple[str, float]], dict[int, Model]]:
+    """The models for :class:`Simulation`, the material values they set (young, poisson),
+    each with the key that set it first, and the user's models (``[[model]] file = ...``)
+    by table index. ``dim`` is the mesh's dimension when the scene says it (a generator),
+    else None: the models are checked again once it is known. Model files are relative to
+    ``base`` (the scene's folder)."""
+    if not tables:
+        raise fail("model", "no model: add a [[model]] table with a kind or a file")
+    kinds = list(dict.fromkeys(m["kind"] for m in available_models()))
+    models: list[dict[str, Any]] = []
+    set_by: dict[str, tuple[str, float]] = {}
+    user_models: dict[int, Model] = {}
+    for i, t in enumerate(tables):
+        if t.has("file"):
+            if t.has("kind"):
+                raise fail(
+                    t.key("kind"),
+                    "give either kind (a shipped model) or file (a rule file), not both",
+                )
+            user = _user_model(t, i, dim, base, fail)
+            models.append(user.config_entry())
+            user_models[i] = user
+            continue
+        kind = t.string("kind")
+        if kind is None:
+            raise fail(
+                t.key("kind"),
+                f"missing: the model's kind ({_or(kinds)}), or file (a rule file declaring it)",
+            )
+        if kind not in kinds:
+            if kind in PLANNED_MODELS:
+                raise fail(
+                    t.key("kind"),
+                    f"model '{kind}' is not available yet (available: {', '.join(kinds)})",
+                )
+            raise fail(t.key("kind"), f"unknown model '{kind}' (known: {', '.join(kinds)})")
+        if dim is not None:
+            _check_models([{"kind": kind}], dim, _Renumber(fail, i))
+        takes = _takes(kind, dim)
+        for k in t.data:
+            if k not in ("kind", *takes):
+                close = difflib.get_close_matches(k, takes, n=1)
+                hint = f"; did you mean '{close[0]}'?" if close else ""
+                raise fail(
+                    t.key(k),
+                    f"unknown key{hint} (model '{kind}' takes {', '.join(takes)})",
+                )
+        spec: dict[str, Any] = {"kind": kind}
+        for p in takes:
+            if p in MATERIAL_KEYS_IN_MODEL:
+                continue
+            v = t.number(p, nonneg=True)
+            if v is not None:
+                spec[p] = v
+        for p in MATERIAL_KEYS_IN_MODEL:
+            v = t.number(p)
+            if v is None:
+                continue
+            if p in set_by and set_by[p][1] != v:
+                other, was = set_by[p]
+                raise fail(
+                    t.key(p),
+                    f"{v:g} differs from {other} = {was:g} (the material has one {p})",
+                )
+            set_by.setdefault(p, (t.key(p), v))
+        models.append(spec)
+    return models, set_by, user_models
+
+
+def _user_model(t: _Table, i: int, dim: int | None, base: Path | None, fail: _Fail) -> Model:
+    """The model of a ``[[model]] file = "..."`` table: the file (relative to ``base``) read
+    and checked with the shipped common rules, the model picked by ``name`` (needed when the
+    file declares several), its parameters from the table's other keys. Refusals name
+    ``model[i].file`` (an unreadable or refused file: the checker's ``FILE:LINE:COL`` lines
+    follow), ``model[i].name`` or ``model[i].<param>``."""
+    file = _required_str(t, "file", fail)
+    path = Path(file).expanduser()
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    key = t.key("file")
+    try:
+        declared = Model.load_all(path)
+    except UnicodeDecodeError as e:
+        raise fail(
+            key, f"cannot read the rule file {path}: not UTF-8 text (byte {e.start})"
+        ) from None
+    except OSError as e:
+        raise fail(key, f"cannot read the rule file {path}: {e.strerror or e}") from None
+    except RuleError as e:
+        raise fail(key, f"the rule file is refused:\n{e}") from None
+    if not declared:
+        raise fail(key, f"{path} declares no model")
+    names = ", ".join(m.name for m in declared)
+    name = t.string("name")
+    if name is None:
+        if len(declared) > 1:
+            raise fail(
+                t.key("name"),
+                f"missing: {path} declares several models ({names}); say which with name",
+            )
+        model = declared[0]
+    else:
+        found = [m for m in declared if m.name == name]
+        if not found:
+            raise fail(t.key("name"), f"{path} declares no model '{name}' (it declares: {names})")
+        model = found[0]
+    if dim is not None and dim not in model.dimensions:
+        raise fail(key, _wrong_dimension(model, dim))
+    params = list(model.params)
+    takes = ", ".join(params) if params else "no parameter"
+    for k in t.data:
+        if k in ("file", "name"):
+            continue
+        if k not in params:
+            close = difflib.get_close_matches(k, params, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise fail(t.key(k), f"unknown key{hint} (model '{model.name}' takes {takes})")
+        if model.param_types.get(k) != "f64":
+            raise fail(
+                t.key(k),
+                f"model '{model.name}': '{k}' is a {model.param_types.get(k)}; only f64 "
+                "parameters can be set from a scene",
+            )
+    values: dict[str, float] = {}
+    for p in params:
+        if model.param_types.get(p) == "f64":
+            v = t.number(p)
+            if v is not None:
+                values[p] = v
+    for p, default in model.params.items():
+        if default is None and p not in values:
+            raise fail(
+                t.key(p), f"missing: model '{model.name}' has no default for parameter '{p}'"
+            )
+    return model.with_params(**values)
+
+
+def _model_origins(
+    models: list[dict[str, Any]], user_models: Mapping[int, Model], tables: list[_Table]
+) -> list[tuple[str, str, str]]:
+    """``("model", kind, key)`` for each model (see :attr:`Scene.origins`): the key a kernel
+    refusal of it is named by, ``model[i].kind``, or for a user's model ``model[i].name``
+    (when the table gives one) or ``model[i].file``."""
+    origins: list[tuple[str, str, str]] = []
+    for i, m in enumerate(models):
+        if i not in user_models:
+            key = f"model[{i}].kind"
+        elif tables[i].has("name"):
+            key = f"model[{i}].name"
+        else:
+            key = f"model[{i}].file"
+        origins.append(("model", m["kind"], key))
+    return origins
+
+
+def _model_files_of(models: list[Model]) -> list[tuple[str, str]]:
+    """The ``(file, text)`` pairs of the user's models' rule files, each once."""
+    return _model_files_pairs(list(models))[1]
+
+
+def _wrong_dimension(model: Model, dim: int) -> str:
+    dims = " or ".join(f"{d}D" for d in model.dimensions)
+    return f"model '{model.name}' runs on {dims} meshes, the mesh is {dim}D"
+
+
+class _Renumber(_Fail):
+    """A :class:`_Fail` that reads ``model[0]`` as ``model[i]`` (checking one model alone)."""
+
+    def __init__(self, fail: _Fail, i: int) -> None:
+        super().__init__(fail.source)
+        self.i = i
+
+    def __call__(self, key: str | None, problem: str) -> SceneError:
+        if key is not None and key.startswith("model[0]"):
+            key = f"model[{self.i}]" + key[len("model[0]") :]
+        return super().__call__(key, problem)
