@@ -20,7 +20,7 @@ fn simulation(n: [usize; 3]) -> Simulation {
     let cfg = Config {
         models: vec![ModelSpec {
             kind: "stretch_cumulated".into(),
-            params: [("stiffness".to_string(), 1e4)].into(),
+            params: [("stiffness".to_string(), topomech_rules::Val::F(1e4))].into(),
         }],
         fixed: vec!["x < 1e-9".into()],
         ..Config::default()

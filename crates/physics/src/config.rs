@@ -2,6 +2,8 @@
 
 use std::collections::HashMap;
 
+use topomech_rules::Val;
+
 use crate::*;
 
 /// The time integrator.
@@ -38,8 +40,24 @@ pub struct ModelSpec {
     /// The model's name: one of [`shipped_models`](crate::shipped_models), or a model declared
     /// in one of [`Config::model_files`].
     pub kind: String,
-    /// Parameters (missing ones take the model's defaults).
-    pub params: HashMap<String, f64>,
+    /// Parameters (missing ones take the model's defaults): a [`Val::F`] for an `f64`
+    /// parameter, a [`Val::V3`] for a `vec3` one; another type, or a type that is not the
+    /// declared one, is refused when the simulation is built, naming the model and parameter.
+    pub params: HashMap<String, Val>,
+}
+
+impl ModelSpec {
+    /// The model `kind` with the real parameters `params` (the common case: every shipped
+    /// model's parameters are `f64`).
+    pub fn with_reals(kind: &str, params: &[(&str, f64)]) -> Self {
+        ModelSpec {
+            kind: kind.to_string(),
+            params: params
+                .iter()
+                .map(|(k, v)| ((*k).to_string(), Val::F(*v)))
+                .collect(),
+        }
+    }
 }
 
 /// Everything a simulation needs beside the map.

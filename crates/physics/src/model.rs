@@ -24,7 +24,7 @@ const SHIPPED: &[(&str, &[usize], &str)] = &[
         &[2, 3],
         include_str!("../models/stretch.tmr"),
     ),
-    ("shear2d.tmr", &[2], include_str!("../models/shear2d.tmr")),
+    ("shear.tmr", &[2, 3], include_str!("../models/shear.tmr")),
     ("shear3d.tmr", &[3], include_str!("../models/shear3d.tmr")),
     (
         "bending2d.tmr",
@@ -40,9 +40,11 @@ const SHIPPED: &[(&str, &[usize], &str)] = &[
     ),
 ];
 
-/// A shipped rule file that is not a model file (or is loaded for more than its models).
+/// A shipped rule file that is not a model file (or is loaded for more than its models), for
+/// dimension `dim`; `("topology", 0)` is the topology file both dimensions share.
 pub(crate) fn model_source(file: &str, dim: usize) -> Option<&'static str> {
     Some(match (file, dim) {
+        ("topology", 0) => include_str!("../models/topology.tmr"),
         ("prelude", 2 | 3) => include_str!("../models/prelude.tmr"),
         ("common", 2) => include_str!("../models/common2d.tmr"),
         ("common", 3) => include_str!("../models/common3d.tmr"),
@@ -160,7 +162,7 @@ pub(crate) struct RunModel {
 impl RunModel {
     /// Binds a checked declaration to the scene's parameter values (`given`, over the
     /// declaration's defaults).
-    pub(crate) fn bind(m: &Model, given: &HashMap<String, f64>) -> Result<Self, PhysicsError> {
+    pub(crate) fn bind(m: &Model, given: &HashMap<String, Val>) -> Result<Self, PhysicsError> {
         for k in given.keys() {
             if !m.params.iter().any(|p| &p.name == k) {
                 let known: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
@@ -175,9 +177,22 @@ impl RunModel {
                 )));
             }
         }
-        let given: HashMap<String, Val> =
-            given.iter().map(|(k, v)| (k.clone(), Val::F(*v))).collect();
-        let values = m.values(&given).map_err(PhysicsError::Config)?;
+        for (k, v) in given {
+            let bad = match v {
+                Val::F(x) if !x.is_finite() => Some(format!("{x}")),
+                Val::V3(x) if !x.iter().all(|c| c.is_finite()) => {
+                    Some(format!("[{}, {}, {}]", x[0], x[1], x[2]))
+                }
+                _ => None,
+            };
+            if let Some(bad) = bad {
+                return Err(PhysicsError::Config(format!(
+                    "model '{}': parameter '{k}' must be finite, got {bad}",
+                    m.name
+                )));
+            }
+        }
+        let values = m.values(given).map_err(PhysicsError::Config)?;
         let bind = |calls: &[topomech_rules::model::Call]| -> Vec<(String, Params)> {
             calls
                 .iter()

@@ -7,14 +7,13 @@ use topomech_rules::{ast, build, parser, Params, Val};
 
 use crate::*;
 
-/// The glue of a step that reads no user input: the ground rule, shipped as a rule file.
-fn glue_source(dim: usize) -> (String, String) {
-    let text = if dim == 3 {
-        include_str!("../models/glue3d.tmr")
-    } else {
-        include_str!("../models/glue2d.tmr")
-    };
-    (format!("glue{dim}d.tmr"), text.to_string())
+/// The glue of a step that reads no user input: the ground rule, shipped as a rule file that
+/// serves both dimensions (`dimension 2 3`).
+fn glue_source() -> (String, String) {
+    (
+        "glue.tmr".to_string(),
+        include_str!("../models/glue.tmr").to_string(),
+    )
 }
 
 /// The label of the built file holding the accumulation rules.
@@ -48,7 +47,8 @@ pub(crate) fn glue_files(
     cfg: &Config,
 ) -> Result<Vec<(String, ast::File)>, PhysicsError> {
     let file = |rules: Vec<ast::RuleDecl>| build::file(glue, rules);
-    let v_orbit: &[u64] = if dim == 3 { &[1, 2, 3] } else { &[1, 2] };
+    // the vertex orbit of both dimensions: label 3 is dropped on a 2-map
+    let v_orbit: &[u64] = &[1, 2, 3];
     let vertex = || build::graph(vec![build::node("v", v_orbit, true)]);
     let mut out = Vec::new();
 
@@ -302,6 +302,10 @@ impl Simulation {
                 model_source("common", dim).expect("shipped").to_string(),
             ),
             (
+                "topology.tmr".to_string(),
+                model_source("topology", 0).expect("shipped").to_string(),
+            ),
+            (
                 format!("topology{dim}d.tmr"),
                 model_source("topology", dim).expect("shipped").to_string(),
             ),
@@ -352,7 +356,7 @@ impl Simulation {
             .flat_map(|o| o.1.iter().map(String::as_str))
             .collect();
         // the glue: shipped where it reads no user input, built as syntax trees where it does
-        let (glue_name, glue_text) = glue_source(dim);
+        let (glue_name, glue_text) = glue_source();
         let glue = parser::parse(&glue_text).map_err(|e| {
             PhysicsError::Config(format!(
                 "{glue_name}:{}:{}: {}",

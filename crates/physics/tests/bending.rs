@@ -200,11 +200,15 @@ fn angular_bending_matches_the_reference() {
             models: vec![
                 ModelSpec {
                     kind: "stretch_elementary".into(),
-                    params: [("stiffness".to_string(), ks)].into(),
+                    params: [("stiffness".to_string(), topomech_rules::Val::F(ks))].into(),
                 },
                 ModelSpec {
                     kind: "bending_angular".into(),
-                    params: [("stiffness".to_string(), kb), ("damping".to_string(), cb)].into(),
+                    params: [
+                        ("stiffness".to_string(), topomech_rules::Val::F(kb)),
+                        ("damping".to_string(), topomech_rules::Val::F(cb)),
+                    ]
+                    .into(),
                 },
             ],
             density: 1.0,
@@ -321,11 +325,15 @@ fn linear_bending_matches_the_reference() {
         models: vec![
             ModelSpec {
                 kind: "stretch_elementary".into(),
-                params: [("stiffness".to_string(), ks)].into(),
+                params: [("stiffness".to_string(), topomech_rules::Val::F(ks))].into(),
             },
             ModelSpec {
                 kind: "bending_linear".into(),
-                params: [("stiffness".to_string(), kb), ("damping".to_string(), cb)].into(),
+                params: [
+                    ("stiffness".to_string(), topomech_rules::Val::F(kb)),
+                    ("damping".to_string(), topomech_rules::Val::F(cb)),
+                ]
+                .into(),
             },
         ],
         density: 1.0,

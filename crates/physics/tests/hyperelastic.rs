@@ -557,7 +557,9 @@ fn meshes_without_tetrahedra_are_refused() {
             &cuboid([1, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra),
             kind,
             |c| {
-                c.models[0].params.insert("stiffness".into(), 1.0);
+                c.models[0]
+                    .params
+                    .insert("stiffness".into(), topomech_rules::Val::F(1.0));
             },
         )
         .unwrap_err();

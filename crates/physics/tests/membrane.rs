@@ -112,7 +112,7 @@ fn corotational_triangles_match_the_reference() {
     let cfg = Config {
         models: vec![ModelSpec {
             kind: "corotational".into(),
-            params: [("thickness".to_string(), t)].into(),
+            params: [("thickness".to_string(), topomech_rules::Val::F(t))].into(),
         }],
         density: rho,
         young,

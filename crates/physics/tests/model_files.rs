@@ -302,3 +302,102 @@ fn shipped_models_are_read_from_the_declarations() {
     }
     assert!(got.len() >= want.len());
 }
+
+/// A user's model with a `vec3` parameter, set from the configuration: anchor springs that
+/// pull each vertex toward `rest + offset`, `f = -k (x - rest - offset)`. Without gravity
+/// the static solve (linear: one Newton step) puts every free vertex exactly at
+/// `rest + offset` (to 1e-12 relative to |offset|: one linear solve per vertex, rounding
+/// only); with the default offset it stays at rest. A parameter of the wrong type, or a
+/// non-finite one, is refused naming the model and the parameter.
+#[test]
+fn a_vec3_model_parameter_is_set_from_the_configuration() {
+    let text = "dimension 2 3
+embedding k_off  : f64  on <1,2,3>
+embedding u_off  : vec3 on <1,2,3>
+embedding f_off  : vec3 on <1,2,3>
+embedding df_off : vec3 on <1,2,3>
+
+rule off_init(k: f64, offset: vec3) {
+  left { v : <1,2,3> hook }
+  compute { v.k_off = k   v.u_off = offset }
+}
+rule off_force {
+  left { v : <1,2,3> hook }
+  compute { v.f_off = -v.k_off * (v.position - v.rest - v.u_off) }
+}
+rule off_jvp {
+  left { v : <1,2,3> hook }
+  compute { v.df_off = -v.k_off * v.dx }
+}
+
+model anchor_offset(k: f64 = 10.0, offset: vec3 = vec3(0, 0, 0)) {
+  init   off_init(k, offset)
+  step   off_force
+  forces f_off
+  jvp    off_jvp -> df_off
+}
+";
+    let file = written("vec3param", "offset.tmr", text);
+    let tet = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let tri = grid([2, 2], [1.0, 1.0], GridElement::Triangle);
+    let run = |mesh: &Mesh, params: HashMap<String, Val>| {
+        let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![topomech_physics::ModelSpec {
+                kind: "anchor_offset".into(),
+                params,
+            }],
+            model_files: vec![file.clone()],
+            gravity: [0.0; 3],
+            integrator: Integrator::Static,
+            dt: 1.0,
+            ..Config::default()
+        };
+        let mut s = Simulation::new(g, cfg)?;
+        s.step()?;
+        Ok::<_, PhysicsError>(s)
+    };
+    let offset = [0.25, -0.5, 0.125];
+    for mesh in [&tet, &tri] {
+        for (given, want) in [(Some(offset), offset), (None, [0.0; 3])] {
+            let mut params: HashMap<String, Val> = [("k".to_string(), Val::F(40.0))].into();
+            if let Some(o) = given {
+                params.insert("offset".into(), Val::V3(o));
+            }
+            let s = run(mesh, params).unwrap();
+            let x = s.vertex_vec3("position").unwrap();
+            let rest = s.vertex_vec3("rest").unwrap();
+            for v in 0..x.len() {
+                for a in 0..3 {
+                    let got = x[v][a] - rest[v][a];
+                    assert!(
+                        (got - want[a]).abs() <= 1e-12 * common::norm(offset),
+                        "vertex {v} axis {a}: moved {got}, the offset is {}",
+                        want[a]
+                    );
+                }
+            }
+        }
+    }
+    for (value, says) in [
+        (Val::F(1.0), "parameter 'offset' is a vec3, got a f64"),
+        (
+            Val::V3([0.0, f64::NAN, 0.0]),
+            "parameter 'offset' must be finite",
+        ),
+    ] {
+        let err = run(&tet, [("offset".to_string(), value)].into())
+            .err()
+            .unwrap();
+        let msg = err.to_string();
+        assert!(msg.contains("anchor_offset") && msg.contains(says), "{msg}");
+    }
+    let err = run(&tet, [("k".to_string(), Val::V3([1.0; 3]))].into())
+        .err()
+        .unwrap();
+    assert!(
+        err.to_string()
+            .contains("parameter 'k' is a f64, got a vec3"),
+        "{err}"
+    );
+}

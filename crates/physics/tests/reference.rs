@@ -439,7 +439,10 @@ fn compare_models(
             .iter()
             .map(|(kind, params)| ModelSpec {
                 kind: (*kind).into(),
-                params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
+                params: params
+                    .iter()
+                    .map(|(k, v)| ((*k).to_string(), topomech_rules::Val::F(*v)))
+                    .collect(),
             })
             .collect(),
         density: 1000.0,

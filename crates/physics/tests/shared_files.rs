@@ -73,3 +73,201 @@ fn the_common_files_keep_only_what_differs() {
     let err = load_sources(&[("common2d.tmr".to_string(), COMMON2D.to_string())]).unwrap_err();
     assert!(err.iter().any(|d| d.message.contains("rest")), "{err:?}");
 }
+
+/// The shipped files before the shear, glue and topology files were merged across
+/// dimensions (fixtures: `fixtures/before_merge/`).
+mod before_merge {
+    pub const SHEAR2D: &str = include_str!("fixtures/before_merge/shear2d.tmr");
+    pub const SHEAR3D: &str = include_str!("fixtures/before_merge/shear3d.tmr");
+    pub const GLUE2D: &str = include_str!("fixtures/before_merge/glue2d.tmr");
+    pub const GLUE3D: &str = include_str!("fixtures/before_merge/glue3d.tmr");
+    pub const TOPOLOGY2D: &str = include_str!("fixtures/before_merge/topology2d.tmr");
+    pub const TOPOLOGY3D: &str = include_str!("fixtures/before_merge/topology3d.tmr");
+}
+
+const SHEAR: &str = include_str!("../models/shear.tmr");
+const SHEAR_VOLUMIC: &str = include_str!("../models/shear3d.tmr");
+const GLUE: &str = include_str!("../models/glue.tmr");
+const TOPOLOGY: &str = include_str!("../models/topology.tmr");
+const TOPOLOGY2D: &str = include_str!("../models/topology2d.tmr");
+const TOPOLOGY3D: &str = include_str!("../models/topology3d.tmr");
+
+/// Rule files: `(name, text)`.
+type Files<'a> = Vec<(&'a str, &'a str)>;
+
+/// The files loaded for `dim` after the prelude and the common file of that dimension.
+fn load_with_common(dim: usize, files: &[(&str, &str)]) -> RuleSet {
+    let common = if dim == 2 { COMMON2D } else { COMMON3D };
+    let mut srcs = vec![
+        ("prelude.tmr".to_string(), PRELUDE.to_string()),
+        (format!("common{dim}d.tmr"), common.to_string()),
+    ];
+    srcs.extend(
+        files
+            .iter()
+            .map(|(n, t)| ((*n).to_string(), (*t).to_string())),
+    );
+    load_sources_for(dim, &srcs)
+        .unwrap_or_else(|d| {
+            panic!(
+                "{dim}D {files:?}: {d:?}",
+                files = files.iter().map(|f| f.0).collect::<Vec<_>>()
+            )
+        })
+        .0
+}
+
+/// The embeddings by name (the merged files declare them in another order; storage order
+/// changes no value).
+fn embeddings_by_name(r: &RuleSet) -> Vec<topomech_rules::check::EmbDecl> {
+    let mut e = r.embeddings().to_vec();
+    e.sort_by(|a, b| a.name.cmp(&b.name));
+    e
+}
+
+/// A rule's checked form as text, with each embedding index (`emb: 3`, `emb: Some(3)`,
+/// `guard_reads: [3, 4]`) replaced by the embedding's name: the merged files declare the
+/// same embeddings in another order, which renumbers them and changes nothing else.
+fn by_name(r: &RuleSet, rule: &Rule) -> String {
+    let names: Vec<&str> = r.embeddings().iter().map(|e| e.name.as_str()).collect();
+    let text = format!("{rule:?}");
+    let mut out = String::new();
+    let mut rest = text.as_str();
+    loop {
+        let emb = rest.find("emb: ");
+        let reads = rest.find("guard_reads: [");
+        let (at, skip) = match (emb, reads) {
+            (Some(e), Some(g)) if g < e => (g, "guard_reads: [".len()),
+            (Some(e), _) => (e, "emb: ".len()),
+            (None, Some(g)) => (g, "guard_reads: [".len()),
+            (None, None) => break,
+        };
+        out.push_str(&rest[..at + skip]);
+        rest = &rest[at + skip..];
+        let list = skip > "emb: ".len();
+        if rest.starts_with("Some(") {
+            out.push_str("Some(");
+            rest = &rest[5..];
+        }
+        loop {
+            let digits = rest.bytes().take_while(u8::is_ascii_digit).count();
+            if digits == 0 {
+                break;
+            }
+            let k: usize = rest[..digits].parse().expect("an index");
+            out.push_str(names[k]);
+            rest = &rest[digits..];
+            if list && rest.starts_with(", ") {
+                out.push_str(", ");
+                rest = &rest[2..];
+            } else {
+                break;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The models without their files, positions and dimension lists.
+fn models_unplaced(r: &RuleSet) -> Vec<topomech_rules::model::Model> {
+    let mut m: Vec<_> = r
+        .models()
+        .iter()
+        .cloned()
+        .map(|mut m| {
+            m.file = String::new();
+            m.pos = topomech_rules::ast::Pos::default();
+            m.dimensions.clear();
+            m
+        })
+        .collect();
+    m.sort_by(|a, b| a.name.cmp(&b.name));
+    m
+}
+
+/// The shear springs, the ground rule and the fracture strains are written once for both
+/// dimensions (`shear.tmr`, `glue.tmr`, `topology.tmr`, all `dimension 2 3`; the 3D-only
+/// volumic shear stays in `shear3d.tmr`, the cuts that unsew alpha2 or alpha3 in
+/// `topology{2,3}d.tmr`). Loaded for each dimension they check to exactly the embeddings,
+/// rules (labels, programs, guards) and model declarations of the per-dimension files they
+/// replace: the merge moves text and drops label 3 on 2-maps, and changes no datum, orbit,
+/// policy or program, so every simulation is unchanged (the other tests check them too).
+#[test]
+fn the_merged_files_are_the_per_dimension_files_as_before() {
+    use before_merge as b;
+    let cases: [(usize, Files, Files); 2] = [
+        (
+            2,
+            vec![
+                ("shear.tmr", SHEAR),
+                ("glue.tmr", GLUE),
+                ("topology.tmr", TOPOLOGY),
+                ("topology2d.tmr", TOPOLOGY2D),
+            ],
+            vec![
+                ("shear2d.tmr", b::SHEAR2D),
+                ("glue2d.tmr", b::GLUE2D),
+                ("topology2d.tmr", b::TOPOLOGY2D),
+            ],
+        ),
+        (
+            3,
+            vec![
+                ("shear.tmr", SHEAR),
+                ("shear3d.tmr", SHEAR_VOLUMIC),
+                ("glue.tmr", GLUE),
+                ("topology.tmr", TOPOLOGY),
+                ("topology3d.tmr", TOPOLOGY3D),
+            ],
+            vec![
+                ("shear3d.tmr", b::SHEAR3D),
+                ("glue3d.tmr", b::GLUE3D),
+                ("topology3d.tmr", b::TOPOLOGY3D),
+            ],
+        ),
+    ];
+    for (dim, now, was) in cases {
+        let (now, was) = (load_with_common(dim, &now), load_with_common(dim, &was));
+        assert_eq!(now.dimension(), dim);
+        assert_eq!(
+            embeddings_by_name(&now),
+            embeddings_by_name(&was),
+            "{dim}D embeddings"
+        );
+        let (n, w) = (unplaced(&now), unplaced(&was));
+        assert_eq!(
+            n.iter().map(|r| &r.name).collect::<Vec<_>>(),
+            w.iter().map(|r| &r.name).collect::<Vec<_>>(),
+            "{dim}D rule names"
+        );
+        for (a, b) in n.iter().zip(&w) {
+            assert_eq!(by_name(&now, a), by_name(&was, b), "{dim}D rule {}", a.name);
+        }
+        assert_eq!(
+            models_unplaced(&now),
+            models_unplaced(&was),
+            "{dim}D models"
+        );
+    }
+    // the shared shear models say they serve both dimensions; the volumic one 3D alone
+    let r3 = load_with_common(3, &[("shear.tmr", SHEAR), ("shear3d.tmr", SHEAR_VOLUMIC)]);
+    for (name, dims) in [
+        ("shear_isotropic", vec![2, 3]),
+        ("shear_anisotropic", vec![2, 3]),
+        ("shear_volumic", vec![3]),
+    ] {
+        assert_eq!(r3.model(name).expect(name).dimensions, dims, "{name}");
+    }
+    // one text for both: no per-dimension copy of what is shared is shipped any more
+    for (file, text) in [
+        ("shear3d.tmr", SHEAR_VOLUMIC),
+        ("topology2d.tmr", TOPOLOGY2D),
+        ("topology3d.tmr", TOPOLOGY3D),
+    ] {
+        assert!(
+            !text.contains("rule shear_isotropic") && !text.contains("rule spring_strains"),
+            "{file}"
+        );
+    }
+}

@@ -16,7 +16,7 @@ use topomech_gmap::generators::{grid, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions};
 use topomech_gmap::{GMap, Value};
 use topomech_rules::parser::MAX_DEPTH;
-use topomech_rules::{load_sources, Diagnostic, Params, RuleSet, Severity};
+use topomech_rules::{load_sources, load_sources_for, Diagnostic, Params, RuleSet, Severity};
 
 const LIMIT: usize = MAX_DEPTH as usize;
 
@@ -291,10 +291,7 @@ const SHIPPED: &[(&str, &str)] = &[
         include_str!("../../physics/models/prelude.tmr"),
     ),
     ("fem3d.tmr", include_str!("../../physics/models/fem3d.tmr")),
-    (
-        "shear2d.tmr",
-        include_str!("../../physics/models/shear2d.tmr"),
-    ),
+    ("shear.tmr", include_str!("../../physics/models/shear.tmr")),
     (
         "shear3d.tmr",
         include_str!("../../physics/models/shear3d.tmr"),
@@ -302,6 +299,15 @@ const SHIPPED: &[(&str, &str)] = &[
     (
         "stretch.tmr",
         include_str!("../../physics/models/stretch.tmr"),
+    ),
+    (
+        "topology.tmr",
+        include_str!("../../physics/models/topology.tmr"),
+    ),
+    ("glue.tmr", include_str!("../../physics/models/glue.tmr")),
+    (
+        "hyperelastic3d.tmr",
+        include_str!("../../physics/models/hyperelastic3d.tmr"),
     ),
     (
         "topology2d.tmr",
@@ -496,13 +502,14 @@ fn shipped_rule_files_still_load() {
         let mut sources: Vec<(String, String)> = SHIPPED
             .iter()
             .filter(|(n, _)| {
-                (n.contains(&format!("{dim}d")) || *n == "prelude.tmr")
-                    && !n.starts_with("modeling")
+                // the files of this dimension, and those serving both (no 2d/3d in the name)
+                let both = !n.contains("2d") && !n.contains("3d");
+                (n.contains(&format!("{dim}d")) || both) && !n.starts_with("modeling")
             })
             .map(|(n, t)| ((*n).to_string(), (*t).to_string()))
             .collect();
         sources.sort();
-        load_sources(&sources).unwrap_or_else(|d| panic!("{d:?}"));
+        load_sources_for(dim, &sources).unwrap_or_else(|d| panic!("{d:?}"));
         let (n, t) = SHIPPED
             .iter()
             .find(|(n, _)| *n == format!("modeling{dim}d.tmr"))

@@ -25,6 +25,7 @@ use topomech_physics::{
     is_additive, shipped_models, Config, Criterion, Cut, Fracture, Ground, Integrator,
     MaterialRegion, ModelSpec, Simulation, TimedEvent, TopologyChange,
 };
+use topomech_rules::Val;
 
 use crate::convert::{array_arg, rows3_arg, rows_to_array, shape_str, type_name};
 use crate::errors::{
@@ -200,7 +201,9 @@ fn dict_items<'py>(
         .collect()
 }
 
-/// A model: its kind alone (`"corotational"`), or a dict `{"kind": ..., param: value, ...}`.
+/// A model: its kind alone (`"corotational"`), or a dict `{"kind": ..., param: value, ...}`
+/// where a value is a real (an `f64` parameter) or 3 reals (a `vec3` one; the declaration's
+/// type is checked when the simulation is built).
 fn model_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<ModelSpec> {
     let what = format!("models[{k}]");
     if obj.is_instance_of::<PyString>() {
@@ -221,7 +224,14 @@ fn model_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<ModelSpec> {
         if key == "kind" {
             kind = Some(str_arg(&v, &format!("{what}['kind']"))?);
         } else {
-            let x = real_arg(&v, &format!("{what}['{key}']"))?;
+            let at = format!("{what}['{key}']");
+            let x = if v.is_instance_of::<PyString>() || v.is_instance_of::<PyBool>() {
+                Val::F(real_arg(&v, &at)?)
+            } else if v.try_iter().is_ok() {
+                Val::V3(vec3_arg(&v, &at)?)
+            } else {
+                Val::F(real_arg(&v, &at)?)
+            };
             params.insert(key, x);
         }
     }
@@ -1283,8 +1293,9 @@ fn rows_i64(rows: &[usize]) -> Vec<i64> {
         .collect()
 }
 
-/// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "needs",
-/// "has_jvp"}]`.
+/// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "param_types":
+/// {name: "f64" | "vec3"}, "needs", "has_jvp"}]`; a default is a float, a list of 3 floats,
+/// or None for a required parameter.
 #[pyfunction]
 pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
     shipped_models()
@@ -1294,12 +1305,17 @@ pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
             d.set_item("kind", &m.name)?;
             d.set_item("dims", m.dimensions.clone())?;
             let p = PyDict::new(py);
+            let types = PyDict::new(py);
             for q in &m.params {
-                if let Some(topomech_rules::Val::F(v)) = q.default {
-                    p.set_item(&q.name, v)?;
+                match &q.default {
+                    Some(Val::F(v)) => p.set_item(&q.name, *v)?,
+                    Some(Val::V3(v)) => p.set_item(&q.name, v.to_vec())?,
+                    _ => p.set_item(&q.name, py.None())?,
                 }
+                types.set_item(&q.name, q.ty.to_string())?;
             }
             d.set_item("params", p)?;
+            d.set_item("param_types", types)?;
             d.set_item("needs", m.needs.as_deref().unwrap_or(""))?;
             d.set_item("has_jvp", m.has_jvp)?;
             Ok(d)

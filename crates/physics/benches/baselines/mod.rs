@@ -643,7 +643,10 @@ impl Model {
         let cfg = Config {
             models: vec![ModelSpec {
                 kind: self.kind().into(),
-                params: params.into_iter().collect(),
+                params: params
+                    .into_iter()
+                    .map(|(k, v)| (k, topomech_rules::Val::F(v)))
+                    .collect(),
             }],
             density: 1000.0,
             young: 1e6,

@@ -9,10 +9,7 @@ use topomech_physics::ModelSpec;
 pub type V3 = [f64; 3];
 
 pub fn model(kind: &str, params: &[(&str, f64)]) -> ModelSpec {
-    ModelSpec {
-        kind: kind.into(),
-        params: params.iter().map(|(k, v)| ((*k).to_string(), *v)).collect(),
-    }
+    ModelSpec::with_reals(kind, params)
 }
 
 pub fn sub(a: V3, b: V3) -> V3 {
