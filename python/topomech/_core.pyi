@@ -240,8 +240,9 @@ class Simulation:
     def integrator(self) -> str: ...
 
 def models() -> list[dict[str, Any]]:
-    """The models topomech ships: ``kind``, ``dims``, ``params`` (with defaults), ``needs``,
-    ``has_jvp``."""
+    """The models topomech ships: ``kind``, ``dims``, ``params`` (``{name: default}``, a
+    default a float, a list of 3 floats or None for a required parameter), ``param_types``
+    (``{name: "f64" | "vec3"}``), ``needs``, ``has_jvp``."""
 
 def check_predicate(text: str, label: str = "predicate") -> None:
     """Checks a predicate on the rest position ``x``, ``y``, ``z`` as a simulation builds it:

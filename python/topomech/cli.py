@@ -731,8 +731,8 @@ def _run_models(args: argparse.Namespace) -> int:
 def _show_default(d: Any) -> str:
     if d is None:
         return "required"
-    if isinstance(d, list):
-        return "vec3(" + ", ".join(f"{x:g}" for x in d) + ")"
+    if isinstance(d, (list, tuple)):
+        return "[" + ", ".join(f"{x:g}" for x in d) + "]"
     return f"{d:g}"
 
 

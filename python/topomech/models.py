@@ -22,23 +22,32 @@ without ``jvp`` runs with the explicit integrators only (``explicit_euler``,
     ({'stiffness': 1000.0, 'damping': 0.0}, True)
     >>> m.with_params(stiffness=50.0).values
     {'stiffness': 50.0}
+
+A ``vec3`` parameter takes 3 real numbers (a list, a tuple or a numpy array of shape
+``(3,)``), kept as a tuple of floats and passed to the simulation as a list.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Union
 
+import numpy as np
+
 from topomech import _core
 
-__all__ = ["EXPLICIT_INTEGRATORS", "INTEGRATORS", "Model", "ParamDefault"]
+__all__ = ["EXPLICIT_INTEGRATORS", "INTEGRATORS", "Model", "ParamDefault", "ParamValue"]
 
 #: A parameter's default: a number (``f64``), 3 numbers (``vec3``), or None (required).
 ParamDefault = Union[float, list[float], None]
+#: A parameter's value as :meth:`Model.with_params` keeps it: a float (``f64``) or a tuple
+#: of 3 floats (``vec3``).
+ParamValue = Union[float, tuple[float, float, float]]
 
 #: The integrators every model runs with.
 EXPLICIT_INTEGRATORS = ("explicit_euler", "symplectic_euler")
@@ -68,8 +77,9 @@ class Model:
     has_jvp: bool
     #: The rule file that declares it, as given to :meth:`load`; None for a shipped model.
     file: str | None = None
-    #: The parameter values set (:meth:`with_params`); the others keep their defaults.
-    values: dict[str, float] = field(default_factory=dict)
+    #: The parameter values set (:meth:`with_params`): a float for an ``f64`` parameter, a
+    #: tuple of 3 floats for a ``vec3`` one; the others keep their defaults.
+    values: dict[str, ParamValue] = field(default_factory=dict)
     #: The rule file's text (read once by :meth:`load`); None for a shipped model.
     source: str | None = field(default=None, repr=False, compare=False)
     #: The force embeddings it sums into each vertex's ``force`` (empty for a shipped model).
@@ -91,7 +101,7 @@ class Model:
         cls,
         path: str | os.PathLike[str],
         name: str | None = None,
-        params: Mapping[str, float] | None = None,
+        params: Mapping[str, Any] | None = None,
     ) -> Model:
         """The model ``name`` declared in the rule file ``path`` (the file's only model when
         ``name`` is None), with the parameter values ``params``.
@@ -158,44 +168,91 @@ class Model:
             raise ValueError(f"no shipped model '{name}'{where} (shipped: {known})")
         return found[0]
 
-    def with_params(self, **values: float) -> Model:
-        """A copy with these parameter values set (over those set before). Raises
-        :class:`ValueError` for a parameter the model does not have (naming its
-        parameters), a non-finite value, or a ``vec3`` parameter (not settable yet: it
-        keeps its default), :class:`TypeError` for a value that is not a real number."""
+    def with_params(self, **values: Any) -> Model:
+        """A copy with these parameter values set (over those set before): a real number for
+        an ``f64`` parameter, 3 real numbers (a list, a tuple or a numpy array of shape
+        ``(3,)``, kept as a tuple of floats) for a ``vec3`` one. Raises :class:`ValueError`
+        for a parameter the model does not have (naming its parameters), a non-finite value
+        or a ``vec3`` value of another length than 3; :class:`TypeError` for a sequence given
+        to an ``f64`` parameter, a single number given to a ``vec3`` one (each saying which
+        type the parameter expects), or a value that is not a real number. Each message
+        names the model and the parameter."""
         out = dict(self.values)
         for k, v in values.items():
             if k not in self.params:
                 has = ", ".join(self.params) or "none"
                 raise ValueError(f"model '{self.name}' has no parameter '{k}' (it has: {has})")
-            if self.param_types.get(k, "f64") != "f64":
+            ty = self.param_types.get(k, "f64")
+            if ty == "vec3":
+                out[k] = self._vec3(k, v)
+            elif ty == "f64":
+                out[k] = self._f64(k, v)
+            else:
                 raise ValueError(
-                    f"model '{self.name}': parameter '{k}' is a {self.param_types[k]}; only "
-                    "f64 parameters can be set (it keeps its default)"
+                    f"model '{self.name}': parameter '{k}' is a {ty}; only f64 and vec3 "
+                    "parameters can be set"
                 )
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
-                raise TypeError(
-                    f"model '{self.name}': parameter '{k}' must be a real number, "
-                    f"got {type(v).__name__}"
-                )
-            if not math.isfinite(v):
-                raise ValueError(f"model '{self.name}': parameter '{k}' must be finite, got {v}")
-            out[k] = float(v)
         return replace(self, values=out)
+
+    def _f64(self, k: str, v: Any) -> float:
+        """The value of the ``f64`` parameter ``k``: a finite real number."""
+        what = f"model '{self.name}': parameter '{k}'"
+        if _is_sequence(v):
+            raise TypeError(
+                f"{what} is an f64: expected a real number, got a {type(v).__name__} "
+                "(3 numbers are for a vec3 parameter)"
+            )
+        if not _is_real(v):
+            raise TypeError(f"{what} must be a real number, got {type(v).__name__}")
+        x = float(v)
+        if not math.isfinite(x):
+            raise ValueError(f"{what} must be finite, got {v}")
+        return x
+
+    def _vec3(self, k: str, v: Any) -> tuple[float, float, float]:
+        """The value of the ``vec3`` parameter ``k``: 3 finite real numbers."""
+        what = f"model '{self.name}': parameter '{k}'"
+        if not _is_sequence(v):
+            got = "a real number" if _is_real(v) else f"a {type(v).__name__}"
+            raise TypeError(
+                f"{what} is a vec3: expected 3 real numbers (a list, a tuple or an array of "
+                f"shape (3,)), got {got}"
+            )
+        if isinstance(v, np.ndarray) and v.shape != (3,):
+            raise ValueError(
+                f"{what} is a vec3: expected 3 real numbers, got an array of shape {v.shape}"
+            )
+        items = list(v)
+        if len(items) != 3:
+            raise ValueError(f"{what} is a vec3: expected 3 real numbers, got {len(items)}")
+        for i, x in enumerate(items):
+            if not _is_real(x):
+                raise TypeError(
+                    f"{what} is a vec3: item {i} must be a real number, got {type(x).__name__}"
+                )
+        xs = [float(x) for x in items]
+        for i, x in enumerate(xs):
+            if not math.isfinite(x):
+                raise ValueError(f"{what} is a vec3: item {i} must be finite, got {x}")
+        return (xs[0], xs[1], xs[2])
 
     def config_entry(self) -> dict[str, Any]:
         """The ``models`` entry :class:`topomech.Simulation` takes: ``{"kind": name, param:
-        value, ...}`` (the values set)."""
-        return {"kind": self.name, **self.values}
+        value, ...}`` (the values set; a ``vec3`` value as a list of 3 floats)."""
+        return {
+            "kind": self.name,
+            **{k: list(v) if isinstance(v, tuple) else v for k, v in self.values.items()},
+        }
 
     def describe(self) -> dict[str, Any]:
         """A JSON-ready description (``topomech models --json``): name, file, params
-        (``{name: {"type", "default"}}``), dimensions, needs, has_jvp, integrators."""
+        (``{name: {"type", "default"}}``, a ``vec3`` default as ``[x, y, z]``, a required
+        parameter's as None), dimensions, needs, has_jvp, integrators."""
         return {
             "name": self.name,
             "file": self.file,
             "params": {
-                p: {"type": self.param_types.get(p, "f64"), "default": d}
+                p: {"type": self.param_types.get(p, "f64"), "default": _default(d)}
                 for p, d in self.params.items()
             },
             "dimensions": list(self.dimensions),
@@ -205,14 +262,38 @@ class Model:
         }
 
 
+def _is_real(x: Any) -> bool:
+    """Whether ``x`` is a real number (Python's or numpy's; not a bool)."""
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)
+
+
+def _is_sequence(x: Any) -> bool:
+    """Whether ``x`` is a sequence of values (a list, a tuple, a numpy array...; not a
+    string)."""
+    if isinstance(x, np.ndarray):
+        return x.ndim > 0
+    return isinstance(x, Sequence) and not isinstance(x, (str, bytes, bytearray))
+
+
+def _default(d: Any) -> ParamDefault:
+    """A default as :class:`Model` keeps it: a float, a list of 3 floats (``vec3``) or
+    None (required)."""
+    if d is None:
+        return None
+    if _is_sequence(d):
+        return [float(x) for x in d]
+    return float(d)
+
+
 def shipped_models() -> list[Model]:
     """The models topomech ships, as :class:`Model` objects (one per declaration: a name
     whose declarations differ between dimensions appears once per dimension set)."""
     return [
         Model(
             name=str(m["kind"]),
-            params={str(k): float(v) for k, v in m["params"].items()},
-            param_types={str(k): "f64" for k in m["params"]},
+            params={str(k): _default(v) for k, v in m["params"].items()},
+            # older builds of the kernel give no types: every shipped parameter was an f64
+            param_types={str(k): str(m.get("param_types", {}).get(k, "f64")) for k in m["params"]},
             dimensions=tuple(int(d) for d in m["dims"]),
             needs=str(m["needs"]) or None,
             has_jvp=bool(m["has_jvp"]),

@@ -373,7 +373,10 @@ class Recorder:
         self.name = scene.name if scene is not None else "simulation"
         self.gravity = np.asarray(cfg.get("gravity", [0.0, 0.0, 0.0]), dtype=np.float64)
         models = cfg.get("models", [])
-        self.damped = any(float(m.get("damping", 0.0) or 0.0) != 0.0 for m in models)
+        self.damped = any(
+            not isinstance(d, (list, tuple)) and float(d or 0.0) != 0.0
+            for d in (m.get("damping", 0.0) for m in models)
+        )
         kinds = {m["kind"] for m in models}
         self.strain: str | None = None
         if sim.dimension == 3 and kinds and kinds <= set(FEM_MODELS):

@@ -34,7 +34,7 @@ before that step.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypedDict, Union
 
@@ -44,7 +44,7 @@ import numpy.typing as npt
 from topomech import _core
 from topomech._core import DivergenceError, SimulationError
 from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_array
-from topomech.models import Model, model_files_of
+from topomech.models import Model, ParamDefault, model_files_of
 
 if TYPE_CHECKING:
     from topomech._gmap import PathLike
@@ -59,9 +59,10 @@ __all__ = [
     "available_models",
 ]
 
-#: A model as :class:`Simulation` takes it: its kind alone, ``{"kind": ..., param: value}``,
-#: or a :class:`topomech.Model`.
-ModelArg = Union[str, Mapping[str, Union[str, float]], Model]
+#: A model as :class:`Simulation` takes it: its kind alone, ``{"kind": ..., param: value}``
+#: (a real number for an ``f64`` parameter, 3 for a ``vec3`` one), or a
+#: :class:`topomech.Model`.
+ModelArg = Union[str, Mapping[str, Union[str, float, Sequence[float]]], Model]
 
 
 class ModelInfo(TypedDict):
@@ -71,9 +72,10 @@ class ModelInfo(TypedDict):
     kind: str
     #: The mesh dimensions it exists in (2: surfaces, 3: volumes).
     dims: list[int]
-    #: Its parameters with their defaults (the continuous models have none: they use the
-    #: material's ``young`` and ``poisson``).
-    params: dict[str, float]
+    #: Its parameters with their defaults: a float (``f64``), a list of 3 floats (``vec3``) or
+    #: None (required). The continuous models have none: they use the material's ``young``
+    #: and ``poisson``.
+    params: dict[str, ParamDefault]
     #: What it needs of the mesh (``edges``, ``tetrahedra``).
     needs: str
 
@@ -135,8 +137,9 @@ class Simulation:
 
     ``config`` (a dict) or keyword arguments, mirroring the kernel's configuration:
 
-    - ``models``: a list of model kinds, dicts ``{"kind": ..., param: value}``
-      (:func:`available_models` lists the shipped ones with their parameters), or
+    - ``models``: a list of model kinds, dicts ``{"kind": ..., param: value}`` (a real
+      number for an ``f64`` parameter, a sequence of 3 for a ``vec3`` one;
+      :func:`available_models` lists the shipped ones with their parameters), or
       :class:`topomech.Model` objects (``Model.load("anchor.tmr").with_params(k=5.0)``: a
       model from the user's rule file, whose text is passed on as ``model_files``);
     - ``model_files``: ``(file name, text)`` pairs of the user's rule files declaring the

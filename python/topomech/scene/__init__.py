@@ -20,7 +20,8 @@ the fixed vertices, gravity, the integrator and how often to write frames::
     poisson = 0.3
     # [[model]]                        # a model from the user's rule file (relative to
     # file = "anchor.tmr"              #   the scene), name = "..." when it declares
-    # k = 50.0                         #   several; its parameters as keys
+    # k = 50.0                         #   several; its parameters as keys, a vec3
+    # offset = [0.0, 0.1, 0.0]         #   one as an array of 3 numbers
 
     [material]
     density = 1000.0                   # per volume in 3D, per area in 2D

@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import Any
 
 from topomech._core import RuleError, SceneError
-from topomech.models import Model
+from topomech.models import Model, shipped_models
 from topomech.models import model_files_of as _model_files_pairs
-from topomech.scene._table import _Fail, _or, _required_str, _Table
+from topomech.scene._table import _Fail, _or, _required_str, _show, _Table
 from topomech.simulation import ModelInfo, available_models
 
 #: Models of the paper that scenes may name but this build does not ship yet.
@@ -45,6 +45,41 @@ def _takes(kind: str, dim: int | None) -> list[str]:
     for m in _model_entries(kind, dim):
         params += [p for p in m["params"] if p not in params]
     return [*params, *MATERIAL_KEYS_IN_MODEL]
+
+
+def _param_types(kind: str, dim: int | None) -> dict[str, str]:
+    """The type (``f64`` or ``vec3``) of each parameter of the shipped model ``kind`` (of
+    dimension ``dim`` when it is known)."""
+    types: dict[str, str] = {}
+    for m in shipped_models():
+        if m.name == kind and (dim is None or dim in m.dimensions):
+            for p, ty in m.param_types.items():
+                types.setdefault(p, ty)
+    return types
+
+
+def _param(
+    t: _Table, p: str, ty: str, model: str, fail: _Fail, *, nonneg: bool = False
+) -> float | list[float] | None:
+    """The value the model table ``t`` gives the parameter ``p`` of type ``ty`` (None when
+    it gives none): a number for an ``f64`` parameter (``nonneg``: >= 0), an array of 3
+    numbers for a ``vec3`` one."""
+    v = t.data.get(p)
+    if ty == "vec3":
+        if v is not None and (not isinstance(v, list) or len(v) != 3):
+            raise fail(
+                t.key(p),
+                f"parameter '{p}' of model '{model}' is vec3: expected an array of 3 numbers, "
+                f"got {_show(v)}",
+            )
+        vec = t.vector(p, 3)
+        return None if vec is None else list(vec)
+    if isinstance(v, list):
+        raise fail(
+            t.key(p),
+            f"parameter '{p}' of model '{model}' is {ty}: expected a number, got {_show(v)}",
+        )
+    return t.number(p, nonneg=nonneg)
 
 
 def _check_models(
@@ -132,10 +167,11 @@ def _models(
                     f"unknown key{hint} (model '{kind}' takes {', '.join(takes)})",
                 )
         spec: dict[str, Any] = {"kind": kind}
+        types = _param_types(kind, dim)
         for p in takes:
             if p in MATERIAL_KEYS_IN_MODEL:
                 continue
-            v = t.number(p, nonneg=True)
+            v = _param(t, p, types.get(p, "f64"), kind, fail, nonneg=True)
             if v is not None:
                 spec[p] = v
         for p in MATERIAL_KEYS_IN_MODEL:
@@ -201,18 +237,17 @@ def _user_model(t: _Table, i: int, dim: int | None, base: Path | None, fail: _Fa
             close = difflib.get_close_matches(k, params, n=1)
             hint = f"; did you mean '{close[0]}'?" if close else ""
             raise fail(t.key(k), f"unknown key{hint} (model '{model.name}' takes {takes})")
-        if model.param_types.get(k) != "f64":
+        if model.param_types.get(k) not in ("f64", "vec3"):
             raise fail(
                 t.key(k),
                 f"model '{model.name}': '{k}' is a {model.param_types.get(k)}; only f64 "
-                "parameters can be set from a scene",
+                "and vec3 parameters can be set from a scene",
             )
-    values: dict[str, float] = {}
+    values: dict[str, float | list[float]] = {}
     for p in params:
-        if model.param_types.get(p) == "f64":
-            v = t.number(p)
-            if v is not None:
-                values[p] = v
+        v = _param(t, p, model.param_types.get(p, "f64"), model.name, fail)
+        if v is not None:
+            values[p] = v
     for p, default in model.params.items():
         if default is None and p not in values:
             raise fail(
