@@ -929,13 +929,17 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
             prefix.truncate(k);
         }
     }
-    // A guard reading only the hook node's embeddings on orbits that contain the hook orbit
-    // has one value on every row of the hook orbit: a dart of the orbit that fails it, fails it
-    // for all.
+    // A guard reading every node through embeddings on orbits that contain the node's orbit
+    // has one value on every row of a match: a dart of the hook orbit that fails it, fails it
+    // for all, so the hook orbit is tried once (a plane cut's guard, which walks both
+    // volumes, runs once per side of a face instead of once per dart).
     let invariant = rule
         .guard
         .as_ref()
-        .is_some_and(|e| row_invariant(e, hook, &rule.hook_orbit, b.embs));
+        .is_some_and(|e| row_invariant(e, &left_labels(rule), b.embs));
+    // the hook darts whose orbit failed an invariant guard (a rule that changes the topology
+    // keeps them apart from the footprints: another match may still hold them)
+    let mut failed = Marks::with_capacity(if overlap { 0 } else { g.capacity() });
     let mut probe = Match {
         rows: 1,
         next: vec![0; rule.arity],
@@ -963,7 +967,7 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
                 applied: 0,
             });
         }
-        if used.is_marked(d) {
+        if used.is_marked(d) || (!overlap && failed.is_marked(d)) {
             continue;
         }
         if !prefix.is_empty() {
@@ -988,10 +992,11 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
             let mut ev = Eval::new(g, b, &m);
             let ok = ev.eval(guard, 0).map_err(|e| eval_err(&rule.name, d, &e))?;
             if ok != Val::B(true) {
-                if overlap && invariant {
+                if invariant {
                     // the other darts of the hook orbit give this footprint and this guard
+                    let marks = if overlap { &mut used } else { &mut failed };
                     for &x in &m.darts[hook] {
-                        used.mark(x);
+                        marks.mark(x);
                     }
                 }
                 continue;
@@ -1042,21 +1047,47 @@ fn leading_conjuncts<'a>(e: &'a TExpr, out: &mut Vec<&'a TExpr>) {
     }
 }
 
-/// Whether `e` reads only node `hook`, through embeddings (or aggregates) whose orbit contains
-/// every label of the hook orbit `labels`.
-fn row_invariant(e: &TExpr, hook: usize, labels: &[u8], embs: &[EmbDecl]) -> bool {
-    let covers = |o: OrbitType| labels.iter().all(|&l| o.contains(usize::from(l)));
-    let rec = |x: &TExpr| row_invariant(x, hook, labels, embs);
+/// Whether `e` has one value on every row of a match: it reads each node `n` only through
+/// embeddings (or aggregates) whose orbit contains every label of `n`'s orbit type in the left
+/// graph (`labels[n]`; `None` for a node whose labels are not all known, which nothing may
+/// read). The darts of node `n` over the rows of a match are one orbit of its orbit type, so
+/// such a read gives the same value from each of them; constants, parameters and the locals
+/// of the guard's own blocks (checked where they are bound) do too.
+///
+/// This is what lets a guard that fails at one hook dart fail for the whole hook orbit: the
+/// match found from another dart of the hook orbit is the same footprint with its rows in
+/// another order, and the guard is evaluated at its row 0.
+fn row_invariant(e: &TExpr, labels: &[Option<Vec<u8>>], embs: &[EmbDecl]) -> bool {
+    let covers = |node: usize, o: OrbitType| {
+        labels
+            .get(node)
+            .and_then(Option::as_ref)
+            .is_some_and(|ls| ls.iter().all(|&l| o.contains(usize::from(l))))
+    };
+    let rec = |x: &TExpr| row_invariant(x, labels, embs);
     match e {
         TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => true,
-        TExpr::Read { node, emb } => *node == hook && covers(embs[*emb].orbit),
-        TExpr::Agg { node, orbit, .. } => *node == hook && covers(*orbit),
+        TExpr::Read { node, emb } => covers(*node, embs[*emb].orbit),
+        TExpr::Agg { node, orbit, .. } => covers(*node, *orbit),
         TExpr::Bin(_, a, c) => rec(a) && rec(c),
         TExpr::Un(_, a) | TExpr::ToReal(a) => rec(a),
         TExpr::Call(_, args) => args.iter().all(rec),
         TExpr::If(c, a, d) => rec(c) && rec(a) && rec(d),
         TExpr::Block(lets, res) => lets.iter().all(|(_, x)| rec(x)) && rec(res),
     }
+}
+
+/// The labels of each node's orbit type in the left graph of `rule` (`None` for a node the
+/// rule creates, or one with a position that is not a label).
+fn left_labels(rule: &Rule) -> Vec<Option<Vec<u8>>> {
+    rule.nodes
+        .iter()
+        .map(|n| {
+            n.left
+                .as_ref()
+                .and_then(|ls| ls.iter().copied().collect::<Option<Vec<u8>>>())
+        })
+        .collect()
 }
 
 /// Whether `e` reads the map only through node `hook` (and no local variable).
@@ -1846,5 +1877,59 @@ impl<'a> Eval<'a> {
 impl fmt::Display for Match {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "match of {} rows", self.rows)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The guards the fast search relies on are proven invariant over the rows of a match,
+    /// and those whose value may differ between rows are not: a plane cut (reads both
+    /// volumes through `<0,1,2>` aggregates of `<0,1>` nodes) and a fracture criterion on the
+    /// face (`mean<0,1>` of a `<0>` embedding) are; a read of a dart embedding (`<>`) from a
+    /// face node, or of a face node's half-edge value without aggregation, is not.
+    #[test]
+    fn guards_proven_invariant_over_the_rows_of_a_match() {
+        let text = "dimension 3
+embedding position : vec3 on <1,2,3>
+embedding tag      : bool on <>
+embedding strain   : f64 on <0>
+rule cut(normal: vec3) {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where dot(mean<0,1,2>(a.position), normal) * dot(mean<0,1,2>(b.position), normal) < 0.0
+}
+rule fracture {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where { let s = mean<0,1>(a.strain); s > 0.5 }
+}
+rule by_tag {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where b.tag
+}
+rule by_half_edge {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where a.strain > 0.5
+}
+";
+        let (rules, _) = crate::load_sources(&[("t.tmr".to_string(), text.to_string())]).unwrap();
+        for (name, want) in [
+            ("cut", true),
+            ("fracture", true),
+            ("by_tag", false),
+            ("by_half_edge", false),
+        ] {
+            let r = rules.rule(name).unwrap();
+            let guard = r.guard.as_ref().unwrap();
+            assert_eq!(
+                row_invariant(guard, &left_labels(r), rules.embeddings()),
+                want,
+                "{name}"
+            );
+        }
     }
 }
