@@ -134,7 +134,11 @@ class Model:
         :meth:`load`; an empty list for a file without models)."""
         file = str(path)
         text = Path(path).read_text(encoding="utf-8")
-        rules = _core.RuleSet.from_model_sources([(file, text)])
+        # a file without a dimension line serves both dimensions, like `dimension 2 3`: its
+        # declarations are read for 3-maps (they are the same for 2-maps; a rule that cannot
+        # hold on a 2-map is refused when the model runs on one, as `topomech check` says)
+        dimension = None if _core.RuleSet.file_dimensions(text) else 3
+        rules = _core.RuleSet.from_model_sources([(file, text)], dimension)
         return [cls._from_declaration(m, text) for m in rules.models() if m["file"] == file]
 
     @classmethod

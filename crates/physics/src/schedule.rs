@@ -292,6 +292,16 @@ impl Simulation {
         if cfg.models.is_empty() {
             return Err(PhysicsError::Model("no model given".into()));
         }
+        // a model's rules and embeddings exist once on a map: listed twice, its force would
+        // be summed twice with the last parameters for both
+        for (k, m) in cfg.models.iter().enumerate() {
+            if let Some(j) = cfg.models[..k].iter().position(|o| o.kind == m.kind) {
+                return Err(PhysicsError::Model(format!(
+                    "model '{}' is listed twice (models {j} and {k}): its rules and embeddings exist once per map, so give it once, with the parameters you want",
+                    m.kind
+                )));
+            }
+        }
         let mut sources = vec![
             (
                 "prelude.tmr".to_string(),

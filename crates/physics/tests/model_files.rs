@@ -401,3 +401,24 @@ model anchor_offset(k: f64 = 10.0, offset: vec3 = vec3(0, 0, 0)) {
         "{err}"
     );
 }
+
+/// A model listed twice would have its force summed twice with the last parameters for both
+/// (its rules and embeddings exist once per map): refused, naming it and both places.
+#[test]
+fn a_model_listed_twice_is_refused() {
+    let tri = grid([2, 2], [1.0, 1.0], GridElement::Triangle);
+    let (g, _) = build(&tri, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![
+            model("stretch_elementary", &[("stiffness", 100.0)]),
+            model("stretch_cumulated", &[]),
+            model("stretch_elementary", &[("stiffness", 300.0)]),
+        ],
+        ..Config::default()
+    };
+    let err = Simulation::new(g, cfg).err().unwrap().to_string();
+    assert!(
+        err.contains("model 'stretch_elementary' is listed twice (models 0 and 2)"),
+        "{err}"
+    );
+}

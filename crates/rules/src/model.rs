@@ -255,6 +255,19 @@ fn check_model(
         let default = match &p.default {
             None => None,
             Some(d) => match constant(d) {
+                Some(v) if v.ty() == ty && !finite(&v) => {
+                    error(
+                        out,
+                        file,
+                        d.pos,
+                        "type",
+                        format!(
+                            "model '{mn}': the default of parameter '{}' is not finite",
+                            p.name
+                        ),
+                    );
+                    None
+                }
                 Some(v) if v.ty() == ty => Some(v),
                 Some(v) => {
                     error(
@@ -425,6 +438,44 @@ fn check_model(
     };
     vector_embeddings(&m.forces, "force", out);
     vector_embeddings(&m.jvp_outputs, "jvp output", out);
+    // each force is written by a step rule, each jvp output by a jvp rule: a name that no
+    // rule of its list writes would be summed as whatever the map holds (zero, or a state
+    // such as `position`)
+    let writes = |calls: &[ast::RuleCall], name: &str| {
+        calls.iter().any(|c| {
+            rules.iter().find(|r| r.name == c.rule).is_some_and(|r| {
+                r.program.iter().any(|st| {
+                    matches!(st, crate::check::TStmt::Write { emb, .. }
+                        if embs.get(*emb).is_some_and(|e| e.name == name))
+                })
+            })
+        })
+    };
+    for (list, calls, what, rules_of) in [
+        (&m.forces, &m.step, "force", "step"),
+        (&m.jvp_outputs, &m.jvp, "jvp output", "jvp"),
+    ] {
+        if calls
+            .iter()
+            .any(|c| !rules.iter().any(|r| r.name == c.rule))
+        {
+            continue; // an undefined rule is reported above
+        }
+        for (name, pos) in list {
+            if embs.iter().any(|e| &e.name == name) && !writes(calls, name) {
+                error(
+                    out,
+                    file,
+                    *pos,
+                    "name",
+                    format!(
+                        "model '{mn}': {what} '{name}' is written by none of its {rules_of} rules ({})",
+                        calls.iter().map(|c| c.rule.as_str()).collect::<Vec<_>>().join(", ")
+                    ),
+                );
+            }
+        }
+    }
     if !m.jvp.is_empty() && m.jvp_outputs.len() != m.forces.len() {
         error(
             out,
@@ -455,4 +506,13 @@ fn check_model(
         file: file.to_string(),
         pos: m.pos,
     })
+}
+
+/// Whether every entry of a parameter value is finite.
+fn finite(v: &Val) -> bool {
+    match v {
+        Val::F(x) => x.is_finite(),
+        Val::V3(x) => x.iter().all(|c| c.is_finite()),
+        _ => true,
+    }
 }

@@ -257,3 +257,40 @@ fn syntax_errors_name_line_and_column() {
         assert!(d[0].message.contains(msg), "{model}: {}", d[0]);
     }
 }
+
+/// A force that no step rule writes, or a jvp output that no jvp rule writes, would be summed
+/// as whatever the map holds (zero; or a state such as `position`, summed as a force), and a
+/// non-finite default would only fail when a simulation is built: each is refused where it
+/// is written.
+#[test]
+fn outputs_nobody_writes_and_non_finite_defaults_are_refused() {
+    for (model, needle, says) in [
+        (
+            "model m(k: f64 = 1.0, d: vec3 = vec3(0, 0, 0)) {\n  init anchor_init(k, d)\n  step anchor_force\n  forces f_anchor\n  jvp anchor_force -> df_anchor\n}\n",
+            "df_anchor\n}",
+            "jvp output 'df_anchor' is written by none of its jvp rules (anchor_force)",
+        ),
+        (
+            "model m(k: f64 = 1.0, d: vec3 = vec3(0, 0, 0)) {\n  init anchor_init(k, d)\n  step anchor_force\n  forces position\n}\n",
+            "position\n}",
+            "force 'position' is written by none of its step rules (anchor_force)",
+        ),
+        (
+            "model m(k: f64 = 1e400, d: vec3 = vec3(0, 0, 0)) {\n  init anchor_init(k, d)\n  step anchor_force\n  forces f_anchor\n}\n",
+            "1e400",
+            "the default of parameter 'k' is not finite",
+        ),
+        (
+            "model m(k: f64 = 1.0, d: vec3 = vec3(0, -1e999, 0)) {\n  init anchor_init(k, d)\n  step anchor_force\n  forces f_anchor\n}\n",
+            "vec3(0, -1e999",
+            "the default of parameter 'd' is not finite",
+        ),
+    ] {
+        let errs = errors(model);
+        let e = errs
+            .iter()
+            .find(|d| d.message.contains(says))
+            .unwrap_or_else(|| panic!("no '{says}' in {errs:?}"));
+        assert_eq!(e.pos.line, line_of(model, needle), "{says}");
+    }
+}
