@@ -1227,8 +1227,9 @@ const SCALING_OFF: f64 = 1.0;
 /// unscaled step with `|X_{k+1} - X_k|_F^2 <= eps`: the singular values of `X_{k+1}` are
 /// within `eps / 2` of 1 in exact arithmetic, and what remains is the last step's rounding.
 /// This saves the step a stop at `|X_{k+1} - X_k| ~ eps` would take. Measured: 2 iterations
-/// for a rotation, 4 for typical FEM stretches (principal stretches in [0.7, 1.4]), at most 7
-/// up to the condition threshold (and still 7 at condition 1e14).
+/// for a rotation, at most 4 for small strains (principal stretches within 2% of 1), 5 for
+/// principal stretches in [0.7, 1.4], 7 up to the condition threshold (and still 7 at
+/// condition 1e14).
 ///
 /// `None` (the caller falls back to Jacobi) when [`newton_applies`] refuses `X_0`
 /// (`det m <= 0`, or condition above about [`NEWTON_MAX_COND`]), when the largest entry is
@@ -2278,7 +2279,8 @@ mod tests {
 
     /// Not a unit test: ns per call of the Jacobi SVD (the old `polar`) and of `polar3_data`
     /// (Newton, with the Jacobi fallback), measured in the same run on the same FEM-like
-    /// matrices, alternating, best of 15 rounds. Run with
+    /// matrices (random rotations times SPD stretches, at random scales), alternating, best
+    /// of 15 rounds. Run with
     /// `cargo test --release -p topomech-rules --lib -- --ignored polar_speed --nocapture`.
     #[test]
     #[ignore = "timing, not a test: run it in release"]
@@ -2287,25 +2289,41 @@ mod tests {
         use std::hint::black_box;
         use std::time::Instant;
         let mut rng = Rng(11);
-        let ms: Vec<[f64; 9]> = (0..4096).map(|_| fem_like(&mut rng)).collect();
-        let time = |f: &dyn Fn(&[f64]) -> [f64; 9]| {
-            let t = Instant::now();
-            let mut acc = 0.0;
-            for m in &ms {
-                acc += f(black_box(m))[4];
+        for (what, lo, hi) in [
+            ("stretches 0.7..1.4", 0.7, 1.4),
+            ("stretches 0.98..1.02", 0.98, 1.02),
+        ] {
+            let ms: Vec<[f64; 9]> = (0..4096)
+                .map(|_| {
+                    let s = [0; 3].map(|_| rng.range(lo, hi));
+                    let scale = rng.range(0.1, 10.0);
+                    with_singular_values(&mut rng, s, scale)
+                })
+                .collect();
+            let iters = ms
+                .iter()
+                .map(|m| polar3_newton(m).map_or(0, |(_, k)| k))
+                .max();
+            let time = |f: &dyn Fn(&[f64]) -> [f64; 9]| {
+                let t = Instant::now();
+                let mut acc = 0.0;
+                for m in &ms {
+                    acc += f(black_box(m))[4];
+                }
+                black_box(acc);
+                t.elapsed().as_nanos() as f64 / ms.len() as f64
+            };
+            let (mut old, mut new) = (f64::INFINITY, f64::INFINITY);
+            for _ in 0..15 {
+                old = old.min(time(&|m| polar3_jacobi(m)));
+                new = new.min(time(&|m| polar3_data(m).unwrap()));
             }
-            black_box(acc);
-            t.elapsed().as_nanos() as f64 / ms.len() as f64
-        };
-        let (mut old, mut new) = (f64::INFINITY, f64::INFINITY);
-        for _ in 0..15 {
-            old = old.min(time(&|m| polar3_jacobi(m)));
-            new = new.min(time(&|m| polar3_data(m).unwrap()));
+            println!(
+                "polar3, {what}: Jacobi SVD {old:.1} ns/call, Newton {new:.1} ns/call ({:.1}x, \
+                 at most {iters:?} iterations)",
+                old / new
+            );
         }
-        println!(
-            "polar3: Jacobi SVD {old:.1} ns/call, Newton {new:.1} ns/call ({:.1}x)",
-            old / new
-        );
     }
 
     /// Eigenvalues of symmetric matrices with known spectra (tolerance: Jacobi is backward
