@@ -14,7 +14,8 @@
 //!   damping along the spring);
 //! - [`Corotational`]: co-rotational linear tetrahedra (Müller & Gross 2004),
 //!   `f = -R K (R^T x - X)`, R the polar rotation of `F = Ds Dm^-1` computed by the same
-//!   one-sided Jacobi SVD as the engine's `polar` built-in;
+//!   algorithm as the engine's `polar` built-in (scaled Newton iteration, one-sided Jacobi SVD
+//!   where it does not apply);
 //! - [`MassTensor`]: mass-tensor tetrahedra (Cotin et al. 2000), `f_i = -K_ii u_i - sum_j K_ij u_j`
 //!   with the tensors cumulated on vertices and edges, `u = x - X`.
 //!
@@ -465,12 +466,115 @@ fn perpendicular(u: V3) -> V3 {
 }
 
 /// The rotation of the polar decomposition of `m`, by the algorithm of the engine's `polar`
-/// built-in (crates/rules/src/builtins.rs, `polar3`): a one-sided Jacobi SVD `m = U S V^T` of
-/// the scaled matrix (Hestenes rotations until every pair of columns is orthogonal to machine
-/// precision), singular values ordered, `det V = +1`, `U` completed with `det U = +1` so that
-/// the smallest singular value carries the sign of `det m` (Irving et al. 2004); `R = U V^T`.
-/// Written for fixed-size arrays, without allocation.
+/// built-in (crates/rules/src/builtins.rs, `polar3_data`), written again for this file's
+/// arrays with the same operations in the same order, so that both agree bit for bit where
+/// Newton applies: Newton's iteration with Frobenius-norm scaling (Higham 1986,
+/// doi:10.1137/0907079) from `m` normalized by a power of two, used when `det m > 0` and the
+/// condition number is below about 100 ([`polar3_newton`]), else the one-sided Jacobi SVD
+/// ([`polar3_jacobi`]). Fixed-size arrays, no allocation.
 pub fn polar3(m: &M3) -> M3 {
+    let mut s = 0.0_f64;
+    for row in m {
+        for &x in row {
+            s = s.max(x.abs());
+        }
+    }
+    if s == 0.0 {
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
+    polar3_newton(m, s).unwrap_or_else(|| polar3_jacobi(m))
+}
+
+/// Newton's iteration for the polar rotation of `m` (largest entry magnitude `s > 0`), as
+/// the engine's `polar3_newton`: `X <- (g X + (g X)^{-T}) / 2` with `X^{-T} = C / det X` (C the
+/// cofactors), Frobenius scaling `g = (|X^-1|_F / |X|_F)^{1/2}` on the first step and while
+/// `|X|_F^2 > 4`, stopping after an unscaled step with `|X_{k+1} - X_k|_F^2 <= eps`. `None`
+/// when `det X <= 0`, `27 K^4 det^2 < |X|_F^6` or `|X|_F |C|_F > K det` (K = 100), when `s`
+/// is below 2^-1022 or at least 2^1023, or after 20 steps.
+pub fn polar3_newton(m: &M3, s: f64) -> Option<M3> {
+    const K2: f64 = 100.0 * 100.0;
+    let biased = s.to_bits() >> 52;
+    if !(1..2046).contains(&biased) {
+        return None;
+    }
+    let scale = f64::from_bits((2046 - biased) << 52);
+    let mut x = [[0.0; 3]; 3];
+    let mut nr = [0.0; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            x[i][j] = m[i][j] * scale;
+            nr[j] += x[i][j] * x[i][j];
+        }
+    }
+    let mut nx = nr[0] + nr[1] + nr[2];
+    let mut scaled = true;
+    for k in 0..20 {
+        let c = [
+            [
+                x[1][1] * x[2][2] - x[1][2] * x[2][1],
+                x[1][2] * x[2][0] - x[1][0] * x[2][2],
+                x[1][0] * x[2][1] - x[1][1] * x[2][0],
+            ],
+            [
+                x[0][2] * x[2][1] - x[0][1] * x[2][2],
+                x[0][0] * x[2][2] - x[0][2] * x[2][0],
+                x[0][1] * x[2][0] - x[0][0] * x[2][1],
+            ],
+            [
+                x[0][1] * x[1][2] - x[0][2] * x[1][1],
+                x[0][2] * x[1][0] - x[0][0] * x[1][2],
+                x[0][0] * x[1][1] - x[0][1] * x[1][0],
+            ],
+        ];
+        let d = x[0][0] * c[0][0] + x[0][1] * c[0][1] + x[0][2] * c[0][2];
+        let (a, b) = if scaled {
+            let mut ncr = [0.0; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    ncr[j] += c[i][j] * c[i][j];
+                }
+            }
+            let nc = ncr[0] + ncr[1] + ncr[2];
+            let w = 1.0 / (nx * nc * (d * d));
+            if k == 0 {
+                let d2 = d * d;
+                if !(d > 0.0 && nx * nx * nx <= 27.0 * K2 * K2 * d2 && nx * nc <= K2 * d2) {
+                    return None;
+                }
+            }
+            let sw = w.sqrt();
+            let g = (nc * sw).sqrt();
+            (0.5 * g, 0.5 * g * (nx * d * sw))
+        } else {
+            (0.5, 0.5 / d)
+        };
+        let mut step = [0.0; 3];
+        let mut norm = [0.0; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                let y = a * x[i][j] + b * c[i][j];
+                let e = y - x[i][j];
+                step[j] += e * e;
+                norm[j] += y * y;
+                x[i][j] = y;
+            }
+        }
+        let step = step[0] + step[1] + step[2];
+        nx = norm[0] + norm[1] + norm[2];
+        if !scaled && step <= f64::EPSILON {
+            return Some(x);
+        }
+        scaled = nx > 4.0;
+    }
+    None
+}
+
+/// The polar rotation by the algorithm of the engine's `polar3_jacobi`: a one-sided Jacobi
+/// SVD `m = U S V^T` of the scaled matrix (Hestenes rotations until every pair of columns is
+/// orthogonal to machine precision), singular values ordered, `det V = +1`, `U` completed
+/// with `det U = +1` so that the smallest singular value carries the sign of `det m` (Irving
+/// et al. 2004); `R = U V^T`.
+fn polar3_jacobi(m: &M3) -> M3 {
     let mut s = 0.0_f64;
     for row in m {
         for &x in row {
