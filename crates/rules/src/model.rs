@@ -438,7 +438,7 @@ fn check_model(
     };
     vector_embeddings(&m.forces, "force", out);
     vector_embeddings(&m.jvp_outputs, "jvp output", out);
-    // each force is written by a step rule, each jvp output by a jvp rule: a name that no
+    // each force is written by an init or step rule, each jvp output by a jvp rule: a name that no
     // rule of its list writes would be summed as whatever the map holds (zero, or a state
     // such as `position`)
     let writes = |calls: &[ast::RuleCall], name: &str| {
@@ -451,8 +451,10 @@ fn check_model(
             })
         })
     };
+    // (a constant force may be written once, by an init rule)
+    let init_and_step: Vec<ast::RuleCall> = m.init.iter().chain(&m.step).cloned().collect();
     for (list, calls, what, rules_of) in [
-        (&m.forces, &m.step, "force", "step"),
+        (&m.forces, &init_and_step, "force", "init or step"),
         (&m.jvp_outputs, &m.jvp, "jvp output", "jvp"),
     ] {
         if calls

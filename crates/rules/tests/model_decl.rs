@@ -273,7 +273,7 @@ fn outputs_nobody_writes_and_non_finite_defaults_are_refused() {
         (
             "model m(k: f64 = 1.0, d: vec3 = vec3(0, 0, 0)) {\n  init anchor_init(k, d)\n  step anchor_force\n  forces position\n}\n",
             "position\n}",
-            "force 'position' is written by none of its step rules (anchor_force)",
+            "force 'position' is written by none of its init or step rules (anchor_init, anchor_force)",
         ),
         (
             "model m(k: f64 = 1e400, d: vec3 = vec3(0, 0, 0)) {\n  init anchor_init(k, d)\n  step anchor_force\n  forces f_anchor\n}\n",
