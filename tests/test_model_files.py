@@ -539,3 +539,42 @@ def test_python_refusals_name_the_model(tmp_path: Path) -> None:
         "on 2D maps, this map is 3D",
     ):
         topomech.Simulation(g3, models=[m.with_params(k=1.0)])
+
+
+def test_a_users_force_embedding_is_an_output_field(tmp_path: Path) -> None:
+    """`output.fields` names the model's own force embedding `f_anchor` (a vec3 on the vertex,
+    which exists on the map once the force rule has run): the final file carries it, equal to
+    -k u at every vertex (the anchor's law, to 1e-12 of |k u|: one subtraction and product)."""
+    _write(tmp_path, "anchor.tmr", ANCHOR)
+    text = _scene("static").replace('fields = ["mass"]', 'fields = ["mass", "f_anchor"]')
+    scene = _write(tmp_path, "anchored.toml", text)
+    out = tmp_path / "out"
+    r = _cli("run", scene, "--out", out, "--no-preview")
+    assert r.returncode == 0, r.stderr + r.stdout
+    last = meshio.read(out / "final.vtu")
+    u = np.asarray(last.point_data["displacement"])
+    f = np.asarray(last.point_data["f_anchor"])
+    scale = K * np.abs(u).max()
+    assert scale > 0
+    assert np.abs(f + K * u).max() <= 1e-12 * scale
+
+
+def test_an_unknown_output_field_lists_each_available_name_once(tmp_path: Path) -> None:
+    _write(tmp_path, "anchor.tmr", ANCHOR)
+    text = _scene("static").replace('fields = ["mass"]', 'fields = ["no_such_field"]')
+    scene = _write(tmp_path, "anchored.toml", text)
+    r = _cli("run", scene, "--out", tmp_path / "out", "--no-preview")
+    assert r.returncode != 0
+    err = r.stderr + r.stdout
+    assert "unknown field 'no_such_field'" in err, err
+    listed = err.split("available: ", 1)[1]
+    for name in ("velocity", "fixed", "point_id", "f_anchor"):
+        assert listed.count(name) == 1, (name, listed)
+
+
+def test_a_model_file_in_a_dict_says_how_to_give_it() -> None:
+    g = topomech.GMap.from_flat(*topomech._core.grid(2, 2, 1.0, 1.0, "triangle"))
+    with pytest.raises(
+        TypeError, match=r"models\[0\]\['file'\]: a model from a rule file is given"
+    ):
+        topomech.Simulation(g, models=[{"file": "anchor.tmr"}])

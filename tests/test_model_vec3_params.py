@@ -230,11 +230,17 @@ def test_with_params_takes_3_real_numbers_for_a_vec3(model: Model, value: Any) -
         (
             {"k": [1.0, 2.0, 3.0]},
             TypeError,
-            "model 'anchor_offset': parameter 'k' is an f64: expected a real number, got a list "
-            "(3 numbers are for a vec3 parameter)",
+            "model 'anchor_offset': parameter 'k' is an f64: expected one real number, got a "
+            "list (sequences of 3 numbers are for vec3 parameters)",
         ),
-        ({"k": np.array([1.0])}, TypeError, "parameter 'k' is an f64: expected a real number"),
-        ({"k": (1.0,)}, TypeError, "parameter 'k' is an f64: expected a real number, got a tuple"),
+        ({"k": np.array([1.0])}, TypeError, "parameter 'k' is an f64: expected one real number"),
+        (
+            {"k": (1.0,)},
+            TypeError,
+            "parameter 'k' is an f64: expected one real number, got a tuple",
+        ),
+        ({"k": 10**400}, ValueError, "parameter 'k' must be finite, got an integer too large"),
+        ({"offset": [0, 10**400, 0]}, ValueError, "an item is an integer too large for f64"),
         ({"k": "1"}, TypeError, "model 'anchor_offset': parameter 'k' must be a real number"),
         ({"k": math.inf}, ValueError, "model 'anchor_offset': parameter 'k' must be finite"),
         # an unknown parameter

@@ -282,6 +282,14 @@ def check_fields(sim: Simulation, fields: Sequence[str], source: object = None) 
     available = available_fields(sim)
     bad = [(i, f) for i, f in enumerate(fields) if f not in available and f not in ALWAYS_WRITTEN]
     if bad:
+        # a model's force embeddings exist on the map once its step rules have run: compute
+        # the forces at this state (which changes no position or velocity) and look again
+        sim.forces()
+        available = available_fields(sim)
+        bad = [
+            (i, f) for i, f in enumerate(fields) if f not in available and f not in ALWAYS_WRITTEN
+        ]
+    if bad:
         fail = _Fail(str(source) if source is not None else "<scene>")
         first, rest = bad[0], bad[1:]
         problem = f"unknown field {first[1]!r}"
@@ -291,7 +299,8 @@ def check_fields(sim: Simulation, fields: Sequence[str], source: object = None) 
             problem += f" (also unknown: {more}{extra})"
         raise fail(
             f"output.fields[{first[0]}]",
-            f"{problem}; available: {', '.join(available)} (and {', '.join(ALWAYS_WRITTEN)}, "
+            f"{problem}; available: {', '.join(f for f in available if f not in ALWAYS_WRITTEN)} "
+            f"(and {', '.join(ALWAYS_WRITTEN)}, "
             "which every file has)",
         )
     return list(dict.fromkeys(f for f in fields if f not in ALWAYS_WRITTEN))

@@ -203,12 +203,15 @@ class Model:
         what = f"model '{self.name}': parameter '{k}'"
         if _is_sequence(v):
             raise TypeError(
-                f"{what} is an f64: expected a real number, got a {type(v).__name__} "
-                "(3 numbers are for a vec3 parameter)"
+                f"{what} is an f64: expected one real number, got a {type(v).__name__} "
+                "(sequences of 3 numbers are for vec3 parameters)"
             )
         if not _is_real(v):
             raise TypeError(f"{what} must be a real number, got {type(v).__name__}")
-        x = float(v)
+        try:
+            x = float(v)
+        except OverflowError:
+            raise ValueError(f"{what} must be finite, got an integer too large for f64") from None
         if not math.isfinite(x):
             raise ValueError(f"{what} must be finite, got {v}")
         return x
@@ -234,7 +237,10 @@ class Model:
                 raise TypeError(
                     f"{what} is a vec3: item {i} must be a real number, got {type(x).__name__}"
                 )
-        xs = [float(x) for x in items]
+        try:
+            xs = [float(x) for x in items]
+        except OverflowError:
+            raise ValueError(f"{what} is a vec3: an item is an integer too large for f64") from None
         for i, x in enumerate(xs):
             if not math.isfinite(x):
                 raise ValueError(f"{what} is a vec3: item {i} must be finite, got {x}")

@@ -223,6 +223,10 @@ fn model_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<ModelSpec> {
     for (key, v) in dict_items(obj, &what)? {
         if key == "kind" {
             kind = Some(str_arg(&v, &format!("{what}['kind']"))?);
+        } else if key == "file" {
+            return Err(type_error(format!(
+                "{what}['file']: a model from a rule file is given as topomech.Model.load(path) (optionally .with_params(...)), not as a dict"
+            )));
         } else {
             let at = format!("{what}['{key}']");
             let x = if v.is_instance_of::<PyString>() || v.is_instance_of::<PyBool>() {
