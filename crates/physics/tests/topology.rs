@@ -480,3 +480,77 @@ fn fracture_and_tearing_keep_the_invariants() {
             .all(|p| p.iter().all(|x| x.is_finite())));
     }
 }
+
+/// Fracture skips the search over the faces when no value of the criterion's measure exceeds
+/// the threshold (no mean of them can). The skip must never change the result: for
+/// thresholds on both sides of the largest strain (and at it), in 2D and 3D, the number of
+/// faces `Simulation::fracture` opens equals what the fracture rule itself finds when applied
+/// to a copy of the same map after the same measure.
+#[test]
+fn fracture_skips_the_search_only_when_nothing_can_open() {
+    use topomech_rules::{Params, Val};
+    for (mesh, three) in [
+        (cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra), true),
+        (grid([6, 4], [3.0, 2.0], GridElement::Triangle), false),
+    ] {
+        let new = || {
+            sim(
+                &mesh,
+                vec![model("stretch_cumulated", &[("stiffness", 1e4)])],
+                |c| c.gravity = [0.0; 3],
+            )
+        };
+        let stretched: Vec<[f64; 3]> = new()
+            .vertex_vec3("rest")
+            .unwrap()
+            .iter()
+            .map(|p| [p[0] * (1.0 + 0.1 * p[1]), 1.3 * p[1], p[2]])
+            .collect();
+        // the strains of this state, from the rule that computes them, on a copy of the map
+        let mut s = new();
+        s.set_vertex_vec3("position", &stretched).unwrap();
+        let mut g = s.gmap().clone();
+        s.rules()
+            .apply_everywhere(&mut g, "spring_strains", &Params::new())
+            .unwrap();
+        let id = g.embedding_id("spring_strain").unwrap();
+        let max = g
+            .orbit_representatives(OrbitType::parse("<0>").unwrap())
+            .into_iter()
+            .map(|d| g.real(id, d)[0])
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!(max > 0.05, "the state is stretched ({max})");
+        for threshold in [
+            0.0,
+            0.5 * max,
+            max * (1.0 - 1e-9),
+            max,
+            max * (1.0 + 1e-9),
+            2.0 * max,
+        ] {
+            let p: Params = [("threshold".to_string(), Val::F(threshold))].into();
+            let mut full = g.clone();
+            let want = s
+                .rules()
+                .apply_everywhere(&mut full, "fracture_strain", &p)
+                .unwrap()
+                .matches;
+            let mut t = new();
+            t.set_vertex_vec3("position", &stretched).unwrap();
+            let got = t
+                .fracture(Fracture {
+                    criterion: Criterion::Strain,
+                    threshold,
+                })
+                .unwrap()
+                .unsewn;
+            assert_eq!(
+                got, want,
+                "3D: {three}, threshold {threshold} (max strain {max})"
+            );
+            if threshold >= max {
+                assert_eq!(got, 0);
+            }
+        }
+    }
+}
