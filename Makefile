@@ -33,18 +33,25 @@ DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 m
 
 venv: $(VENV_STAMP)
 
+# The set-up steps print one line each; their output goes to a log under .venv, printed
+# only when a step fails (then the recipe fails too).
 $(VENV_STAMP):
-	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
-	$(VPY) -m pip install --quiet --upgrade pip
-	$(VPY) -m pip install --quiet $(foreach t,$(DEV_TOOLS),'$(t)')
-	touch $@
+	@mkdir -p $(VENV)
+	@echo "make: setting up $(VENV) (pip's output: $(VENV)/venv.log)"
+	@{ test -x $(VPY) || $(PYTHON) -m venv $(VENV); } > $(VENV)/venv.log 2>&1 \
+		&& $(VPY) -m pip install --quiet --upgrade pip >> $(VENV)/venv.log 2>&1 \
+		&& $(VPY) -m pip install --quiet $(foreach t,$(DEV_TOOLS),'$(t)') >> $(VENV)/venv.log 2>&1 \
+		|| { cat $(VENV)/venv.log >&2; echo "make: setting up $(VENV) failed (log: $(VENV)/venv.log)" >&2; exit 1; }
+	@touch $@
 
 develop: $(DEVELOP_STAMP)
 
 $(DEVELOP_STAMP): $(VENV_STAMP) $(RUST_SOURCES) pyproject.toml
-	VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH \
-		$(VENV)/bin/maturin develop --release --quiet
-	touch $@
+	@echo "make: building the extension and installing the package (log: $(VENV)/develop.log)"
+	@VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH \
+		$(VENV)/bin/maturin develop --release --quiet > $(VENV)/develop.log 2>&1 \
+		|| { cat $(VENV)/develop.log >&2; echo "make: the build failed (log: $(VENV)/develop.log)" >&2; exit 1; }
+	@touch $@
 
 test: rust-test develop lint py-test
 
@@ -71,7 +78,7 @@ docs-pictures: $(DEVELOP_STAMP)
 # --overwrite: out/demo may hold the outputs of a version that kept no manifest (they are
 # replaced; other files there are kept)
 demo: $(DEVELOP_STAMP)
-	$(VENV)/bin/topomech demo --overwrite
+	@$(VENV)/bin/topomech demo --overwrite
 
 # Under 10 minutes on 2 cores: the engine bench skips, and records as skipped, a size that the
 # previous one predicts over its budget (TOPOMECH_BENCH_* variables: crates/physics/benches/engine.rs).

@@ -20,6 +20,7 @@ import os
 import re
 import signal
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Callable
@@ -251,6 +252,20 @@ def _run_info(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------- run
 
 
+#: ``--quiet`` of ``run`` and ``demo``.
+QUIET_HELP = "no progress bar, no progress lines and no report (errors are still printed)"
+
+#: What ``run`` and ``demo`` say of their progress and report.
+PROGRESS_HELP = (
+    "While stepping: a progress bar on stderr when stderr is a terminal; a line on stdout "
+    "('NAME: step N/M, t = T s, X steps/s, ETA E s') at most every 10 s "
+    "(TOPOMECH_PROGRESS_INTERVAL_S sets the interval) and one at the end when stdout or "
+    "stderr is not a terminal. Then a report on stdout: the input and final mesh counts "
+    "(when a cut or a fracture changed them) and the time spent in set-up, stepping "
+    "(steps/s counts it alone), output and previews; --quiet prints none of them."
+)
+
+
 def _add_run(sub: Any) -> None:
     p = sub.add_parser(
         "run",
@@ -272,7 +287,7 @@ def _add_run(sub: Any) -> None:
             "(DIR/.topomech-manifest.jsonl): a rerun removes only those files, never "
             "following a symbolic link. A file that cannot be written (a full disk) stops "
             "the run with exit 1, the message naming the file; Ctrl-C stops it with exit "
-            "130; either way summary.json says what happened."
+            "130; either way summary.json says what happened. " + PROGRESS_HELP
         ),
     )
     p.add_argument("scene", metavar="SCENE", nargs="?", help="scene file (.toml) or shipped name")
@@ -284,7 +299,7 @@ def _add_run(sub: Any) -> None:
         type=_count,
         help="a frame every N steps, 0 for none (default: the scene's output.every)",
     )
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar and no report")
+    p.add_argument("--quiet", "-q", action="store_true", help=QUIET_HELP)
     p.add_argument(
         "--no-preview",
         dest="preview",
@@ -327,6 +342,39 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
+def _mesh_counts(c: dict[str, Any], dimension: int) -> str:
+    cells = "volumes" if dimension == 3 else "faces"
+    return f"{c['vertices']} vertices, {c[cells]} {cells}, {c['darts']} darts"
+
+
+def _mesh_rows(s: dict[str, Any]) -> list[tuple[str, str]]:
+    """The report's mesh line: the input's counts; and a line with the final ones when they
+    differ (a cut or a fracture split vertices)."""
+    dim = s["dimension"]
+    mesh = s.get("mesh") or {}
+    final = mesh.get("final") or s
+    first = mesh.get("input")
+    if first is None or first == final:
+        return [("mesh", f"{dim}D, {_mesh_counts(final, dim)}")]
+    return [
+        ("mesh", f"{dim}D, {_mesh_counts(first, dim)} (input)"),
+        ("final mesh", _mesh_counts(final, dim)),
+    ]
+
+
+def _time_row(s: dict[str, Any]) -> str:
+    """The report's time line: the total, then its parts (they add up to it)."""
+    t = s.get("timings")
+    if t is None:
+        return f"{s['wall_seconds']:.2f} s"
+    rate = s["steps_per_second"]
+    per = f" ({rate:.0f} steps/s)" if rate is not None else ""
+    return (
+        f"{t['total_s']:.2f} s: set-up {t['setup_s']:.2f} s, stepping {t['stepping_s']:.2f} s"
+        f"{per}, output {t['output_s']:.2f} s, previews {t['preview_s']:.2f} s"
+    )
+
+
 def _topology_rows(s: dict[str, Any]) -> list[tuple[str, str]]:
     """The report's line on topology changes, when there were some."""
     changes = s.get("topology_changes") or []
@@ -349,14 +397,9 @@ def _topology_rows(s: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def _report(s: dict[str, Any], out: Path) -> None:
-    cells = "volumes" if s["dimension"] == 3 else "faces"
-    rate = s["steps_per_second"]
     rows = [
         ("scene", f"{s['name']} ({s['scene']})"),
-        (
-            "mesh",
-            f"{s['dimension']}D, {s['vertices']} vertices, {s[cells]} {cells}, {s['darts']} darts",
-        ),
+        *_mesh_rows(s),
         ("models", ", ".join(m["kind"] for m in s["models"])),
         (
             "integrator",
@@ -366,10 +409,7 @@ def _report(s: dict[str, Any], out: Path) -> None:
         *_topology_rows(s),
         ("max disp.", _fmt(s["max_displacement"])),
         ("kinetic", _fmt(s["kinetic_energy"])),
-        (
-            "took",
-            f"{s['wall_seconds']:.2f} s" + (f" ({rate:.0f} steps/s)" if rate is not None else ""),
-        ),
+        ("took", _time_row(s)),
     ]
     for k, v in rows:
         print(f"{k:<11} {v}")
@@ -387,6 +427,23 @@ def _report(s: dict[str, Any], out: Path) -> None:
         print(f"{'previews':<11} {', '.join(map(str, previews))}")
     if s["outputs"].get("view"):
         print(f"{'view':<11} topomech view {out}")
+
+
+def _isatty(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+def _progress_kinds(quiet: bool) -> tuple[bool, bool]:
+    """(a progress bar on stderr, progress lines on stdout) for ``run`` and ``demo``: the bar
+    when stderr is a terminal, the lines when stdout or stderr is not one (a pipe, a file, a
+    CI log: what a bar cannot draw on, or what nobody watches); neither with ``--quiet``."""
+    if quiet:
+        return False, False
+    tty_out, tty_err = _isatty(sys.stdout), _isatty(sys.stderr)
+    return tty_err, not (tty_out and tty_err)
 
 
 def _run_scene_cli(
@@ -408,8 +465,16 @@ def _run_scene_cli(
         if steps is not None or every is not None:
             sc = sc.with_steps(steps, every)
         out_dir = out if out is not None else Path("out") / sc.name
-        show = not quiet and sys.stderr.isatty()
-        summary = run_scene(sc, out_dir, progress=show, preview=preview, overwrite=overwrite)
+        bar, log = _progress_kinds(quiet)
+        summary = run_scene(
+            sc,
+            out_dir,
+            progress=bar,
+            log=log,
+            preview=preview,
+            overwrite=overwrite,
+            started=_started[0],
+        )
     except (SceneError, OutputError) as e:
         _error(str(e))
         return EXIT_REFUSED, None
@@ -460,12 +525,12 @@ def _add_demo(sub: Any) -> None:
             f"Run the shipped scene '{DEMO_SCENE}' (a cantilever beam of tetrahedra, "
             "co-rotational FEM, bending under gravity, fixed at x = 0) end to end and write "
             "its frames, final state and summary under the output directory, as "
-            f"`topomech run {DEMO_SCENE}` does."
+            f"`topomech run {DEMO_SCENE}` does. " + PROGRESS_HELP
         ),
     )
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory")
     p.add_argument("--steps", metavar="N", type=_count, help="steps to run (default: the scene's)")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar and no report")
+    p.add_argument("--quiet", "-q", action="store_true", help=QUIET_HELP)
     p.add_argument(
         "--overwrite",
         action="store_true",
@@ -981,12 +1046,17 @@ def _quiet_stdout() -> None:
         pass  # stdout is not a file descriptor (a test's capture): nothing will flush it
 
 
+#: When :func:`main` began (``time.perf_counter``): a run's set-up time counts from it.
+_started: list[float | None] = [None]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Runs the command line ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
 
     A usage error exits 2 (``SystemExit``, from argparse). When stdout is closed before the
     output is written (``topomech info X | head``) it returns :data:`EXIT_BROKEN_PIPE`
     quietly, without a traceback."""
+    _started[0] = time.perf_counter()
     try:
         args = build_parser().parse_args(argv)
         try:

@@ -19,6 +19,21 @@
   energy at every step) and ``energy.png``, ``preview.gif`` (the frames rendered headless,
   see :mod:`topomech.render`) and ``preview.mp4`` when imageio-ffmpeg's encoder is installed.
 
+``summary.json`` splits the run's wall time (``time.perf_counter``) into ``timings``:
+``setup_s`` (reading the scene, building the mesh and the simulation, preparing the output
+folder; from the CLI, from the moment its command line is read), ``stepping_s`` (the
+:meth:`Simulation.step` calls alone), ``output_s`` (the frames, the energies recorded after
+each step, ``final.vtu``, ``animation.pvd``, the view data, the summary, and the moments
+between the steps: the progress display), ``preview_s`` (``preview.gif``, ``preview.mp4``,
+``energy.png``) and ``total_s``. Every moment of the run counts for the phase it falls in, so
+the four parts add up to ``total_s``; the total runs until the summary is complete, just
+before ``summary.json`` is written. ``wall_seconds`` is ``total_s`` (kept for
+compatibility), ``step_seconds`` is ``stepping_s`` and ``steps_per_second`` is ``steps /
+stepping_s``. ``mesh`` gives the cell counts (``darts``, ``vertices``, ``edges``, ``faces``,
+``volumes``, ``components``) of the ``input`` (the map as built from the scene's mesh, before
+any step) and of the ``final`` map; they differ after a cut or a fracture, which split
+vertices. The top-level ``darts``, ``vertices``, ... are the final ones.
+
 A divergence stops the run: what was written stays, ``final.vtu`` holds the last good state,
 and ``summary.json`` has an ``error`` entry naming the step and the vertex.
 
@@ -63,7 +78,7 @@ if TYPE_CHECKING:
     from topomech._gmap import PathLike
     from topomech.simulation import Simulation
 
-__all__ = ["OutputError", "Progress", "run_scene", "write_pvd"]
+__all__ = ["OutputError", "Progress", "ProgressLog", "run_scene", "write_pvd"]
 
 #: The keys every summary has (an ``error`` entry is added when the run fails).
 SUMMARY_KEYS = (
@@ -89,6 +104,8 @@ SUMMARY_KEYS = (
     "max_displacement",
     "solver",
     "frames",
+    "mesh",
+    "timings",
     "wall_seconds",
     "step_seconds",
     "steps_per_second",
@@ -131,6 +148,131 @@ class Progress:
         self.update(done, force=True)
         self.stream.write("\n")
         self.stream.flush()
+
+
+#: The default of :func:`run_scene`'s ``log_interval``: the environment variable
+#: ``TOPOMECH_PROGRESS_INTERVAL_S`` (seconds), else :data:`LOG_INTERVAL_S`.
+LOG_INTERVAL_ENV = "TOPOMECH_PROGRESS_INTERVAL_S"
+LOG_INTERVAL_S = 10.0
+
+
+def log_interval_default() -> float:
+    """The progress log's interval: ``$TOPOMECH_PROGRESS_INTERVAL_S`` when it is a finite
+    number >= 0, else :data:`LOG_INTERVAL_S`."""
+    text = os.environ.get(LOG_INTERVAL_ENV, "").strip()
+    if text:
+        with contextlib.suppress(ValueError):
+            v = float(text)
+            if math.isfinite(v) and v >= 0:
+                return v
+    return LOG_INTERVAL_S
+
+
+def _secs(x: float) -> str:
+    """Seconds for a log line: one decimal under a minute, whole seconds above."""
+    return f"{x:.1f}" if x < 60 else f"{x:.0f}"
+
+
+class ProgressLog:
+    """Progress as log lines, for a stream that is not a terminal (a pipe, a file, a CI log):
+    ``NAME: step N/M, t = T s, X steps/s, ETA E s``, at most one every ``interval`` seconds,
+    and one at the end (``done in S s``, or ``stopped`` when the run stopped early). The rate
+    is over the wall time since the first step began (frames included), so the ETA holds; the
+    report's steps/s counts the stepping alone."""
+
+    def __init__(
+        self,
+        label: str,
+        total: int,
+        stream: TextIO | None = None,
+        interval: float = LOG_INTERVAL_S,
+    ) -> None:
+        self.label = label
+        self.total = total
+        self.stream = stream if stream is not None else sys.stdout
+        self.interval = interval
+        self.start = time.perf_counter()
+        self.last = self.start
+        self.lines = 0
+        self.closed = False  # the stream went away (a pipe closed early): no more lines
+
+    def _line(self, done: int, t: float, now: float, tail: str) -> None:
+        if self.closed:
+            return
+        elapsed = now - self.start
+        rate = done / elapsed if elapsed > 0 else 0.0
+        try:
+            self.stream.write(
+                f"{self.label}: step {done}/{self.total}, t = {t:.6g} s, {rate:.0f} steps/s, "
+                f"{tail}\n"
+            )
+            self.stream.flush()
+        except (OSError, ValueError):
+            # `topomech run X | head -1`: the run goes on and writes its files; the report
+            # meets the closed pipe as before
+            self.closed = True
+            return
+        self.lines += 1
+
+    def update(self, done: int, t: float) -> None:
+        """After step ``done``, at simulated time ``t``: a line when ``interval`` seconds
+        have passed since the last one (or since the start)."""
+        now = time.perf_counter()
+        if now - self.last < self.interval or done >= self.total:
+            return  # the last step's line is the end line
+        self.last = now
+        elapsed = now - self.start
+        rate = done / elapsed if elapsed > 0 else 0.0
+        eta = f"ETA {_secs((self.total - done) / rate)} s" if rate > 0 else "ETA unknown"
+        self._line(done, t, now, eta)
+
+    def close(self, done: int, t: float) -> None:
+        """The end line."""
+        now = time.perf_counter()
+        tail = f"done in {_secs(now - self.start)} s" if done >= self.total else "stopped"
+        self._line(done, t, now, tail)
+
+
+#: The phases of a run's wall time, as ``summary.json``'s ``timings`` names them (``_s``).
+TIMING_PHASES = ("setup", "stepping", "output", "preview")
+
+#: The timing phase of each phase of :data:`PHASES`: the moments from entering one phase to
+#: entering the next count for it (the steps phase: all but the ``Simulation.step`` calls,
+#: which the loop counts as stepping itself).
+_TIMING_OF = {
+    "setup": "setup",
+    "steps": "output",
+    "frames": "output",
+    "final": "output",
+    "view": "output",
+    "previews": "preview",
+    "summary": "output",
+}
+
+
+class _Clock:
+    """Splits a run's wall time into :data:`TIMING_PHASES`: each moment counts for the phase
+    current then, so the parts add up to the total."""
+
+    def __init__(self, start: float) -> None:
+        self.start = start
+        self.mark = start
+        self.current = "setup"
+        self.spent = dict.fromkeys(TIMING_PHASES, 0.0)
+
+    def to(self, phase: str) -> None:
+        """From now on the time counts for ``phase``."""
+        now = time.perf_counter()
+        self.spent[self.current] += now - self.mark
+        self.mark = now
+        self.current = phase
+
+    def timings(self) -> dict[str, float]:
+        """The time spent so far in each phase (``setup_s``, ...) and ``total_s``."""
+        self.to(self.current)
+        out = {f"{p}_s": self.spent[p] for p in TIMING_PHASES}
+        out["total_s"] = self.mark - self.start
+        return out
 
 
 class _Writer:
@@ -351,6 +493,9 @@ def run_scene(
     preview: bool = True,
     video: bool = True,
     overwrite: bool = False,
+    log: bool | TextIO = False,
+    log_interval: float | None = None,
+    started: float | None = None,
 ) -> dict[str, Any]:
     """Runs a scene (a :class:`Scene` or a scene file) and writes its outputs under ``out``
     (default ``out/<scene name>``); ``steps`` and ``every`` override the scene's. Returns the
@@ -363,8 +508,12 @@ def run_scene(
     ``momentum``, ``max_displacement``, ``solver`` (static and implicit Euler runs: the
     last step's :meth:`Simulation.solver_report`, with the worst relative residual over the
     run and the number of steps that needed load stepping; null for explicit integrators),
-    ``frames``, ``wall_seconds`` (the whole run),
-    ``step_seconds`` (in steps only), ``steps_per_second``, ``outputs`` and
+    ``frames``, ``mesh`` (``{"input": counts, "final": counts}``, the counts being
+    ``darts``, ``vertices``, ``edges``, ``faces``, ``volumes`` and ``components``: of the
+    map as built, before any step, and at the end), ``timings`` (``setup_s``,
+    ``stepping_s``, ``output_s``, ``preview_s`` and ``total_s``, their sum: see the module's
+    documentation), ``wall_seconds`` (``total_s``), ``step_seconds`` (``stepping_s``),
+    ``steps_per_second`` (``steps / stepping_s``), ``outputs`` and
     ``topomech_version`` (a number that is not finite, after a divergence, is null; one not
     known, after an interruption during set-up, is null too); plus ``error`` when the run
     stopped early: ``type`` and ``message`` always; ``"divergence"`` with ``step`` and
@@ -390,6 +539,12 @@ def run_scene(
     naming it (and ``outputs.summary`` null).
 
     ``progress``: True for a progress bar on stderr, or a callable ``(done, total)``.
+    ``log``: progress as log lines (:class:`ProgressLog`) on stdout (True) or on the stream
+    given, at most one every ``log_interval`` seconds (default: the environment variable
+    ``TOPOMECH_PROGRESS_INTERVAL_S``, else 10) and one at the end. ``started``: the
+    :func:`time.perf_counter` value at which the run began (the command line passes the
+    moment it started reading its arguments), so that ``timings.setup_s`` counts from it;
+    default: the call.
     ``preview``: track the energies and render ``preview.gif``, ``energy.png`` (and
     ``preview.mp4`` with ``video``, when an encoder is installed); the frames for the viewer
     (``view.json``) are written either way. ``outputs`` names each file written (None for
@@ -400,7 +555,7 @@ def run_scene(
     ``out``, a scene name that is not a plain folder name; :class:`OutputError` for an
     output folder that is refused (see above) or cannot be created.
     """
-    t0 = time.perf_counter()
+    clock = _Clock(started if started is not None else time.perf_counter())
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
     if steps is not None or every is not None:
         sc = sc.with_steps(steps, every)
@@ -427,15 +582,17 @@ def run_scene(
         "energy_plot": None,
     }
     final_written = False
-    step_seconds = 0.0
+    input_counts: dict[str, int] | None = None
     phase = "setup"
     writing: list[Path] = []  # the files the phase is writing, for an OSError's message
     bar: Progress | None = None
+    lines: ProgressLog | None = None
 
     def enter(name: str, files: Sequence[str] = ()) -> None:
         """Starts a phase that writes ``files`` (listed in the manifest first)."""
         nonlocal phase, writing
         phase = name
+        clock.to(_TIMING_OF[name])
         _enter(name)
         writing = [folder.add(f) for f in files]
 
@@ -456,6 +613,7 @@ def run_scene(
     try:
         _enter("setup")
         sim = sc.build()
+        input_counts = _counts(sim)
         fields = check_fields(sim, getattr(sc, "fields", ()), sc.path)
         folder.prepare()
         for rel in ("view.bin", "view.json", "energy.csv"):
@@ -487,16 +645,22 @@ def run_scene(
             bar = Progress(sc.name, sc.steps)
         elif callable(progress):
             report = progress
+        if log is not False:
+            interval = log_interval if log_interval is not None else log_interval_default()
+            stream = None if log is True else log
+            lines = ProgressLog(sc.name, sc.steps, stream, interval)
         try:
             for k in range(1, sc.steps + 1):
-                ts = time.perf_counter()
+                clock.to("stepping")
                 sim.step()
-                step_seconds += time.perf_counter() - ts
+                clock.to("output")
                 recorder.after_step()
                 if sc.every > 0 and (k % sc.every == 0 or k == sc.steps):
                     frame()
                 if bar is not None:
                     bar.update(k)
+                if lines is not None:
+                    lines.update(k, sim.time)
                 if report is not None:
                     report(k, sc.steps)
         except DivergenceError as e:
@@ -521,9 +685,13 @@ def run_scene(
                     "event": missed,
                 }
         finally:
+            clock.to("output")
             if bar is not None:
                 with contextlib.suppress(OSError, ValueError):
                     bar.close(sim.steps)
+            if lines is not None:
+                with contextlib.suppress(OSError, ValueError):
+                    lines.close(sim.steps, sim.time)
     except (KeyboardInterrupt, OSError) as e:
         if isinstance(e, OSError) and not folder.prepared:
             raise  # not one of the run's files (a preparation failure is an OutputError)
@@ -568,7 +736,8 @@ def run_scene(
     elif sim is not None:
         changes = [dict(c) for c in sim.topology_changes()]
 
-    summary = _summary(sc, sim, t0, step_seconds, frames, outputs, final_written, changes)
+    clock.to("output")
+    summary = _summary(sc, sim, clock, input_counts, frames, outputs, final_written, changes)
     if error is not None:
         summary["error"] = error
     try:
@@ -605,11 +774,24 @@ def _write_summary(path: Path, summary: dict[str, Any]) -> None:
         raise
 
 
+def _counts(sim: Simulation) -> dict[str, int]:
+    """The cell counts of the simulation's map now (``mesh.input`` and ``mesh.final``)."""
+    c = sim.gmap().cell_counts()
+    return {
+        "darts": c["darts"],
+        "vertices": c["vertices"],
+        "edges": c["edges"],
+        "faces": c["faces"],
+        "volumes": c["volumes"],
+        "components": c["components"],
+    }
+
+
 def _summary(
     sc: Scene,
     sim: Simulation | None,
-    t0: float,
-    step_seconds: float,
+    clock: _Clock,
+    input_counts: dict[str, int] | None,
     frames: list[tuple[float, str]],
     outputs: dict[str, str | None],
     final_written: bool,
@@ -618,8 +800,10 @@ def _summary(
     """The summary of a run (see :func:`run_scene`); the values a simulation that was never
     built would give are null."""
     known: dict[str, Any] = {}
+    final_counts: dict[str, int] | None = None
     if sim is not None:
-        counts = sim.gmap().cell_counts()  # of the final map: a topology change changes them
+        # of the final map: a topology change changes them
+        counts = final_counts = _counts(sim)
         known = {
             "dimension": sim.dimension,
             "steps": sim.steps,
@@ -635,7 +819,6 @@ def _summary(
             "momentum": [float(x) for x in sim.momentum()],
             "max_displacement": _max_displacement(sim),
             "solver": sim.solver_report(),
-            "steps_per_second": sim.steps / step_seconds if step_seconds > 0 else None,
         }
     summary: dict[str, Any] = {
         "scene": str(sc.path) if sc.path is not None else None,
@@ -660,8 +843,10 @@ def _summary(
         "max_displacement": None,
         "solver": None,
         "frames": len(frames),
-        "wall_seconds": time.perf_counter() - t0,
-        "step_seconds": step_seconds,
+        "mesh": {"input": input_counts, "final": final_counts},
+        "timings": None,
+        "wall_seconds": None,
+        "step_seconds": None,
         "steps_per_second": None,
         "outputs": {
             "summary": "summary.json",
@@ -673,4 +858,12 @@ def _summary(
         "topomech_version": __version__,
     }
     summary.update(known)
+    # last: the total runs until the summary is complete
+    timings = clock.timings()
+    stepping = timings["stepping_s"]
+    summary["timings"] = timings
+    summary["wall_seconds"] = timings["total_s"]
+    summary["step_seconds"] = stepping
+    if sim is not None and stepping > 0:
+        summary["steps_per_second"] = sim.steps / stepping
     return summary
