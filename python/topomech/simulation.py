@@ -240,6 +240,22 @@ class Simulation:
         unsewn, added = self._core.cut(np.ascontiguousarray(normal, dtype=np.float64), offset)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 
+    def cut_swept(self, start: Any, end: Any) -> TopologyResult:
+        """Cuts now along the quad a blade sweeps moving from the segment ``start`` to the
+        segment ``end`` (each 2 points ``[[x, y, z], [x, y, z]]``, in the positions' unit):
+        every face (3D) or edge (2D) between two elements whose current centroids the quad
+        separates (the segment between them crosses it) is unsewn and the vertices on it
+        split. Elements are separated along their faces, never split. A blade running during
+        the run is an event (``{"kind": "blade", "start": t0, "end": t1, "from": ...,
+        "to": ...}`` in ``events``; a scene's ``[[event]] kind = "blade"``), which cuts along
+        what it sweeps each step. Returns a :class:`TopologyResult` (0 unsewn when it crosses
+        nothing); raises :class:`TypeError` / :class:`ValueError` for points that are not 2
+        finite 3-vectors."""
+        unsewn, added = self._core.cut_swept(
+            np.asarray(start, dtype=np.float64).tolist(), np.asarray(end, dtype=np.float64).tolist()
+        )
+        return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
+
     def fracture(self, criterion: str, threshold: float) -> TopologyResult:
         """Opens now every face (3D) or edge (2D) where ``criterion`` (``"stress"`` or
         ``"strain"``, see the ``fracture`` setting) exceeds ``threshold``; returns a

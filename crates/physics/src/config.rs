@@ -95,6 +95,8 @@ pub struct Config {
     pub ground: Option<Ground>,
     /// Topology changes at given times.
     pub events: Vec<TimedEvent>,
+    /// Blades moving through the object during the run (progressive cuts).
+    pub blades: Vec<Blade>,
     /// Fracture (or tearing), tested after every step.
     pub fracture: Option<Fracture>,
     /// The integrator.
@@ -118,6 +120,7 @@ impl Default for Config {
             regions: Vec::new(),
             ground: None,
             events: Vec::new(),
+            blades: Vec::new(),
             fracture: None,
             integrator: Integrator::SymplecticEuler,
             dt: 1e-3,

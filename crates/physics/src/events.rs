@@ -29,6 +29,63 @@ pub struct TimedEvent {
     pub cut: Cut,
 }
 
+/// A blade cutting progressively (what surgery simulators need): the segment from `from[0]`
+/// to `from[1]` at time `start` moves linearly to the segment `to[0]`..`to[1]` at `end` (s).
+/// Each step that overlaps `[start, end]`, the blade's segment at the step's start and at its
+/// end bound the quad it swept during the step (two triangles, `a0 b0 b1` and `a0 b1 a1`),
+/// and every face (3D) or edge (2D) between two elements whose centroids it separates — the
+/// segment between the centroids, at the end of the step, crosses the quad — is unsewn.
+/// Elements are separated along their existing faces: none is split. On a surface the blade
+/// is a segment through the sheet (a knife held across it), not a segment lying in it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Blade {
+    /// When the blade starts moving (s).
+    pub start: f64,
+    /// When it stops (s), after `start`.
+    pub end: f64,
+    /// Its two end points at `start`.
+    pub from: [[f64; 3]; 2],
+    /// Its two end points at `end`.
+    pub to: [[f64; 3]; 2],
+}
+
+impl Blade {
+    /// The blade's end points at time `t`, linearly between `from` (at `start`) and `to` (at
+    /// `end`), held at the nearer pose outside `[start, end]`.
+    pub fn at(&self, t: f64) -> [[f64; 3]; 2] {
+        let s = ((t - self.start) / (self.end - self.start)).clamp(0.0, 1.0);
+        let lerp = |a: [f64; 3], b: [f64; 3]| [0, 1, 2].map(|i| a[i] + s * (b[i] - a[i]));
+        [
+            lerp(self.from[0], self.to[0]),
+            lerp(self.from[1], self.to[1]),
+        ]
+    }
+
+    /// Why this blade cannot run, if it cannot: a start before 0, an end not after the start,
+    /// a non-finite time or point.
+    pub fn problem(&self) -> Option<String> {
+        if !(self.start >= 0.0 && self.start.is_finite()) {
+            return Some(format!(
+                "its start must be a finite time >= 0, got {}",
+                self.start
+            ));
+        }
+        if !(self.end > self.start && self.end.is_finite()) {
+            return Some(format!(
+                "its end must be a finite time after its start ({}), got {}",
+                self.start, self.end
+            ));
+        }
+        let finite = self
+            .from
+            .iter()
+            .chain(&self.to)
+            .flatten()
+            .all(|x| x.is_finite());
+        (!finite).then(|| "its points must be finite".to_string())
+    }
+}
+
 /// What opens a face (3D) or an edge (2D) during the run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Criterion {
@@ -87,10 +144,70 @@ impl Simulation {
                 }
             }
         }
+        // the blades that moved during this step, over the part of it they moved in
+        let (t0, t1) = (self.time - self.cfg.dt, self.time);
+        for k in 0..self.cfg.blades.len() {
+            let b = &self.cfg.blades[k];
+            let (lo, hi) = (t0.max(b.start), t1.min(b.end));
+            if hi > lo {
+                let (from, to) = (b.at(lo), b.at(hi));
+                self.sweep(from, to, "blade")?;
+            }
+        }
         if let Some(f) = self.cfg.fracture {
             self.fracture(f)?;
         }
         Ok(())
+    }
+
+    /// Cuts now along the quad a blade sweeps moving from the segment `from` to the segment
+    /// `to` (each a pair of end points): unsews every face (3D) or edge (2D) between two
+    /// elements whose current centroids the quad separates (see [`Blade`]); returns how many,
+    /// and the rows appended for the vertices that split. Nothing crossed is not an error.
+    pub fn cut_swept(
+        &mut self,
+        from: [[f64; 3]; 2],
+        to: [[f64; 3]; 2],
+    ) -> Result<TopologyResult, PhysicsError> {
+        if !from.iter().chain(&to).flatten().all(|x| x.is_finite()) {
+            return Err(PhysicsError::Config(
+                "the blade's points must be finite".into(),
+            ));
+        }
+        self.sweep(from, to, "blade")
+    }
+
+    fn sweep(
+        &mut self,
+        from: [[f64; 3]; 2],
+        to: [[f64; 3]; 2],
+        kind: &'static str,
+    ) -> Result<TopologyResult, PhysicsError> {
+        let p: Params = [
+            ("a0".to_string(), Val::V3(from[0])),
+            ("b0".to_string(), Val::V3(from[1])),
+            ("a1".to_string(), Val::V3(to[0])),
+            ("b1".to_string(), Val::V3(to[1])),
+        ]
+        .into();
+        let n = self
+            .rules
+            .apply_everywhere(&mut self.g, "cut_swept", &p)?
+            .matches;
+        let mut added_rows = Vec::new();
+        if n > 0 {
+            self.changes.push(TopologyChange {
+                step: self.steps,
+                time: self.time,
+                kind,
+                unsewn: n,
+            });
+            added_rows = self.after_topology_change()?;
+        }
+        Ok(TopologyResult {
+            unsewn: n,
+            added_rows,
+        })
     }
 
     /// Opens now every face (3D) or edge (2D) where the criterion passes the threshold; returns
@@ -209,8 +326,16 @@ impl Simulation {
         self.sync_rows()
     }
 
-    /// Refuses events that a run ending at `end_time` would never reach.
+    /// Refuses events (and blades) that a run ending at `end_time` would never reach.
     pub fn check_events(&self, end_time: f64) -> Result<(), PhysicsError> {
+        for (k, b) in self.cfg.blades.iter().enumerate() {
+            if b.start >= end_time {
+                return Err(PhysicsError::Config(format!(
+                    "blade {k} starts at t = {} but the run ends at t = {end_time}: it would never move",
+                    b.start
+                )));
+            }
+        }
         for e in &self.cfg.events {
             if e.time > end_time + 1e-9 * self.cfg.dt {
                 return Err(PhysicsError::Config(format!(

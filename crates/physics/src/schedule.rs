@@ -337,6 +337,11 @@ impl Simulation {
                 ));
             }
         }
+        for (k, b) in cfg.blades.iter().enumerate() {
+            if let Some(why) = b.problem() {
+                return Err(PhysicsError::Config(format!("blade {k}: {why}")));
+            }
+        }
         for e in &cfg.events {
             if !(e.time >= 0.0 && e.time.is_finite()) {
                 return Err(PhysicsError::Config(format!(

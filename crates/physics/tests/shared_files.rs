@@ -264,7 +264,10 @@ fn the_merged_files_are_the_per_dimension_files_as_before() {
             embeddings_by_name(&was),
             "{dim}D embeddings"
         );
-        let (n, w) = (unplaced(&now), unplaced(&was));
+        // rules added since the merge (the blade's cut) are not in the old files
+        let added = ["cut_swept"];
+        let (mut n, w) = (unplaced(&now), unplaced(&was));
+        n.retain(|r| !added.contains(&r.name.as_str()));
         assert_eq!(
             n.iter().map(|r| &r.name).collect::<Vec<_>>(),
             w.iter().map(|r| &r.name).collect::<Vec<_>>(),

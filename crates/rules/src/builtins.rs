@@ -320,6 +320,15 @@ const CATALOGUE: &[(&str, &str, &str)] = &[
     ),
     ("sym", "sym(m: matN) -> matN", "Symmetric part (m + m^T) / 2."),
     (
+        "segment_hits_triangle",
+        "segment_hits_triangle(a: vec3, b: vec3, p: vec3, q: vec3, r: vec3) -> bool",
+        "Whether the segment from a to b meets the triangle p q r (its closed interior: an \
+         end or an edge touching counts), by Moeller and Trumbore 1997 (doi:10.1080/\
+         10867651.1997.10487468) with tolerances relative to the sizes; false for a flat \
+         triangle, a zero-length segment, a segment lying in the triangle's plane, or \
+         non-finite input.",
+    ),
+    (
         "polar",
         "polar(m: mat2 | mat3) -> same",
         "The rotation R (det R = +1) of the polar decomposition m = R S: the rotation closest \
@@ -526,6 +535,7 @@ fn result_type(name: &str, args: &[Ty]) -> Option<Ty> {
         ("frobenius", [Mat(..)]) => F64,
         ("trace" | "det", [Mat(r, c)]) if r == c => F64,
         ("inverse" | "sym", [m @ Mat(r, c)]) if r == c => *m,
+        ("segment_hits_triangle", [Vec3, Vec3, Vec3, Vec3, Vec3]) => Bool,
         ("polar", [m @ (Mat(2, 2) | Mat(3, 3))]) => *m,
         ("eigvals_sym2", [Mat(2, 2)]) => Vec2,
         ("eigvals_sym3", [Mat(3, 3)]) => Vec3,
@@ -733,6 +743,9 @@ fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
         ("det", [M(m)]) if m.rows == m.cols => Some(F(det(m))),
         ("inverse", [M(m)]) if m.rows == m.cols => Some(M(inverse(m)?)),
         ("sym", [M(m)]) if m.rows == m.cols => Some(M(sym(m))),
+        ("segment_hits_triangle", [V3(a), V3(b), V3(p), V3(q), V3(r)]) => {
+            Some(B(segment_hits_triangle(a, b, p, q, r)))
+        }
         ("polar", [M(m)]) if m.rows == 2 && m.cols == 2 => Some(M(polar2(m)?)),
         ("polar", [M(m)]) if m.rows == 3 && m.cols == 3 => Some(M(polar3(m)?)),
         ("eigvals_sym2", [M(m)]) if m.rows == 2 && m.cols == 2 => Some(V2(eigvals_sym2(m))),
@@ -1401,6 +1414,54 @@ fn polar3_jacobi(m: &[f64]) -> [f64; 9] {
     r
 }
 
+/// Whether the segment `a b` meets the closed triangle `p q r`: Moeller & Trumbore, "Fast,
+/// minimum storage ray-triangle intersection", J. Graphics Tools 2 (1997),
+/// doi:10.1080/10867651.1997.10487468, restricted to the segment's parameter range [0, 1].
+/// Barycentric coordinates and the segment parameter are accepted within `1e-12` of their
+/// range (relative: they are ratios), so a segment through an edge or a vertex of the
+/// triangle, or ending on it, hits it. A segment parallel to the plane (within `1e-12` of
+/// the product of the lengths), a zero-length segment, a flat triangle and any non-finite
+/// coordinate give false.
+pub(crate) fn segment_hits_triangle(
+    a: &[f64; 3],
+    b: &[f64; 3],
+    p: &[f64; 3],
+    q: &[f64; 3],
+    r: &[f64; 3],
+) -> bool {
+    const TOL: f64 = 1e-12;
+    if [a, b, p, q, r]
+        .iter()
+        .any(|v| v.iter().any(|x| !x.is_finite()))
+    {
+        return false;
+    }
+    let sub = |u: &[f64; 3], v: &[f64; 3]| [u[0] - v[0], u[1] - v[1], u[2] - v[2]];
+    let d = sub(b, a);
+    let e1 = sub(q, p);
+    let e2 = sub(r, p);
+    let h = cross(&d, &e2);
+    let det = dot(&e1, &h);
+    // the scale of det: |d| |e1| |e2|; below it relatively, the segment is parallel to the
+    // plane or something is degenerate
+    let scale = norm(&d) * norm(&e1) * norm(&e2);
+    if scale.is_nan() || scale <= 0.0 || det.abs() <= TOL * scale {
+        return false;
+    }
+    let s = sub(a, p);
+    let u = dot(&s, &h) / det;
+    if !(-TOL..=1.0 + TOL).contains(&u) {
+        return false;
+    }
+    let qv = cross(&s, &e1);
+    let v = dot(&d, &qv) / det;
+    if v < -TOL || u + v > 1.0 + TOL {
+        return false;
+    }
+    let t = dot(&e2, &qv) / det;
+    (-TOL..=1.0 + TOL).contains(&t)
+}
+
 /// The determinant of the matrix with columns `c`.
 fn det3_cols(c: &[[f64; 3]; 3]) -> f64 {
     dot(&c[0], &cross(&c[1], &c[2]))
@@ -1927,6 +1988,113 @@ mod tests {
 
     /// R of a pure rotation is that rotation; of rotation * SPD stretch, that rotation
     /// (tolerance: a few hundred ulps, the Jacobi sweeps and products of 3x3 matrices).
+    /// The segment-triangle test on cases whose answer is known by construction: through
+    /// the interior, outside, through an edge and a vertex (the closed triangle counts),
+    /// ending on the triangle or just short of it, parallel and in-plane segments, degenerate
+    /// input; and the same answers after a translation and a scaling by 1e6 (the tolerances
+    /// are relative), and with the triangle's vertices in either order.
+    #[test]
+    fn segment_hits_triangle_cases() {
+        let (p, q, r) = ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+        let cases: [([f64; 3], [f64; 3], bool, &str); 11] = [
+            (
+                [0.2, 0.2, -1.0],
+                [0.2, 0.2, 1.0],
+                true,
+                "through the interior",
+            ),
+            (
+                [0.8, 0.8, -1.0],
+                [0.8, 0.8, 1.0],
+                false,
+                "beside the hypotenuse",
+            ),
+            (
+                [0.5, 0.5, -1.0],
+                [0.5, 0.5, 1.0],
+                true,
+                "through the hypotenuse",
+            ),
+            ([0.0, 0.0, -1.0], [0.0, 0.0, 1.0], true, "through a vertex"),
+            (
+                [0.2, 0.2, -1.0],
+                [0.2, 0.2, 0.0],
+                true,
+                "ending on the triangle",
+            ),
+            (
+                [0.2, 0.2, -1.0],
+                [0.2, 0.2, -1e-3],
+                false,
+                "ending short of it",
+            ),
+            (
+                [0.2, 0.2, 1e-3],
+                [0.2, 0.2, 1.0],
+                false,
+                "starting above it",
+            ),
+            ([-1.0, 0.2, 0.5], [2.0, 0.2, 0.5], false, "parallel, above"),
+            ([-1.0, 0.2, 0.0], [2.0, 0.2, 0.0], false, "in the plane"),
+            ([0.2, 0.2, 0.0], [0.2, 0.2, 0.0], false, "zero length"),
+            (
+                [0.2, 0.2, -1.0],
+                [0.3, 0.1, 1.0],
+                true,
+                "slanted, through the interior",
+            ),
+        ];
+        let tf = |v: [f64; 3], k: f64| [v[0] * k + 3.0 * k, v[1] * k - 7.0 * k, v[2] * k + k];
+        for (a, b, want, what) in cases {
+            for k in [1.0, 1e6, 1e-6] {
+                let (a, b, p, q, r) = (tf(a, k), tf(b, k), tf(p, k), tf(q, k), tf(r, k));
+                assert_eq!(
+                    segment_hits_triangle(&a, &b, &p, &q, &r),
+                    want,
+                    "{what}, scale {k}"
+                );
+                assert_eq!(
+                    segment_hits_triangle(&a, &b, &p, &r, &q),
+                    want,
+                    "{what}, reversed"
+                );
+                assert_eq!(
+                    segment_hits_triangle(&b, &a, &q, &r, &p),
+                    want,
+                    "{what}, from b"
+                );
+            }
+        }
+        let flat = segment_hits_triangle(
+            &[0.2, 0.2, -1.0],
+            &[0.2, 0.2, 1.0],
+            &p,
+            &q,
+            &[2.0, 0.0, 0.0],
+        );
+        assert!(!flat, "a flat triangle");
+        let nan = segment_hits_triangle(&[f64::NAN, 0.2, -1.0], &[0.2, 0.2, 1.0], &p, &q, &r);
+        assert!(!nan, "non-finite input");
+        assert_eq!(
+            call(
+                "segment_hits_triangle",
+                &[
+                    Val::V3([0.2, 0.2, -1.0]),
+                    Val::V3([0.2, 0.2, 1.0]),
+                    Val::V3(p),
+                    Val::V3(q),
+                    Val::V3(r)
+                ]
+            )
+            .unwrap(),
+            Val::B(true)
+        );
+        assert_eq!(
+            call_type("segment_hits_triangle", &[Ty::Vec3; 5]).unwrap(),
+            Ty::Bool
+        );
+    }
+
     #[test]
     fn polar_of_rotation_and_stretch() {
         for (axis, t) in [

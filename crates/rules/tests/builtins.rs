@@ -104,6 +104,7 @@ const SAMPLES: &[(&str, &[Ty])] = &[
     ("inverse", &[Ty::Mat(12, 12)]),
     ("frobenius", &[Ty::Mat(12, 12)]),
     ("sym", &[Ty::Mat(3, 3)]),
+    ("segment_hits_triangle", &[Ty::Vec3; 5]),
     ("polar", &[Ty::Mat(2, 2)]),
     ("polar", &[Ty::Mat(3, 3)]),
     ("eigvals_sym2", &[Ty::Mat(2, 2)]),

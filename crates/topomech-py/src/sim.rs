@@ -22,7 +22,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
 use topomech_gmap::{EmbeddingType, OrbitType, Value};
 use topomech_physics::{
-    is_additive, shipped_models, Config, Criterion, Cut, Fracture, Ground, Integrator,
+    is_additive, shipped_models, Blade, Config, Criterion, Cut, Fracture, Ground, Integrator,
     MaterialRegion, ModelSpec, Simulation, TimedEvent, TopologyChange,
 };
 use topomech_rules::Val;
@@ -398,6 +398,63 @@ fn event_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<TimedEvent> {
     Ok(TimedEvent { time, cut })
 }
 
+/// Whether an `events` entry is a dict whose `kind` is `"blade"`.
+fn is_blade(obj: &Bound<'_, PyAny>) -> bool {
+    obj.cast::<PyDict>().is_ok_and(|d| {
+        d.get_item("kind")
+            .ok()
+            .flatten()
+            .is_some_and(|k| k.extract::<String>().is_ok_and(|k| k == "blade"))
+    })
+}
+
+/// Two points, a blade's segment: `[[x, y, z], [x, y, z]]`.
+fn segment_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<[[f64; 3]; 2]> {
+    let items = list_arg(obj, what)?;
+    if items.len() != 2 {
+        return Err(value_error(format!(
+            "{what} must be 2 points [[x, y, z], [x, y, z]], got {} items",
+            items.len()
+        )));
+    }
+    Ok([
+        vec3_arg(&items[0], &format!("{what}[0]"))?,
+        vec3_arg(&items[1], &format!("{what}[1]"))?,
+    ])
+}
+
+/// A blade: `{"kind": "blade", "start": t0, "end": t1, "from": [[..], [..]], "to": [[..], [..]]}`.
+fn blade_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<Blade> {
+    let what = format!("events[{k}]");
+    let (mut start, mut end, mut from, mut to) = (None, None, None, None);
+    for (key, v) in dict_items(obj, &what)? {
+        let w = format!("{what}['{key}']");
+        match key.as_str() {
+            "kind" => {}
+            "start" => start = Some(real_arg(&v, &w)?),
+            "end" => end = Some(real_arg(&v, &w)?),
+            "from" => from = Some(segment_arg(&v, &w)?),
+            "to" => to = Some(segment_arg(&v, &w)?),
+            _ => {
+                return Err(type_error(format!(
+                "{what} (a blade) has an unknown key '{key}' (known: kind, start, end, from, to)"
+            )))
+            }
+        }
+    }
+    let missing = |key: &str| value_error(format!("{what} (a blade) has no '{key}'"));
+    let blade = Blade {
+        start: start.ok_or_else(|| missing("start"))?,
+        end: end.ok_or_else(|| missing("end"))?,
+        from: from.ok_or_else(|| missing("from"))?,
+        to: to.ok_or_else(|| missing("to"))?,
+    };
+    if let Some(why) = blade.problem() {
+        return Err(value_error(format!("{what} (a blade): {why}")));
+    }
+    Ok(blade)
+}
+
 /// Fracture settings: `{"criterion": "stress" | "strain", "threshold": x}`.
 fn fracture_arg(obj: &Bound<'_, PyAny>) -> Result<Fracture> {
     let what = "fracture";
@@ -541,11 +598,13 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
                     .collect::<Result<_>>()?;
             }
             "events" => {
-                cfg.events = list_arg(v, k)?
-                    .iter()
-                    .enumerate()
-                    .map(|(i, e)| event_arg(e, i))
-                    .collect::<Result<_>>()?;
+                for (i, e) in list_arg(v, k)?.iter().enumerate() {
+                    if is_blade(e) {
+                        cfg.blades.push(blade_arg(e, i)?);
+                    } else {
+                        cfg.events.push(event_arg(e, i)?);
+                    }
+                }
             }
             "fracture" => {
                 cfg.fracture = if v.is_none() {
@@ -778,6 +837,23 @@ impl PySimulation {
             plane_cut(normal, offset, "normal")
         })?;
         let r = this.run(py, move |sim| Ok(sim.cut(&cut)?))?;
+        Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
+    }
+
+    /// Cuts now along the quad swept by a blade moving from the segment `start` to the
+    /// segment `end` (each 2 points, `[[x, y, z], [x, y, z]]`): unsews every face (3D) or edge
+    /// (2D) between two elements whose centroids the quad separates. Returns how many and
+    /// the rows appended for the vertices that split, int64 (k,). Raises `ValueError` for
+    /// points that are not 2 finite 3-vectors.
+    fn cut_swept<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+        start: &Bound<'_, PyAny>,
+        end: &Bound<'_, PyAny>,
+    ) -> PyResult<(usize, Bound<'py, PyArray1<i64>>)> {
+        let mut this = exclusive(slf)?;
+        let (from, to) = guard(|| Ok((segment_arg(start, "start")?, segment_arg(end, "end")?)))?;
+        let r = this.run(py, move |sim| Ok(sim.cut_swept(from, to)?))?;
         Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
     }
 

@@ -1,6 +1,7 @@
-"""Topology changes of a scene: the ``[[event]]`` tables (timed cuts) and the ``[fracture]``
-table, as :class:`topomech.Simulation` takes them, and the check of the fracture criterion
-against the mesh once it is known (the Rust side: ``crates/physics/src/events.rs``).
+"""Topology changes of a scene: the ``[[event]]`` tables (timed cuts and moving blades) and
+the ``[fracture]`` table, as :class:`topomech.Simulation` takes them, and the check of the
+fracture criterion against the mesh once it is known (the Rust side:
+``crates/physics/src/events.rs``).
 """
 
 from __future__ import annotations
@@ -8,14 +9,22 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from topomech.scene._table import _check_predicate, _Fail, _or, _required_str, _show, _Table
+from topomech.scene._table import (
+    _check_predicate,
+    _Fail,
+    _number,
+    _or,
+    _required_str,
+    _show,
+    _Table,
+)
 
 if TYPE_CHECKING:
     from topomech._gmap import GMap
 
 
 #: The kinds of ``[[event]]`` tables.
-EVENT_KINDS = ("cut",)
+EVENT_KINDS = ("cut", "blade")
 
 #: The fracture criteria.
 FRACTURE_CRITERIA = ("stress", "strain")
@@ -44,6 +53,9 @@ def _events(tables: list[_Table], fail: _Fail) -> list[dict[str, Any]]:
     """The ``[[event]]`` tables as :class:`Simulation` takes them."""
     events: list[dict[str, Any]] = []
     for t in tables:
+        if t.has("kind") and t.data.get("kind") == "blade":
+            events.append(_blade(t, fail))
+            continue
         time = t.number("time", nonneg=True)
         kind = t.string("kind")
         t.done(extra=("plane", "where"))
@@ -84,6 +96,50 @@ def _events(tables: list[_Table], fail: _Fail) -> list[dict[str, Any]]:
             )
         events.append(event)
     return events
+
+
+def _segment(t: _Table, k: str, fail: _Fail) -> list[list[float]]:
+    """A blade's segment: 2 points ``[[x, y, z], [x, y, z]]``."""
+    v = t.data.get(k)
+    t.known.append(k)
+    if v is None:
+        raise fail(t.key(k), "missing: the blade's two end points [[x, y, z], [x, y, z]]")
+    if not isinstance(v, list) or len(v) != 2:
+        raise fail(t.key(k), f"expected 2 points [[x, y, z], [x, y, z]], got {_show(v)}")
+    points = []
+    for i, p in enumerate(v):
+        at = f"{t.key(k)}[{i}]"
+        if not isinstance(p, list) or len(p) != 3:
+            raise fail(at, f"expected an array of 3 numbers, got {_show(p)}")
+        points.append([_number(x, f"{at}[{j}]", fail) for j, x in enumerate(p)])
+    if points[0] == points[1]:
+        raise fail(t.key(k), "the blade's two end points must differ")
+    return points
+
+
+def _blade(t: _Table, fail: _Fail) -> dict[str, Any]:
+    """A ``[[event]]`` of kind ``blade``: the segment ``from`` at time ``start`` moving
+    linearly to the segment ``to`` at time ``end``, cutting what it crosses each step."""
+    t.string("kind")
+    start = t.number("start", nonneg=True)
+    end = t.number("end", nonneg=True)
+    if start is None:
+        raise fail(t.key("start"), "missing: when the blade starts moving (s, >= 0)")
+    if end is None:
+        raise fail(t.key("end"), "missing: when the blade stops (s, after start)")
+    if end <= start:
+        raise fail(t.key("end"), f"must be after start ({start:g}), got {end:g}")
+    if t.has("time"):
+        raise fail(t.key("time"), "a blade moves from start to end: give start and end")
+    blade = {
+        "kind": "blade",
+        "start": start,
+        "end": end,
+        "from": _segment(t, "from", fail),
+        "to": _segment(t, "to", fail),
+    }
+    t.done()
+    return blade
 
 
 def _fracture(top: _Table, fail: _Fail) -> dict[str, Any] | None:

@@ -97,8 +97,9 @@ class Scene:
 
     @property
     def events(self) -> list[dict[str, Any]]:
-        """The timed events, as :class:`Simulation` takes them (``time``, ``kind`` and
-        ``plane`` or ``where``)."""
+        """The events, as :class:`Simulation` takes them: timed cuts (``time``, ``kind`` and
+        ``plane`` or ``where``) and blades (``kind = "blade"``, ``start``, ``end``, ``from``,
+        ``to``)."""
         return list(self.config.get("events", []))
 
     def _fail(self) -> _Fail:
@@ -109,6 +110,15 @@ class Scene:
         naming ``event[i].time``."""
         end = self.end_time
         for i, e in enumerate(self.events):
+            if e.get("kind") == "blade":
+                t = float(e["start"])
+                if t >= end:
+                    raise self._fail()(
+                        f"event[{i}].start",
+                        f"t = {t:g} is not before the end of the run (t = {end:g}: "
+                        f"{self.steps} steps of dt {self.dt:g}): the blade would never move",
+                    )
+                continue
             t = float(e["time"])
             if t > end + 1e-9 * self.dt:
                 raise self._fail()(
