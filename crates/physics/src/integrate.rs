@@ -82,7 +82,11 @@ impl Simulation {
         }
         self.steps += 1;
         self.time += self.cfg.dt;
-        self.topology_events()
+        let events = self.topology_events();
+        // the matches shared by rules of one pattern while this step planned them: its plans
+        // hold what they need
+        self.rules.clear_shared_matches();
+        events
     }
 
     /// The row of the vertex whose orbit holds `dart`, by the slot of the vertex

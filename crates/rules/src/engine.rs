@@ -16,6 +16,7 @@
 
 use std::collections::HashMap;
 use std::fmt;
+use std::sync::Arc;
 
 use topomech_gmap::{
     Dart, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType, Policy, RewireError, Value,
@@ -405,7 +406,34 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
 pub struct RuleSet {
     checked: Checked,
     plans: std::sync::Mutex<HashMap<usize, Plan>>,
+    /// Matches found for a plan, kept for the other rules of the same pattern until the
+    /// topology changes or [`RuleSet::clear_shared_matches`] (see [`pattern_key`]).
+    shared: std::sync::Mutex<SharedMatches>,
     compile: bool,
+}
+
+/// The matches of the patterns planned on one map state, by [`pattern_key`].
+#[derive(Debug, Default)]
+struct SharedMatches {
+    identity: (u64, u64),
+    by_pattern: HashMap<String, Arc<Vec<Match>>>,
+}
+
+/// What a computation rule's matches depend on, as a key: its left graph (each node's orbit
+/// type, the arcs, the hooks, the hook orbit). Two rules with the same key have the same
+/// matches on a map (the names of their nodes, their embeddings and their programs do not
+/// matter), so the second one planned reuses the first one's (an init rule and the step rule
+/// of one model, the spring strains and the cumulated springs). `None` for a rule whose
+/// matches depend on more: a guard (it filters them), or a topology change.
+fn pattern_key(rule: &Rule) -> Option<String> {
+    if rule.guard.is_some() || rule.changes_topology {
+        return None;
+    }
+    let nodes: Vec<_> = rule.nodes.iter().map(|n| (&n.left, n.left_src)).collect();
+    Some(format!(
+        "{nodes:?}|{:?}|{:?}|{:?}|{}",
+        rule.left_arcs, rule.hooks, rule.hook_orbit, rule.arity
+    ))
 }
 
 impl Clone for RuleSet {
@@ -430,8 +458,8 @@ struct Plan {
 enum PlanKind {
     /// Compiled to flat index arrays and a program (see [`crate::compiled`]).
     Compiled(Box<crate::compiled::Plan>),
-    /// Left to the interpreter: the matches.
-    Matches(Vec<Match>),
+    /// Left to the interpreter: the matches (shared with the rules of the same pattern).
+    Matches(Arc<Vec<Match>>),
 }
 
 struct Bound<'a> {
@@ -447,6 +475,7 @@ impl RuleSet {
         RuleSet {
             checked,
             plans: std::sync::Mutex::new(HashMap::new()),
+            shared: std::sync::Mutex::new(SharedMatches::default()),
             compile: true,
         }
     }
@@ -739,7 +768,7 @@ impl RuleSet {
             .get(&index)
             .is_some_and(|p| p.identity == g.identity() && p.reads == reads);
         if !fresh {
-            let matches = find_all(g, &b, poll)?;
+            let matches = self.matches_of(g, &b, poll)?;
             let kind = if matches.is_empty() {
                 PlanKind::Matches(matches)
             } else {
@@ -791,12 +820,73 @@ impl RuleSet {
         }
     }
 
-    /// Drops every plan (they are rebuilt when needed): after rules that run once.
+    /// Drops every plan (they are rebuilt when needed): after rules that run once. The
+    /// matches shared by rules of one pattern stay (until the topology changes or
+    /// [`RuleSet::clear_shared_matches`]), so the rules run next reuse those of the rules
+    /// run before (a simulation's step rules those of its init rules).
     pub fn clear_plans(&self) {
         self.plans
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clear();
+    }
+
+    /// Drops the matches kept for rules of the same pattern (they are found again when a
+    /// plan needs them): a caller that has planned what it will run (a simulation, after a
+    /// step) frees them, since compiled plans no longer need them.
+    pub fn clear_shared_matches(&self) {
+        let mut shared = self
+            .shared
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if !shared.by_pattern.is_empty() {
+            shared.by_pattern.clear();
+        }
+    }
+
+    /// How many patterns have matches kept for sharing now (see [`RuleSet::clear_shared_matches`]).
+    pub fn shared_patterns(&self) -> usize {
+        self.shared
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .by_pattern
+            .len()
+    }
+
+    /// The matches of a computation rule on `g`: those of an earlier rule of the same
+    /// pattern on the same map state when there are some, else found now (and kept for the
+    /// next rule of that pattern).
+    fn matches_of(
+        &self,
+        g: &GMap,
+        b: &Bound,
+        poll: &mut Poll,
+    ) -> Result<Arc<Vec<Match>>, ApplyError> {
+        let Some(key) = pattern_key(b.rule) else {
+            return Ok(Arc::new(find_all(g, b, poll)?));
+        };
+        {
+            let mut shared = self
+                .shared
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            if shared.identity != g.identity() {
+                shared.by_pattern.clear();
+                shared.identity = g.identity();
+            }
+            if let Some(ms) = shared.by_pattern.get(&key) {
+                return Ok(Arc::clone(ms));
+            }
+        }
+        let ms = Arc::new(find_all(g, b, poll)?);
+        let mut shared = self
+            .shared
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if shared.identity == g.identity() {
+            shared.by_pattern.insert(key, Arc::clone(&ms));
+        }
+        Ok(ms)
     }
 
     /// Whether computation rules run through compiled plans (the default) or through the
