@@ -406,12 +406,15 @@ pub struct RuleSet {
     checked: Checked,
     plans: std::sync::Mutex<HashMap<usize, Plan>>,
     compile: bool,
+    /// Whether compiled plans run native code (see [`crate::jit`]).
+    jit: bool,
 }
 
 impl Clone for RuleSet {
     fn clone(&self) -> Self {
         let mut r = RuleSet::new(self.checked.clone());
         r.compile = self.compile;
+        r.jit = self.jit;
         r
     }
 }
@@ -448,6 +451,7 @@ impl RuleSet {
             checked,
             plans: std::sync::Mutex::new(HashMap::new()),
             compile: true,
+            jit: crate::jit::enabled_by_env(),
         }
     }
 
@@ -746,7 +750,7 @@ impl RuleSet {
                 let b = self.bind(g, name, params)?;
                 match crate::compiled::compile(b.rule, b.embs) {
                     Ok(prog) if self.compile => PlanKind::Compiled(Box::new(
-                        crate::compiled::Plan::build(prog, b.rule, g, &b.ids, &matches),
+                        crate::compiled::Plan::build(prog, b.rule, g, &b.ids, &matches, self.jit),
                     )),
                     _ => PlanKind::Matches(matches),
                 }
@@ -807,6 +811,45 @@ impl RuleSet {
             .get_mut()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clear();
+    }
+
+    /// Whether compiled plans run native code generated with Cranelift (see [`crate::jit`])
+    /// instead of the plan evaluator: the same results bit for bit, the evaluator staying
+    /// the fallback for what the code generator does not cover. The default is the
+    /// environment variable `TOPOMECH_JIT` (`1`: on; `0` or unset: off), read once per
+    /// process; this overrides it for this rule set (for comparisons and tests). Plans
+    /// are rebuilt.
+    pub fn set_jit(&mut self, on: bool) {
+        self.jit = on;
+        self.plans
+            .get_mut()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clear();
+    }
+
+    /// Whether compiled plans run native code (see [`RuleSet::set_jit`]).
+    pub fn jit(&self) -> bool {
+        self.jit
+    }
+
+    /// Which computation rules run native code: `(rule, native)` for every rule whose
+    /// compiled plan exists now and has run at least once (the code is generated at a plan's
+    /// first run); `false` where the plan's program uses what the code generator does not
+    /// cover, or the switch is off.
+    pub fn plan_native(&self) -> Vec<(String, bool)> {
+        let plans = self
+            .plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut out: Vec<(String, bool)> = plans
+            .iter()
+            .filter_map(|(k, p)| match &p.kind {
+                PlanKind::Compiled(c) => Some((self.checked.rules[*k].name.clone(), c.is_native())),
+                PlanKind::Matches(_) => None,
+            })
+            .collect();
+        out.sort();
+        out
     }
 
     /// Which computation rules run compiled: `(rule, compiled)` for every rule whose plan
