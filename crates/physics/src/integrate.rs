@@ -208,8 +208,8 @@ impl Simulation {
     }
 
     /// Whether compiled plans run native code (see [`topomech_rules::RuleSet::set_jit`]):
-    /// the same results bit for bit; the default is the environment variable
-    /// `TOPOMECH_JIT`.
+    /// the same results bit for bit; the default is on, unless the environment variable
+    /// `TOPOMECH_JIT` is `0`.
     pub fn set_jit(&mut self, on: bool) {
         self.rules.set_jit(on);
     }

@@ -19,6 +19,10 @@
 //! short lists: its parameters and columns). The plan is a cache derived
 //! from the map: it is rebuilt when the topology version changes (see [`crate::RuleSet`]).
 //!
+//! The program can also be compiled to native code (see [`crate::jit`]), which the plan then
+//! runs per chunk instead of the evaluator here: the same results, bit for bit; the evaluator
+//! stays the reference and the fallback.
+//!
 //! Nothing here knows any model: any rule compiles the same way. A rule using what the plan
 //! machinery does not cover (integer arithmetic, reads of integer embeddings) is run by the
 //! interpreter instead, and so is an application whose evaluation fails (a built-in refusing

@@ -815,10 +815,9 @@ impl RuleSet {
 
     /// Whether compiled plans run native code generated with Cranelift (see [`crate::jit`])
     /// instead of the plan evaluator: the same results bit for bit, the evaluator staying
-    /// the fallback for what the code generator does not cover. The default is the
-    /// environment variable `TOPOMECH_JIT` (`1`: on; `0` or unset: off), read once per
-    /// process; this overrides it for this rule set (for comparisons and tests). Plans
-    /// are rebuilt.
+    /// the fallback for what the code generator does not cover. The default is on, unless
+    /// the environment variable `TOPOMECH_JIT` is `0` (read once per process); this
+    /// overrides it for this rule set (for comparisons and tests). Plans are rebuilt.
     pub fn set_jit(&mut self, on: bool) {
         self.jit = on;
         self.plans

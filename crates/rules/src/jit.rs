@@ -1,17 +1,17 @@
 //! Native code for compiled plans, generated with Cranelift: the first slice of a code
 //! generator.
 //!
-//! [`compile`] turns a plan's register [`Program`] into one native function
+//! `compile` turns a plan's register `Program` into one native function
 //! `extern "C" fn(args: *const JitArgs, first: u64, n: u64) -> u32` that evaluates rows
 //! `first..first + n` (all in one chunk) and stores each write's values into the plan's output
-//! buffer exactly where [`crate::compiled`]'s evaluator (`Ctx::chunk`) stores them, in the same
+//! buffer exactly where `crate::compiled`'s evaluator (`Ctx::chunk`) stores them, in the same
 //! layout. Inside a row, registers are SSA values (one `f64` value per float of a register's
 //! width): the intermediates stay in machine registers instead of going through scratch.
 //!
 //! **No host pointer is baked into the code.** Every array the row loop touches (column
 //! bases, gather index arrays, CSR offsets and slots, counts, fill values, the output buffer)
 //! and every helper function (the `extern "C"` trampoline to the Rust built-ins, `fma` where
-//! the host lacks it) comes through the [`JitArgs`] table passed at run time; the code only
+//! the host lacks it) comes through the `JitArgs` table passed at run time; the code only
 //! adds offsets to what it loads from that table. That is what lets another backend (a GPU
 //! one) compile the same form later: the table is the whole interface.
 //!
@@ -24,11 +24,17 @@
 //! caught by the plan's existing scan of its output buffer; a helper that refuses its argument
 //! makes the function return a nonzero code, which the plan treats as the evaluator's `Err`.
 //!
-//! An operation not covered here makes [`compile`] fail: the plan then keeps using the
+//! An operation not covered here makes `compile` fail: the plan then keeps using the
 //! evaluator, which stays the reference and the fallback.
 //!
-//! **Lifetime.** The function pointer points into memory owned by the [`JITModule`] kept in
-//! [`Native`]; `Native` never hands the pointer out and frees the module's memory only when
+//! **The switch.** A plan built while its rule set's switch is on ([`crate::RuleSet::set_jit`];
+//! default: on, unless the environment variable `TOPOMECH_JIT` is `0`) generates its code at
+//! its first run, once (a few milliseconds), and runs it per chunk with the evaluator's
+//! chunking and rayon parallelism. `compiled_count` counts the programs compiled, and
+//! [`crate::RuleSet::plan_native`] tells which plans run native code.
+//!
+//! **Lifetime.** The function pointer points into memory owned by the `JITModule` kept in
+//! `Native`; `Native` never hands the pointer out and frees the module's memory only when
 //! it is dropped, so no call can outlive the code.
 #![allow(unsafe_code)]
 
@@ -152,11 +158,15 @@ pub fn compiled_count() -> u64 {
     COMPILED.load(Ordering::Relaxed)
 }
 
-/// Whether the environment variable `TOPOMECH_JIT` asks for native code (`1`; `0` or unset:
-/// off), read once.
+/// Whether compiled plans run native code by default: the environment variable
+/// `TOPOMECH_JIT` (`0`: off; `1`, unset or anything else: on), read once per process.
+///
+/// On by default: on every shipped model and integrator the native code gives the
+/// evaluator's bits (tests `physics/tests/jit.rs`, `rules/tests/jit.rs`), compiles in a few
+/// milliseconds per plan, and steps faster (see the crate's `engine` bench).
 pub(crate) fn enabled_by_env() -> bool {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| std::env::var("TOPOMECH_JIT").is_ok_and(|v| v.trim() == "1"))
+    *ON.get_or_init(|| std::env::var("TOPOMECH_JIT").map_or(true, |v| v.trim() != "0"))
 }
 
 impl Native {
@@ -419,6 +429,10 @@ pub(crate) fn compile(
     set(&mut fb, "use_colocated_libcalls", "false")?;
     set(&mut fb, "is_pic", "false")?;
     set(&mut fb, "opt_level", "speed")?;
+    // frames larger than a page probe the stack inline (a call to a probe function would be
+    // a symbol resolved into the code)
+    set(&mut fb, "enable_probestack", "true")?;
+    set(&mut fb, "probestack_strategy", "inline")?;
     let isa = cranelift_native::builder()
         .map_err(|e| format!("no native target: {e}"))?
         .finish(settings::Flags::new(fb))
