@@ -150,6 +150,22 @@ impl Drop for Native {
     }
 }
 
+/// Tests: generate code as for a host without FMA and SSE4.1 (helper calls for `fma`, `floor`
+/// and `ceil`).
+#[cfg(test)]
+static PORTABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+fn portable() -> bool {
+    #[cfg(test)]
+    {
+        PORTABLE.load(Ordering::Relaxed)
+    }
+    #[cfg(not(test))]
+    {
+        false
+    }
+}
+
 /// Natively compiled programs so far (in this process).
 static COMPILED: AtomicU64 = AtomicU64::new(0);
 
@@ -445,7 +461,10 @@ pub(crate) fn compile(
             .iter()
             .any(|v| v.name == name && v.as_bool() == Some(true))
     };
-    let (has_fma, has_sse41) = (flag("has_fma"), flag("has_sse41"));
+    let (has_fma, has_sse41) = (
+        flag("has_fma") && !portable(),
+        flag("has_sse41") && !portable(),
+    );
     let mut module = JITModule::new(JITBuilder::with_isa(isa, default_libcall_names()));
     let mut ctx = module.make_context();
     let ptr = types::I64;
@@ -982,5 +1001,61 @@ fn dst_of(op: &Op) -> usize {
         | Op::F2 { dst, .. }
         | Op::Fast { dst, .. }
         | Op::Generic { dst, .. } => *dst,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PORTABLE;
+    use crate::{load_sources, Params, Val};
+    use std::sync::atomic::Ordering;
+    use topomech_gmap::generators::{grid, GridElement};
+    use topomech_gmap::mesh::{build, BuildOptions};
+
+    const SRC: &str = "dimension 2
+embedding position : vec3 on <1,2>
+embedding out : vec3 on <1,2>
+
+rule r(q: vec3) {
+  left { v : <1,2> hook }
+  compute {
+    let p = v.position + vec3(0.3, -0.7, 0.1)
+    v.out = cross(p, q) + vec3(floor(7.0 * x(p)), ceil(-5.0 * y(p)), cross(vec2(x(p), y(p)), vec2(z(q), x(q))))
+  }
+}
+";
+
+    /// The paths a host without FMA or SSE4.1 takes (`fma` through the table's helper,
+    /// `floor` and `ceil` through `jit_call`) give the evaluator's bits too.
+    #[test]
+    fn without_host_fma_and_sse41_the_helpers_give_the_same_bits() {
+        PORTABLE.store(true, Ordering::Relaxed);
+        let (g0, _) = build(
+            &grid([13, 11], [1.0, 0.8], GridElement::Quad),
+            &BuildOptions::default(),
+        )
+        .unwrap();
+        let run = |jit: bool| {
+            let (mut rules, _) = load_sources(&[("t.tmr".to_string(), SRC.to_string())]).unwrap();
+            rules.set_jit(jit);
+            let mut g = g0.clone();
+            rules.prepare(&mut g).unwrap();
+            let p: Params = [("q".to_string(), Val::V3([0.25, -1.5, 2.0]))].into();
+            rules.apply_everywhere(&mut g, "r", &p).unwrap();
+            let id = g.require("out").unwrap();
+            let bits: Vec<u64> = g
+                .embedding(id)
+                .real_column()
+                .unwrap()
+                .iter()
+                .map(|x| x.to_bits())
+                .collect();
+            (bits, rules.plan_native())
+        };
+        let (slow, _) = run(false);
+        let (fast, native) = run(true);
+        PORTABLE.store(false, Ordering::Relaxed);
+        assert_eq!(native, vec![("r".to_string(), true)]);
+        assert_eq!(slow, fast);
     }
 }
