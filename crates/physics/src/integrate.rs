@@ -210,4 +210,11 @@ impl Simulation {
     pub fn set_compiled(&mut self, on: bool) {
         self.rules.set_compiled(on);
     }
+
+    /// Whether compiled plans run native code (see [`topomech_rules::RuleSet::set_jit`]):
+    /// the same results bit for bit; the default is on, unless the environment variable
+    /// `TOPOMECH_JIT` is `0`.
+    pub fn set_jit(&mut self, on: bool) {
+        self.rules.set_jit(on);
+    }
 }

@@ -1,8 +1,10 @@
 //! Compiled plans against the interpreter: every shipped model's rules compile (no rule of a
 //! step is left to the interpreter), and a run through the plans gives the same positions as a
 //! run through the interpreter, bit for bit — the plans evaluate the same operations in the
-//! same order, so no tolerance is needed. A renamed copy of a shipped rule file (what a user
-//! would write) compiles to the same plan and gives the same results.
+//! same order, so no tolerance is needed. Compiled plans run native code
+//! ([`Simulation::set_jit`]) or the plan evaluator: both are compared with the interpreter. A
+//! renamed copy of a shipped rule file (what a user would write) compiles to the same plan and
+//! gives the same results.
 // exact comparisons are the point here; the shared helpers index their arrays
 #![allow(clippy::float_cmp, clippy::needless_range_loop)]
 mod common;
@@ -45,9 +47,21 @@ fn run(
     integrator: Integrator,
     compiled: bool,
 ) -> (Simulation, Vec<[f64; 3]>) {
+    run_with(kind, dim, integrator, compiled, true)
+}
+
+/// [`run`], the compiled plans running native code (`jit`) or the plan evaluator.
+fn run_with(
+    kind: &str,
+    dim: usize,
+    integrator: Integrator,
+    compiled: bool,
+    jit: bool,
+) -> (Simulation, Vec<[f64; 3]>) {
     let (g, _) = build(&mesh_for(kind, dim), &BuildOptions::default()).unwrap();
     let mut s = Simulation::new(g, config(kind, integrator)).unwrap();
     s.set_compiled(compiled);
+    s.set_jit(jit);
     for _ in 0..15 {
         s.step().unwrap();
     }
@@ -87,7 +101,21 @@ fn every_model_runs_compiled_and_matches_the_interpreter_bit_for_bit() {
             interpreted.is_empty(),
             "{kind} ({dim}D): rules left to the interpreter: {interpreted:?}"
         );
+        let native = s.rules().plan_native();
+        assert!(
+            native.iter().all(|k| k.1),
+            "{kind} ({dim}D): plans without native code: {native:?}"
+        );
         let (_, slow) = run(kind, dim, Integrator::SymplecticEuler, false);
+        // the third mode: compiled plans through the plan evaluator instead of native code
+        let (_, evaluated) = run_with(kind, dim, Integrator::SymplecticEuler, true, false);
+        for (i, (a, b)) in evaluated.iter().zip(&slow).enumerate() {
+            assert_eq!(
+                a.map(f64::to_bits),
+                b.map(f64::to_bits),
+                "{kind} ({dim}D): vertex {i} differs: evaluator {a:?}, interpreted {b:?}"
+            );
+        }
         assert_eq!(fast.len(), slow.len());
         let moved = fast
             .iter()

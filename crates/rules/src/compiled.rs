@@ -19,6 +19,10 @@
 //! short lists: its parameters and columns). The plan is a cache derived
 //! from the map: it is rebuilt when the topology version changes (see [`crate::RuleSet`]).
 //!
+//! The program can also be compiled to native code (see [`crate::jit`]), which the plan then
+//! runs per chunk instead of the evaluator here: the same results, bit for bit; the evaluator
+//! stays the reference and the fallback.
+//!
 //! Nothing here knows any model: any rule compiles the same way. A rule using what the plan
 //! machinery does not cover (integer arithmetic, reads of integer embeddings) is run by the
 //! interpreter instead, and so is an application whose evaluation fails (a built-in refusing
@@ -35,17 +39,19 @@ use crate::ast::AggKind;
 use crate::builtins;
 use crate::check::{EmbDecl, Rule, TExpr, TStmt};
 use crate::engine::Match;
+use crate::jit;
 use crate::value::{binop_type, unop_type, BinOp, Ty, UnOp, Val};
 
 /// Why a rule or an application is left to the interpreter.
 #[derive(Debug)]
 pub(crate) struct Unsupported(#[allow(dead_code)] pub String);
 
-type R = usize;
+pub(crate) type R = usize;
+type F1Fn = fn(f64) -> f64;
 
 /// Binary element-wise operations.
 #[derive(Clone, Copy, Debug)]
-enum Ew {
+pub(crate) enum Ew {
     Add,
     Sub,
     Mul,
@@ -55,7 +61,7 @@ enum Ew {
 
 impl Ew {
     #[inline]
-    fn apply(self, x: f64, y: f64) -> f64 {
+    pub(crate) fn apply(self, x: f64, y: f64) -> f64 {
         match self {
             Ew::Add => x + y,
             Ew::Sub => x - y,
@@ -67,7 +73,7 @@ impl Ew {
 }
 
 #[derive(Clone, Copy, Debug)]
-enum Cmp {
+pub(crate) enum Cmp {
     Lt,
     Le,
     Gt,
@@ -76,7 +82,7 @@ enum Cmp {
 
 /// Built-ins with a flat implementation (the same arithmetic as [`builtins::call`]).
 #[derive(Clone, Copy, Debug)]
-enum Fast {
+pub(crate) enum Fast {
     Dot,
     Norm,
     Norm2,
@@ -90,7 +96,7 @@ enum Fast {
 }
 
 #[derive(Clone, Debug)]
-enum Op {
+pub(crate) enum Op {
     /// [`Op::MatMul`] whose left matrix has zeros by construction (a block-diagonal matrix, its
     /// transpose): row `i` sums only over the columns `terms[offs[i]..offs[i + 1]]`, in
     /// increasing order. The same bits as the dense product for finite values: the skipped
@@ -202,6 +208,8 @@ enum Op {
     },
     F1 {
         f: fn(f64) -> f64,
+        /// The built-in's name (the code generator computes some natively).
+        name: &'static str,
         dst: R,
         a: R,
     },
@@ -227,10 +235,10 @@ enum Op {
 }
 
 #[derive(Clone, Copy, Debug)]
-struct Reg {
+pub(crate) struct Reg {
     /// Offset, in floats per row, of the register in a row's scratch.
-    off: usize,
-    width: usize,
+    pub(crate) off: usize,
+    pub(crate) width: usize,
 }
 
 /// A gather: the node and embedding read.
@@ -250,7 +258,7 @@ struct AggKey {
 
 /// What a fill register holds.
 #[derive(Clone, Debug)]
-enum FillSrc {
+pub(crate) enum FillSrc {
     Const(Vec<f64>),
     Param(usize),
 }
@@ -258,11 +266,11 @@ enum FillSrc {
 /// The compiled program of a rule: independent of any map.
 #[derive(Clone, Debug)]
 pub(crate) struct Program {
-    ops: Vec<Op>,
-    regs: Vec<Reg>,
+    pub(crate) ops: Vec<Op>,
+    pub(crate) regs: Vec<Reg>,
     /// Floats per row of scratch.
     stride: usize,
-    fills: Vec<FillSrc>,
+    pub(crate) fills: Vec<FillSrc>,
     /// Reads: (node, rule embedding).
     reads: Vec<ReadKey>,
     /// Aggregates (sum, mean, count).
@@ -270,7 +278,7 @@ pub(crate) struct Program {
     /// Embeddings whose columns the program reads (rule embedding indices).
     cols: Vec<usize>,
     /// Writes, in program order: (node, rule embedding, register, uniform positions).
-    writes: Vec<(usize, usize, R, Vec<usize>)>,
+    pub(crate) writes: Vec<(usize, usize, R, Vec<usize>)>,
 }
 
 struct Compiler<'a> {
@@ -758,25 +766,30 @@ impl Compiler<'_> {
             return Ok((dst, ty));
         }
         let all_f64 = ts.iter().all(|t| *t == Ty::F64);
-        let f1: Option<fn(f64) -> f64> = match name {
+        let f1: Option<(F1Fn, &'static str)> = match name {
             _ if !(all_f64 && ts.len() == 1) => None,
-            "abs" => Some(|x| builtins::scalar1("abs", x)),
-            "sign" => Some(|x| builtins::scalar1("sign", x)),
-            "sqrt" => Some(|x| builtins::scalar1("sqrt", x)),
-            "exp" => Some(|x| builtins::scalar1("exp", x)),
-            "log" => Some(|x| builtins::scalar1("log", x)),
-            "sin" => Some(|x| builtins::scalar1("sin", x)),
-            "cos" => Some(|x| builtins::scalar1("cos", x)),
-            "tan" => Some(|x| builtins::scalar1("tan", x)),
-            "asin" => Some(|x| builtins::scalar1("asin", x)),
-            "acos" => Some(|x| builtins::scalar1("acos", x)),
-            "atan" => Some(|x| builtins::scalar1("atan", x)),
-            "floor" => Some(|x| builtins::scalar1("floor", x)),
-            "ceil" => Some(|x| builtins::scalar1("ceil", x)),
+            "abs" => Some((|x| builtins::scalar1("abs", x), "abs")),
+            "sign" => Some((|x| builtins::scalar1("sign", x), "sign")),
+            "sqrt" => Some((|x| builtins::scalar1("sqrt", x), "sqrt")),
+            "exp" => Some((|x| builtins::scalar1("exp", x), "exp")),
+            "log" => Some((|x| builtins::scalar1("log", x), "log")),
+            "sin" => Some((|x| builtins::scalar1("sin", x), "sin")),
+            "cos" => Some((|x| builtins::scalar1("cos", x), "cos")),
+            "tan" => Some((|x| builtins::scalar1("tan", x), "tan")),
+            "asin" => Some((|x| builtins::scalar1("asin", x), "asin")),
+            "acos" => Some((|x| builtins::scalar1("acos", x), "acos")),
+            "atan" => Some((|x| builtins::scalar1("atan", x), "atan")),
+            "floor" => Some((|x| builtins::scalar1("floor", x), "floor")),
+            "ceil" => Some((|x| builtins::scalar1("ceil", x), "ceil")),
             _ => None,
         };
-        if let Some(f) = f1 {
-            self.p.ops.push(Op::F1 { f, dst, a: rs[0] });
+        if let Some((f, name)) = f1 {
+            self.p.ops.push(Op::F1 {
+                f,
+                name,
+                dst,
+                a: rs[0],
+            });
             return Ok((dst, ty));
         }
         let f2: Option<fn(f64, f64) -> f64> = match name {
@@ -903,6 +916,23 @@ pub(crate) struct Plan {
     /// each write's rows contiguous from `offset * chunk` (see [`Plan::out_index`]).
     out: Vec<f64>,
     evaluations: usize,
+    /// Native code for the program (see [`crate::jit`]), compiled at the first run when the
+    /// plan was built with the switch on.
+    native: NativeState,
+}
+
+/// Whether and how a plan runs native code.
+#[derive(Debug)]
+enum NativeState {
+    /// The switch was off when the plan was built: the evaluator runs.
+    Off,
+    /// To compile at the first run (the column kinds are known then).
+    Untried,
+    /// Not covered (the reason): the evaluator runs.
+    Failed(#[allow(dead_code)] String),
+    /// Compiled, with per program column the length it must have at least (in elements):
+    /// one more than the largest slot the index arrays hold, times the width read.
+    Ready(Box<jit::Native>, Vec<usize>),
 }
 
 /// Partition of the rows: rows joined through the orbit positions `uniform` share a class.
@@ -937,6 +967,7 @@ impl Plan {
         g: &GMap,
         ids: &[EmbeddingId],
         matches: &[Match],
+        jit_on: bool,
     ) -> Plan {
         let nw = prog.writes.len();
         // domain rows: the class representatives of every write
@@ -1058,6 +1089,67 @@ impl Plan {
             out_width,
             out: Vec::new(),
             evaluations,
+            native: if jit_on {
+                NativeState::Untried
+            } else {
+                NativeState::Off
+            },
+        }
+    }
+
+    /// Whether the plan runs native code (after its first run).
+    pub(crate) fn is_native(&self) -> bool {
+        matches!(self.native, NativeState::Ready(..))
+    }
+
+    /// Compiles the program to native code for columns of `kinds`.
+    fn compile_native(&self, kinds: &[jit::ColKind]) -> NativeState {
+        // what the code will index: checked once here (the arrays never change after
+        // `build`), so that a run only compares column lengths with `need`
+        let rows = self.rows;
+        let mut need = vec![0usize; kinds.len()];
+        for op in &self.prog.ops {
+            match op {
+                Op::Gather { dst, col, idx } => {
+                    let g = &self.gathers[*idx];
+                    if g.len() != rows {
+                        return NativeState::Failed("a gather of another length".into());
+                    }
+                    let w = if kinds[*col] == jit::ColKind::Real {
+                        self.prog.regs[*dst].width
+                    } else {
+                        1
+                    };
+                    if let Some(&m) = g.iter().max() {
+                        need[*col] = need[*col].max((m as usize + 1) * w);
+                    }
+                }
+                Op::Agg { dst, col, csr, .. } => {
+                    let (offs, slots) = &self.csr[*csr];
+                    let monotone = offs.windows(2).all(|o| o[0] <= o[1]);
+                    if offs.len() != rows + 1 || !monotone || offs[rows] as usize > slots.len() {
+                        return NativeState::Failed("an aggregate's offsets out of shape".into());
+                    }
+                    let w = self.prog.regs[*dst].width;
+                    if let Some(&m) = slots.iter().max() {
+                        need[*col] = need[*col].max((m as usize + 1) * w);
+                    }
+                }
+                Op::RowData { data, .. } if self.counts[*data].len() != rows => {
+                    return NativeState::Failed("counts of another length".into());
+                }
+                _ => {}
+            }
+        }
+        let offsets: Vec<usize> = self.targets.iter().map(|t| t.1).collect();
+        let layout = jit::OutLayout {
+            chunk: self.chunk,
+            out_width: self.out_width,
+            offsets: &offsets,
+        };
+        match jit::compile(&self.prog, kinds, self.csr.len(), &layout) {
+            Ok(n) => NativeState::Ready(Box::new(n), need),
+            Err(e) => NativeState::Failed(e),
         }
     }
 
@@ -1095,6 +1187,8 @@ impl Plan {
 
     /// Evaluates every match and writes the results into `g`. `Err` leaves `g` unchanged
     /// and means: let the interpreter apply the rule (it reports the error precisely).
+    // the one `unsafe` block calls the plan's native code (see its SAFETY comment)
+    #[allow(unsafe_code)]
     pub(crate) fn run(
         &mut self,
         g: &mut GMap,
@@ -1117,10 +1211,11 @@ impl Plan {
         let ch = self.chunk;
         let n_chunks = self.rows.div_ceil(ch);
         let block = ch * ow.max(1);
-        let need = n_chunks * block;
-        if self.out.len() != need {
-            self.out = vec![0.0; need];
+        let need_out = n_chunks * block;
+        if self.out.len() != need_out {
+            self.out = vec![0.0; need_out];
         }
+        let mut native_done = false;
         {
             let cols: Vec<ColumnRef> = self
                 .prog
@@ -1140,7 +1235,88 @@ impl Plan {
                 out_offsets: &self.targets,
             };
             let rows = self.rows;
-            let ok = if n_chunks >= 4 && rayon::current_num_threads() > 1 {
+            let kinds: Vec<jit::ColKind> = cols
+                .iter()
+                .map(|c| match c {
+                    ColumnRef::Real(_) => jit::ColKind::Real,
+                    ColumnRef::Bool(_) => jit::ColKind::Bool,
+                    ColumnRef::Int(_) => jit::ColKind::Int,
+                })
+                .collect();
+            if matches!(self.native, NativeState::Untried) {
+                self.native = self.compile_native(&kinds);
+            }
+            if let NativeState::Ready(nat, need) = &self.native {
+                let len = |c: &ColumnRef| match c {
+                    ColumnRef::Real(x) => x.len(),
+                    ColumnRef::Bool(x) => x.len(),
+                    ColumnRef::Int(x) => x.len(),
+                };
+                let fills_fit = self.prog.ops.iter().all(|op| match op {
+                    Op::Fill { dst, at } => fills[*at].len() >= self.prog.regs[*dst].width,
+                    _ => true,
+                });
+                let fits = nat.kinds == kinds
+                    && fills_fit
+                    && cols.iter().zip(need).all(|(c, &m)| len(c) >= m)
+                    && self.out.len() == need_out;
+                if fits {
+                    let ptr = |c: &ColumnRef| match c {
+                        ColumnRef::Real(x) => x.as_ptr().cast::<u8>(),
+                        ColumnRef::Bool(x) => x.as_ptr().cast::<u8>(),
+                        ColumnRef::Int(x) => x.as_ptr().cast::<u8>(),
+                    };
+                    let col_p: Vec<*const u8> = cols.iter().map(ptr).collect();
+                    let gat_p: Vec<*const u32> = self.gathers.iter().map(Vec::as_ptr).collect();
+                    let offs_p: Vec<*const u32> = self.csr.iter().map(|x| x.0.as_ptr()).collect();
+                    let slots_p: Vec<*const u32> = self.csr.iter().map(|x| x.1.as_ptr()).collect();
+                    let counts_p: Vec<*const f64> = self.counts.iter().map(Vec::as_ptr).collect();
+                    let fills_p: Vec<*const f64> = fills.iter().map(|x| x.as_ptr()).collect();
+                    let calls_p: Vec<*const jit::Call> =
+                        nat.calls.iter().map(|c| &raw const *c).collect();
+                    let helpers = jit::helper_table();
+                    let args = jit::JitArgs {
+                        cols: col_p.as_ptr(),
+                        gathers: gat_p.as_ptr(),
+                        offs: offs_p.as_ptr(),
+                        slots: slots_p.as_ptr(),
+                        counts: counts_p.as_ptr(),
+                        fills: fills_p.as_ptr(),
+                        out: self.out.as_mut_ptr(),
+                        calls: calls_p.as_ptr(),
+                        helpers: helpers.as_ptr(),
+                    };
+                    let one = |c: usize| {
+                        let (first, n) = (c * ch, (rows - c * ch).min(ch));
+                        // SAFETY: `args` describes this plan's arrays, for which `nat` was
+                        // compiled (checked above: the column kinds, each column at least as
+                        // long as the largest slot its index arrays hold requires (`need`,
+                        // computed from these immutable arrays in `compile_native`, which
+                        // also checked their row lengths and CSR shape), fills at least as
+                        // wide as their registers, the output buffer of `n_chunks` blocks);
+                        // rows `first..first + n` are one chunk inside `0..rows`, and each
+                        // chunk is run by one call only, so concurrent calls write disjoint
+                        // blocks of `out`, which nothing else touches meanwhile (`&mut self`).
+                        if unsafe { nat.call(&args, first, n) } == 0 {
+                            Ok(())
+                        } else {
+                            Err(())
+                        }
+                    };
+                    let ok = if n_chunks >= 4 && rayon::current_num_threads() > 1 {
+                        (0..n_chunks).into_par_iter().try_for_each(one)
+                    } else {
+                        (0..n_chunks).try_for_each(one)
+                    };
+                    if ok.is_err() {
+                        return unsupported("an evaluation failed");
+                    }
+                    native_done = true;
+                }
+            }
+            let ok = if native_done {
+                Ok(())
+            } else if n_chunks >= 4 && rayon::current_num_threads() > 1 {
                 self.out
                     .par_chunks_mut(block)
                     .enumerate()
@@ -1536,7 +1712,7 @@ impl Ctx<'_> {
                         }
                     }
                 }
-                Op::F1 { f, dst, a } => {
+                Op::F1 { f, dst, a, .. } => {
                     let (bd, _) = at(*dst);
                     let (ba, _) = at(*a);
                     let (lo, d) = split(s, bd, n);
@@ -1749,7 +1925,7 @@ fn matmul(x: &[f64], y: &[f64], z: &mut [f64], r: usize, k: usize, c: usize) {
 
 /// The flat built-ins; `Err` when the built-in would refuse its argument.
 #[inline]
-fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Result<(), ()> {
+pub(crate) fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Result<(), ()> {
     match f {
         Fast::Dot => z[0] = builtins::dot(x, y.ok_or(())?),
         Fast::Norm => z[0] = builtins::norm(x),

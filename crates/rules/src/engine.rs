@@ -410,6 +410,8 @@ pub struct RuleSet {
     /// topology changes or [`RuleSet::clear_shared_matches`] (see [`pattern_key`]).
     shared: std::sync::Mutex<SharedMatches>,
     compile: bool,
+    /// Whether compiled plans run native code (see [`crate::jit`]).
+    jit: bool,
 }
 
 /// The matches of the patterns planned on one map state, by [`pattern_key`].
@@ -440,6 +442,7 @@ impl Clone for RuleSet {
     fn clone(&self) -> Self {
         let mut r = RuleSet::new(self.checked.clone());
         r.compile = self.compile;
+        r.jit = self.jit;
         r
     }
 }
@@ -477,6 +480,7 @@ impl RuleSet {
             plans: std::sync::Mutex::new(HashMap::new()),
             shared: std::sync::Mutex::new(SharedMatches::default()),
             compile: true,
+            jit: crate::jit::enabled_by_env(),
         }
     }
 
@@ -775,7 +779,7 @@ impl RuleSet {
                 let b = self.bind(g, name, params)?;
                 match crate::compiled::compile(b.rule, b.embs) {
                     Ok(prog) if self.compile => PlanKind::Compiled(Box::new(
-                        crate::compiled::Plan::build(prog, b.rule, g, &b.ids, &matches),
+                        crate::compiled::Plan::build(prog, b.rule, g, &b.ids, &matches, self.jit),
                     )),
                     _ => PlanKind::Matches(matches),
                 }
@@ -897,6 +901,44 @@ impl RuleSet {
             .get_mut()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clear();
+    }
+
+    /// Whether compiled plans run native code generated with Cranelift (see [`crate::jit`])
+    /// instead of the plan evaluator: the same results bit for bit, the evaluator staying
+    /// the fallback for what the code generator does not cover. The default is on, unless
+    /// the environment variable `TOPOMECH_JIT` is `0` (read once per process); this
+    /// overrides it for this rule set (for comparisons and tests). Plans are rebuilt.
+    pub fn set_jit(&mut self, on: bool) {
+        self.jit = on;
+        self.plans
+            .get_mut()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clear();
+    }
+
+    /// Whether compiled plans run native code (see [`RuleSet::set_jit`]).
+    pub fn jit(&self) -> bool {
+        self.jit
+    }
+
+    /// Which computation rules run native code: `(rule, native)` for every rule whose
+    /// compiled plan exists now and has run at least once (the code is generated at a plan's
+    /// first run); `false` where the plan's program uses what the code generator does not
+    /// cover, or the switch is off.
+    pub fn plan_native(&self) -> Vec<(String, bool)> {
+        let plans = self
+            .plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut out: Vec<(String, bool)> = plans
+            .iter()
+            .filter_map(|(k, p)| match &p.kind {
+                PlanKind::Compiled(c) => Some((self.checked.rules[*k].name.clone(), c.is_native())),
+                PlanKind::Matches(_) => None,
+            })
+            .collect();
+        out.sort();
+        out
     }
 
     /// Which computation rules run compiled: `(rule, compiled)` for every rule whose plan

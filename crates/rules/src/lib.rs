@@ -29,6 +29,7 @@ pub mod check;
 mod compiled;
 mod dims;
 pub mod engine;
+pub mod jit;
 pub mod lexer;
 pub mod mechanics;
 pub mod model;
