@@ -163,3 +163,50 @@ def test_bad_blades(event: str, key: str, problem: str) -> None:
         parse_scene(BOX + "[[event]]\n" + event)
     assert f"{key}: " in str(e.value), str(e.value)
     assert problem in str(e.value)
+
+
+def test_blade_kind_and_timing_refusals(tmp_path: Path) -> None:
+    """A misspelled kind is said as such (not as unknown keys of a cut), in scenes and in
+    Python; a blade still moving when the run ends is refused; a blade that crosses nothing
+    by its end stops the run like a cut that misses; numpy arrays are points too."""
+    with pytest.raises(topomech.SceneError, match=r'event\[0\].kind: unknown event kind "Blade"'):
+        parse_scene(BOX + '[[event]]\nkind = "Blade"\nstart = 0.0\nend = 0.004\n' + SEG)
+    with pytest.raises(topomech.SceneError, match=r"event\[0\].end: t = 0.01 is after the end"):
+        parse_scene(BOX + '[[event]]\nkind = "blade"\nstart = 0.0\nend = 0.01\n' + SEG)
+    sc = topomech.load_scene("blade_cut")
+    blade = sc.events[0]
+    with pytest.raises(
+        ValueError, match=r"unknown event kind 'Blade' \(expected 'cut' or 'blade'\)"
+    ):
+        topomech.Simulation(
+            sc.load_gmap(),
+            models=["corotational"],
+            events=[{"kind": "Blade", "start": 0.0, "end": 1.0, "from": blade["from"]}],
+        )
+    s = topomech.Simulation(
+        sc.load_gmap(),
+        models=["corotational"],
+        gravity=[0.0, 0.0, 0.0],
+        dt=0.01,
+        events=[
+            {
+                "kind": "blade",
+                "start": 0.0,
+                "end": 0.05,
+                "from": np.array(blade["from"]),
+                "to": np.array(blade["to"]),
+            }
+        ],
+    )
+    s.step(6)
+    assert sum(c["unsewn"] for c in s.topology_changes()) == 32
+    far = [[5.0, 0.0, 0.0], [5.0, 1.0, 0.0]]
+    miss = topomech.Simulation(
+        sc.load_gmap(),
+        models=["corotational"],
+        dt=0.01,
+        events=[{"kind": "blade", "start": 0.0, "end": 0.02, "from": far, "to": far[::-1]}],
+    )
+    miss.step(1)
+    with pytest.raises(topomech.TopomechError, match="crossed nothing: it misses the object"):
+        miss.step(1)

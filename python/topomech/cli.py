@@ -383,7 +383,11 @@ def _topology_rows(s: dict[str, Any]) -> list[tuple[str, str]]:
     kinds: dict[str, int] = {}
     for c in changes:
         kinds[c["kind"]] = kinds.get(c["kind"], 0) + 1
-    what = ", ".join(_plural(n, k) for k, n in kinds.items())
+    # a blade opens faces over several steps: counted as steps of cutting, not as blades
+    what = ", ".join(
+        f"blade cuts in {_plural(n, 'step')}" if k == "blade" else _plural(n, k)
+        for k, n in kinds.items()
+    )
     opened = sum(int(c["unsewn"]) for c in changes)
     cells = "faces" if s["dimension"] == 3 else "edges"
     first = changes[0]

@@ -82,8 +82,18 @@ impl Blade {
             .chain(&self.to)
             .flatten()
             .all(|x| x.is_finite());
-        (!finite).then(|| "its points must be finite".to_string())
+        if !finite {
+            return Some("its points must be finite".to_string());
+        }
+        (zero_length(&self.from) || zero_length(&self.to))
+            .then(|| "its two end points must differ (at its start and at its end)".to_string())
     }
+}
+
+/// Whether a segment's two (finite) end points coincide.
+fn zero_length(s: &[[f64; 3]; 2]) -> bool {
+    let d = [0, 1, 2].map(|i| s[1][i] - s[0][i]);
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= 0.0
 }
 
 /// What opens a face (3D) or an edge (2D) during the run.
@@ -151,7 +161,16 @@ impl Simulation {
             let (lo, hi) = (t0.max(b.start), t1.min(b.end));
             if hi > lo {
                 let (from, to) = (b.at(lo), b.at(hi));
-                self.sweep(from, to, "blade")?;
+                let end = b.end;
+                self.blades_opened[k] += self.sweep(from, to, "blade")?.unsewn;
+                // like a timed cut that separates nothing: a blade that has swept its whole
+                // path without crossing anything misses the object
+                if t1 >= end - 1e-9 * self.cfg.dt && self.blades_opened[k] == 0 {
+                    return Err(PhysicsError::Config(format!(
+                        "blade {k} moved from t = {} to t = {end} and crossed nothing: it misses the object",
+                        self.cfg.blades[k].start
+                    )));
+                }
             }
         }
         if let Some(f) = self.cfg.fracture {
@@ -172,6 +191,11 @@ impl Simulation {
         if !from.iter().chain(&to).flatten().all(|x| x.is_finite()) {
             return Err(PhysicsError::Config(
                 "the blade's points must be finite".into(),
+            ));
+        }
+        if zero_length(&from) || zero_length(&to) {
+            return Err(PhysicsError::Config(
+                "the blade's two end points must differ".into(),
             ));
         }
         self.sweep(from, to, "blade")
@@ -333,6 +357,12 @@ impl Simulation {
                 return Err(PhysicsError::Config(format!(
                     "blade {k} starts at t = {} but the run ends at t = {end_time}: it would never move",
                     b.start
+                )));
+            }
+            if b.end > end_time + 1e-9 * self.cfg.dt {
+                return Err(PhysicsError::Config(format!(
+                    "blade {k} ends at t = {} but the run ends at t = {end_time}: it would stop part-way",
+                    b.end
                 )));
             }
         }

@@ -84,6 +84,8 @@ pub struct Simulation {
     size: f64,
     /// Which events have happened.
     events_done: Vec<bool>,
+    /// The faces (3D) or edges (2D) each blade has opened so far.
+    blades_opened: Vec<usize>,
     /// The topology changes so far.
     changes: Vec<TopologyChange>,
     /// The position and velocity columns before the step being taken (kept between steps so

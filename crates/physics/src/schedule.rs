@@ -543,6 +543,7 @@ impl Simulation {
             norm3([hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]).max(f64::MIN_POSITIVE)
         };
         let cfg_events = cfg.events.len();
+        let cfg_blades = cfg.blades.len();
         let mut sim = Simulation {
             g,
             rules,
@@ -555,6 +556,7 @@ impl Simulation {
             vertex_darts_version,
             size,
             events_done: vec![false; cfg_events],
+            blades_opened: vec![0; cfg_blades],
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
             report: None,

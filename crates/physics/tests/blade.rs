@@ -185,3 +185,82 @@ fn bad_blades_are_refused_naming_them() {
     let err = s.check_events(1.0).unwrap_err().to_string();
     assert!(err.contains("blade 0 starts at t = 2"), "{err}");
 }
+
+/// The plane of the sweep through element centroids (x at the middle of a cell row, where
+/// tetrahedra have their centroids): a centroid on the blade's plane is on neither side, as
+/// for the plane cut, so both open the same faces (none, or those between other centroids)
+/// for every offset, on and off the centroids and cell boundaries.
+#[test]
+fn a_blade_through_centroids_opens_what_the_plane_cut_opens() {
+    let mesh = cuboid([8, 4, 4], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    for c in [0.0625, 0.1875, 0.3125, 0.4375, 0.5, 0.5625, 0.3, 0.71] {
+        let want = sim(&mesh, vec![])
+            .cut(&Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: c,
+            })
+            .unwrap()
+            .unsewn;
+        let got = sim(&mesh, vec![])
+            .cut_swept(
+                [[c, 0.7, -0.1], [c, 0.7, 0.6]],
+                [[c, -0.2, -0.1], [c, -0.2, 0.6]],
+            )
+            .unwrap()
+            .unsewn;
+        assert_eq!(got, want, "x = {c}");
+    }
+}
+
+/// A blade that has swept its whole path without crossing anything misses the object: an
+/// error at the step it stops, like a timed cut that separates nothing; a zero-length blade
+/// and a blade still moving when the run ends are refused.
+#[test]
+fn a_blade_that_misses_or_cannot_finish_is_an_error() {
+    let mesh = cuboid([2, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let far = Blade {
+        start: 0.0,
+        end: 0.003,
+        from: [[5.0, 0.0, 0.0], [5.0, 1.0, 0.0]],
+        to: [[5.0, 0.0, 1.0], [5.0, 1.0, 1.0]],
+    };
+    let mut s = sim(&mesh, vec![far.clone()]);
+    s.step().unwrap();
+    s.step().unwrap();
+    let err = s.step().unwrap_err().to_string();
+    assert!(
+        err.contains("blade 0 moved from t = 0 to t = 0.003 and crossed nothing"),
+        "{err}"
+    );
+    let s = sim(
+        &mesh,
+        vec![Blade {
+            end: 2.0,
+            ..far.clone()
+        }],
+    );
+    let err = s.check_events(1.0).unwrap_err().to_string();
+    assert!(
+        err.contains("blade 0 ends at t = 2 but the run ends at t = 1"),
+        "{err}"
+    );
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("stretch_cumulated", &[])],
+        blades: vec![Blade {
+            from: [[0.5, 0.0, 0.0], [0.5, 0.0, 0.0]],
+            ..far
+        }],
+        ..Config::default()
+    };
+    let err = Simulation::new(g, cfg).err().unwrap().to_string();
+    assert!(err.contains("its two end points must differ"), "{err}");
+    let err = sim(&mesh, vec![])
+        .cut_swept(
+            [[0.5, 0.0, 0.0], [0.5, 0.0, 0.0]],
+            [[0.5, 0.0, 1.0], [0.5, 1.0, 1.0]],
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("must differ"), "{err}");
+}

@@ -322,11 +322,12 @@ const CATALOGUE: &[(&str, &str, &str)] = &[
     (
         "segment_hits_triangle",
         "segment_hits_triangle(a: vec3, b: vec3, p: vec3, q: vec3, r: vec3) -> bool",
-        "Whether the segment from a to b meets the triangle p q r (its closed interior: an \
-         end or an edge touching counts), by Moeller and Trumbore 1997 (doi:10.1080/\
-         10867651.1997.10487468) with tolerances relative to the sizes; false for a flat \
-         triangle, a zero-length segment, a segment lying in the triangle's plane, or \
-         non-finite input.",
+        "Whether the segment from a to b crosses the triangle p q r: its ends strictly on \
+         opposite sides of the triangle's plane (an end on the plane does not count, as for \
+         a plane cut's sides), through the closed triangle (its edges and vertices count), by \
+         Moeller and Trumbore 1997 (doi:10.1080/10867651.1997.10487468) with tolerances \
+         relative to the sizes; false for a flat triangle, a zero-length segment, a segment \
+         lying in the triangle's plane, or non-finite input.",
     ),
     (
         "polar",
@@ -1414,14 +1415,17 @@ fn polar3_jacobi(m: &[f64]) -> [f64; 9] {
     r
 }
 
-/// Whether the segment `a b` meets the closed triangle `p q r`: Moeller & Trumbore, "Fast,
+/// Whether the segment `a b` crosses the closed triangle `p q r`: Moeller & Trumbore, "Fast,
 /// minimum storage ray-triangle intersection", J. Graphics Tools 2 (1997),
-/// doi:10.1080/10867651.1997.10487468, restricted to the segment's parameter range [0, 1].
-/// Barycentric coordinates and the segment parameter are accepted within `1e-12` of their
-/// range (relative: they are ratios), so a segment through an edge or a vertex of the
-/// triangle, or ending on it, hits it. A segment parallel to the plane (within `1e-12` of
-/// the product of the lengths), a zero-length segment, a flat triangle and any non-finite
-/// coordinate give false.
+/// doi:10.1080/10867651.1997.10487468, restricted to the open range (0, 1) of the segment's
+/// parameter. Barycentric coordinates are accepted within `1e-12` of their range (relative:
+/// they are ratios), so a segment through an edge or a vertex of the triangle crosses it; the
+/// segment parameter must lie `1e-12` inside (0, 1), so an end on the triangle's plane (or
+/// within 1e-12 of the segment's length of it) does not: like the plane cut, which separates
+/// two centroids only when they lie strictly on opposite sides, a centroid on the blade's
+/// plane is on neither side, and the faces on both sides of it stay. A segment parallel to
+/// the plane (within `1e-12` of the product of the lengths), a zero-length segment, a flat
+/// triangle and any non-finite coordinate give false.
 pub(crate) fn segment_hits_triangle(
     a: &[f64; 3],
     b: &[f64; 3],
@@ -1459,7 +1463,7 @@ pub(crate) fn segment_hits_triangle(
         return false;
     }
     let t = dot(&e2, &qv) / det;
-    (-TOL..=1.0 + TOL).contains(&t)
+    t > TOL && t < 1.0 - TOL
 }
 
 /// The determinant of the matrix with columns `c`.
@@ -1990,13 +1994,14 @@ mod tests {
     /// (tolerance: a few hundred ulps, the Jacobi sweeps and products of 3x3 matrices).
     /// The segment-triangle test on cases whose answer is known by construction: through
     /// the interior, outside, through an edge and a vertex (the closed triangle counts),
-    /// ending on the triangle or just short of it, parallel and in-plane segments, degenerate
+    /// ending or starting on its plane (no crossing: an end on the plane is on neither side)
+    /// or just short of it, parallel and in-plane segments, degenerate
     /// input; and the same answers after a translation and a scaling by 1e6 (the tolerances
     /// are relative), and with the triangle's vertices in either order.
     #[test]
     fn segment_hits_triangle_cases() {
         let (p, q, r) = ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
-        let cases: [([f64; 3], [f64; 3], bool, &str); 11] = [
+        let cases: [([f64; 3], [f64; 3], bool, &str); 12] = [
             (
                 [0.2, 0.2, -1.0],
                 [0.2, 0.2, 1.0],
@@ -2019,9 +2024,10 @@ mod tests {
             (
                 [0.2, 0.2, -1.0],
                 [0.2, 0.2, 0.0],
-                true,
-                "ending on the triangle",
+                false,
+                "ending on the triangle's plane",
             ),
+            ([0.2, 0.2, 0.0], [0.2, 0.2, 1.0], false, "starting on it"),
             (
                 [0.2, 0.2, -1.0],
                 [0.2, 0.2, -1e-3],

@@ -906,7 +906,7 @@ impl RuleSet {
     /// Whether compiled plans run native code generated with Cranelift (see [`crate::jit`])
     /// instead of the plan evaluator: the same results bit for bit, the evaluator staying
     /// the fallback for what the code generator does not cover. The default is on, unless
-    /// the environment variable `TOPOMECH_JIT` is `0` (read once per process); this
+    /// the environment variable `TOPOMECH_JIT` is `0`, `false`, `off` or `no` (read once per process); this
     /// overrides it for this rule set (for comparisons and tests). Plans are rebuilt.
     pub fn set_jit(&mut self, on: bool) {
         self.jit = on;

@@ -28,7 +28,7 @@
 //! evaluator, which stays the reference and the fallback.
 //!
 //! **The switch.** A plan built while its rule set's switch is on ([`crate::RuleSet::set_jit`];
-//! default: on, unless the environment variable `TOPOMECH_JIT` is `0`) generates its code at
+//! default: on, unless the environment variable `TOPOMECH_JIT` is `0`, `false`, `off` or `no`) generates its code at
 //! its first run, once (a few milliseconds), and runs it per chunk with the evaluator's
 //! chunking and rayon parallelism. `compiled_count` counts the programs compiled, and
 //! [`crate::RuleSet::plan_native`] tells which plans run native code.
@@ -175,14 +175,21 @@ pub fn compiled_count() -> u64 {
 }
 
 /// Whether compiled plans run native code by default: the environment variable
-/// `TOPOMECH_JIT` (`0`: off; `1`, unset or anything else: on), read once per process.
+/// `TOPOMECH_JIT` (`0`, `false`, `off`, `no`, in any case: off; unset or anything else: on), read once per process.
 ///
 /// On by default: on every shipped model and integrator the native code gives the
 /// evaluator's bits (tests `physics/tests/jit.rs`, `rules/tests/jit.rs`), compiles in a few
 /// milliseconds per plan, and steps faster (see the crate's `engine` bench).
 pub(crate) fn enabled_by_env() -> bool {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| std::env::var("TOPOMECH_JIT").map_or(true, |v| v.trim() != "0"))
+    *ON.get_or_init(|| {
+        std::env::var("TOPOMECH_JIT").map_or(true, |v| {
+            !matches!(
+                v.trim().to_ascii_lowercase().as_str(),
+                "0" | "false" | "off" | "no"
+            )
+        })
+    })
 }
 
 impl Native {

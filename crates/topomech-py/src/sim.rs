@@ -344,6 +344,17 @@ fn plane_cut(normal: [f64; 3], offset: f64, what: &str) -> Result<Cut> {
 /// `{"time": t, "kind": "cut", "where": predicate}`.
 fn event_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<TimedEvent> {
     let what = format!("events[{k}]");
+    // the kind first: a misspelled kind is said as such, not as the keys of another kind
+    if let Ok(d) = obj.cast::<PyDict>() {
+        if let Some(kind) = d.get_item("kind")? {
+            let kind = str_arg(&kind, &format!("{what}['kind']"))?;
+            if kind != "cut" {
+                return Err(value_error(format!(
+                    "{what}['kind']: unknown event kind '{kind}' (expected 'cut' or 'blade')"
+                )));
+            }
+        }
+    }
     let mut time = None;
     let mut kind = None;
     let mut plane = None;
@@ -372,12 +383,12 @@ fn event_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<TimedEvent> {
         Some("cut") => {}
         Some(other) => {
             return Err(value_error(format!(
-                "{what}['kind']: unknown event kind '{other}' (expected 'cut')"
+                "{what}['kind']: unknown event kind '{other}' (expected 'cut' or 'blade')"
             )))
         }
         None => {
             return Err(value_error(format!(
-                "{what} has no 'kind' (expected 'cut')"
+                "{what} has no 'kind' (expected 'cut' or 'blade')"
             )))
         }
     }
@@ -410,7 +421,19 @@ fn is_blade(obj: &Bound<'_, PyAny>) -> bool {
 
 /// Two points, a blade's segment: `[[x, y, z], [x, y, z]]`.
 fn segment_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<[[f64; 3]; 2]> {
-    let items = list_arg(obj, what)?;
+    let bad = || {
+        type_error(format!(
+            "{what} must be 2 points [[x, y, z], [x, y, z]], got {}",
+            type_name(obj)
+        ))
+    };
+    if obj.is_instance_of::<PyString>() {
+        return Err(bad());
+    }
+    let items: Vec<Bound<'_, PyAny>> = obj
+        .try_iter()
+        .map_err(|_| bad())?
+        .collect::<PyResult<_>>()?;
     if items.len() != 2 {
         return Err(value_error(format!(
             "{what} must be 2 points [[x, y, z], [x, y, z]], got {} items",

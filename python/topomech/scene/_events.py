@@ -53,20 +53,20 @@ def _events(tables: list[_Table], fail: _Fail) -> list[dict[str, Any]]:
     """The ``[[event]]`` tables as :class:`Simulation` takes them."""
     events: list[dict[str, Any]] = []
     for t in tables:
-        if t.has("kind") and t.data.get("kind") == "blade":
-            events.append(_blade(t, fail))
-            continue
-        time = t.number("time", nonneg=True)
         kind = t.string("kind")
-        t.done(extra=("plane", "where"))
-        if time is None:
-            raise fail(t.key("time"), "missing: when the event happens (s, >= 0)")
         if kind is None:
             raise fail(t.key("kind"), f"missing: the event's kind ({_or(EVENT_KINDS)})")
         if kind not in EVENT_KINDS:
             raise fail(
                 t.key("kind"), f"unknown event kind {_show(kind)} (expected {_or(EVENT_KINDS)})"
             )
+        if kind == "blade":
+            events.append(_blade(t, fail))
+            continue
+        time = t.number("time", nonneg=True)
+        t.done(extra=("plane", "where"))
+        if time is None:
+            raise fail(t.key("time"), "missing: when the event happens (s, >= 0)")
         event: dict[str, Any] = {"time": time, "kind": kind}
         if t.has("plane") and t.has("where"):
             raise fail(

@@ -118,6 +118,13 @@ class Scene:
                         f"t = {t:g} is not before the end of the run (t = {end:g}: "
                         f"{self.steps} steps of dt {self.dt:g}): the blade would never move",
                     )
+                stop = float(e["end"])
+                if stop > end + 1e-9 * self.dt:
+                    raise self._fail()(
+                        f"event[{i}].end",
+                        f"t = {stop:g} is after the end of the run (t = {end:g}: {self.steps} "
+                        f"steps of dt {self.dt:g}): the blade would stop part-way",
+                    )
                 continue
             t = float(e["time"])
             if t > end + 1e-9 * self.dt:
