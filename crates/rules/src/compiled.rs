@@ -1755,11 +1755,7 @@ impl Ctx<'_> {
                         for &(r, t) in args {
                             let (b, wr) = at(r);
                             let x = &lo[b + i * wr..][..wr];
-                            vals.push(match t {
-                                Ty::I64 => Val::I(x[0] as i64),
-                                Ty::Bool => Val::B(x[0] != 0.0),
-                                t => Val::from_reals(t, x),
-                            });
+                            vals.push(register_val(t, x));
                         }
                         let v = builtins::call(name, &vals).map_err(|_| ())?;
                         if v.ty() != *ty {
@@ -1956,4 +1952,14 @@ pub(crate) fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Resu
         }
     }
     Ok(())
+}
+
+/// A register's floats as the value of type `t` they hold (an integer or a boolean is one
+/// float: `0.0` is false), for a built-in called through [`builtins::call`].
+pub(crate) fn register_val(t: Ty, x: &[f64]) -> Val {
+    match t {
+        Ty::I64 => Val::I(x[0] as i64),
+        Ty::Bool => Val::B(x[0] != 0.0),
+        t => Val::from_reals(t, x),
+    }
 }

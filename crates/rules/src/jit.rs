@@ -52,7 +52,7 @@ use cranelift_module::{default_libcall_names, Linkage, Module};
 
 use crate::builtins;
 use crate::compiled::{Cmp, Ew, Fast, Op, Program};
-use crate::value::{Ty, Val};
+use crate::value::Ty;
 
 /// The run-time table of a native plan function: addresses of arrays of addresses, one entry
 /// per column, gather, aggregate, count array, fill, helper call. The generated code reads
@@ -272,11 +272,7 @@ fn helper(c: &Call, x: &[f64], z: &mut [f64]) -> Result<(), ()> {
             for &(w, t) in args {
                 let v = &x[at..at + w];
                 at += w;
-                vals.push(match t {
-                    Ty::I64 => Val::I(v[0] as i64),
-                    Ty::Bool => Val::B(v[0] != 0.0),
-                    t => Val::from_reals(t, v),
-                });
+                vals.push(crate::compiled::register_val(t, v));
             }
             let v = builtins::call(name, &vals).map_err(|_| ())?;
             if v.ty() != *ty {
