@@ -21,9 +21,10 @@ import re
 import signal
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, TextIO
 
 from topomech import __version__
 from topomech._cells import flat_to_blocks, mesh_figures
@@ -50,6 +51,31 @@ def _note(msg: str) -> None:
 
 def _error(msg: str) -> None:
     print(f"topomech: error: {msg}", file=sys.stderr)
+
+
+#: The scene warnings printed so far (a scene is checked more than once: each said once).
+_scene_warnings: set[str] = set()
+_default_showwarning = warnings.showwarning
+
+
+def _show_scene_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: TextIO | None = None,
+    line: str | None = None,
+) -> None:
+    """A :class:`topomech.scene.SceneWarning` as a note (once); other warnings as Python
+    shows them."""
+    from topomech.scene import SceneWarning
+
+    if issubclass(category, SceneWarning):
+        if str(message) not in _scene_warnings:
+            _scene_warnings.add(str(message))
+            _note(str(message))
+        return
+    _default_showwarning(message, category, filename, lineno, file, line)
 
 
 # ---------------------------------------------------------------------------------- info
@@ -1064,7 +1090,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         try:
-            code: int = args.run(args)
+            with warnings.catch_warnings():
+                warnings.showwarning = _show_scene_warning
+                code: int = args.run(args)
         except TopomechError as e:  # InternalError included: a bug, reported without a traceback
             _error(str(e))
             return EXIT_REFUSED

@@ -214,7 +214,7 @@ fn a_blade_through_centroids_opens_what_the_plane_cut_opens() {
 
 /// A blade that has swept its whole path without crossing anything misses the object: an
 /// error at the step it stops, like a timed cut that separates nothing; a zero-length blade
-/// and a blade still moving when the run ends are refused.
+/// is refused.
 #[test]
 fn a_blade_that_misses_or_cannot_finish_is_an_error() {
     let mesh = cuboid([2, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
@@ -239,11 +239,8 @@ fn a_blade_that_misses_or_cannot_finish_is_an_error() {
             ..far.clone()
         }],
     );
-    let err = s.check_events(1.0).unwrap_err().to_string();
-    assert!(
-        err.contains("blade 0 ends at t = 2 but the run ends at t = 1"),
-        "{err}"
-    );
+    // a blade still moving when the run ends is allowed (it cuts what it crossed by then)
+    assert!(s.check_events(1.0).is_ok());
     let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
     let cfg = Config {
         models: vec![model("stretch_cumulated", &[])],

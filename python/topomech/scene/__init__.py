@@ -127,6 +127,7 @@ from topomech.scene._models import PLANNED_MODELS
 from topomech.scene._scene import (
     INTEGRATORS,
     Scene,
+    SceneWarning,
     find_scene,
     load_scene,
     parse_scene,
@@ -144,6 +145,7 @@ __all__ = [
     "MeshSpec",
     "Scene",
     "SceneError",
+    "SceneWarning",
     "find_scene",
     "load_scene",
     "parse_scene",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 import sys
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,6 +38,13 @@ if TYPE_CHECKING:
 
 
 #: The integrators a scene can name.
+
+
+class SceneWarning(UserWarning):
+    """Something in a scene that runs but may not do what was meant (a blade that stops
+    part-way); the CLI prints it as a note."""
+
+
 INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler", "static")
 
 
@@ -120,10 +128,14 @@ class Scene:
                     )
                 stop = float(e["end"])
                 if stop > end + 1e-9 * self.dt:
-                    raise self._fail()(
-                        f"event[{i}].end",
-                        f"t = {stop:g} is after the end of the run (t = {end:g}: {self.steps} "
-                        f"steps of dt {self.dt:g}): the blade would stop part-way",
+                    # allowed (a shortened run, a preview), but said: the cut is partial
+                    warnings.warn(
+                        SceneWarning(
+                            f"{self._fail().source}: event[{i}].end: t = {stop:g} is after the end "
+                            f"of the run (t = {end:g}: {self.steps} steps of dt {self.dt:g}): the "
+                            "blade stops part-way and cuts only what it crossed by then"
+                        ),
+                        stacklevel=2,
                     )
                 continue
             t = float(e["time"])
