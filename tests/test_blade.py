@@ -211,3 +211,26 @@ def test_blade_kind_and_timing_refusals(tmp_path: Path) -> None:
     miss.step(1)
     with pytest.raises(topomech.TopomechError, match="crossed nothing: it misses the object"):
         miss.step(1)
+
+
+def test_a_blade_that_misses_stops_the_run_as_an_event(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Beside a plane cut that does cut, a blade that crosses nothing by its end stops the run:
+    the summary's error is an ``event`` naming it, as for a timed cut that misses."""
+    from test_topology_scenes import box_with, run_cli, summary_of
+
+    scene = box_with(
+        tmp_path,
+        '[[event]]\ntime = 0.0\nkind = "cut"\nplane = { normal = [1, 0, 0], offset = 1.0 }\n'
+        '[[event]]\nkind = "blade"\nstart = 0.0\nend = 0.002\n'
+        "from = [[50.0, 0.0, 0.0], [50.0, 1.0, 0.0]]\nto = [[50.0, 0.0, 1.0], [50.0, 1.0, 1.0]]\n",
+    )
+    out = tmp_path / "o"
+    code, err = run_cli([str(scene), "--out", str(out)], capsys)
+    assert code == 1, err
+    s = summary_of(out)
+    assert s["error"]["type"] == "event", s["error"]
+    assert s["error"]["event"] == 1
+    assert "event[1] (a blade moving from t = 0 to t = 0.002)" in s["error"]["message"]
+    assert "misses the object" in err

@@ -366,10 +366,14 @@ def _json_safe(x: Any) -> Any:
 
 #: The kernel's message for a timed cut that separates nothing.
 _MISSED = re.compile(r"at t = (\S+) separates nothing: it misses the object")
+#: The kernel's message for a blade that crossed nothing (k: its index among the blades).
+_BLADE_MISSED = re.compile(r"blade (\d+) moved from t = \S+ to t = \S+ and crossed nothing")
 
 
 def _describe_event(e: dict[str, Any]) -> str:
     """An event as a message shows it: ``a cut at t = 0.5 along the plane ...``."""
+    if e.get("kind") == "blade":
+        return f"a blade moving from t = {float(e['start']):g} to t = {float(e['end']):g}"
     if "plane" in e:
         n = ", ".join(f"{float(x):g}" for x in e["plane"]["normal"])
         geometry = f"along the plane normal [{n}], offset {float(e['plane']['offset']):g}"
@@ -382,6 +386,11 @@ def _missed_event(sc: Scene, sim: Simulation, message: str) -> int | None:
     """The index of the event whose cut separated nothing in the step just done, from the
     kernel's message: events due at this step run in order, and each one that cut something
     is recorded as a change at this step, so the one that failed comes after those."""
+    b = _BLADE_MISSED.search(message)
+    if b is not None:
+        blades = [i for i, e in enumerate(sc.events) if e.get("kind") == "blade"]
+        k = int(b.group(1))
+        return blades[k] if k < len(blades) else None
     m = _MISSED.search(message)
     if m is None:
         return None
@@ -392,11 +401,12 @@ def _missed_event(sc: Scene, sim: Simulation, message: str) -> int | None:
     tol = 1e-9 * sim.dt
     # due now and not at the step before (the first step takes every event up to its time)
     lower = -math.inf if sim.steps <= 1 else sim.time - sim.dt + tol
-    due = [i for i, e in enumerate(sc.events) if lower < float(e["time"]) <= sim.time + tol]
+    timed = [(i, float(e["time"])) for i, e in enumerate(sc.events) if "time" in e]
+    due = [i for i, t in timed if lower < t <= sim.time + tol]
     done = sum(1 for c in sim.topology_changes() if c["kind"] == "cut" and c["step"] == sim.steps)
     if done < len(due) and float(sc.events[due[done]]["time"]) == t_msg:
         return due[done]
-    same = [i for i, e in enumerate(sc.events) if float(e["time"]) == t_msg]
+    same = [i for i, t in timed if t == t_msg]
     return same[0] if same else None
 
 
