@@ -251,9 +251,7 @@ class Simulation:
         what it sweeps each step. Returns a :class:`TopologyResult` (0 unsewn when it crosses
         nothing); raises :class:`TypeError` / :class:`ValueError` for points that are not 2
         finite 3-vectors."""
-        unsewn, added = self._core.cut_swept(
-            np.asarray(start, dtype=np.float64).tolist(), np.asarray(end, dtype=np.float64).tolist()
-        )
+        unsewn, added = self._core.cut_swept(start, end)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 
     def fracture(self, criterion: str, threshold: float) -> TopologyResult:

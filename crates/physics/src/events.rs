@@ -76,24 +76,22 @@ impl Blade {
                 self.start, self.end
             ));
         }
-        let finite = self
-            .from
-            .iter()
-            .chain(&self.to)
-            .flatten()
-            .all(|x| x.is_finite());
-        if !finite {
-            return Some("its points must be finite".to_string());
-        }
-        (zero_length(&self.from) || zero_length(&self.to))
-            .then(|| "its two end points must differ (at its start and at its end)".to_string())
+        segments_problem(&self.from, &self.to)
     }
 }
 
-/// Whether a segment's two (finite) end points coincide.
-fn zero_length(s: &[[f64; 3]; 2]) -> bool {
-    let d = [0, 1, 2].map(|i| s[1][i] - s[0][i]);
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= 0.0
+/// Why a blade's segments at its two poses cannot cut: a non-finite point, or two end points
+/// that coincide.
+fn segments_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String> {
+    if !from.iter().chain(to).flatten().all(|x| x.is_finite()) {
+        return Some("its points must be finite".to_string());
+    }
+    let zero_length = |s: &[[f64; 3]; 2]| {
+        let d = [0, 1, 2].map(|i| s[1][i] - s[0][i]);
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= 0.0
+    };
+    (zero_length(from) || zero_length(to))
+        .then(|| "its two end points must differ (at its start and at its end)".to_string())
 }
 
 /// What opens a face (3D) or an edge (2D) during the run.
@@ -162,7 +160,7 @@ impl Simulation {
             if hi > lo {
                 let (from, to) = (b.at(lo), b.at(hi));
                 let end = b.end;
-                self.blades_opened[k] += self.sweep(from, to, "blade")?.unsewn;
+                self.blades_opened[k] += self.sweep(from, to)?.unsewn;
                 // like a timed cut that separates nothing: a blade that has swept its whole
                 // path without crossing anything misses the object
                 if t1 >= end - 1e-9 * self.cfg.dt && self.blades_opened[k] == 0 {
@@ -188,24 +186,16 @@ impl Simulation {
         from: [[f64; 3]; 2],
         to: [[f64; 3]; 2],
     ) -> Result<TopologyResult, PhysicsError> {
-        if !from.iter().chain(&to).flatten().all(|x| x.is_finite()) {
-            return Err(PhysicsError::Config(
-                "the blade's points must be finite".into(),
-            ));
+        if let Some(why) = segments_problem(&from, &to) {
+            return Err(PhysicsError::Config(format!("the blade: {why}")));
         }
-        if zero_length(&from) || zero_length(&to) {
-            return Err(PhysicsError::Config(
-                "the blade's two end points must differ".into(),
-            ));
-        }
-        self.sweep(from, to, "blade")
+        self.sweep(from, to)
     }
 
     fn sweep(
         &mut self,
         from: [[f64; 3]; 2],
         to: [[f64; 3]; 2],
-        kind: &'static str,
     ) -> Result<TopologyResult, PhysicsError> {
         let p: Params = [
             ("a0".to_string(), Val::V3(from[0])),
@@ -218,20 +208,7 @@ impl Simulation {
             .rules
             .apply_everywhere(&mut self.g, "cut_swept", &p)?
             .matches;
-        let mut added_rows = Vec::new();
-        if n > 0 {
-            self.changes.push(TopologyChange {
-                step: self.steps,
-                time: self.time,
-                kind,
-                unsewn: n,
-            });
-            added_rows = self.after_topology_change()?;
-        }
-        Ok(TopologyResult {
-            unsewn: n,
-            added_rows,
-        })
+        self.record_change("blade", n)
     }
 
     /// Opens now every face (3D) or edge (2D) where the criterion passes the threshold; returns
@@ -239,9 +216,10 @@ impl Simulation {
     /// meaning).
     pub fn fracture(&mut self, f: Fracture) -> Result<TopologyResult, PhysicsError> {
         let none = Params::new();
-        let measure = match f.criterion {
-            Criterion::Stress => "element_stress",
-            Criterion::Strain => "spring_strains",
+        // the rule computing the measure, the embedding it writes, the rule opening faces
+        let (measure, column, rule) = match f.criterion {
+            Criterion::Stress => ("element_stress", "max_stress", "fracture_stress"),
+            Criterion::Strain => ("spring_strains", "spring_strain", "fracture_strain"),
         };
         if self.rules.rule(measure).is_err() {
             return Err(PhysicsError::Config(
@@ -258,10 +236,6 @@ impl Simulation {
         // keeps a margin of 64 eps |T| (k is at most a face's 8 half-edges, or 2). Dead slots
         // hold old values and NaN compares as "may exceed": either only sends the step to the
         // search, which decides.
-        let column = match f.criterion {
-            Criterion::Stress => "max_stress",
-            Criterion::Strain => "spring_strain",
-        };
         if let Some(id) = self.g.embedding_id(column) {
             if let Some(values) = self.g.embedding(id).real_column() {
                 let bound = f.threshold - 64.0 * f64::EPSILON * f.threshold.abs();
@@ -271,26 +245,8 @@ impl Simulation {
             }
         }
         let p: Params = [("threshold".to_string(), Val::F(f.threshold))].into();
-        let rule = if f.criterion == Criterion::Stress {
-            "fracture_stress"
-        } else {
-            "fracture_strain"
-        };
         let n = self.rules.apply_everywhere(&mut self.g, rule, &p)?.matches;
-        let mut added_rows = Vec::new();
-        if n > 0 {
-            self.changes.push(TopologyChange {
-                step: self.steps,
-                time: self.time,
-                kind: "fracture",
-                unsewn: n,
-            });
-            added_rows = self.after_topology_change()?;
-        }
-        Ok(TopologyResult {
-            unsewn: n,
-            added_rows,
-        })
+        self.record_change("fracture", n)
     }
 
     /// Cuts now; returns the number of faces (3D) or edges (2D) unsewn and the rows appended
@@ -327,12 +283,22 @@ impl Simulation {
                     .matches
             }
         };
+        self.record_change("cut", n)
+    }
+
+    /// Records a change that opened `n` faces (3D) or edges (2D), when it opened some, and
+    /// brings the simulation after it (see [`Simulation::after_topology_change`]).
+    fn record_change(
+        &mut self,
+        kind: &'static str,
+        n: usize,
+    ) -> Result<TopologyResult, PhysicsError> {
         let mut added_rows = Vec::new();
         if n > 0 {
             self.changes.push(TopologyChange {
                 step: self.steps,
                 time: self.time,
-                kind: "cut",
+                kind,
                 unsewn: n,
             });
             added_rows = self.after_topology_change()?;
