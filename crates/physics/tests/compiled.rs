@@ -9,37 +9,13 @@
 #![allow(clippy::float_cmp, clippy::needless_range_loop)]
 mod common;
 
-use common::{model, renamed};
+use common::cases::{config, mesh_for};
+use common::renamed;
 use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
-use topomech_gmap::mesh::{build, BuildOptions, Mesh};
+use topomech_gmap::mesh::{build, BuildOptions};
 use topomech_gmap::GMap;
-use topomech_physics::{Config, Integrator, Simulation};
+use topomech_physics::{Integrator, Simulation};
 use topomech_rules::{Params, RuleSet};
-
-fn config(kind: &str, integrator: Integrator) -> Config {
-    Config {
-        models: vec![model(kind, &[])],
-        gravity: [0.0, -9.81, 0.0],
-        damping: 0.3,
-        fixed: vec!["x < 1e-9".into()],
-        integrator,
-        dt: 1e-3,
-        ..Config::default()
-    }
-}
-
-fn mesh_for(kind: &str, dim: usize) -> Mesh {
-    if dim == 4 {
-        // 4: hexahedra
-        cuboid([3, 2, 2], [1.5, 1.0, 1.0], BoxElement::Hexa)
-    } else if dim == 3 {
-        cuboid([3, 2, 2], [1.5, 1.0, 1.0], BoxElement::Tetra)
-    } else if kind == "corotational" {
-        grid([4, 3], [1.0, 0.75], GridElement::Triangle)
-    } else {
-        grid([4, 3], [1.0, 0.75], GridElement::Quad)
-    }
-}
 
 fn run(
     kind: &str,

@@ -2,6 +2,7 @@
 //! (independent of the crates under test).
 #![allow(dead_code, missing_docs)]
 
+pub mod cases;
 pub mod renamed;
 
 use topomech_physics::ModelSpec;
