@@ -257,3 +257,30 @@ def test_fem_runs_are_colored_by_von_mises(tmp_path: Path) -> None:
     meta = json.loads((tmp_path / "s" / "view.json").read_text())
     assert meta["default_field"] == "displacement"
     assert set(meta["fields"]) == {"displacement"}
+
+
+def test_an_interruption_while_a_state_is_recorded_leaves_consistent_energies(
+    tmp_path: Path,
+) -> None:
+    """Regression: a Ctrl-C arriving in ``after_step`` between recording a state's row and
+    noting it as pending (or the reverse, as the code once ordered them) made ``finish`` pop
+    from an empty list and the run end in a traceback instead of exit 130. Both halves of the
+    window are reproduced: a pending state without its row, and a row without its pending
+    state; ``finish`` keeps every column the same length, the rows of completed states only."""
+    sc = load_scene(beam(tmp_path))
+    for lose in ("row", "pending"):
+        sim = sc.build()
+        rec = Recorder(sim, sc)
+        assert rec.lagged
+        rec.start()
+        for _ in range(3):
+            sim.step()
+            rec.after_step()
+        if lose == "row":
+            rec._drop_partial()  # the pending state's row was never appended
+        else:
+            rec._pending = None  # the row was appended, the state not yet noted as pending
+        rec.finish()
+        lengths = {c: len(v) for c, v in rec.energy.items()}
+        assert len(set(lengths.values())) == 1, (lose, lengths)
+        assert lengths["elastic"] == 3, (lose, lengths)

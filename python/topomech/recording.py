@@ -721,21 +721,25 @@ class Recorder:
             if self._pending is not None:
                 # the step's forces were those of the state before it, at zero damping
                 self._complete(*self._pending, self.sim.vertex_field("force") - self._external())
-            self._pending = (x, rest, version)
+            # the row first: a pending state always has its row (an interruption between
+            # the two leaves a row without a pending state, which finish drops)
             self._record_state(x, rest)
+            self._pending = (x, rest, version)
         else:
             self._record_state(x, rest)
             self._complete(x, rest, version, self._elastic_forces())
 
     def finish(self) -> None:
-        """After the last step: completes the last state's elastic energy (lagged mode)."""
-        if self._pending is None:
-            return
+        """After the last step: completes the last state's elastic energy (lagged mode), and
+        forgets the rows whose elastic energy will not be known (a step interrupted while it
+        was recorded)."""
         pending, self._pending = self._pending, None
-        try:
-            self._complete(*pending, self._elastic_forces())
-        except TopomechError:
-            self._drop_partial()
+        if pending is not None and self._rows:
+            try:
+                self._complete(*pending, self._elastic_forces())
+            except TopomechError:
+                self._drop_partial()
+        self._drop_partial()
 
     def _drop_partial(self) -> None:
         """Forgets the states whose elastic energy will not be known (an interrupted step)."""
