@@ -27,7 +27,7 @@ VENV_STAMP := $(VENV)/.stamp-venv
 DEVELOP_STAMP := $(VENV)/.stamp-develop
 # Linters are pinned to a minor (ruff) or major (mypy) version: new releases add checks.
 DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 mypy>=2,<3 \
-	pillow>=10.1 matplotlib>=3.7 imageio-ffmpeg>=0.4.9 playwright>=1.40 scikit-fem gmsh
+	pillow>=10.1 matplotlib>=3.7 scipy imageio-ffmpeg>=0.4.9 playwright>=1.40 scikit-fem gmsh
 
 .PHONY: venv develop test rust-test py-test lint demo bench clean browser docs-pictures
 

@@ -34,10 +34,12 @@ from topomech._core import (
     __version__,
 )
 from topomech._gmap import BuildReport, CellCounts, EmbeddingSpec, EmbeddingValues, GMap
+from topomech._solver_log import SolverWarning
 from topomech.io import read_gmap, read_mesh, write_vtu
 from topomech.models import Model
 from topomech.rules import ApplyReport, RuleInfo, RuleSet
 from topomech.run import run_scene
+from topomech.samples import sample, samples
 from topomech.scene import Scene, load_scene, shipped_scenes
 from topomech.simulation import (
     ModelInfo,
@@ -71,6 +73,7 @@ __all__ = [
     "SceneError",
     "Simulation",
     "SimulationError",
+    "SolverWarning",
     "TopologyChange",
     "TopologyError",
     "TopologyResult",
@@ -81,6 +84,8 @@ __all__ = [
     "read_gmap",
     "read_mesh",
     "run_scene",
+    "sample",
+    "samples",
     "shipped_scenes",
     "write_vtu",
 ]

@@ -68,9 +68,10 @@ def _show_scene_warning(
 ) -> None:
     """A :class:`topomech.scene.SceneWarning` as a note (once); other warnings as Python
     shows them."""
+    from topomech._solver_log import SolverWarning
     from topomech.scene import SceneWarning
 
-    if issubclass(category, SceneWarning):
+    if issubclass(category, (SceneWarning, SolverWarning)):
         if str(message) not in _scene_warnings:
             _scene_warnings.add(str(message))
             _note(str(message))
@@ -1034,6 +1035,36 @@ def _apply(args: argparse.Namespace, stage: list[str]) -> int:
     return EXIT_OK
 
 
+# ---------------------------------------------------------------------------------- samples
+
+
+def _add_samples(sub: Any) -> None:
+    p = sub.add_parser(
+        "samples",
+        help="list the sample meshes shipped in the package, or copy them into a folder",
+        description=(
+            "List the sample meshes shipped in the package (name, size, what it holds, path); "
+            "with --copy, copy them into a folder (made if missing) for the README's examples."
+        ),
+    )
+    p.add_argument("--copy", metavar="DIR", type=Path, help="copy every sample into DIR")
+    p.set_defaults(run=_run_samples)
+
+
+def _run_samples(args: argparse.Namespace) -> int:
+    from topomech.samples import copy_samples, sample, samples
+
+    if args.copy is not None:
+        for path in copy_samples(args.copy):
+            print(f"wrote {path}")
+        return EXIT_OK
+    for name, what in samples().items():
+        path = sample(name)
+        print(f"{name:<10} {path.stat().st_size / 1024:5.1f} KiB  {what}")
+        print(f"{'':<10} {path}")
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------------------- main
 
 #: The subcommands, in the order `--help` lists them.
@@ -1045,6 +1076,7 @@ SUBCOMMANDS: list[Callable[[Any], None]] = [
     _add_run,
     _add_view,
     _add_demo,
+    _add_samples,
 ]
 
 

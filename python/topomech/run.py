@@ -17,7 +17,14 @@
   :mod:`topomech.recording`);
 - with ``preview`` (the default): ``energy.csv`` (kinetic, gravitational, elastic and total
   energy at every step) and ``energy.png``, ``preview.gif`` (the frames rendered headless,
-  see :mod:`topomech.render`) and ``preview.mp4`` when imageio-ffmpeg's encoder is installed.
+  see :mod:`topomech.render`) and ``preview.mp4`` when imageio-ffmpeg's encoder is installed;
+- for ``static`` and ``implicit_euler`` runs: ``solver.csv``, one row a step: ``step``,
+  ``time``, ``integrator``, ``linear_solver``, ``preconditioner``, ``iterations`` (Newton
+  iterations, static; linear iterations, implicit Euler), ``linear_iterations``, ``residual``,
+  ``relative_residual``, ``tolerance``, ``converged`` (1 or 0) and ``load_steps``. A step
+  whose linear solve stopped at ``max_iterations`` above its tolerance is taken with the
+  approximate solution and makes the run end with a :class:`SolverWarning` (a note on the
+  command line); a static solve that does not converge is an error (a divergence).
 
 ``summary.json`` splits the run's wall time (``time.perf_counter``) into ``timings``:
 ``setup_s`` (reading the scene, building the mesh and the simulation, preparing the output
@@ -69,6 +76,7 @@ from topomech._cells import FlatMesh, to_flat
 from topomech._core import DivergenceError, SceneError, SimulationError, TopomechError
 from topomech._manifest import OutputError, OutputFolder
 from topomech._output import OutputCells, check_fields, field_values
+from topomech._solver_log import SolverLog, SolverWarning
 from topomech.recording import Recorder
 from topomech.scene import Scene, load_scene, name_problem
 
@@ -517,7 +525,11 @@ def run_scene(
     the faces, in 3D, or edges, in 2D, opened), ``total_mass``, ``kinetic_energy``,
     ``momentum``, ``max_displacement``, ``solver`` (static and implicit Euler runs: the
     last step's :meth:`Simulation.solver_report`, with the worst relative residual over the
-    run and the number of steps that needed load stepping; null for explicit integrators),
+    run and the number of steps that needed load stepping, and the run's totals
+    ``steps_solved``, ``steps_not_converged``, ``total_iterations``,
+    ``total_linear_iterations``, ``mean_linear_iterations`` and ``max_relative_residual``
+    (see :mod:`topomech._solver_log`; per step in ``solver.csv``); null for explicit
+    integrators),
     ``frames``, ``mesh`` (``{"input": counts, "final": counts}``, the counts being
     ``darts``, ``vertices``, ``edges``, ``faces``, ``volumes`` and ``components``: of the
     map as built, before any step, and at the end), ``timings`` (``setup_s``,
@@ -582,6 +594,7 @@ def run_scene(
     sim: Simulation | None = None
     recorder: Recorder | None = None
     writer: _Writer | None = None
+    solver_log = SolverLog()
     frames: list[tuple[float, str]] = []
     error: dict[str, Any] | None = None
     outputs: dict[str, str | None] = {
@@ -590,6 +603,7 @@ def run_scene(
         "preview": None,
         "video": None,
         "energy_plot": None,
+        "solver": None,
     }
     final_written = False
     input_counts: dict[str, int] | None = None
@@ -664,6 +678,7 @@ def run_scene(
                 clock.to("stepping")
                 sim.step()
                 clock.to("output")
+                solver_log.after_step(sim)
                 recorder.after_step()
                 if sc.every > 0 and (k % sc.every == 0 or k == sc.steps):
                     frame()
@@ -727,6 +742,11 @@ def run_scene(
             if frames:
                 enter("final", ["animation.pvd"])
                 write_pvd(out_dir / "animation.pvd", frames)
+            if solver_log.rows:
+                enter("final", ["solver.csv"])
+                outputs["solver"] = (
+                    "solver.csv" if solver_log.write(out_dir / "solver.csv") else None
+                )
             changes = [dict(c) for c in sim.topology_changes()]
             enter("view", ["view.bin", "view.json", "energy.csv"])
             recorder.finish()
@@ -748,6 +768,8 @@ def run_scene(
 
     clock.to("output")
     summary = _summary(sc, sim, clock, input_counts, frames, outputs, final_written, changes)
+    if sim is not None:
+        summary["solver"] = solver_log.summary(summary["solver"])
     if error is not None:
         summary["error"] = error
     try:
@@ -769,6 +791,9 @@ def run_scene(
     safe: dict[str, Any] = _json_safe(summary)
     if error is not None and error["type"] == "interrupted":
         raise KeyboardInterrupt
+    unmet = solver_log.warning()
+    if unmet is not None:
+        warnings.warn(unmet, SolverWarning, stacklevel=2)
     return safe
 
 

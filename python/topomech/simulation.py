@@ -47,6 +47,8 @@ from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_ar
 from topomech.models import Model, ParamDefault, model_files_of
 
 if TYPE_CHECKING:
+    import scipy.sparse
+
     from topomech._gmap import PathLike
 
 __all__ = [
@@ -119,6 +121,14 @@ def available_models() -> list[ModelInfo]:
     ]
 
 
+def _csr(parts: tuple[Any, Any, Any, int]) -> scipy.sparse.csr_matrix:
+    """A ``scipy.sparse.csr_matrix`` from the kernel's ``(indptr, indices, data, n)``."""
+    import scipy.sparse
+
+    indptr, indices, data, n = parts
+    return scipy.sparse.csr_matrix((data, indices, indptr), shape=(n, n))
+
+
 def _check_dimensions(models: Any, gmap: Any) -> None:
     """Refuses a :class:`Model` declared for other dimensions than the map's, naming it and
     its file (the kernel would only say that the file's dimension differs)."""
@@ -159,6 +169,15 @@ class Simulation:
       vertex that goes below it is put back onto it and loses its velocity into it;
     - ``integrator``: ``explicit_euler``, ``symplectic_euler``, ``implicit_euler`` or
       ``static`` (each step solves for the equilibrium); ``dt``: the time step;
+    - ``linear_solver`` (``implicit_euler`` and ``static``): ``"cg"`` (conjugate gradients on
+      the models' Jacobian-vector products, matrix-free), ``"pcg"`` (the same, preconditioned
+      by ``preconditioner``: ``"block_jacobi"``, the default, or ``"jacobi"``), ``"direct"``
+      (the Jacobian assembled into a sparse matrix and factored by faer's sparse Cholesky)
+      or ``"auto"`` (the default: chosen by the integrator and the size, see the README's
+      Solvers section); ``tolerance``: the relative residual a solve must reach (implicit
+      Euler: of its linear system, default 1e-6; static: of the force balance, default
+      1e-10); ``max_iterations``: the most iterations of the iterative linear solver in
+      one solve;
     - ``events``: topology changes at given times, dicts ``{"time": t, "kind": "cut",
       "plane": {"normal": [nx, ny, nz], "offset": o}}`` (elements whose centroids lie on
       opposite sides of the plane ``normal . x = offset`` are separated) or ``{"time": t,
@@ -275,6 +294,27 @@ class Simulation:
         such step and for the explicit integrators. After a step that raised
         :class:`DivergenceError` it describes that step."""
         return self._core.solver_report()
+
+    def stiffness_matrix(self) -> scipy.sparse.csr_matrix:
+        """The stiffness matrix ``K = -df/dx`` of the models' forces at the current positions,
+        a ``scipy.sparse.csr_matrix`` of shape ``(3 V, 3 V)`` (N/m), degree of freedom
+        ``3 * row + axis`` (rows as :meth:`positions`; fixed vertices included: drop their
+        rows and columns, ``~np.repeat(sim.fixed(), 3)``, for a constrained problem).
+        Assembled from the models' Jacobian-vector-product rules (the same ones the
+        solvers use) by compressed probing (Curtis, Powell & Reid 1974, "On the estimation of
+        sparse Jacobian matrices", IMA J. Appl. Math. 13, doi:10.1093/imamat/13.1.117), so it
+        is exactly the operator the ``cg``/``pcg`` solvers apply. Symmetric for the shipped
+        models; the co-rotational models give the warped stiffness ``R K R^T`` (dR/dx
+        omitted, as in their implicit solves). Raises :class:`SimulationError` when a model
+        has no Jacobian-vector-product rules."""
+        return _csr(self._core.stiffness_matrix())
+
+    def mass_matrix(self) -> scipy.sparse.csr_matrix:
+        """The lumped mass matrix, a diagonal ``scipy.sparse.csr_matrix`` of shape
+        ``(3 V, 3 V)`` (kg): each row's mass (:meth:`masses`) on its 3 degrees of freedom.
+        With :meth:`stiffness_matrix` it gives the generalized eigenproblem ``K u = w^2 M u``
+        of modal analysis (see the README's Solvers section)."""
+        return _csr(self._core.mass_matrix())
 
     def topology_changes(self) -> list[TopologyChange]:
         """The topology changes so far, in order."""

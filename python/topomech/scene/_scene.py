@@ -46,6 +46,14 @@ class SceneWarning(UserWarning):
 
 
 INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler", "static")
+#: The linear solvers of ``implicit_euler`` and ``static`` (``integrator.linear_solver``).
+LINEAR_SOLVERS = ("auto", "cg", "pcg", "direct")
+#: The preconditioners of ``pcg`` (``integrator.preconditioner``).
+PRECONDITIONERS = ("jacobi", "block_jacobi")
+#: The ``[integrator]`` keys of the linear solver.
+SOLVER_KEYS = ("linear_solver", "preconditioner", "tolerance", "max_iterations")
+#: The integrators that solve linear systems (the only ones the solver keys apply to).
+_SOLVING = ("implicit_euler", "static")
 
 
 @dataclass(frozen=True)
@@ -311,7 +319,8 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     kind = integ.choice("kind", INTEGRATORS, "symplectic_euler")
     dt = integ.number("dt", 1e-3, positive=True)
     steps = integ.integer("steps", 100, minimum=0)
-    integ.done()
+    solver = _solver(integ, kind, fail)
+    integ.done(SOLVER_KEYS)
 
     out = top.table("output")
     every_v = out.integer("every", None, minimum=0)
@@ -334,6 +343,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         "ground": ground,
         "integrator": kind,
         "dt": dt,
+        **solver,
         "events": events,
         "fracture": fracture,
     }
@@ -356,6 +366,48 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     )
     scene.check_events()
     return scene
+
+
+def _solver(integ: _Table, kind: str, fail: _Fail) -> dict[str, Any]:
+    """The ``[integrator]`` keys of the linear solver: ``linear_solver``, ``preconditioner``,
+    ``tolerance`` (relative residual, in (0, 1)) and ``max_iterations`` (>= 1), as the
+    simulation's configuration entries (only those given). Refused for the explicit
+    integrators (they solve nothing) and ``preconditioner`` with a solver other than ``pcg``
+    or ``auto``."""
+    given = [
+        k
+        for k in ("linear_solver", "preconditioner", "tolerance", "max_iterations")
+        if integ.has(k)
+    ]
+    if given and kind not in _SOLVING:
+        raise fail(
+            integ.key(given[0]),
+            f"only used by the integrators {_or_names(_SOLVING)}, and this scene's is {kind!r}",
+        )
+    out: dict[str, Any] = {}
+    if integ.has("linear_solver"):
+        out["linear_solver"] = integ.choice("linear_solver", LINEAR_SOLVERS, "auto")
+    if integ.has("preconditioner"):
+        out["preconditioner"] = integ.choice("preconditioner", PRECONDITIONERS, "block_jacobi")
+        if out.get("linear_solver", "auto") not in ("auto", "pcg"):
+            raise fail(
+                integ.key("preconditioner"),
+                f'only used by linear_solver = "pcg" (or "auto"), and this scene\'s is '
+                f"{out['linear_solver']!r}",
+            )
+    if integ.has("tolerance"):
+        tol = integ.number("tolerance", positive=True)
+        assert tol is not None
+        if not tol < 1.0:
+            raise fail(integ.key("tolerance"), f"must be below 1 (a relative residual), got {tol}")
+        out["tolerance"] = tol
+    if integ.has("max_iterations"):
+        out["max_iterations"] = integ.integer("max_iterations", minimum=1)
+    return out
+
+
+def _or_names(names: tuple[str, ...]) -> str:
+    return " and ".join(repr(n) for n in names)
 
 
 def load_scene(path: PathLike) -> Scene:
