@@ -153,7 +153,7 @@ def test_each_solver_runs_and_reports_per_step(
     assert s["converged"] is True
     assert s["tolerance"] == 1e-6  # the implicit default
     assert summary["outputs"]["solver"] == "solver.csv"
-    with open(Path(out) / "solver.csv", newline="") as f:
+    with (Path(out) / "solver.csv").open(newline="") as f:
         rows = list(csv.DictReader(f))
     assert [int(r["step"]) for r in rows] == [1, 2, 3, 4]
     assert all(r["converged"] == "1" for r in rows)
@@ -188,7 +188,7 @@ def test_unmet_tolerance_warns_and_is_reported(
     """One conjugate-gradient iteration cannot solve the system to 1e-6: every step is
     taken with the approximate solution, counted as not converged, and the run ends with one
     SolverWarning (a note on the command line)."""
-    code, summary, out = _run(tmp_path, 'linear_solver = "cg"\nmax_iterations = 1')
+    code, summary, _ = _run(tmp_path, 'linear_solver = "cg"\nmax_iterations = 1')
     err = capsys.readouterr().err
     assert code == 0, summary.get("error")
     s = summary["solver"]
@@ -216,7 +216,8 @@ def test_static_run_reports_newton_and_linear_iterations(tmp_path: Path) -> None
     assert s["iterations"] >= 1  # Newton
     assert s["linear_iterations"] >= s["iterations"]
     assert s["relative_residual"] <= 1e-10
-    rows = list(csv.DictReader(open(Path(out) / "solver.csv", newline="")))
+    with (Path(out) / "solver.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
     assert len(rows) == 4
 
 
