@@ -316,6 +316,7 @@ PULL = {
     "param_types": {"stiffness": "f64", "target": "vec3", "pivot": "vec3"},
     "needs": "vertices",
     "has_jvp": True,
+    "per_element": False,
 }
 
 

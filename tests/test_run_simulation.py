@@ -259,6 +259,8 @@ def test_available_models() -> None:
             "dims": [2, 3],
             "params": {"stiffness": 1000.0, "damping": 0.0},
             "needs": "edges",
+            "per_element": False,
         }
     ]
     assert any(m["kind"] == "corotational" and 3 in m["dims"] for m in models)
+    assert all(m["per_element"] for m in models if m["kind"] in ("corotational", "linear_fem"))

@@ -337,6 +337,15 @@ def test_model_young_against_material_young() -> None:
     assert "differs from material.young" in str(e)
 
 
+@pytest.mark.parametrize("key", ["young", "poisson"])
+def test_material_keys_refused_in_a_spring_model_table(key: str) -> None:
+    """Springs take their stiffness, not the material: a young or poisson in their table
+    would be ignored, so it is refused, naming the key and what the model takes."""
+    e = refusal(BASE.replace('kind = "corotational"', f'kind = "stretch_elementary"\n{key} = 0.3'))
+    assert e.key == f"model[0].{key}"
+    assert "model 'stretch_elementary' takes stiffness, damping" in str(e)
+
+
 def test_model_young_sets_the_material() -> None:
     text = BASE.replace(
         'kind = "corotational"', 'kind = "corotational"\nyoung = 2.5e6\npoisson = 0.25'
@@ -485,3 +494,15 @@ def test_from_scene() -> None:
     sim = topomech.Simulation.from_scene(shipped_scenes()["cantilever"])
     assert sim.integrator == "static"
     assert sim.dimension == 3
+
+
+def test_model_listed_twice_names_the_second_listing(tmp_path: Path) -> None:
+    """The kernel refuses a model listed twice; the scene names the second table (the one to
+    remove), not the first."""
+    text = BASE.replace(
+        'kind = "corotational"', 'kind = "corotational"\n[[model]]\nkind = "corotational"'
+    )
+    with pytest.raises(topomech.SceneError) as e:
+        parse_scene(text, "dup.toml").build()
+    assert e.value.key == "model[1].kind", str(e.value)
+    assert "listed twice" in str(e.value)

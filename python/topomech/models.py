@@ -193,7 +193,7 @@ class Model:
                 out[k] = self._f64(k, v)
             else:
                 raise ValueError(
-                    f"model '{self.name}': parameter '{k}' is a {ty}; only f64 and vec3 "
+                    f"model '{self.name}': parameter '{k}' has type {ty}; only f64 and vec3 "
                     "parameters can be set"
                 )
         return replace(self, values=out)

@@ -80,6 +80,9 @@ class ModelInfo(TypedDict):
     params: dict[str, ParamDefault]
     #: What it needs of the mesh (``edges``, ``tetrahedra``).
     needs: str
+    #: Whether it is a continuous model, computed per element from the material's ``young``
+    #: and ``poisson`` (the springs and bending models take their stiffness instead).
+    per_element: bool
 
 
 class TopologyChange(TypedDict):
@@ -116,7 +119,13 @@ def available_models() -> list[ModelInfo]:
     ['stretch_elementary', 'stretch_cumulated']
     """
     return [
-        ModelInfo(kind=m["kind"], dims=list(m["dims"]), params=dict(m["params"]), needs=m["needs"])
+        ModelInfo(
+            kind=m["kind"],
+            dims=list(m["dims"]),
+            params=dict(m["params"]),
+            needs=m["needs"],
+            per_element=bool(m["per_element"]),
+        )
         for m in _core.models()
     ]
 

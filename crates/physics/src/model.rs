@@ -87,6 +87,9 @@ pub struct ShippedModel {
     pub needs: Option<String>,
     /// Whether it has Jacobian rules (implicit Euler and static runs need them).
     pub has_jvp: bool,
+    /// Whether it is declared `per_element` (a continuous model: its elements take the
+    /// material's `young` and `poisson`).
+    pub per_element: bool,
 }
 
 /// Every model topomech ships, read from the declarations of its rule files. One name may
@@ -133,6 +136,7 @@ pub fn shipped_models() -> Vec<ShippedModel> {
                         params: m.params.clone(),
                         needs,
                         has_jvp: !m.jvp.is_empty(),
+                        per_element: m.per_element,
                     });
                 }
             }

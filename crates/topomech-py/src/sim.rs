@@ -1397,8 +1397,9 @@ fn rows_i64(rows: &[usize]) -> Vec<i64> {
 }
 
 /// The models topomech ships: `[{"kind", "dims", "params": {name: default}, "param_types":
-/// {name: "f64" | "vec3"}, "needs", "has_jvp"}]`; a default is a float, a list of 3 floats,
-/// or None for a required parameter.
+/// {name: "f64" | "vec3"}, "needs", "has_jvp", "per_element"}]` (`per_element`: a continuous
+/// model, taking the material's young and poisson); a default is a float, a list of 3
+/// floats, or None for a required parameter.
 #[pyfunction]
 pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
     shipped_models()
@@ -1421,6 +1422,7 @@ pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
             d.set_item("param_types", types)?;
             d.set_item("needs", m.needs.as_deref().unwrap_or(""))?;
             d.set_item("has_jvp", m.has_jvp)?;
+            d.set_item("per_element", m.per_element)?;
             Ok(d)
         })
         .collect()

@@ -40,11 +40,15 @@ def _model_entries(kind: str, dim: int | None) -> list[ModelInfo]:
 
 
 def _takes(kind: str, dim: int | None) -> list[str]:
-    """The keys a ``[[model]]`` table of ``kind`` may have beside ``kind``."""
+    """The keys a ``[[model]]`` table of ``kind`` may have beside ``kind``: its parameters,
+    and the material's ``young`` and ``poisson`` for a continuous model (declared
+    ``per_element``; springs and bending ignore the material, so these are refused there)."""
     params: list[str] = []
+    continuous = False
     for m in _model_entries(kind, dim):
         params += [p for p in m["params"] if p not in params]
-    return [*params, *MATERIAL_KEYS_IN_MODEL]
+        continuous = continuous or m["per_element"]
+    return [*params, *(MATERIAL_KEYS_IN_MODEL if continuous else ())]
 
 
 def _param_types(kind: str, dim: int | None) -> dict[str, str]:
@@ -240,7 +244,7 @@ def _user_model(t: _Table, i: int, dim: int | None, base: Path | None, fail: _Fa
         if model.param_types.get(k) not in ("f64", "vec3"):
             raise fail(
                 t.key(k),
-                f"model '{model.name}': '{k}' is a {model.param_types.get(k)}; only f64 "
+                f"model '{model.name}': '{k}' has type {model.param_types.get(k)}; only f64 "
                 "and vec3 parameters can be set from a scene",
             )
     values: dict[str, float | list[float]] = {}

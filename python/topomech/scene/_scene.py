@@ -234,6 +234,9 @@ class Scene:
         if m is None:
             return None
         what = _KERNEL_WHAT[m.group(1)]
+        twice = _LISTED_TWICE.search(message)
+        if what == "model" and twice is not None:
+            return f"model[{twice.group(1)}].kind"  # the second listing is the extra one
         for w, value, key in self.origins:
             if w == what and value == m.group(2):
                 return key
@@ -244,6 +247,8 @@ class Scene:
 _KERNEL_SUBJECT = re.compile(
     r"(fix predicate|prescribed-displacement predicate|material region|model) '([^']*)'"
 )
+#: The kernel's refusal of a model listed twice, and the index of its second listing.
+_LISTED_TWICE = re.compile(r"is listed twice \(models \d+ and (\d+)\)")
 _KERNEL_WHAT = {
     "fix predicate": "fix",
     "prescribed-displacement predicate": "prescribed",
