@@ -5,7 +5,9 @@
 #   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest
 #   make demo     run `topomech demo` (writes out/demo)
 #   make bench    kernel benchmarks, the cost of topology changes, the engine against
-#                 hand-written baselines (writes bench/results.md and bench/results.json)
+#                 hand-written baselines (writes bench/results.md and bench/results.json),
+#                 then `make readme-perf`
+#   make readme-perf  rewrite README.md's engine figures from bench/results.json
 #   make bench-peers  topomech against Newton, Taichi and pyPBD in their own .venv-peers
 #                 (writes bench/peers.md and bench/peers.json)
 #   make browser  playwright into .venv, and Debian's chromium when missing (for the viewer's
@@ -87,6 +89,13 @@ bench:
 	$(CARGO) bench -p topomech-physics --bench topology
 	$(CARGO) bench -p topomech-physics --bench engine
 	$(PYTHON) bench/report.py
+	@$(MAKE) --no-print-directory readme-perf
+
+# The README's section between <!-- perf:begin --> and <!-- perf:end -->, from the results
+# (tests/test_readme_perf.py fails when it differs).
+.PHONY: readme-perf
+readme-perf:
+	$(PYTHON) scripts/readme_perf.py
 
 # The peers live in their own virtualenv, never in .venv: nothing in `make test` needs them.
 # Each peer's install may fail on its own; bench/peers/run.py then reports it as "not
