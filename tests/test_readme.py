@@ -17,9 +17,10 @@ Unmarked ``sh``/``bash`` blocks run line by line (a line starting with a space o
 continues the comment of the line above), each line must exit 0. ``console`` blocks hold
 ``$ COMMAND`` lines, each followed by its output as shown: the command must exit 0 with
 exactly that stdout (``...`` stands for any text within a line). ``python`` blocks run in a
-fresh interpreter and must exit 0. Blocks in other languages (TOML, rule text, the layout)
-are not run unless marked ``file``. A failure names the line of README.md where the block or
-command is.
+fresh interpreter and must exit 0. Blocks in other languages (rule text, the layout) are
+not run unless marked ``file``; a TOML block that is not a file is a part of a scene, which
+is completed into a scene on the sample beam that must load and build. A failure names the
+line of README.md where the block or command is.
 """
 
 from __future__ import annotations
@@ -265,3 +266,47 @@ def test_a_marker_without_its_reason_or_block_is_refused(
     monkeypatch.setattr(sys.modules[__name__], "README", fake)
     with pytest.raises(AssertionError, match=problem):
         test_every_marker_is_right_before_a_block_and_says_what_it_does()
+
+
+#: What a TOML fragment of the README (a table or two of a scene) is completed with to make a
+#: scene: the sample beam, held at x = 0, 1 s of implicit Euler (the fragments' events fit).
+_SCENE_BASE = """
+[mesh]
+file = "beam.msh"
+[material]
+density = 1000.0
+[integrator]
+kind = "implicit_euler"
+dt = 1e-3
+steps = 1000
+"""
+_WORLD = "[world]\ngravity = [0.0, -9.81, 0.0]\n"
+_MODEL = '[[model]]\nkind = "corotational"\nyoung = 1e7\npoisson = 0.3\n'
+
+
+def test_every_toml_fragment_is_a_valid_part_of_a_scene(tmp_path: Path) -> None:
+    """The README's TOML blocks that are not whole files (a fix, a load, an event, ...) are
+    completed into a scene on the sample beam, which must load and build: every key, group
+    and point they name exists."""
+    import topomech
+
+    (tmp_path / "beam.msh").write_bytes(topomech.sample("beam.msh").read_bytes())
+    checked = 0
+    for b in readme_blocks():
+        if b.info != "toml" or (b.marker and _FILE.fullmatch(b.marker)):
+            continue
+        text = b.body
+        if "[mesh]" not in text:
+            text += _SCENE_BASE
+        if "[world]" not in text:
+            text += _WORLD
+        if "[[model]]" not in text:
+            text += _MODEL
+        path = tmp_path / f"block_{b.line}.toml"
+        path.write_text(text, encoding="utf-8")
+        try:
+            topomech.load_scene(path).build()
+        except topomech.TopomechError as e:
+            raise AssertionError(f"README.md:{b.line}: this TOML block: {e}\n{text}") from None
+        checked += 1
+    assert checked >= 7, checked
