@@ -310,3 +310,60 @@ def test_every_toml_fragment_is_a_valid_part_of_a_scene(tmp_path: Path) -> None:
             raise AssertionError(f"README.md:{b.line}: this TOML block: {e}\n{text}") from None
         checked += 1
     assert checked >= 7, checked
+
+
+_PATH = re.compile(r"(?<![\w/.])(?:tests|crates|python|bench|scripts|docs)/[\w./{},*-]*[\w*}]")
+
+
+def _expand(path: str) -> list[str]:
+    """``a{2,3}b`` as ``a2b``, ``a3b``."""
+    m = re.search(r"\{([^{}]*)\}", path)
+    if m is None:
+        return [path]
+    return [
+        x for alt in m[1].split(",") for x in _expand(path[: m.start()] + alt + path[m.end() :])
+    ]
+
+
+def test_every_file_the_readme_names_exists() -> None:
+    """A test, a source file or a folder of the repository named in the README is there
+    (``*`` a glob, ``{a,b}`` both)."""
+    root = README.parent
+    text = README.read_text(encoding="utf-8")
+    missing = []
+    for n, line in enumerate(text.splitlines(), 1):
+        for m in _PATH.finditer(line):
+            for path in _expand(m[0]):
+                if not any(root.glob(path)):
+                    missing.append(f"README.md:{n}: {path}")
+    assert not missing, "\n".join(missing)
+
+
+def test_the_status_names_every_command() -> None:
+    """The status paragraph lists the commands `topomech --help` has, no more, no fewer."""
+    from topomech.cli import build_parser
+
+    text = README.read_text(encoding="utf-8")
+    m = re.search(r"with its `topomech (\w+)`,(.*?) commands\.", text, re.DOTALL)
+    assert m is not None, "the status paragraph lists the commands"
+    named = [m[1], *re.findall(r"`(\w+)`", m[2])]
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    assert sorted(named) == sorted(sub.choices), named  # type: ignore[arg-type]
+
+
+def test_the_table_of_models_is_the_shipped_models() -> None:
+    """Each row of the README's table of models is a shipped kind and its dimensions."""
+    import topomech
+
+    text = README.read_text(encoding="utf-8")
+    table = text.split("| `kind` | dims |", 1)[1].split("\n\n", 1)[0]
+    rows = set()
+    for line in table.splitlines():
+        m = re.match(r"\| `(\w+)` \| ([23]D(?:, [23]D)?) \|", line)
+        if m:
+            rows.add((m[1], tuple(int(d[0]) for d in m[2].split(", "))))
+    shipped = set()
+    for model in topomech.available_models():
+        shipped.add((model["kind"], tuple(model["dims"])))
+    # a kind shipped once per dimension is one row per dimension (corotational)
+    assert rows == shipped
