@@ -23,6 +23,8 @@ import meshio
 import numpy as np
 
 DATA = Path(__file__).resolve().parent.parent / "python" / "topomech" / "data"
+#: The gmsh that wrote the shipped beam.msh (another version may mesh the beam otherwise).
+GMSH_VERSION = "4.15.2"
 
 
 def write_beam(path: Path) -> None:

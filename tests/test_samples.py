@@ -80,10 +80,30 @@ def test_the_samples_are_not_ignored_by_git() -> None:
     assert r.stdout == "", r.stdout
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("gmsh") is None, reason="the gmsh package is not installed"
-)
-def test_the_script_writes_the_same_files(tmp_path: Path) -> None:
+def _content(path: Path) -> tuple[object, ...]:
+    import meshio
+
+    m = meshio.read(path)
+    cells = tuple((b.type, b.data.tolist()) for b in m.cells)
+    sets = {k: [np.asarray(x).tolist() for x in v] for k, v in m.cell_sets.items()}
+    return (m.points.tolist(), cells, sets)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("gmsh") is None, reason="no gmsh package")
+def test_the_script_writes_the_same_meshes(tmp_path: Path) -> None:
+    """``scripts/make_samples.py`` writes the shipped meshes again: the same bytes with the
+    gmsh and meshio that wrote them, the same points, cells and groups with another meshio;
+    with another gmsh (which may mesh the beam otherwise), the OBJ and VTU only."""
+    import gmsh
+    import meshio
+
+    spec = importlib.util.spec_from_file_location(
+        "make_samples", ROOT / "scripts" / "make_samples.py"
+    )
+    assert spec is not None
+    assert spec.loader is not None
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
     r = subprocess.run(
         [sys.executable, str(ROOT / "scripts" / "make_samples.py"), "--out", str(tmp_path)],
         capture_output=True,
@@ -91,5 +111,9 @@ def test_the_script_writes_the_same_files(tmp_path: Path) -> None:
         timeout=120,
     )
     assert r.returncode == 0, r.stderr
-    for name in NAMES:
-        assert (tmp_path / name).read_bytes() == topomech.sample(name).read_bytes(), name
+    names = NAMES if gmsh.__version__ == script.GMSH_VERSION else NAMES[1:]
+    for name in names:
+        shipped, again = topomech.sample(name), tmp_path / name
+        assert _content(again) == _content(shipped), name
+        if name != "block.vtu" or f"meshio v{meshio.__version__}" in shipped.read_text():
+            assert again.read_bytes() == shipped.read_bytes(), name
