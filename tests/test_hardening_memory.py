@@ -449,6 +449,7 @@ def _page_as_before(out: Path) -> str:
         ("__TITLE__", title.replace("&", "&amp;").replace("<", "&lt;")),
         ("__META__", json.dumps(view.meta).replace("</", "<\\/")),
         ("__BIN__", base64.b64encode((out / "view.bin").read_bytes()).decode("ascii")),
+        ("__LIB__", (web / "three" / "three.min.js").read_text(encoding="utf-8")),
         ("__SCRIPT__", (web / "viewer.js").read_text(encoding="utf-8")),
     ):
         page = page.replace(key, value, 1)

@@ -9,9 +9,10 @@
   centre of the rest positions' bounding box, float64, recorded as ``origin`` in
   ``view.json``, with the ``bounds`` relative to it): a mesh placed far away — at 5e6 m,
   say — keeps float32's precision of its own size. A topology is recorded again only when
-  the map's darts were relinked (a cut, a fracture): its surface polygons, its edges and,
-  for maps of at most :data:`DART_LIMIT` darts, the darts themselves with their alpha
-  links, so that the viewer's dart view shows links disappearing.
+  the map's darts were relinked (a cut, a fracture): its surface polygons, its edges, each
+  row's input point (``point_id``, shown by the viewer's picking) and, for maps of at most
+  :data:`DART_LIMIT` darts, the darts themselves with their alpha links, so that the
+  viewer's dart view shows links disappearing.
   The arrays go to ``view.bin`` (little-endian, 4 bytes per value) as they are recorded;
   only a few numbers per frame (its time, step, topology and offset in ``view.bin``) stay
   in memory, so a run's memory does not grow with its number of frames.
@@ -74,8 +75,9 @@ __all__ = [
     "read_view",
 ]
 
-#: Maps with at most this many darts have their darts recorded for the dart view.
-DART_LIMIT = 12000
+#: Maps with at most this many darts have their darts recorded for the dart view (28 bytes
+#: a dart in view.bin, again after each topology change).
+DART_LIMIT = 1_000_000
 #: The ``format`` of ``view.json``.
 VIEW_FORMAT = "topomech-view"
 VIEW_VERSION = 2
@@ -136,6 +138,9 @@ class Topology:
     #: None for maps above :data:`DART_LIMIT`.
     darts: dict[str, I64] | None
     n_darts: int
+    #: Each row's input point (``Simulation.point_ids``; -1 for a point the input did not
+    #: have); None when the map has no ``point_id``.
+    point_ids: I64 | None = None
 
 
 @contextlib.contextmanager
@@ -470,10 +475,16 @@ class Recorder:
 
     def _write_topology(self, t: Topology) -> None:
         names = list(t.darts) if t.darts is not None else []
+        ids = [] if t.point_ids is None else [(t.point_ids, "i4")]
         refs = self._put(
             [(t.face_offsets, "i4"), (t.face_indices, "i4"), (t.edges, "i4")]
             + [(t.darts[k], "i4") for k in names if t.darts is not None]
+            + ids
         )
+        if ids:
+            point_id_ref: dict[str, Any] | None = refs.pop()
+        else:
+            point_id_ref = None
         self._topology_refs.append(
             {
                 "step": t.step,
@@ -483,6 +494,7 @@ class Recorder:
                 "face_indices": refs[1],
                 "edges": refs[2],
                 "dart_table": None if t.darts is None else dict(zip(names, refs[3:])),
+                "point_id": point_id_ref,
             }
         )
         # the topology before this one is in view.bin: its arrays are not needed any more
@@ -490,7 +502,7 @@ class Recorder:
             old = self.topologies[-1]
             empty = np.zeros(0, dtype=np.int64)
             old.face_offsets, old.face_indices, old.edges = empty, empty, empty.reshape(0, 2)
-            old.cells, old.rest, old.darts = [], np.zeros((0, 3)), None
+            old.cells, old.rest, old.darts, old.point_ids = [], np.zeros((0, 3)), None, None
         self.topologies.append(t)
 
     def _topology(self) -> Topology:
@@ -510,6 +522,10 @@ class Recorder:
             if n_darts <= self.dart_limit
             else None
         )
+        try:
+            point_ids: I64 | None = np.asarray(self.sim.point_ids(), dtype=np.int64)
+        except TopomechError:
+            point_ids = None
         topo = Topology(
             step=self.sim.steps,
             n_vertices=self.sim.n_vertices,
@@ -520,6 +536,7 @@ class Recorder:
             rest=self.sim.rest_positions(),
             darts=darts,
             n_darts=n_darts,
+            point_ids=point_ids,
         )
         self._write_topology(topo)
         self._topo_version = version

@@ -1,13 +1,20 @@
-"""``topomech view OUT_DIR``: a self-contained web page that plays a run's frames.
+"""``topomech view OUT_DIR``: a self-contained web page that plays a run's frames in 3D.
 
-:func:`write_viewer` writes ``viewer.html`` into a run's directory: one file with its script
+:func:`write_viewer` writes ``viewer.html`` into a run's directory: one file with its scripts
 and the run's view data (``view.json``, and ``view.bin`` in base64) inlined, so that it opens
 from disk or from any server, without network access. :func:`serve` serves the directory on
 127.0.0.1 (a free port unless one is given) in a background thread.
 
-The page (``web/viewer.html`` and ``web/viewer.js`` in this package) draws on a Canvas 2D:
-play/pause, previous/next, a scrub bar, the field that colors the surfaces, a wireframe
-toggle and the dart view (see :mod:`topomech.recording` for what is recorded).
+The page (``web/viewer.html`` and ``web/viewer.js`` in this package) draws with WebGL through
+three.js, vendored in ``web/three/`` (``three.min.js``: the classes the viewer uses and
+OrbitControls, bundled by ``scripts/vendor_three.sh``; its version and MIT licence beside it):
+orbit, pan and zoom; a click picks a vertex (its row, its input ``point_id``, its fields);
+play/pause, previous/next, a scrub bar; the field that colors the surface (with a legend); a
+wireframe toggle; and the dart view, instanced line segments over the translucent surface
+(see :mod:`topomech.recording` for what is recorded). ``window.topomechViewer`` in the page
+tells scripts and tests what is drawn: ``frame``, ``mode``, ``darts`` and ``links`` (the
+darts and alpha links drawn), ``mapDarts``, ``picked``, ``camera``, the renderer's ``info``
+of the last render, and ``pick(x, y)``, ``project(vertex)``, ``setFrame(k)``, ``render()``.
 """
 
 from __future__ import annotations
@@ -36,6 +43,10 @@ def _asset(name: str) -> str:
     return (resources.files("topomech") / "web" / name).read_text(encoding="utf-8")
 
 
+#: three.js, bundled (``scripts/vendor_three.sh``), under ``web/``.
+THREE_JS = "three/three.min.js"
+
+
 def _script_safe(text: str) -> str:
     """Text that cannot end the ``<script>`` element it is inlined in."""
     return text.replace("</", "<\\/")
@@ -48,9 +59,9 @@ _B64_BLOCK = 3 << 14
 
 def _page_parts(out_dir: Path) -> Iterator[str]:
     """The viewer page of a run directory, piece by piece: the template with its markers
-    (``__TITLE__``, ``__META__``, ``__BIN__``, ``__SCRIPT__``, each replaced once, in this
-    order) filled in, view.bin base64-encoded a block at a time. Raises :class:`ViewError`
-    when the directory has no readable view data."""
+    (``__TITLE__``, ``__META__``, ``__BIN__``, ``__LIB__`` (three.js), ``__SCRIPT__``, each
+    replaced once, in this order) filled in, view.bin base64-encoded a block at a time.
+    Raises :class:`ViewError` when the directory has no readable view data."""
     view = read_view(Path(out_dir))
     page = _asset("viewer.html")
     title = str(view.meta.get("name", "run"))
@@ -68,6 +79,7 @@ def _page_parts(out_dir: Path) -> Iterator[str]:
         ("__TITLE__", lambda: iter([title.replace("&", "&amp;").replace("<", "&lt;")])),
         ("__META__", lambda: iter([_script_safe(json.dumps(view.meta))])),
         ("__BIN__", data),
+        ("__LIB__", lambda: iter([_asset(THREE_JS)])),
         ("__SCRIPT__", lambda: iter([_asset("viewer.js")])),
     ]
     rest = page
