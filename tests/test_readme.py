@@ -325,6 +325,10 @@ def _expand(path: str) -> list[str]:
     ]
 
 
+#: Files the README names that ``make bench`` writes (absent until its first run that does).
+_WRITTEN_BY_BENCH = {"bench/kernel.txt", "bench/topology.txt"}
+
+
 def test_every_file_the_readme_names_exists() -> None:
     """A test, a source file or a folder of the repository named in the README is there
     (``*`` a glob, ``{a,b}`` both)."""
@@ -334,7 +338,7 @@ def test_every_file_the_readme_names_exists() -> None:
     for n, line in enumerate(text.splitlines(), 1):
         for m in _PATH.finditer(line):
             for path in _expand(m[0]):
-                if not any(root.glob(path)):
+                if path not in _WRITTEN_BY_BENCH and not any(root.glob(path)):
                     missing.append(f"README.md:{n}: {path}")
     assert not missing, "\n".join(missing)
 

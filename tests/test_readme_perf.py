@@ -61,3 +61,36 @@ def test_the_markers_must_be_there_once() -> None:
     perf = _script()
     with pytest.raises(SystemExit, match="perf:begin"):
         perf.rewrite("# no markers\n", _results())
+
+
+def test_a_bench_output_replaces_its_section_once_written(tmp_path: Path) -> None:
+    """``bench/kernel.txt`` and ``bench/topology.txt`` (what ``make bench`` tees) become the
+    README's kernel and topology figures; before they exist the sections stay as they are."""
+    perf = _script()
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert perf.rewrite(readme, _results(), tmp_path) == perf.rewrite(readme, _results())
+    (tmp_path / "kernel.txt").write_text(
+        "kernel benchmark: box of 8 tetrahedra\n", encoding="utf-8"
+    )
+    new = perf.rewrite(readme, _results(), tmp_path)
+    kernel = new.split("<!-- perf-kernel:begin -->\n")[1].split("<!-- perf-kernel:end -->")[0]
+    assert kernel == perf.raw_section(
+        "kernel benchmark: box of 8 tetrahedra\n", "kernel.txt", "cargo bench -p topomech-gmap"
+    )
+    assert "```text\nkernel benchmark: box of 8 tetrahedra\n```" in kernel
+    begin, end = "<!-- perf-topology:begin -->", "<!-- perf-topology:end -->"
+    kept = readme.split(begin)[1].split(end)[0]
+    assert new.split(begin)[1].split(end)[0] == kept  # no topology.txt: as it was
+
+
+def test_the_sections_made_from_files_in_the_repository_are_current() -> None:
+    """Where bench/kernel.txt or bench/topology.txt is in the repository, the README's section
+    is what it gives (the first test covers it too; this one names the file)."""
+    perf = _script()
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    for name, (file, command) in perf.RAW.items():
+        path = ROOT / "bench" / file
+        if path.is_file():
+            section = readme.split(f"<!-- {name}:begin -->\n")[1].split(f"<!-- {name}:end -->")[0]
+            want = perf.raw_section(path.read_text(encoding="utf-8"), file, command)
+            assert section == want, f"bench/{file} is not in README.md: run `make readme-perf`"
