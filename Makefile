@@ -2,9 +2,7 @@
 #
 #   make venv     .venv with the build and test tools
 #   make develop  build the extension (release) and install the package into .venv
-#   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest (with the wheel's
-#                 test: its build starts first, in the background)
-#   make wheel    a stripped abi3 manylinux2014 wheel into target/wheels (scripts/wheel.py)
+#   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest
 #   make demo     run `topomech demo` (writes out/demo)
 #   make bench    kernel benchmarks, the cost of topology changes, the engine against
 #                 hand-written baselines (writes bench/results.md, bench/results.json and
@@ -32,8 +30,7 @@ VENV_STAMP := $(VENV)/.stamp-venv
 DEVELOP_STAMP := $(VENV)/.stamp-develop
 # Linters are pinned to a minor (ruff) or major (mypy) version: new releases add checks.
 DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 mypy>=2,<3 \
-	pillow>=10.1 matplotlib>=3.7 scipy imageio-ffmpeg>=0.4.9 playwright>=1.40 scikit-fem gmsh \
-	nbclient ipykernel ziglang>=0.13
+	pillow>=10.1 matplotlib>=3.7 scipy imageio-ffmpeg>=0.4.9 playwright>=1.40 scikit-fem gmsh
 
 .PHONY: venv develop test rust-test py-test lint demo bench clean browser docs-pictures
 
@@ -59,7 +56,7 @@ $(DEVELOP_STAMP): $(VENV_STAMP) $(RUST_SOURCES) pyproject.toml
 		|| { cat $(VENV)/develop.log >&2; echo "make: the build failed (log: $(VENV)/develop.log)" >&2; exit 1; }
 	@touch $@
 
-test: wheel-start rust-test develop lint py-test
+test: rust-test develop lint py-test
 
 rust-test:
 	$(CARGO) fmt --all --check
@@ -74,18 +71,6 @@ lint: $(DEVELOP_STAMP)
 
 py-test: $(DEVELOP_STAMP) browser
 	$(VPY) -m pytest -q
-
-# The wheel: a release build with zig (the ziglang package) for glibc 2.17, in target/wheel
-# (its log: .venv/wheel.log, printed when it fails); up to date when newer than every source.
-# `make test` starts it first, in the background at the lowest priority (wheel-start), so
-# that it uses the CPU the other steps leave idle; tests/test_wheel.py waits for it, then
-# installs it into a fresh venv and runs the demo there.
-.PHONY: wheel wheel-start
-wheel: $(VENV_STAMP)
-	@$(VPY) scripts/wheel.py build
-
-wheel-start: $(VENV_STAMP)
-	@$(VPY) scripts/wheel.py start
 
 browser: $(VENV_STAMP)
 	scripts/install_browser.sh $(VPY)
