@@ -671,3 +671,45 @@ def test_dart_view_draws_half_a_million_darts(tmp_path: Path, page: Any) -> None
     px = _canvas_pixels(page)
     assert _drawn_fraction(px) > 0.1
     assert px.std() > 20
+
+
+def _triangles(view: Any, k: int) -> int:
+    return sum(len(f) - 2 for f in view.faces(k) if len(f) >= 3)
+
+
+def test_the_surface_of_each_frame_shows_the_cut(
+    runs: dict[str, tuple[Path, dict[str, Any]]], page: Any
+) -> None:
+    """The surface drawn is the frame's recorded boundary faces: after the cut, the faces it
+    opened are drawn on both of its sides."""
+    out, summary = runs["bar"]
+    view = read_view(out)
+    last = summary["frames"] - 1
+    opened = sum(c["unsewn"] for c in summary["topology_changes"])
+    assert len(view.faces(last)) == len(view.faces(0)) + 2 * opened
+    _open(page, out)
+    assert _viewer(page, "v.info.triangles") == _triangles(view, 0)
+    _scrub_to(page, last)
+    assert _viewer(page, "v.topology") == view.frames[last]["topology"] > 0
+    assert _viewer(page, "v.info.triangles") == _triangles(view, last)
+
+
+def test_field_selector_colors_the_surface_and_the_legend(
+    runs: dict[str, tuple[Path, dict[str, Any]]], page: Any
+) -> None:
+    out, summary = runs["bar"]
+    _open(page, out)
+    _scrub_to(page, summary["frames"] - 1)
+    assert "von Mises stress" in page.inner_text("#field-label")
+    stress = _canvas_pixels(page)
+    page.select_option("#field", "displacement")
+    assert "displacement magnitude (m)" in page.inner_text("#field-label")
+    shown = _canvas_pixels(page)
+    assert np.abs(shown - stress).mean() > 0.5
+    page.select_option("#field", "none")
+    assert not page.is_visible("#field-legend")
+    gray = _canvas_pixels(page)
+    drawn = np.abs(gray - 255.0).sum(axis=2) > 30
+    # no field: the surface is gray (its channels equal, up to the antialiased edges)
+    spread = gray.max(axis=2) - gray.min(axis=2)
+    assert (spread[drawn] < 12).mean() > 0.9

@@ -121,8 +121,16 @@
     camera.position.copy(centre).addScaledVector(eye, dist);
   }
   scene.add(camera);
-  scene.add(new THREE.AmbientLight(0xffffff, 0.7));
-  const light = new THREE.DirectionalLight(0xffffff, 2.4);
+  scene.add(new THREE.AmbientLight(0xffffff, 0.55));
+  {
+    // a light from above (the up direction, a little from the side), fixed in the scene
+    const sky = new THREE.DirectionalLight(0xffffff, 1.3);
+    const side = Math.abs(up.x) < 0.9 ? new V3(1, 0, 0) : new V3(0, 0, 1);
+    sky.position.copy(centre).addScaledVector(up, 2 * radius).addScaledVector(side, 0.8 * radius);
+    sky.target.position.copy(centre);
+    scene.add(sky, sky.target);
+  }
+  const light = new THREE.DirectionalLight(0xffffff, 1.8);
   light.position.set(0.8, 1.0, 0.5);  // a head light, above the camera's right shoulder
   camera.add(light);
   camera.add(light.target);
