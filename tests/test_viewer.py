@@ -602,10 +602,12 @@ def test_dart_view_is_instanced_and_keeps_the_surface(
     assert _viewer(page, "v.items") == []
 
 
-def test_without_webgl_the_page_says_so(
+def test_without_webgl_the_page_draws_in_2d(
     runs: dict[str, tuple[Path, dict[str, Any]]], browser: Any
 ) -> None:
-    out, _ = runs["bar"]
+    """A browser that gives the page no WebGL gets the 2D viewer (Canvas 2D, as before the
+    3D one), saying so: it draws, plays and has its dart view."""
+    out, summary = runs["bar"]
     pg = browser.new_page(viewport={"width": 900, "height": 640})
     errors: list[str] = []
     pg.on("pageerror", lambda e: errors.append(str(e)))
@@ -615,8 +617,19 @@ def test_without_webgl_the_page_says_so(
         "(HTMLCanvasElement.prototype.getContext);"
     )
     pg.goto(write_viewer(out).resolve().as_uri())
-    assert "no WebGL" in pg.inner_text("#note")
     assert _state(pg)["webgl"] == "false"
+    assert pg.evaluate("() => window.topomechViewer.webgl") is False
+    assert "no WebGL" in pg.inner_text("#hint")
+    assert _state(pg)["mode"] == "surface"
+    px = _canvas_pixels(pg)
+    assert _drawn_fraction(px) > 0.05
+    assert px.std() > 20
+    # the fields once each, and "none" (the 3D viewer set nothing up before it gave way)
+    assert len(pg.query_selector_all("#field option")) == len(read_view(out).meta["fields"]) + 1
+    pg.check("#darts")
+    assert _state(pg)["darts"] == str(summary["darts"])
+    _scrub_to(pg, summary["frames"] - 1)
+    assert _state(pg)["frame"] == str(summary["frames"] - 1)
     pg.close()
     assert errors == []
 
