@@ -37,6 +37,7 @@ from topomech._gmap import BuildReport, CellCounts, EmbeddingSpec, EmbeddingValu
 from topomech._solver_log import SolverWarning
 from topomech.io import read_gmap, read_mesh, write_vtu
 from topomech.models import Model
+from topomech.notebook import show
 from topomech.rules import ApplyReport, RuleInfo, RuleSet
 from topomech.run import run_scene
 from topomech.samples import sample, samples
@@ -87,5 +88,6 @@ __all__ = [
     "sample",
     "samples",
     "shipped_scenes",
+    "show",
     "write_vtu",
 ]

@@ -1,10 +1,11 @@
 """Headless previews of a run: ``preview.gif`` (and ``preview.mp4`` when imageio-ffmpeg's
 encoder is installed) and ``energy.png``, from the view data a run writes (see
-:mod:`topomech.recording`). Pillow draws the frames, matplotlib (Agg) the energy plot; nothing
-needs a display.
+:mod:`topomech.recording`), after the steps. Pillow draws the frames and the energy plot;
+nothing needs a display.
 
 Frames are rendered one at a time and handed to the encoders as they come (the GIF written
-frame by frame with Pillow's GIF encoder, the MP4 piped to ffmpeg), and the energy plot reads
+frame by frame with Pillow's GIF encoder, the MP4 piped to ffmpeg, which encodes it in a
+process of its own while the next frames are drawn), and the energy plot reads
 ``energy.csv`` row by row into a bounded min/max envelope (:class:`EnergyEnvelope`): memory
 does not grow with the number of frames or steps.
 
@@ -13,14 +14,24 @@ von Mises stress for the continuous 3D models, displacement magnitude otherwise 
 color scale for the whole run, seen by a fixed orthographic camera whose frame holds every
 position of every frame (so nothing leaves the picture), with the simulated time and a color
 bar. The camera looks from the front-right and above, "above" being against gravity.
+
+Previews cost less than the steps of most runs (``make bench-previews`` measures it for the
+shipped scenes): a :class:`FrameRenderer` prepares once what the frames share (each
+topology's polygons, the color bar, the title) and draws each frame straight into a palette
+image (:data:`PALETTE`: :data:`FIELD_LEVELS` colors of the field times
+:data:`SHADE_LEVELS` shades), which is a GIF frame as it is (no quantizing, no
+supersampling); the energy plot is drawn with Pillow too (:func:`line_plot`: importing
+matplotlib alone took longer than most shipped scenes' steps).
 """
 
 from __future__ import annotations
 
 import csv
+import functools
 import math
+import os
 import subprocess
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
@@ -35,12 +46,18 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ENERGY_BUCKETS",
+    "FIELD_LEVELS",
+    "PALETTE",
+    "SHADE_LEVELS",
     "Camera",
+    "Curve",
     "EnergyEnvelope",
+    "FrameRenderer",
     "GifWriter",
     "Mp4Writer",
     "colormap",
     "ffmpeg_exe",
+    "line_plot",
     "plot_energy",
     "render_frame",
     "render_previews",
@@ -160,6 +177,7 @@ class Camera:
         return np.stack([sx, sy], axis=1), x @ self.eye
 
 
+@functools.cache
 def _font(size: int) -> Any:
     from PIL import ImageFont
 
@@ -184,6 +202,305 @@ def _light(camera: Camera) -> F64:
     return np.asarray(light / np.linalg.norm(light), dtype=np.float64)
 
 
+# ------------------------------------------------------------------------------ frames
+#
+# Frames are drawn straight into a palette ("P") image: a face's color is one of FIELD_LEVELS
+# field colors times one of SHADE_LEVELS shades, so that no frame needs quantizing for the GIF
+# (what took most of the time, with supersampling, before). Text is anti-aliased on a ramp of
+# ink levels blended with the white background.
+
+#: The field's color levels of the frames' palette (viridis, sampled evenly).
+FIELD_LEVELS = 24
+#: The shade levels (from 0.35, the darkest side, to 1, lit face on).
+SHADE_LEVELS = 9
+_SHADES = 0.35 + 0.65 * np.arange(SHADE_LEVELS) / (SHADE_LEVELS - 1)
+_INK_RGB = np.array([30.0, 30.0, 30.0])
+#: Palette indices: the background, the ink ramp (4 levels, the last one full), the color
+#: bar's frame, the plain (no field) and NaN greys times the shades, the field colors times
+#: the shades.
+_WHITE, _INK, _BAR_EDGE = 0, 1, 5
+_GREY = 6
+_NAN = _GREY + SHADE_LEVELS
+_FIELD = _NAN + SHADE_LEVELS
+
+
+def _palette() -> npt.NDArray[np.uint8]:
+    white = np.array([255.0, 255.0, 255.0])
+    rows = [white]
+    rows += [white + (_INK_RGB - white) * (i / 4) for i in (1, 2, 3, 4)]
+    rows.append(np.array([60.0, 60.0, 60.0]))
+    rows += [np.full(3, 190.0) * s for s in _SHADES]
+    rows += [np.full(3, 160.0) * s for s in _SHADES]
+    for rgb in colormap(np.linspace(0.0, 1.0, FIELD_LEVELS)):
+        rows += [rgb * s for s in _SHADES]
+    pal: npt.NDArray[np.uint8] = np.clip(np.rint(np.array(rows)), 0, 255).astype(np.uint8)
+    assert len(pal) <= 256
+    return pal
+
+
+#: The frames' palette ``(C, 3)``, C <= 256.
+PALETTE = _palette()
+_PALETTE_BYTES = PALETTE.tobytes()
+
+
+def _shade_level(shade: F64) -> npt.NDArray[np.int64]:
+    j = np.rint((shade - _SHADES[0]) / (1.0 - _SHADES[0]) * (SHADE_LEVELS - 1))
+    out: npt.NDArray[np.int64] = np.clip(np.nan_to_num(j), 0, SHADE_LEVELS - 1).astype(np.int64)
+    return out
+
+
+def _indexed(a: npt.NDArray[np.uint8]) -> PILImage.Image:
+    """A palette image of the indices ``a`` ``(H, W)``, with :data:`PALETTE`."""
+    from PIL import Image
+
+    im = Image.fromarray(a, "P")
+    im.putpalette(_PALETTE_BYTES)
+    return im
+
+
+@dataclass
+class _Patch:
+    """Anti-aliased ink (or solid palette colors) at a place: ``levels`` ``(h, w)`` are
+    palette indices, 0 where the picture shows through."""
+
+    x: int
+    y: int
+    levels: npt.NDArray[np.uint8]
+
+    def apply(self, a: npt.NDArray[np.uint8]) -> None:
+        h, w = a.shape[:2]
+        x0, y0 = max(self.x, 0), max(self.y, 0)
+        x1 = min(self.x + self.levels.shape[1], w)
+        y1 = min(self.y + self.levels.shape[0], h)
+        if x1 <= x0 or y1 <= y0:
+            return
+        p = self.levels[y0 - self.y : y1 - self.y, x0 - self.x : x1 - self.x]
+        region = a[y0:y1, x0:x1]
+        np.copyto(region, p, where=p > 0)
+
+
+def _text_patch(x: int, y: int, text: str, font: Any) -> _Patch:
+    """``text`` drawn at ``(x, y)`` (its top left, as ``ImageDraw.text`` places it) in ink."""
+    from PIL import Image, ImageDraw
+
+    box = font.getbbox(text)
+    w, h = max(int(box[2]), 1), max(int(box[3]), 1)
+    mask = Image.new("L", (w, h), 0)
+    ImageDraw.Draw(mask).text((0, 0), text, fill=255, font=font)
+    m = np.asarray(mask, dtype=np.int64)
+    level = (m * 4 + 127) // 255  # 0 (nothing) .. 4 (full ink)
+    idx = np.where(level > 0, _INK + level - 1, 0).astype(np.uint8)
+    return _Patch(x, y, idx)
+
+
+@functools.cache
+def _glyph(font: Any, ch: str) -> tuple[float, npt.NDArray[np.uint8]]:
+    """The advance and coverage mask ``(h, w)`` of one character (for text that changes
+    from frame to frame: drawn once per character, not once per frame)."""
+    from PIL import Image, ImageDraw
+
+    ascent, descent = font.getmetrics()
+    advance = float(font.getlength(ch))
+    box = font.getbbox(ch)
+    mask = Image.new("L", (max(math.ceil(max(advance, box[2])) + 1, 1), ascent + descent), 0)
+    ImageDraw.Draw(mask).text((0, 0), ch, fill=255, font=font)
+    return advance, np.asarray(mask, dtype=np.uint8)
+
+
+def _line_patch(x: int, y: int, text: str, font: Any) -> _Patch:
+    """Like :func:`_text_patch`, set from cached glyphs (without kerning)."""
+    glyphs = [_glyph(font, ch) for ch in text]
+    width = math.ceil(sum(a for a, _ in glyphs)) + 4
+    height = max((m.shape[0] for _, m in glyphs), default=1)
+    cover = np.zeros((height, width), dtype=np.uint8)
+    pos = 0.0
+    for advance, m in glyphs:
+        x0 = round(pos)
+        w = min(m.shape[1], width - x0)
+        np.maximum(cover[: m.shape[0], x0 : x0 + w], m[:, :w], out=cover[: m.shape[0], x0 : x0 + w])
+        pos += advance
+    level = (cover.astype(np.int64) * 4 + 127) // 255
+    return _Patch(x, y, np.where(level > 0, _INK + level - 1, 0).astype(np.uint8))
+
+
+class FrameRenderer:
+    """Renders a run's frames, seen by one camera, in a palette image each
+    (:meth:`indexed`, :data:`PALETTE`) or RGB (:meth:`rgb`): what stays the same from frame
+    to frame (the faces of each topology, the color bar, the title) is prepared once.
+
+    ``supersample`` > 1 draws the faces that many times larger and averages them down in
+    RGB (smoother edges; :meth:`indexed` then needs ``supersample`` 1)."""
+
+    def __init__(
+        self,
+        view: View,
+        camera: Camera,
+        size: tuple[int, int],
+        field: str | None = None,
+        *,
+        supersample: int = 1,
+    ) -> None:
+        self.view = view
+        self.camera = camera
+        self.size = (int(size[0]), int(size[1]))
+        self.supersample = max(1, int(supersample))
+        self.name = _field_name(view, field)
+        self.light = _light(camera)
+        self._groups: dict[int, list[npt.NDArray[np.int64]]] = {}
+        h = self.size[1]
+        self._font = _font(max(11, h // 30))
+        self._small = _font(max(10, h // 36))
+        self._static = [_text_patch(10, 8, str(view.meta["name"]), self._font)]
+        self._time_y = 12 + int(self._font.getbbox("Ag")[3])
+        if self.name is not None:
+            self._static += self._color_bar()
+
+    def _color_bar(self) -> list[_Patch]:
+        assert self.name is not None
+        meta = self.view.meta["fields"][self.name]
+        w, h = self.size
+        small = self._small
+        bar_w, top, bottom = 14, int(h * 0.22), int(h * 0.8)
+        left = w - bar_w - 66
+        rows = bottom - top + 1
+        t = np.linspace(1.0, 0.0, rows)
+        level = np.rint(t * (FIELD_LEVELS - 1)).astype(np.int64)
+        bar = np.empty((rows, bar_w + 1), dtype=np.uint8)
+        bar[:] = (_FIELD + level * SHADE_LEVELS + SHADE_LEVELS - 1).astype(np.uint8)[:, None]
+        bar[0, :] = bar[-1, :] = bar[:, 0] = bar[:, -1] = _BAR_EDGE
+        patches = [_Patch(left, top, bar)]
+        patches.append(_text_patch(left + bar_w + 4, top - 6, f"{meta['max']:.3g}", small))
+        patches.append(_text_patch(left + bar_w + 4, bottom - 8, f"{meta['min']:.3g}", small))
+        label = f"{meta['label']} ({meta['unit']})"
+        tw = math.ceil(small.getlength(label))
+        patches.append(_text_patch(w - tw - 8, top - 12 - 2 * int(small.size), label, small))
+        return patches
+
+    def _faces(self, k: int) -> list[npt.NDArray[np.int64]]:
+        """Frame ``k``'s polygons as one ``(F, n)`` array of vertex rows per size ``n``."""
+        topo = int(self.view.frames[k]["topology"])
+        groups = self._groups.get(topo)
+        if groups is None:
+            t = self.view.topology(k)
+            off = np.asarray(self.view.array(t["face_offsets"]), dtype=np.int64)
+            idx = np.asarray(self.view.array(t["face_indices"]), dtype=np.int64)
+            sizes = np.diff(off)
+            groups = []
+            for n in np.unique(sizes):
+                if n < 3:
+                    continue
+                rows = off[:-1][sizes == n]
+                groups.append(idx[rows[:, None] + np.arange(n)])
+            self._groups = {topo: groups}  # topologies come in order: keep the current one
+        return groups
+
+    def _draw_faces(self, k: int, ss: int) -> PILImage.Image:
+        from PIL import Image, ImageDraw
+
+        w, h = self.size
+        img = Image.new("P", (w * ss, h * ss), _WHITE)
+        draw = ImageDraw.Draw(img)
+        x = np.asarray(self.view.positions(k), dtype=np.float64)
+        xy, depth = self.camera.project(x)
+        if ss > 1:
+            xy = xy * ss
+        t: F64 | None = None
+        if self.name is not None:
+            meta = self.view.meta["fields"][self.name]
+            span = meta["max"] - meta["min"]
+            values = np.asarray(self.view.field(k, self.name), dtype=np.float64)
+            t = (values - meta["min"]) / span if span > 0 else np.zeros_like(values)
+        groups = self._faces(k)
+        # mesh lines where the faces are large enough on screen not to darken the picture
+        n_faces = sum(len(g) for g in groups)
+        outline = False
+        if groups and n_faces <= 4000:
+            seg = np.concatenate(
+                [np.linalg.norm(xy[g[:, 0]] - xy[g[:, 1]], axis=1) for g in groups]
+            )
+            with np.errstate(invalid="ignore"):
+                outline = bool(np.nanmedian(seg) / ss > 12) if np.isfinite(seg).any() else False
+        coords: list[list[float]] = []
+        fills: list[int] = []
+        edges: list[int] = []
+        depths: list[F64] = []
+        for idx in groups:
+            p = x[idx]  # (F, n, 3)
+            q = p - p.mean(axis=1, keepdims=True)
+            normal = np.cross(q, np.roll(q, -1, axis=1)).sum(axis=1)
+            norm = np.linalg.norm(normal, axis=1)
+            ok = np.isfinite(p).all(axis=(1, 2)) & (norm > 0)
+            if not ok.any():
+                continue
+            idx, normal, norm = idx[ok], normal[ok], norm[ok]
+            shade = 0.35 + 0.65 * np.abs((normal / norm[:, None]) @ self.light)
+            j = _shade_level(shade)
+            jo = _shade_level(0.6 * shade)
+            if t is None:
+                fill, edge = _GREY + j, _GREY + jo
+            else:
+                with np.errstate(invalid="ignore"):
+                    tm = t[idx].mean(axis=1)
+                bad = ~np.isfinite(tm)
+                level = np.clip(np.rint(np.where(bad, 0.0, tm) * (FIELD_LEVELS - 1)), 0, None)
+                level = np.minimum(level, FIELD_LEVELS - 1).astype(np.int64)
+                base = _FIELD + level * SHADE_LEVELS
+                fill = np.where(bad, _NAN + j, base + j)
+                edge = np.where(bad, _NAN + jo, base + jo)
+            coords += xy[idx].reshape(len(idx), -1).tolist()
+            fills += fill.tolist()
+            edges += edge.tolist()
+            depths.append(depth[idx].mean(axis=1))
+        if coords:
+            order = np.argsort(np.concatenate(depths), kind="stable").tolist()  # far to near
+            # ImageDraw.polygon's own drawing call (in a palette image, a color is its index),
+            # without the argument checks that cost more than the drawing of a small polygon
+            core = getattr(draw, "draw", None)
+            polygon = getattr(core, "draw_polygon", None)
+            if polygon is None:  # pragma: no cover - another Pillow
+                for i in order:
+                    draw.polygon(coords[i], fill=fills[i], outline=edges[i] if outline else None)
+            elif outline:
+                for i in order:
+                    polygon(coords[i], fills[i], 1)
+                    polygon(coords[i], edges[i], 0, 1)
+            else:
+                for i in order:
+                    polygon(coords[i], fills[i], 1)
+        return img
+
+    def _decorate(self, a: npt.NDArray[np.uint8], k: int) -> None:
+        fr = self.view.frames[k]
+        line = f"t = {fr['time']:.4g} s   step {fr['step']}   frame {k + 1}/{len(self.view.frames)}"
+        for p in (*self._static, _line_patch(10, self._time_y, line, self._small)):
+            p.apply(a)
+
+    def indexed(self, k: int) -> PILImage.Image:
+        """Frame ``k`` as a palette image (:data:`PALETTE`), without supersampling."""
+        if self.supersample != 1:
+            raise ValueError("palette frames are drawn without supersampling")
+        a = np.array(self._draw_faces(k, 1), dtype=np.uint8)
+        self._decorate(a, k)
+        return _indexed(a)
+
+    def rgb(self, k: int) -> PILImage.Image:
+        """Frame ``k`` as an RGB image."""
+        from PIL import Image
+
+        ss = self.supersample
+        a = np.array(self._draw_faces(k, ss), dtype=np.uint8)
+        if ss == 1:
+            self._decorate(a, k)
+            return Image.fromarray(PALETTE[a], "RGB")
+        img = Image.fromarray(PALETTE[a], "RGB").reduce(ss)
+        rgb = np.array(img, dtype=np.uint8)
+        ink = np.zeros(rgb.shape[:2], dtype=np.uint8)
+        self._decorate(ink, k)
+        on = ink > 0
+        rgb[on] = PALETTE[ink[on]]
+        return Image.fromarray(rgb, "RGB")
+
+
 def render_frame(
     view: View,
     k: int,
@@ -191,96 +508,12 @@ def render_frame(
     size: tuple[int, int],
     field: str | None = None,
     *,
-    supersample: int = 2,
+    supersample: int = 1,
 ) -> PILImage.Image:
     """Frame ``k`` as an RGB image of ``size``; ``camera`` fitted to ``size`` minus the color
-    bar (see :func:`frame_camera`)."""
-    from PIL import Image, ImageDraw
-
-    w, h = size
-    ss = supersample
-    img = Image.new("RGB", (w * ss, h * ss), (255, 255, 255))
-    draw = ImageDraw.Draw(img)
-    x = np.asarray(view.positions(k), dtype=np.float64)
-    xy, depth = camera.project(x)
-    xy = xy * ss
-    name = _field_name(view, field)
-    if name is not None:
-        meta = view.meta["fields"][name]
-        span = meta["max"] - meta["min"]
-        values = np.asarray(view.field(k, name), dtype=np.float64)
-        t = (values - meta["min"]) / span if span > 0 else np.zeros_like(values)
-    else:
-        t = None
-    light = _light(camera)
-    faces = view.faces(k)
-    # mesh lines where the faces are large enough on screen for them not to darken the picture
-    first = np.array([f[:2] for f in faces if len(f) >= 2], dtype=np.int64).reshape(-1, 2)
-    seg = np.linalg.norm(xy[first[:, 0]] - xy[first[:, 1]], axis=1) / ss
-    outline = len(faces) <= 4000 and bool(np.nanmedian(seg) > 12) if len(seg) else False
-    polys: list[tuple[float, list[tuple[float, float]], tuple[int, ...], tuple[int, ...]]] = []
-    by_size: dict[int, list[int]] = {}
-    for i, f in enumerate(faces):
-        by_size.setdefault(len(f), []).append(i)
-    for n, ids in by_size.items():
-        if n < 3:
-            continue
-        idx = np.array([faces[i] for i in ids], dtype=np.int64)
-        p = x[idx]  # (F, n, 3)
-        c = p.mean(axis=1, keepdims=True)
-        q = p - c
-        normal = np.cross(q, np.roll(q, -1, axis=1)).sum(axis=1)
-        norm = np.linalg.norm(normal, axis=1)
-        ok = np.isfinite(p).all(axis=(1, 2)) & (norm > 0)
-        normal = normal / np.where(norm > 0, norm, 1.0)[:, None]
-        shade = 0.35 + 0.65 * np.abs(normal @ light)
-        base = colormap(t[idx].mean(axis=1)) if t is not None else np.full((len(idx), 3), 190.0)
-        rgb = np.clip(base * shade[:, None], 0, 255).astype(np.int64)
-        edge = np.clip(rgb * 0.6, 0, 255).astype(np.int64)
-        d = depth[idx].mean(axis=1)
-        for j in np.flatnonzero(ok):
-            pts = [(float(a), float(b)) for a, b in xy[idx[j]]]
-            polys.append((float(d[j]), pts, tuple(rgb[j]), tuple(edge[j])))
-    polys.sort(key=lambda p: p[0])
-    for _, pts, fill, edge_rgb in polys:
-        draw.polygon(pts, fill=fill, outline=edge_rgb if outline else None)
-    if ss > 1:
-        img = img.reduce(ss)
-    _decorate(img, view, k, name)
-    return img
-
-
-def _decorate(img: PILImage.Image, view: View, k: int, name: str | None) -> None:
-    """Title, time and color bar."""
-    from PIL import ImageDraw
-
-    draw = ImageDraw.Draw(img)
-    w, h = img.size
-    font = _font(max(11, h // 30))
-    small = _font(max(10, h // 36))
-    fr = view.frames[k]
-    draw.text((10, 8), view.meta["name"], fill=(20, 20, 20), font=font)
-    draw.text(
-        (10, 12 + int(font.getbbox("Ag")[3])),
-        f"t = {fr['time']:.4g} s   step {fr['step']}   frame {k + 1}/{len(view.frames)}",
-        fill=(70, 70, 70),
-        font=small,
-    )
-    if name is None:
-        return
-    meta = view.meta["fields"][name]
-    bar_w, top, bottom = 14, int(h * 0.22), int(h * 0.8)
-    left = w - bar_w - 66
-    ramp = colormap(np.linspace(1.0, 0.0, bottom - top)).astype(np.uint8)
-    for r, rgb in enumerate(ramp):
-        draw.line([(left, top + r), (left + bar_w, top + r)], fill=tuple(int(c) for c in rgb))
-    draw.rectangle([left, top, left + bar_w, bottom], outline=(60, 60, 60))
-    unit = meta["unit"]
-    draw.text((left + bar_w + 4, top - 6), f"{meta['max']:.3g}", fill=(40, 40, 40), font=small)
-    draw.text((left + bar_w + 4, bottom - 8), f"{meta['min']:.3g}", fill=(40, 40, 40), font=small)
-    label = f"{meta['label']} ({unit})"
-    tw = draw.textlength(label, font=small)
-    draw.text((w - tw - 8, top - 12 - 2 * small.size), label, fill=(40, 40, 40), font=small)
+    bar (see :func:`frame_camera`). For many frames, a :class:`FrameRenderer` prepares what
+    they share once."""
+    return FrameRenderer(view, camera, size, field, supersample=supersample).rgb(k)
 
 
 def frame_camera(view: View, size: tuple[int, int], azimuth: float = AZIMUTH) -> Camera:
@@ -319,13 +552,14 @@ def iter_frames(
     *,
     size: tuple[int, int] = (640, 480),
     field: str | None = None,
+    supersample: int = 1,
 ) -> Iterator[PILImage.Image]:
     """Frames of the run (all by default) as RGB images, seen by its fixed camera, rendered
     one at a time as they are asked for."""
     ks = range(len(view.frames)) if frames is None else frames
-    cam = frame_camera(view, size)
+    r = FrameRenderer(view, frame_camera(view, size), size, field, supersample=supersample)
     for k in ks:
-        yield render_frame(view, k, cam, size, field)
+        yield r.rgb(k)
 
 
 def render_frames(
@@ -334,15 +568,17 @@ def render_frames(
     *,
     size: tuple[int, int] = (640, 480),
     field: str | None = None,
+    supersample: int = 1,
 ) -> list[PILImage.Image]:
     """Frames of the run (all by default) as RGB images, seen by its fixed camera (all in
     memory: for a few; :func:`iter_frames` renders them one at a time)."""
-    return list(iter_frames(view, frames, size=size, field=field))
+    return list(iter_frames(view, frames, size=size, field=field, supersample=supersample))
 
 
 class GifWriter:
     """An animated, looping GIF written frame by frame: each RGB image is quantized (one
-    palette of at most 255 colors per frame, no dithering) and encoded when it is appended.
+    palette of at most 255 colors per frame, no dithering; a palette image, such as
+    :meth:`FrameRenderer.indexed` draws, is taken as it is) and encoded when it is appended.
 
     The file is what Pillow's ``save(save_all=True, loop=0, optimize=False)`` writes for the
     same quantized frames: the first frame whole with its palette as the global color table;
@@ -369,7 +605,13 @@ class GifWriter:
 
         if self._fh is None:
             raise ValueError(f"{self.path}: the GIF is closed")
-        im = image.quantize(colors=255, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
+        im = (
+            image  # a palette image (a :class:`FrameRenderer` frame) is a GIF frame as it is
+            if image.mode == "P"
+            else image.quantize(
+                colors=255, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE
+            )
+        )
         assert im.palette is not None
         im.palette.palette = bytearray(im.getpalette(None) or b"")  # as Pillow's writer does
         if self._previous is None:
@@ -463,19 +705,40 @@ def write_gif(
 
 
 def ffmpeg_exe() -> str | None:
-    """The ffmpeg of the imageio-ffmpeg package, or None when it is not installed."""
+    """The ffmpeg of the imageio-ffmpeg package, or None when it is not installed. Its
+    bundled binary is taken as it is (imageio-ffmpeg would run it once to check it, which
+    costs as much as encoding a short preview: an encoder that does not run makes no video,
+    see :class:`Mp4Writer`)."""
     try:
         import imageio_ffmpeg
     except ImportError:
         return None
+    exe = os.environ.get("IMAGEIO_FFMPEG_EXE")
+    if exe:
+        return exe
+    try:
+        from imageio_ffmpeg import _definitions, _utils
+
+        bundled = Path(_utils._get_bin_dir()) / _definitions.FNAME_PER_PLATFORM.get(
+            _definitions.get_platform(), ""
+        )
+        if bundled.is_file() and os.access(bundled, os.X_OK):
+            return str(bundled)
+    except (ImportError, AttributeError, TypeError, OSError):  # another imageio-ffmpeg
+        pass
     try:
         return str(imageio_ffmpeg.get_ffmpeg_exe())
     except RuntimeError:
         return None
 
 
-#: The encoders tried, in order: H.264 where ffmpeg has it, else MPEG-4 part 2.
-_CODECS = (["libx264", "-pix_fmt", "yuv420p"], ["mpeg4", "-q:v", "3"])
+#: The encoders tried, in order: H.264 where ffmpeg has it (its fastest preset: a preview's
+#: video is encoded in a few milliseconds a frame, about 2.5 times faster than the default
+#: preset, for files about 2.5 times larger), else MPEG-4 part 2.
+_CODECS = (
+    ["libx264", "-preset", "ultrafast", "-pix_fmt", "yuv420p"],
+    ["mpeg4", "-q:v", "3"],
+)
 
 
 class Mp4Writer:
@@ -757,6 +1020,214 @@ def energy_envelope(csv_path: Path, buckets: int = ENERGY_BUCKETS) -> EnergyEnve
     return env
 
 
+def _nice_ticks(lo: float, hi: float, target: int = 6) -> tuple[list[float], float]:
+    """Ticks at multiples of 1, 2 or 5 times a power of ten inside ``[lo, hi]``, and their
+    step."""
+    span = hi - lo
+    if not (span > 0 and math.isfinite(span)):
+        return [lo], 1.0
+    raw = span / max(target - 1, 1)
+    mag = 10.0 ** math.floor(math.log10(raw))
+    step = next((m * mag for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * mag >= raw), 10 * mag)
+    first = math.ceil(lo / step - 1e-9)
+    ticks = []
+    i = first
+    while i * step <= hi + 1e-9 * step:
+        ticks.append(i * step)
+        i += 1
+    return ticks, step
+
+
+def _tick_label(v: float, step: float, scale: float) -> str:
+    """``v`` as an axis shows it: divided by ``scale`` (a power of ten shown once at the top
+    of the axis), with as many decimals as ``step`` needs."""
+    v, step = v / scale, step / scale
+    if abs(v) < step * 1e-6:
+        v = 0.0
+    decimals = max(0, -math.floor(math.log10(step) + 1e-9)) if step > 0 else 0
+    if step * 10**decimals % 1 > 1e-6 and decimals < 6:  # 2.5: one more
+        decimals += 1
+    return f"{v:.{decimals}f}"
+
+
+def _axis_scale(ticks: list[float]) -> float:
+    """A power of ten to divide the tick labels by when they are very large or small."""
+    top = max((abs(t) for t in ticks), default=0.0)
+    if top == 0 or 1e-3 <= top < 1e5:
+        return 1.0
+    return float(10.0 ** math.floor(math.log10(top)))
+
+
+def _limits(values: list[F64], margin: float = 0.05) -> tuple[float, float]:
+    """The data range with ``margin`` of it added on each side (one unit when it is empty or
+    a single value)."""
+    finite = [v[np.isfinite(v)] for v in values]
+    finite = [v for v in finite if len(v)]
+    if not finite:
+        return 0.0, 1.0
+    lo = float(min(v.min() for v in finite))
+    hi = float(max(v.max() for v in finite))
+    if hi - lo <= 1e-12 * max(abs(lo), abs(hi), 1e-300):
+        d = abs(lo) * 0.05 if lo != 0 else 1.0
+        return lo - d, hi + d
+    d = (hi - lo) * margin
+    return lo - d, hi + d
+
+
+@dataclass
+class Curve:
+    """One curve of :func:`line_plot`: its legend label (None: not in the legend), color,
+    line width (points) and points."""
+
+    label: str | None
+    color: tuple[int, int, int]
+    width: float
+    t: F64
+    v: F64
+
+
+def _hex(color: str) -> tuple[int, int, int]:
+    c = color.lstrip("#")
+    return int(c[0:2], 16), int(c[2:4], 16), int(c[4:6], 16)
+
+
+def line_plot(
+    curves: list[Curve],
+    *,
+    title: str,
+    xlabel: str,
+    ylabel: str,
+    vlines: Sequence[tuple[float, str | None]] = (),
+    size: tuple[int, int] = (720, 400),
+    supersample: int = 2,
+) -> PILImage.Image:
+    """A line plot drawn with Pillow (axes, ticks, grid, legend, dotted vertical lines at
+    ``vlines``: ``(x, label)``): what matplotlib drew before, at a small part of its cost
+    (importing it alone took half a second)."""
+    from PIL import Image, ImageDraw
+
+    s = max(1, int(supersample))
+    w, h = size[0] * s, size[1] * s
+    img = Image.new("RGB", (w, h), (255, 255, 255))
+    draw = ImageDraw.Draw(img)
+    font = _font(11 * s)
+    big = _font(13 * s)
+    ink = (30, 30, 30)
+    x0, x1 = _limits([c.t for c in curves] + [np.array([x for x, _ in vlines], dtype=float)])
+    y0, y1 = _limits([c.v for c in curves])
+    xt, xstep = _nice_ticks(x0, x1)
+    yt, ystep = _nice_ticks(y0, y1)
+    xscale, yscale = _axis_scale(xt), _axis_scale(yt)
+    ylabels = [_tick_label(v, ystep, yscale) for v in yt]
+    lab_w = max((font.getlength(t) for t in ylabels), default=0.0)
+    line_h = font.getbbox("Ag")[3]
+    left = int(12 * s + line_h + 8 * s + lab_w)
+    right, top, bottom = (
+        w - 14 * s,
+        int(16 * s + big.getbbox("Ag")[3]),
+        h - int(2 * line_h + 18 * s),
+    )
+
+    def px(x: Any) -> Any:  # data to pixels, for numbers and arrays
+        return left + (np.asarray(x, dtype=np.float64) - x0) / (x1 - x0) * (right - left)
+
+    def py(y: Any) -> Any:
+        return bottom - (np.asarray(y, dtype=np.float64) - y0) / (y1 - y0) * (bottom - top)
+
+    grid = (232, 232, 232)
+    for v, text in zip(yt, ylabels):
+        y = float(py(v))
+        draw.line([(left, y), (right, y)], fill=grid, width=s)
+        draw.line([(left - 4 * s, y), (left, y)], fill=ink, width=s)
+        tw = font.getlength(text)
+        draw.text((left - 6 * s - tw, y - line_h / 2), text, fill=ink, font=font)
+    for v in xt:
+        x = float(px(v))
+        draw.line([(x, top), (x, bottom)], fill=grid, width=s)
+        draw.line([(x, bottom), (x, bottom + 4 * s)], fill=ink, width=s)
+        text = _tick_label(v, xstep, xscale)
+        tw = font.getlength(text)
+        draw.text((x - tw / 2, bottom + 6 * s), text, fill=ink, font=font)
+    if yscale != 1.0:
+        draw.text(
+            (left, top - line_h - 2 * s), f"1e{round(math.log10(yscale))}", fill=ink, font=font
+        )
+    if xscale != 1.0:
+        text = f"1e{round(math.log10(xscale))}"
+        draw.text(
+            (right - font.getlength(text), bottom + 6 * s + line_h), text, fill=ink, font=font
+        )
+    legend: list[tuple[str, tuple[int, int, int], float, bool]] = []
+    for x, label in vlines:
+        xx = float(px(x))
+        dash = 3 * s
+        for y in range(top, bottom, 2 * dash):
+            draw.line([(xx, y), (xx, min(y + dash, bottom))], fill=(128, 128, 128), width=s)
+        if label is not None:
+            legend.append((label, (128, 128, 128), 1.0, True))
+    for c in curves:
+        ok = np.isfinite(c.t) & np.isfinite(c.v)
+        if ok.sum() >= 1:
+            pts = np.stack([px(c.t[ok]), py(c.v[ok])], axis=1)
+            width = max(1, round(c.width * 1.4 * s))
+            if len(pts) == 1:
+                r = width
+                x, y = pts[0]
+                draw.ellipse([x - r, y - r, x + r, y + r], fill=c.color)
+            else:
+                draw.line(pts.ravel().tolist(), fill=c.color, width=width, joint="curve")
+        if c.label is not None:
+            legend.insert(
+                len(legend) - sum(1 for e in legend if e[3]), (c.label, c.color, c.width, False)
+            )
+    draw.rectangle([left, top, right, bottom], outline=ink, width=s)
+    # the legend in the corner that hides the fewest points
+    if legend:
+        pad, sample = 6 * s, 22 * s
+        lw = int(max(font.getlength(e[0]) for e in legend) + sample + 3 * pad)
+        lh = int(len(legend) * (line_h + 4 * s) + 2 * pad)
+        corners = [
+            (right - lw - pad, top + pad),
+            (left + pad, top + pad),
+            (left + pad, bottom - lh - pad),
+            (right - lw - pad, bottom - lh - pad),
+        ]
+        xs = np.concatenate([px(c.t) for c in curves]) if curves else np.zeros(0)
+        ys = np.concatenate([py(c.v) for c in curves]) if curves else np.zeros(0)
+
+        def hidden(corner: tuple[int, int]) -> int:
+            cx, cy = corner
+            inside = (xs >= cx) & (xs <= cx + lw) & (ys >= cy) & (ys <= cy + lh)
+            return int(inside.sum())
+
+        lx, ly = min(corners, key=hidden)
+        lx, ly = int(lx), int(ly)
+        draw.rectangle(
+            [lx, ly, lx + lw, ly + lh], fill=(255, 255, 255), outline=(200, 200, 200), width=s
+        )
+        for i, (label, color, weight, dotted) in enumerate(legend):
+            y = ly + pad + i * (line_h + 4 * s) + line_h / 2
+            if dotted:
+                for x in range(lx + pad, lx + pad + sample, 6 * s):
+                    draw.line([(x, y), (x + 3 * s, y)], fill=color, width=s)
+            else:
+                draw.line(
+                    [(lx + pad, y), (lx + pad + sample, y)],
+                    fill=color,
+                    width=max(1, round(weight * 1.4 * s)),
+                )
+            draw.text((lx + 2 * pad + sample, y - line_h / 2), label, fill=ink, font=font)
+    tw = big.getlength(title)
+    draw.text(((left + right) / 2 - tw / 2, 8 * s), title, fill=ink, font=big)
+    tw = font.getlength(xlabel)
+    draw.text(((left + right) / 2 - tw / 2, h - line_h - 8 * s), xlabel, fill=ink, font=font)
+    lab = Image.new("RGB", (int(font.getlength(ylabel)) + 2, int(line_h) + 2 * s), (255, 255, 255))
+    ImageDraw.Draw(lab).text((1, 0), ylabel, fill=ink, font=font)
+    lab = lab.transpose(Image.Transpose.ROTATE_90)
+    img.paste(lab, (8 * s, int((top + bottom) / 2 - lab.size[1] / 2)))
+    return img.reduce(s) if s > 1 else img
+
+
 def plot_energy(
     csv_path: Path,
     png_path: Path,
@@ -765,36 +1236,30 @@ def plot_energy(
     events: list[dict[str, Any]] | None = None,
 ) -> None:
     """Plots ``energy.csv``: kinetic, gravitational (when there is gravity), elastic and
-    total energy over time, topology changes marked. The file is read row by row into an
-    :class:`EnergyEnvelope`: a history longer than :data:`ENERGY_BUCKETS` rows is drawn as
-    each bucket's min and max, so spikes stay visible and memory stays bounded."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
+    total energy over time, topology changes marked (720 x 400 pixels, drawn by
+    :func:`line_plot`). The file is read row by row into an :class:`EnergyEnvelope`: a
+    history longer than :data:`ENERGY_BUCKETS` rows is drawn as each bucket's min and max,
+    so spikes stay visible and memory stays bounded."""
     env = energy_envelope(csv_path)
-    fig = Figure(figsize=(7.2, 4.0), dpi=100)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
-    ax.plot(*env.series("kinetic"), label="kinetic", color="#d62728")
-    ax.plot(*env.series("elastic"), label="elastic", color="#1f77b4")
+    curves = [
+        Curve("kinetic", _hex("#d62728"), 1.0, *env.series("kinetic")),
+        Curve("elastic", _hex("#1f77b4"), 1.0, *env.series("elastic")),
+    ]
     tg, g = env.series("gravitational")
     if np.any(g != 0):
-        ax.plot(tg, g, label="gravitational", color="#2ca02c")
-    ax.plot(*env.series("total"), label="total", color="black", linewidth=2)
-    for i, c in enumerate(events or []):
-        ax.axvline(
-            c["time"],
-            color="grey",
-            linestyle=":",
-            label=f"{c['kind']}" if i == 0 else None,
-        )
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("energy (J)")
-    ax.set_title(f"{title}: energy" if title else "energy")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize="small")
-    fig.tight_layout()
-    fig.savefig(png_path)
+        curves.append(Curve("gravitational", _hex("#2ca02c"), 1.0, tg, g))
+    curves.append(Curve("total", (0, 0, 0), 2.0, *env.series("total")))
+    vlines = [
+        (float(c["time"]), str(c["kind"]) if i == 0 else None) for i, c in enumerate(events or [])
+    ]
+    img = line_plot(
+        curves,
+        title=f"{title}: energy" if title else "energy",
+        xlabel="time (s)",
+        ylabel="energy (J)",
+        vlines=vlines,
+    )
+    img.save(png_path)
 
 
 def render_previews(
@@ -835,7 +1300,9 @@ def render_previews(
         )
         try:
             frames = range(n) if mp4 is not None else ks
-            for k, im in zip(frames, iter_frames(view, frames, size=size)):
+            renderer = FrameRenderer(view, frame_camera(view, size), size)
+            for k in frames:
+                im = renderer.indexed(k)
                 if k in in_gif:
                     gif.append(im)
                 if mp4 is not None:

@@ -525,3 +525,10 @@ class Simulation:
             f"topomech.Simulation(dimension={self.dimension}, vertices={self.n_vertices}, "
             f"integrator={self.integrator!r}, steps={self.steps}, time={self.time:g})"
         )
+
+    def _repr_html_(self) -> str:
+        """Jupyter's view: a summary table and the current mesh in the viewer
+        (:func:`topomech.notebook.simulation_html`)."""
+        from topomech.notebook import simulation_html
+
+        return simulation_html(self)
