@@ -6,6 +6,8 @@ real notebook displays them."""
 from __future__ import annotations
 
 import html.parser
+import os
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -196,6 +198,16 @@ def test_simulation_mesh_page_holds_the_current_positions(tmp_path: Path) -> Non
 
 # ---------------------------------------------------------------------------------- browser
 
+#: As tests/test_viewer.py launches it: WebGL drawn by SwiftShader (its CPU renderer).
+CHROMIUM_ARGS = ["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+
+
+def _chromium() -> str | None:
+    path = os.environ.get("TOPOMECH_CHROMIUM", "/usr/bin/chromium")
+    if Path(path).is_file():
+        return path
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
 
 def test_embedded_viewer_starts_in_chromium(run_dir: Path) -> None:
     """The notebook's HTML in a page of its own: the iframe's viewer runs (its
@@ -203,8 +215,6 @@ def test_embedded_viewer_starts_in_chromium(run_dir: Path) -> None:
     pw = pytest.importorskip(
         "playwright.sync_api", reason="the playwright package is not installed (make browser)"
     )
-    from test_viewer import CHROMIUM_ARGS, _chromium
-
     exe = _chromium()
     if exe is None:
         pytest.skip("no Chromium (/usr/bin/chromium; make browser installs it)")
