@@ -176,3 +176,52 @@ def test_ticks_are_round_and_inside(lo: float, hi: float) -> None:
     scale = render._axis_scale(ticks)
     labels = [render._tick_label(t, step, scale) for t in ticks]
     assert len(set(labels)) == len(labels)  # distinct: enough decimals
+
+
+# ---------------------------------------------------------------------------------- video
+
+FAKE_FFMPEG = """#!/bin/sh
+# a stand-in ffmpeg: no H.264 ({fail_all}: no codec at all); else reads the frames and
+# writes their byte count into the output file (the last argument)
+for a in "$@"; do out="$a"; done
+case " $* " in *" libx264 "*) exit 1;; esac
+[ "{fail_all}" = yes ] && exit 1
+wc -c > "$out"
+"""
+
+
+@pytest.mark.parametrize("fail_all", [False, True])
+def test_video_falls_back_to_the_next_codec_or_to_none(
+    runs: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, fail_all: bool
+) -> None:
+    """The frames go to the encoder through a thread: an encoder without H.264 gets them
+    again for MPEG-4 (every frame's bytes arrive); one that fails on every codec leaves no
+    file, and the GIF is written all the same."""
+    exe = tmp_path / "ffmpeg"
+    exe.write_text(FAKE_FFMPEG.format(fail_all="yes" if fail_all else "no"))
+    exe.chmod(0o755)
+    monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(exe))
+    out = tmp_path / "run"
+    s = run_scene(shipped_scenes()["cube_cut"], out, steps=4)
+    assert s["outputs"]["preview"] == "preview.gif"
+    n = s["frames"]
+    if fail_all:
+        assert s["outputs"]["video"] is None
+        assert not (out / "preview.mp4").exists()
+    else:
+        assert s["outputs"]["video"] == "preview.mp4"
+        assert int((out / "preview.mp4").read_text()) == n * 640 * 480 * 3
+
+
+def test_mp4_writer_stops_when_the_encoder_dies(tmp_path: Path) -> None:
+    exe = tmp_path / "ffmpeg"
+    exe.write_text("#!/bin/sh\nexit 3\n")
+    exe.chmod(0o755)
+    w = render.Mp4Writer(tmp_path / "x.mp4", (320, 240), 10, str(exe), ["libx264"])
+    frame = Image.new("RGB", (320, 240), (10, 20, 30))
+    for _ in range(40):  # more than the pipe holds: the writes fail once ffmpeg has exited
+        w.append(frame)
+    assert w.failed
+    assert w.append(frame) is False
+    assert w.close() is False
+    assert not (tmp_path / "x.mp4").exists()

@@ -30,7 +30,9 @@ import csv
 import functools
 import math
 import os
+import queue
 import subprocess
+import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -87,6 +89,8 @@ AZIMUTH = 35.0
 ELEVATION = 25.0
 #: The longest GIF: runs with more frames are sampled evenly.
 MAX_GIF_FRAMES = 300
+#: Frames waiting for the MP4 encoder at most (each ``width * height * 3`` bytes once sent).
+MP4_QUEUE = 3
 #: The energy plot's buckets: a longer history is plotted as the min and max of each of at
 #: most this many buckets of consecutive rows (at most twice as many points per curve).
 ENERGY_BUCKETS = 1024
@@ -742,9 +746,11 @@ _CODECS = (
 
 
 class Mp4Writer:
-    """An MP4 encoded by ffmpeg as frames are appended (raw RGB piped to its input, one
-    frame at a time). :attr:`failed` once the encoder has stopped (missing codec, full
-    disk); :meth:`close` says whether the file is complete, and removes it otherwise."""
+    """An MP4 encoded by ffmpeg as frames are appended (raw RGB piped to its input by a
+    thread of its own, so that the next frames are drawn while ffmpeg reads; at most
+    :data:`MP4_QUEUE` frames wait). :attr:`failed` once the encoder has stopped (missing
+    codec, full disk); :meth:`close` says whether the file is complete, and removes it
+    otherwise."""
 
     def __init__(
         self, path: Path, size: tuple[int, int], fps: int, exe: str, codec: list[str]
@@ -759,6 +765,8 @@ class Mp4Writer:
             "-movflags", "+faststart", str(self.path),
         ]  # fmt: skip
         self._proc: subprocess.Popen[bytes] | None
+        self._queue: queue.Queue[PILImage.Image | None] = queue.Queue(maxsize=MP4_QUEUE)
+        self._thread: threading.Thread | None = None
         try:
             self._proc = subprocess.Popen(
                 cmd,
@@ -769,28 +777,47 @@ class Mp4Writer:
         except OSError:
             self._proc = None
             self.failed = True
+            return
+        self._thread = threading.Thread(target=self._feed, name="topomech-mp4", daemon=True)
+        self._thread.start()
+
+    def _feed(self) -> None:
+        """The thread: frames from the queue to ffmpeg's input until None, then closes it."""
+        proc = self._proc
+        stdin = proc.stdin if proc is not None else None
+        while True:
+            image = self._queue.get()
+            if image is None:
+                break
+            if self.failed or stdin is None:
+                continue  # drained: the encoder has stopped
+            try:
+                stdin.write(image.convert("RGB").tobytes())
+            except (BrokenPipeError, OSError, ValueError):
+                self.failed = True
+        if stdin is not None:
+            try:
+                stdin.close()
+            except OSError:
+                self.failed = True
 
     def append(self, image: PILImage.Image) -> bool:
         """Sends one frame (of :attr:`size`) to the encoder; False once it has failed."""
-        if self.failed or self._proc is None or self._proc.stdin is None:
+        if self.failed or self._thread is None:
             return False
         if image.size != self.size:
             raise ValueError(f"a frame of {image.size}, the video is {self.size}")
-        try:
-            self._proc.stdin.write(image.convert("RGB").tobytes())
-        except (BrokenPipeError, OSError):
-            self.failed = True
+        self._queue.put(image)
         return not self.failed
 
     def close(self, timeout: float = 600) -> bool:
         """Ends the input and waits for the encoder; True when the file is written."""
         proc, self._proc = self._proc, None
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            self._queue.put(None)
+            thread.join()
         if proc is not None:
-            try:
-                if proc.stdin is not None:
-                    proc.stdin.close()
-            except OSError:
-                self.failed = True
             try:
                 if proc.wait(timeout=timeout) != 0:
                     self.failed = True
