@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -225,3 +226,26 @@ def test_mp4_writer_stops_when_the_encoder_dies(tmp_path: Path) -> None:
     assert w.append(frame) is False
     assert w.close() is False
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_an_error_encoding_the_gif_reaches_the_caller(
+    runs: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The GIF is encoded in a thread: a full disk there is raised by render_previews, and
+    the unfinished file is removed."""
+    out = tmp_path / "run"
+    shutil.copytree(runs["corotational"], out)
+    (out / "preview.gif").unlink()
+    calls = []
+    append = render.GifWriter.append
+
+    def failing(self: render.GifWriter, image: Image.Image) -> None:
+        calls.append(1)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        append(self, image)
+
+    monkeypatch.setattr(render.GifWriter, "append", failing)
+    with pytest.raises(OSError, match="No space left"):
+        render.render_previews(out, video=False)
+    assert not (out / "preview.gif").exists()

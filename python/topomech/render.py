@@ -1202,7 +1202,9 @@ def line_plot(
                 x, y = pts[0]
                 draw.ellipse([x - r, y - r, x + r, y + r], fill=c.color)
             else:
-                draw.line(pts.ravel().tolist(), fill=c.color, width=width, joint="curve")
+                # round joints only where a wide line would show notches at its corners
+                joint = "curve" if width > 3 else None
+                draw.line(pts.ravel().tolist(), fill=c.color, width=width, joint=joint)
         if c.label is not None:
             legend.insert(
                 len(legend) - sum(1 for e in legend if e[3]), (c.label, c.color, c.width, False)
@@ -1286,7 +1288,50 @@ def plot_energy(
         ylabel="energy (J)",
         vlines=vlines,
     )
-    img.save(png_path)
+    img.save(png_path, compress_level=1)  # 4 times faster than the default level
+
+
+_STOP = object()
+
+
+class _InThread:
+    """Calls ``work(item)`` for each item :meth:`put`, in order, in a thread of its own (at
+    most ``depth`` items waiting); :meth:`close` waits for the last one and raises what
+    ``work`` raised (after which the items put are dropped)."""
+
+    def __init__(self, work: Callable[[Any], object], depth: int = 3) -> None:
+        self._work = work
+        self._queue: queue.Queue[Any] = queue.Queue(maxsize=depth)
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="topomech-gif", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is _STOP:
+                return
+            if self._error is None:
+                try:
+                    self._work(item)
+                except BaseException as e:  # raised in the caller's thread by close()
+                    self._error = e
+
+    def put(self, item: object) -> None:
+        if self._error is not None:
+            self.close()
+        self._queue.put(item)
+
+    def stop(self) -> None:
+        """Waits for the thread to end (what it raised is dropped)."""
+        if self._thread.is_alive():
+            self._queue.put(_STOP)
+            self._thread.join()
+
+    def close(self) -> None:
+        self.stop()
+        if self._error is not None:
+            raise self._error
 
 
 def render_previews(
@@ -1325,16 +1370,21 @@ def render_previews(
             if exe is not None
             else None
         )
+        # the GIF is encoded in a thread of its own (Pillow's encoder lets go of the GIL),
+        # the MP4 by ffmpeg: both while the next frames are drawn
+        gif_thread = _InThread(gif.append)
         try:
             frames = range(n) if mp4 is not None else ks
             renderer = FrameRenderer(view, frame_camera(view, size), size)
             for k in frames:
                 im = renderer.indexed(k)
                 if k in in_gif:
-                    gif.append(im)
+                    gif_thread.put(im)
                 if mp4 is not None:
                     mp4.append(im)
+            gif_thread.close()
         except BaseException:
+            gif_thread.stop()
             gif.abort()
             if mp4 is not None:
                 mp4.failed = True
