@@ -20,10 +20,9 @@ _DATA = Path(__file__).resolve().parent / "data"
 
 #: Each sample's name and what it holds.
 SAMPLES: dict[str, str] = {
-    "beam.msh": "1 m x 0.2 m x 0.2 m beam of 308 tetrahedra (Gmsh 4.1), "
-    "physical groups beam (volume), clamp (x = 0), grip (x = 1), top (z = 0.2)",
-    "sheet.obj": "1 m x 1 m flat sheet of 8 x 8 quads in the plane z = 0 (OBJ surface)",
-    "block.vtu": "0.6 m x 0.2 m x 0.2 m block of 6 x 2 x 2 hexahedra (VTK XML)",
+    "beam.msh": "1 x 0.2 x 0.2 m beam, 308 tetrahedra (Gmsh 4.1; groups beam clamp grip top)",
+    "sheet.obj": "1 x 1 m flat sheet of 8 x 8 quads in the plane z = 0 (OBJ surface)",
+    "block.vtu": "0.6 x 0.2 x 0.2 m block of 6 x 2 x 2 hexahedra (VTK XML)",
 }
 
 
