@@ -15,6 +15,8 @@ wireframe toggle; and the dart view, instanced line segments over the translucen
 tells scripts and tests what is drawn: ``frame``, ``mode``, ``darts`` and ``links`` (the
 darts and alpha links drawn), ``mapDarts``, ``picked``, ``camera``, the renderer's ``info``
 of the last render, and ``pick(x, y)``, ``project(vertex)``, ``setFrame(k)``, ``render()``.
+A browser that gives the page no WebGL gets the 2D viewer the 3D one replaced (Canvas 2D, no
+picking), with a line saying so.
 """
 
 from __future__ import annotations
