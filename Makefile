@@ -2,13 +2,16 @@
 #
 #   make venv     .venv with the build and test tools
 #   make develop  build the extension (release) and install the package into .venv
-#   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest
+#   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest (with the wheel's
+#                 test: its build starts first, in the background)
+#   make wheel    a stripped abi3 manylinux2014 wheel into target/wheels (scripts/wheel.py)
 #   make demo     run `topomech demo` (writes out/demo)
 #   make bench    kernel benchmarks, the cost of topology changes, the engine against
 #                 hand-written baselines (writes bench/results.md, bench/results.json and
 #                 the kernel's and topology's output, bench/kernel.txt, bench/topology.txt),
 #                 then `make readme-perf`
 #   make readme-perf  rewrite README.md's benchmark figures from those files
+#   make bench-previews  previews against stepping per shipped scene (bench/previews.md)
 #   make bench-peers  topomech against Newton, Taichi and pyPBD in their own .venv-peers
 #                 (writes bench/peers.md and bench/peers.json)
 #   make browser  playwright into .venv, and Debian's chromium when missing (for the viewer's
@@ -30,7 +33,8 @@ VENV_STAMP := $(VENV)/.stamp-venv
 DEVELOP_STAMP := $(VENV)/.stamp-develop
 # Linters are pinned to a minor (ruff) or major (mypy) version: new releases add checks.
 DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 mypy>=2,<3 \
-	pillow>=10.1 matplotlib>=3.7 scipy imageio-ffmpeg>=0.4.9 playwright>=1.40 scikit-fem gmsh
+	pillow>=10.1 matplotlib>=3.7 scipy imageio-ffmpeg>=0.4.9 playwright>=1.40 scikit-fem gmsh \
+	nbclient ipykernel ziglang>=0.13
 
 .PHONY: venv develop test rust-test py-test lint demo bench clean browser docs-pictures
 
@@ -56,7 +60,7 @@ $(DEVELOP_STAMP): $(VENV_STAMP) $(RUST_SOURCES) pyproject.toml
 		|| { cat $(VENV)/develop.log >&2; echo "make: the build failed (log: $(VENV)/develop.log)" >&2; exit 1; }
 	@touch $@
 
-test: rust-test develop lint py-test
+test: wheel-start rust-test develop lint py-test
 
 rust-test:
 	$(CARGO) fmt --all --check
@@ -71,6 +75,18 @@ lint: $(DEVELOP_STAMP)
 
 py-test: $(DEVELOP_STAMP) browser
 	$(VPY) -m pytest -q
+
+# The wheel: a release build with zig (the ziglang package) for glibc 2.17, in target/wheel
+# (its log: .venv/wheel.log, printed when it fails); up to date when newer than every source.
+# `make test` starts it first, in the background at the lowest priority (wheel-start), so
+# that it uses the CPU the other steps leave idle; tests/test_wheel.py waits for it, then
+# installs it into a fresh venv and runs the demo there.
+.PHONY: wheel wheel-start
+wheel: $(VENV_STAMP)
+	@$(VPY) scripts/wheel.py build
+
+wheel-start: $(VENV_STAMP)
+	@$(VPY) scripts/wheel.py start
 
 browser: $(VENV_STAMP)
 	scripts/install_browser.sh $(VPY)
@@ -90,7 +106,14 @@ bench:
 	set -o pipefail; $(CARGO) bench -p topomech-physics --bench topology | tee bench/topology.txt
 	$(CARGO) bench -p topomech-physics --bench engine
 	$(PYTHON) bench/report.py
+	@$(MAKE) --no-print-directory bench-previews
 	@$(MAKE) --no-print-directory readme-perf
+
+# The previews' cost against the stepping, per shipped scene (bench/previews.md and .json;
+# names the scenes whose previews take longer than their stepping and longer than 0.15 s).
+.PHONY: bench-previews
+bench-previews: $(DEVELOP_STAMP)
+	$(VPY) bench/previews.py
 
 # The README's sections between <!-- perf...:begin --> and <!-- perf...:end -->, from the
 # results (tests/test_readme_perf.py fails when one differs).
