@@ -249,3 +249,25 @@ def test_an_error_encoding_the_gif_reaches_the_caller(
     with pytest.raises(OSError, match="No space left"):
         render.render_previews(out, video=False)
     assert not (out / "preview.gif").exists()
+
+
+@pytest.mark.skipif(render.ffmpeg_exe() is None, reason="imageio-ffmpeg is not installed")
+def test_mp4_shows_the_frames(runs: dict[str, Path], tmp_path: Path) -> None:
+    """The palette frames go to ffmpeg as they are (pal8): the video's frames are the
+    pictures, but for H.264's loss."""
+    import imageio_ffmpeg
+
+    out = tmp_path / "run"
+    shutil.copytree(runs["corotational"], out)
+    written = render.render_previews(out)
+    assert written["video"] == "preview.mp4"
+    view = read_view(out)
+    r = render.FrameRenderer(view, render.frame_camera(view, (640, 480)), (640, 480))
+    gen = imageio_ffmpeg.read_frames(str(out / "preview.mp4"))
+    meta = next(gen)
+    assert tuple(meta["size"]) == (640, 480)
+    decoded = [np.frombuffer(f, dtype=np.uint8).reshape(480, 640, 3) for f in gen]
+    assert len(decoded) == len(view.frames)
+    for k in (0, len(decoded) - 1):
+        diff = np.abs(decoded[k].astype(np.int64) - _rgb(r.indexed(k)))
+        assert diff.mean() < 4, (k, diff.mean())

@@ -32,6 +32,7 @@ import math
 import os
 import queue
 import subprocess
+import sys
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -745,22 +746,46 @@ _CODECS = (
 )
 
 
+def _pal8(image: PILImage.Image) -> bytes:
+    """A palette image's palette as ffmpeg's ``pal8`` takes it after the indices: 256
+    entries of 4 bytes, B, G, R and A (a native-endian ARGB word, little-endian)."""
+    rgb = np.zeros((256, 3), dtype=np.uint8)
+    pal = np.frombuffer(bytes(image.getpalette("RGB") or []), dtype=np.uint8)[: 256 * 3]
+    rgb[: len(pal) // 3] = pal[: len(pal) // 3 * 3].reshape(-1, 3)
+    out = np.full((256, 4), 255, dtype=np.uint8)
+    out[:, 0], out[:, 1], out[:, 2] = rgb[:, 2], rgb[:, 1], rgb[:, 0]
+    if sys.byteorder == "big":
+        out = out[:, ::-1]
+    return out.tobytes()
+
+
 class Mp4Writer:
     """An MP4 encoded by ffmpeg as frames are appended (raw RGB piped to its input by a
     thread of its own, so that the next frames are drawn while ffmpeg reads; at most
-    :data:`MP4_QUEUE` frames wait). :attr:`failed` once the encoder has stopped (missing
+    :data:`MP4_QUEUE` frames wait). With ``indexed``, the frames are palette images, sent
+    as they are (ffmpeg's ``pal8``: the indices, then the palette; a third of the bytes of
+    RGB, and no conversion here). :attr:`failed` once the encoder has stopped (missing
     codec, full disk); :meth:`close` says whether the file is complete, and removes it
     otherwise."""
 
     def __init__(
-        self, path: Path, size: tuple[int, int], fps: int, exe: str, codec: list[str]
+        self,
+        path: Path,
+        size: tuple[int, int],
+        fps: int,
+        exe: str,
+        codec: list[str],
+        *,
+        indexed: bool = False,
     ) -> None:
         self.path = Path(path)
         self.size = size
+        self.indexed = indexed
         self.failed = False
         w, h = size
+        pix_fmt = "pal8" if indexed else "rgb24"
         cmd = [
-            exe, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
+            exe, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", pix_fmt,
             "-s", f"{w}x{h}", "-r", str(fps), "-i", "-", "-an", "-c:v", *codec,
             "-movflags", "+faststart", str(self.path),
         ]  # fmt: skip
@@ -792,7 +817,11 @@ class Mp4Writer:
             if self.failed or stdin is None:
                 continue  # drained: the encoder has stopped
             try:
-                stdin.write(image.convert("RGB").tobytes())
+                if self.indexed:
+                    stdin.write(image.tobytes())
+                    stdin.write(_pal8(image))
+                else:
+                    stdin.write(image.convert("RGB").tobytes())
             except (BrokenPipeError, OSError, ValueError):
                 self.failed = True
         if stdin is not None:
@@ -807,6 +836,8 @@ class Mp4Writer:
             return False
         if image.size != self.size:
             raise ValueError(f"a frame of {image.size}, the video is {self.size}")
+        if self.indexed and image.mode != "P":
+            raise ValueError(f"a frame of mode {image.mode}, the video takes palette images")
         self._queue.put(image)
         return not self.failed
 
@@ -1365,7 +1396,12 @@ def render_previews(
         gif = GifWriter(out_dir / "preview.gif", _frame_ms(len(ks)))
         mp4 = (
             Mp4Writer(
-                out_dir / "preview.mp4", size, max(1, round(1000 / _frame_ms(n))), exe, _CODECS[0]
+                out_dir / "preview.mp4",
+                size,
+                max(1, round(1000 / _frame_ms(n))),
+                exe,
+                _CODECS[0],
+                indexed=True,
             )
             if exe is not None
             else None
