@@ -11,7 +11,7 @@ longer than ``--floor`` seconds (a scene that steps in a few milliseconds still 
 starting the encoders and drawing a few frames); with ``--check``, exits 1 when there is
 one.
 
-    python bench/previews.py [--floor 0.15] [--repeat 3] [--check] [NAME ...]
+    python bench/previews.py [--floor 0.15] [--repeat 3] [--check] [--no-video] [NAME ...]
 """
 
 from __future__ import annotations
@@ -31,18 +31,18 @@ PROBE = """
 import json, sys
 from topomech.run import run_scene
 from topomech.scene import shipped_scenes
-s = run_scene(shipped_scenes()[sys.argv[1]], sys.argv[2])
+s = run_scene(shipped_scenes()[sys.argv[1]], sys.argv[2], video=sys.argv[3] == "1")
 print(json.dumps({"timings": s["timings"], "frames": s["frames"], "steps": s["steps"],
                   "outputs": s["outputs"], "error": s.get("error")}))
 """
 
 
-def measure(name: str, work: Path, repeat: int) -> dict[str, Any]:
+def measure(name: str, work: Path, repeat: int, video: bool = True) -> dict[str, Any]:
     runs = []
     for i in range(repeat):
         out = work / f"{name}-{i}"
         r = subprocess.run(
-            [sys.executable, "-c", PROBE, name, str(out)],
+            [sys.executable, "-c", PROBE, name, str(out), "1" if video else "0"],
             capture_output=True,
             text=True,
             check=True,
@@ -73,6 +73,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="runs per scene (the median)")
     ap.add_argument("--out", type=Path, default=HERE / "previews.md")
     ap.add_argument("--check", action="store_true", help="exit 1 when a scene is over")
+    ap.add_argument("--no-video", action="store_true", help="without preview.mp4")
     args = ap.parse_args(argv)
     from topomech.scene import shipped_scenes
 
@@ -80,7 +81,7 @@ def main(argv: list[str]) -> int:
     rows = []
     with tempfile.TemporaryDirectory(prefix="topomech-bench-previews-") as tmp:
         for name in names:
-            rows.append(measure(name, Path(tmp), max(1, args.repeat)))
+            rows.append(measure(name, Path(tmp), max(1, args.repeat), not args.no_video))
             r = rows[-1]
             print(
                 f"{name:<20} {r['frames']:>4} frames  stepping {r['stepping_s']:7.3f} s  "
