@@ -102,7 +102,6 @@ def _build() -> int:
     if done is not None:
         print(f"make: the wheel is up to date: {_describe(done)}")
         return 0
-    print(f"make: building the wheel (release, zig; log: {LOG})", flush=True)
     LOG.parent.mkdir(parents=True, exist_ok=True)
     py = python()
     env = {**os.environ, "CARGO_TARGET_DIR": str(TARGET), "CARGO_PROFILE_RELEASE_DEBUG": "0"}
@@ -110,6 +109,7 @@ def _build() -> int:
     if shutil.which("cargo", path=env["PATH"]) is None:
         print("make: the wheel cannot be built here: no cargo on PATH (Rust)", file=sys.stderr)
         return CANNOT
+    print(f"make: building the wheel (release, zig; log: {LOG})", flush=True)
     with LOG.open("w", encoding="utf-8") as log:
         if not _zig_ok(py):
             r = subprocess.run(
