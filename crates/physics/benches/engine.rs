@@ -23,6 +23,10 @@
 //! - `TOPOMECH_BENCH_CASE_BUDGET_S`: seconds one case may take (default 120)
 //! - `TOPOMECH_BENCH_TOTAL_BUDGET_S`: seconds for the whole bench (default 360)
 //! - `TOPOMECH_BENCH_OUT`: the output directory (default `bench/` at the workspace root)
+//! - `TOPOMECH_BENCH_SOLVER_SIZES`: the solver section's beam sizes (default `1.5e3,1e5`;
+//!   empty or `0` skips it): implicit against symplectic Euler, iterations of cg, Jacobi-
+//!   and block-Jacobi-PCG, static cantilevers (issue 17)
+//! - `TOPOMECH_BENCH_SOLVER_STEPS`: timed steps per solver case (default 5)
 
 mod baselines;
 #[path = "../tests/common/renamed.rs"]
@@ -978,6 +982,257 @@ fn profile(spec: &str) {
     });
 }
 
+// ------------------------------------------------------------------------------ solvers
+
+/// A beam of about `target` tetrahedra (the corotational case's proportions, 1 m thick),
+/// its vertices at x = 0 fixed, one model of `kind` with default parameters, E = 1e6 Pa,
+/// density 1000, gravity, dt 1e-3 (the defaults), then `f`.
+fn solver_beam(
+    kind: &str,
+    target: usize,
+    f: impl FnOnce(&mut topomech_physics::Config),
+) -> Simulation {
+    use topomech_gmap::generators::{cuboid, BoxElement};
+    use topomech_gmap::mesh::{build, BuildOptions};
+    use topomech_physics::{Config, ModelSpec};
+    let (cells, _) = Model::Corotational.cells(target);
+    let mesh = cuboid(
+        [cells[0], cells[1], cells[2]],
+        [cells[0] as f64 / cells[1] as f64, 1.0, 1.0],
+        BoxElement::Tetra,
+    );
+    let (g, _) = build(&mesh, &BuildOptions::default()).expect("a valid mesh");
+    let mut cfg = Config {
+        models: vec![ModelSpec {
+            kind: kind.to_string(),
+            params: std::collections::HashMap::new(),
+        }],
+        young: 1e6,
+        poisson: 0.3,
+        fixed: vec!["x < 1e-9".into()],
+        ..Config::default()
+    };
+    f(&mut cfg);
+    Simulation::new(g, cfg).expect("a simulation")
+}
+
+/// Implicit Euler (default solver settings: block-Jacobi PCG to 1e-6) against symplectic
+/// Euler on the same beam and model at dt 1e-3, from rest under gravity: the median of
+/// `steps` timed steps each (after one untimed step, which builds the plans, the coupling
+/// graph and the preconditioner; that first implicit step is timed apart), and the linear
+/// iterations per step of cg, Jacobi-PCG and block-Jacobi-PCG side by side (means over
+/// `steps` steps, tolerance 1e-6).
+fn implicit_vs_symplectic(kind: &str, target: usize, steps: usize) -> J {
+    use topomech_physics::{Integrator, LinearSolver, Preconditioner};
+    let time_steps_of = |s: &mut Simulation| -> (f64, Vec<f64>, Vec<usize>) {
+        let first = seconds(|| s.step().expect("a step"));
+        let mut t = Vec::new();
+        let mut its = Vec::new();
+        for _ in 0..steps {
+            t.push(seconds(|| s.step().expect("a step")));
+            its.push(s.solver_report().map_or(0, |r| r.linear_iterations));
+        }
+        (first, t, its)
+    };
+    let mut sym = solver_beam(kind, target, |_| {});
+    let n = sym.n_vertices();
+    let (_, ts, _) = time_steps_of(&mut sym);
+    let mut imp = solver_beam(kind, target, |c| c.integrator = Integrator::ImplicitEuler);
+    let colors = imp.coupling_colors().expect("the coupling graph");
+    let (first, ti, its_default) = time_steps_of(&mut imp);
+    let (symplectic, implicit) = (median(&ts), median(&ti));
+    let mut iterations = Vec::new();
+    for (name, solver, pre) in [
+        ("cg", LinearSolver::Cg, Preconditioner::Jacobi),
+        ("jacobi_pcg", LinearSolver::Pcg, Preconditioner::Jacobi),
+        (
+            "block_jacobi_pcg",
+            LinearSolver::Pcg,
+            Preconditioner::BlockJacobi,
+        ),
+    ] {
+        let mut s = solver_beam(kind, target, |c| {
+            c.integrator = Integrator::ImplicitEuler;
+            c.linear_solver = solver;
+            c.preconditioner = pre;
+        });
+        let mut its = Vec::new();
+        let mut times = Vec::new();
+        for _ in 0..=steps {
+            times.push(seconds(|| s.step().expect("a step")));
+            its.push(s.solver_report().map_or(0, |r| r.linear_iterations) as f64);
+        }
+        let mean = its.iter().sum::<f64>() / its.len() as f64;
+        iterations.push((name, mean, median(&times[1..])));
+    }
+    println!(
+        "  {kind}, {} tets ({n} vertices): implicit Euler step {:.3} ms, symplectic {:.3} ms: {:.1} x (first implicit step {:.1} ms: coupling graph, {} + {} colors, preconditioner); iterations per step: {}",
+        Model::Corotational.cells(target).1,
+        implicit * 1e3,
+        symplectic * 1e3,
+        implicit / symplectic,
+        first * 1e3,
+        colors.0,
+        colors.1,
+        iterations
+            .iter()
+            .map(|(n, m, t)| format!("{n} {m:.1} ({:.1} ms)", t * 1e3))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    J::Obj(vec![
+        ("model", J::str(kind)),
+        (
+            "elements",
+            J::num(Model::Corotational.cells(target).1 as f64),
+        ),
+        ("vertices", J::num(n as f64)),
+        ("dt", J::num(imp.config().dt)),
+        ("implicit_step_s", J::num(implicit)),
+        ("symplectic_step_s", J::num(symplectic)),
+        ("ratio", J::num(implicit / symplectic)),
+        ("first_implicit_step_s", J::num(first)),
+        (
+            "default_iterations",
+            J::Arr(its_default.iter().map(|&i| J::num(i as f64)).collect()),
+        ),
+        ("distance1_colors", J::num(colors.0 as f64)),
+        ("distance2_colors", J::num(colors.1 as f64)),
+        (
+            "iterations",
+            J::Arr(
+                iterations
+                    .iter()
+                    .map(|(n, m, t)| {
+                        J::Obj(vec![
+                            ("solver", J::str(*n)),
+                            ("mean_iterations", J::num(*m)),
+                            ("step_s", J::num(*t)),
+                        ])
+                    })
+                    .collect(),
+            ),
+        ),
+    ])
+}
+
+/// A static co-rotational cantilever of about `target` tetrahedra under gravity solved to
+/// 1e-8 relative residual with the default linear solver (auto: direct at this size), timed;
+/// its deflection against a solve with `against` (pcg at the small sizes, where it is
+/// affordable; direct at 1e-12 otherwise) to 1e-6.
+fn static_cantilever(target: usize, against: topomech_physics::LinearSolver) -> J {
+    use topomech_physics::{Integrator, LinearSolver};
+    let deflection = |s: &Simulation| -> Vec<[f64; 3]> {
+        let rest = s.vertex_vec3("rest").expect("rest");
+        s.vertex_vec3("position")
+            .expect("position")
+            .iter()
+            .zip(&rest)
+            .map(|(x, p)| [x[0] - p[0], x[1] - p[1], x[2] - p[2]])
+            .collect()
+    };
+    let mut s = solver_beam("corotational", target, |c| {
+        c.integrator = Integrator::Static;
+        c.tolerance = Some(1e-8);
+    });
+    let n = s.n_vertices();
+    let t = seconds(|| s.step().expect("a static solve"));
+    let r = s.solver_report().expect("a report").clone();
+    let u = deflection(&s);
+    let tip = u.iter().map(|u| u[1]).fold(0.0f64, f64::min);
+    let mut o = solver_beam("corotational", target, |c| {
+        c.integrator = Integrator::Static;
+        c.linear_solver = against;
+        c.tolerance = Some(if against == LinearSolver::Direct {
+            1e-12
+        } else {
+            1e-8
+        });
+    });
+    let t2 = seconds(|| o.step().expect("a static solve"));
+    let r2 = o.solver_report().expect("a report").clone();
+    let u2 = deflection(&o);
+    let diff = u
+        .iter()
+        .zip(&u2)
+        .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+        .fold(0.0f64, f64::max);
+    let scale = u2.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    println!(
+        "  static cantilever, {} tets ({n} vertices): {:.2} s with {} ({} Newton iterations, {} load steps, relative residual {:.2e}), tip deflection {tip:.4e} m; against {} ({:.2} s, {} linear iterations): max difference {:.2e} of the deflection",
+        Model::Corotational.cells(target).1,
+        t,
+        r.linear_solver,
+        r.iterations,
+        r.load_steps,
+        r.relative_residual,
+        r2.linear_solver,
+        t2,
+        r2.linear_iterations,
+        diff / scale
+    );
+    J::Obj(vec![
+        (
+            "elements",
+            J::num(Model::Corotational.cells(target).1 as f64),
+        ),
+        ("vertices", J::num(n as f64)),
+        ("time_s", J::num(t)),
+        ("linear_solver", J::str(r.linear_solver)),
+        ("newton_iterations", J::num(r.iterations as f64)),
+        ("load_steps", J::num(r.load_steps as f64)),
+        ("relative_residual", J::num(r.relative_residual)),
+        ("tip_deflection_m", J::num(tip)),
+        ("against", J::str(r2.linear_solver)),
+        ("against_time_s", J::num(t2)),
+        (
+            "against_linear_iterations",
+            J::num(r2.linear_iterations as f64),
+        ),
+        ("relative_difference", J::num(diff / scale)),
+    ])
+}
+
+/// The solver section (issue 17): `TOPOMECH_BENCH_SOLVER_SIZES` (default `1.5e3,1e5`; empty
+/// or `0` skips it) and `TOPOMECH_BENCH_SOLVER_STEPS` (timed steps, default 5).
+fn solvers() -> J {
+    let sizes: Vec<usize> = env_list("TOPOMECH_BENCH_SOLVER_SIZES", "1.5e3,1e5", |s| {
+        s.parse::<f64>()
+            .ok()
+            .filter(|x| *x >= 1.0)
+            .map(|x| x as usize)
+    });
+    if sizes.is_empty() {
+        return J::Null;
+    }
+    let steps = env_f64("TOPOMECH_BENCH_SOLVER_STEPS", 5.0).max(1.0) as usize;
+    println!("solvers: implicit Euler against symplectic Euler (dt 1e-3), static cantilevers");
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
+    pool.install(|| {
+        let mut implicit = Vec::new();
+        let mut statics = Vec::new();
+        for &target in &sizes {
+            for kind in ["corotational", "stretch_cumulated"] {
+                implicit.push(implicit_vs_symplectic(kind, target, steps));
+            }
+            let against = if target <= 20_000 {
+                topomech_physics::LinearSolver::Pcg
+            } else {
+                topomech_physics::LinearSolver::Direct
+            };
+            statics.push(static_cantilever(target, against));
+        }
+        J::Obj(vec![
+            ("threads", J::num(1.0)),
+            ("implicit", J::Arr(implicit)),
+            ("static", J::Arr(statics)),
+        ])
+    })
+}
+
 fn main() {
     if let Ok(spec) = std::env::var("TOPOMECH_BENCH_PROFILE") {
         profile(&spec);
@@ -1058,6 +1313,7 @@ fn main() {
         ("cases", J::Arr(cases)),
         ("renamed_copy", renamed_copy(20_000)),
         ("hyperelastic", hyperelastic_beside_corotational(20_000)),
+        ("solvers", solvers()),
     ]);
     let mut s = String::new();
     results.write(&mut s, 0);

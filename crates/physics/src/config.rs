@@ -103,6 +103,97 @@ pub struct Config {
     pub integrator: Integrator,
     /// Time step.
     pub dt: f64,
+    /// The linear solver of the implicit Euler and static steps (scene key
+    /// `integrator.linear_solver`).
+    pub linear_solver: LinearSolver,
+    /// The preconditioner of [`LinearSolver::Pcg`] (scene key `integrator.preconditioner`).
+    pub preconditioner: Preconditioner,
+    /// The relative residual a solve must reach (scene key `integrator.tolerance`, in
+    /// (0, 1)): of the linear solve for implicit Euler (None: [`IMPLICIT_TOLERANCE`],
+    /// 1e-6), of Newton's residual force for static (None: [`STATIC_TOLERANCE`], 1e-10).
+    pub tolerance: Option<f64>,
+    /// The most iterations of the iterative linear solver (cg, pcg) in one linear solve
+    /// (scene key `integrator.max_iterations`, at least 1; None: 10 times the degrees of
+    /// freedom, at least 50).
+    pub max_iterations: Option<usize>,
+}
+
+/// The linear solver of the implicit Euler and static steps.
+///
+/// `Auto` picks [`LinearSolver::Direct`] for a static solve of at most
+/// [`AUTO_DIRECT_MAX_DOFS`] free degrees of freedom (3 per free vertex) and
+/// [`LinearSolver::Pcg`] otherwise; implicit Euler always gets `Pcg` (its matrix, mass plus
+/// h^2 stiffness, is well conditioned at the usual time steps, so a few preconditioned
+/// iterations cost less than one assembly).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LinearSolver {
+    /// Chosen by the problem (see the type's docs).
+    #[default]
+    Auto,
+    /// Matrix-free conjugate gradients on the models' Jacobian-vector product rules, no
+    /// preconditioner.
+    Cg,
+    /// Matrix-free conjugate gradients with [`Config::preconditioner`].
+    Pcg,
+    /// The Jacobian assembled from the same rules (compressed probing, Curtis, Powell & Reid
+    /// 1974) and factored by a sparse Cholesky (LDL^T when it is not positive definite) of
+    /// the `faer` crate, on the free degrees of freedom.
+    Direct,
+}
+
+impl LinearSolver {
+    /// Parses `auto`, `cg`, `pcg`, `direct`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "auto" => Some(LinearSolver::Auto),
+            "cg" => Some(LinearSolver::Cg),
+            "pcg" => Some(LinearSolver::Pcg),
+            "direct" => Some(LinearSolver::Direct),
+            _ => None,
+        }
+    }
+
+    /// The name [`LinearSolver::parse`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            LinearSolver::Auto => "auto",
+            LinearSolver::Cg => "cg",
+            LinearSolver::Pcg => "pcg",
+            LinearSolver::Direct => "direct",
+        }
+    }
+}
+
+/// The preconditioner of [`LinearSolver::Pcg`]: built from the diagonal 3x3 blocks of the
+/// system matrix, which the models' Jacobian-vector product rules give by probing (a
+/// distance-1 coloring of the vertex coupling graph, 3 products per color).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Preconditioner {
+    /// The diagonal of the system matrix.
+    Jacobi,
+    /// The inverse of each free vertex's 3x3 diagonal block (the diagonal for a block that
+    /// is not symmetric positive definite).
+    #[default]
+    BlockJacobi,
+}
+
+impl Preconditioner {
+    /// Parses `jacobi`, `block_jacobi`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "jacobi" => Some(Preconditioner::Jacobi),
+            "block_jacobi" => Some(Preconditioner::BlockJacobi),
+            _ => None,
+        }
+    }
+
+    /// The name [`Preconditioner::parse`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preconditioner::Jacobi => "jacobi",
+            Preconditioner::BlockJacobi => "block_jacobi",
+        }
+    }
 }
 
 impl Default for Config {
@@ -124,6 +215,10 @@ impl Default for Config {
             fracture: None,
             integrator: Integrator::SymplecticEuler,
             dt: 1e-3,
+            linear_solver: LinearSolver::Auto,
+            preconditioner: Preconditioner::BlockJacobi,
+            tolerance: None,
+            max_iterations: None,
         }
     }
 }

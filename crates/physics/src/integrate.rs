@@ -36,22 +36,22 @@ impl Simulation {
                 dart,
                 value,
             })) => Some((
-                self.vertex_of(*dart, pos),
+                Some(self.vertex_of(*dart, pos)),
                 format!("rule '{rule}' computed a non-finite value {value} for '{embedding}' (dart {dart})"),
             )),
-            Err(e) => Some((0, e.to_string())),
+            Err(e) => Some((None, e.to_string())),
             // every slot scanned in order first (dead slots included: they hold old, finite
             // values), the vertices searched one by one only to name the one that fails
             Ok(()) if self.columns_sane(pos, vel) => None,
             Ok(()) => self.rows.darts.iter().enumerate().find_map(|(v, d)| {
                 let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
                 if p.iter().chain(u).any(|x| !x.is_finite()) {
-                    return Some((v, "non-finite position or velocity".to_string()));
+                    return Some((Some(v), "non-finite position or velocity".to_string()));
                 }
                 // runaway: a vertex crossing more than the whole object in one step
                 let step = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * self.cfg.dt;
                 (step > self.size).then(|| {
-                    (v, format!("runaway motion: the vertex moved {step:.3e} in one step, more than the object's size {:.3e}", self.size))
+                    (Some(v), format!("runaway motion: the vertex moved {step:.3e} in one step, more than the object's size {:.3e}", self.size))
                 })
             }),
         };

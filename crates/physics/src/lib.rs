@@ -23,6 +23,7 @@
 mod config;
 mod events;
 mod integrate;
+mod linear;
 mod model;
 mod schedule;
 mod solve;
@@ -35,6 +36,7 @@ use topomech_rules::{ApplyError, Diagnostic, Params, RuleSet};
 
 pub use config::*;
 pub use events::*;
+pub use linear::Csr;
 pub use model::*;
 pub use schedule::check_predicate;
 pub use solve::*;
@@ -56,12 +58,14 @@ pub enum PhysicsError {
     #[error(transparent)]
     Apply(#[from] ApplyError),
     /// The simulation diverged; the last good state was kept.
-    #[error("diverged at step {step}: {why} at vertex {vertex} (the last good state is kept)")]
+    #[error("diverged at step {step}: {why}{} (the last good state is kept)", .vertex.map_or(String::new(), |v| format!(" at vertex {v}")))]
     Diverged {
         /// The step that failed.
         step: u64,
-        /// The vertex (its row: index in the per-vertex arrays).
-        vertex: usize,
+        /// The vertex (its row: index in the per-vertex arrays) where it means something
+        /// (the largest residual force, the first non-finite value); None for a failure of
+        /// a global linear solve.
+        vertex: Option<usize>,
         /// What happened.
         why: String,
     },
@@ -96,6 +100,9 @@ pub struct Simulation {
     /// The positions of the last converged static solve: where a load ramp of prescribed
     /// displacements starts from (the rest positions before the first one).
     static_base: Vec<[f64; 3]>,
+    /// What the linear solvers keep between solves (coupling graph, colorings, symbolic
+    /// factorization, the implicit Euler preconditioner and warm start).
+    solver: linear::SolverCache,
 }
 
 /// Whether a vertex embedding holds a share of a row's quantity (masses and forces: `mass`,

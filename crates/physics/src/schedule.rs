@@ -283,6 +283,18 @@ impl Simulation {
                 cfg.dt
             )));
         }
+        if let Some(t) = cfg.tolerance {
+            if !(t > 0.0 && t < 1.0) {
+                return Err(PhysicsError::Config(format!(
+                    "integrator.tolerance must be a relative residual in (0, 1), got {t}"
+                )));
+            }
+        }
+        if cfg.max_iterations == Some(0) {
+            return Err(PhysicsError::Config(
+                "integrator.max_iterations must be at least 1, got 0".into(),
+            ));
+        }
         if !(cfg.density > 0.0 && cfg.density.is_finite()) {
             return Err(PhysicsError::Config(format!(
                 "density must be positive, got {}",
@@ -561,6 +573,7 @@ impl Simulation {
             saved: [Vec::new(), Vec::new()],
             report: None,
             static_base: Vec::new(),
+            solver: linear::SolverCache::default(),
         };
         // a welded row is one particle: held when any of its orbits is
         if !sim.rows.welded.is_empty() {

@@ -12,7 +12,7 @@ pub struct SolverReport {
     /// `static` or `implicit_euler`.
     pub integrator: &'static str,
     /// Newton iterations over every load step (static), or conjugate-gradient iterations
-    /// of the linearized solve (implicit Euler).
+    /// of the linearized solve (implicit Euler; 0 with the direct solver).
     pub iterations: usize,
     /// The norm of the residual force on the free vertices (static: of the whole load), or of
     /// the linear system's residual (implicit Euler).
@@ -24,7 +24,9 @@ pub struct SolverReport {
     /// The relative residual the solve must reach.
     pub tolerance: f64,
     /// Whether `relative_residual <= tolerance`, or (static) within [`STALL_TOLERANCE`] where
-    /// rounding in the forces stops Newton from decreasing the residual further.
+    /// rounding in the forces stops Newton from decreasing the residual further. An
+    /// implicit Euler step whose iterative solve reached `max_iterations` first is still
+    /// taken, with the solution found, and says false here.
     pub converged: bool,
     /// The load increments the static solve took (1: the whole load at once; more when
     /// automatic load stepping was needed; 0 for implicit Euler).
@@ -37,12 +39,35 @@ pub struct SolverReport {
     pub worst_relative_residual: f64,
     /// How many static steps so far needed more than one load increment.
     pub load_stepped_steps: usize,
+    /// The linear solver used: `cg`, `pcg` or `direct` (what [`LinearSolver::Auto`] chose;
+    /// with `Auto`, a Newton iteration whose direct solve finds the stiffness singular is
+    /// solved by `pcg` instead, its iterations counted in `linear_iterations`).
+    pub linear_solver: &'static str,
+    /// The preconditioner of `pcg`: `jacobi` or `block_jacobi`; `none` for `cg` and `direct`.
+    pub preconditioner: &'static str,
+    /// The iterations of the iterative linear solver over the whole step (every Newton
+    /// iteration of a static solve); 0 for `direct`.
+    pub linear_iterations: usize,
 }
 
-/// The relative residual a static solve must reach.
+/// The relative residual a static solve must reach (the default of [`Config::tolerance`]).
 pub const STATIC_TOLERANCE: f64 = 1e-10;
-/// The relative residual the linear solve of an implicit Euler step must reach.
-pub const IMPLICIT_TOLERANCE: f64 = 1e-8;
+/// The relative residual the linear solve of an implicit Euler step must reach (the default
+/// of [`Config::tolerance`]).
+pub const IMPLICIT_TOLERANCE: f64 = 1e-6;
+/// The relative residual of the iterative linear solve of each Newton iteration of a static
+/// solve.
+pub const NEWTON_LINEAR_TOLERANCE: f64 = 1e-12;
+/// The most free degrees of freedom (3 per free vertex) for which [`LinearSolver::Auto`]
+/// solves a static step with [`LinearSolver::Direct`] (above: [`LinearSolver::Pcg`]).
+/// Measured on cantilevers (`make bench`): assembly plus a sparse Cholesky factorization
+/// costs less than one preconditioned conjugate-gradient solve of the stiffness to 1e-12
+/// at every size measured up to 10^5 tetrahedra; the limit keeps the factor's memory
+/// (fill-in grows faster than the degrees of freedom in 3D) to a few GB.
+pub const AUTO_DIRECT_MAX_DOFS: usize = 300_000;
+/// Implicit Euler steps between two rebuilds of its preconditioner (see
+/// [`Simulation::solver_report`] and the rules in `implicit_euler`'s docs).
+pub const PRECOND_REFRESH_STEPS: u64 = 50;
 /// The relative residual at which a static solve whose Newton step no longer decreases the
 /// residual (rounding in the forces) counts as converged.
 pub const STALL_TOLERANCE: f64 = 1e-8;
@@ -60,6 +85,9 @@ const LINE_SEARCH_HALVINGS: usize = 10;
 pub(crate) struct NewtonOutcome {
     converged: bool,
     iterations: usize,
+    linear_iterations: usize,
+    /// Why a linear solve failed (indefinite stiffness, singular matrix), if one did.
+    why: Option<String>,
     /// The final residual norm and its largest vertex.
     residual: f64,
     worst: usize,
@@ -71,6 +99,31 @@ pub(crate) struct CgOutcome {
     iterations: usize,
     relative: f64,
     residual: f64,
+}
+
+/// Which system a linear solve is of (for its messages).
+#[derive(Clone, Copy)]
+pub(crate) enum System {
+    /// The stiffness of a static Newton iteration.
+    Stiffness,
+    /// The implicit Euler matrix.
+    Implicit,
+}
+
+impl System {
+    fn what(self) -> &'static str {
+        match self {
+            System::Stiffness => "the stiffness matrix -df/dx",
+            System::Implicit => "the implicit Euler matrix (1 + h c) M - h df/dv - h^2 df/dx",
+        }
+    }
+
+    fn hint(self) -> &'static str {
+        match self {
+            System::Stiffness => "the stiffness is not positive definite at this state: buckling, or a model with no stiffness in some direction (springs without shear springs, a free vertex or a rigid-body motion no fixed vertex holds); load stepping is automatic, so try more fixed vertices, a smaller load, a stiffer shear model, the linear solver direct (its LDL^T factorization handles an indefinite but nonsingular stiffness), or the integrator implicit_euler",
+            System::Implicit => "the stiffness is indefinite at this state (buckling, inverted elements) beyond what the mass holds at this time step; try a smaller dt, a stiffer shear model, or the linear solver direct (its LDL^T factorization handles an indefinite but nonsingular matrix)",
+        }
+    }
 }
 
 impl Simulation {
@@ -114,12 +167,106 @@ impl Simulation {
         Ok((total, m, fixed))
     }
 
+    /// The linear solver and preconditioner a solve uses: [`Config::linear_solver`], `Auto`
+    /// resolved ([`LinearSolver`]'s docs) for a static solve or not with `free_dofs`.
+    pub(crate) fn linear_choice(&self, is_static: bool, free_dofs: usize) -> LinearSolver {
+        match self.cfg.linear_solver {
+            LinearSolver::Auto if is_static && free_dofs <= AUTO_DIRECT_MAX_DOFS => {
+                LinearSolver::Direct
+            }
+            LinearSolver::Auto => LinearSolver::Pcg,
+            s => s,
+        }
+    }
+
+    /// The report's names of a linear solver choice.
+    fn solver_names(&self, s: LinearSolver) -> (&'static str, &'static str) {
+        match s {
+            LinearSolver::Pcg => ("pcg", self.cfg.preconditioner.name()),
+            LinearSolver::Direct => ("direct", "none"),
+            LinearSolver::Cg | LinearSolver::Auto => ("cg", "none"),
+        }
+    }
+
+    /// The most iterations of one iterative linear solve: [`Config::max_iterations`], or 10
+    /// times the degrees of freedom (at least 50).
+    fn max_linear_iterations(&self, rows: usize) -> usize {
+        self.cfg.max_iterations.unwrap_or((10 * 3 * rows).max(50))
+    }
+
+    /// The implicit Euler preconditioner, kept across steps: it is rebuilt (3 products of the
+    /// rules per color of a distance-1 coloring of the coupling graph) when the topology,
+    /// the fixed vertices or the kind changed, every [`PRECOND_REFRESH_STEPS`] steps, and
+    /// when the last solve took markedly more iterations (more than 1.5 times plus 3) than
+    /// the first solve with it. A lagged preconditioner is the exact block diagonal of an
+    /// earlier state's matrix, still symmetric positive definite, so conjugate gradients
+    /// converge to the same solution, only in more iterations when the state has moved far.
+    fn implicit_precond(
+        &mut self,
+        kind: Preconditioner,
+        h: f64,
+        c: f64,
+        m: &[f64],
+        fixed: &[bool],
+        last_iterations: Option<usize>,
+    ) -> Result<linear::Precond, PhysicsError> {
+        self.sync_rows()?;
+        let identity = self.g.identity();
+        let steps = self.steps;
+        let keep = self.solver.precond.as_ref().is_some_and(|p| {
+            p.kind == kind
+                && p.identity == identity
+                && p.fixed == fixed
+                && steps - p.built < PRECOND_REFRESH_STEPS
+                && match (p.base_iterations, last_iterations) {
+                    (Some(b), Some(l)) => l as f64 <= 1.5 * b as f64 + 3.0,
+                    _ => true,
+                }
+        });
+        if !keep {
+            let d = self.diagonal_blocks(h * h, h)?;
+            let a: Vec<[[f64; 3]; 3]> = d
+                .iter()
+                .zip(m)
+                .map(|(d, m)| {
+                    std::array::from_fn(|x| {
+                        std::array::from_fn(|y| {
+                            let shift = if x == y { (1.0 + h * c) * m } else { 0.0 };
+                            shift - d[x][y]
+                        })
+                    })
+                })
+                .collect();
+            self.solver.precond = Some(linear::LaggedPrecond {
+                kind,
+                identity,
+                fixed: fixed.to_vec(),
+                built: steps,
+                base_iterations: None,
+                p: linear::Precond::build(kind, &a, fixed),
+            });
+        }
+        Ok(self.solver.precond.as_ref().expect("set above").p.clone())
+    }
+
+    /// One implicit Euler step (Baraff & Witkin 1998, linearized once):
+    /// `A dv = h (f + h (df/dx) v)` with `A = (1 + h c) M - h df/dv - h^2 df/dx` (`c` the
+    /// viscous damping), then `v += dv`, `x += h v`. The linear solve is
+    /// [`Config::linear_solver`] (`Auto`: block-Jacobi preconditioned conjugate gradients,
+    /// warm-started from the last step's `dv`, the preconditioner kept across steps as
+    /// [`Simulation::implicit_precond`] says) to [`Config::tolerance`] (default
+    /// [`IMPLICIT_TOLERANCE`]). An iterative solve that reaches [`Config::max_iterations`]
+    /// first still takes the step with the solution it found; the report says
+    /// `converged: false`. Errors: [`PhysicsError::Diverged`] (no vertex: the solve is global)
+    /// when the matrix is not positive definite for conjugate gradients, or singular for
+    /// the direct solver; a rule's failure.
     pub(crate) fn implicit_euler(&mut self) -> Result<(), PhysicsError> {
         let h = self.cfg.dt;
         let c = self.cfg.damping;
         let (f, m, fixed) = self.total_force()?;
         let v = self.vertex_vec3("velocity")?;
-        let zero = vec![[0.0; 3]; v.len()];
+        let n = v.len();
+        let zero = vec![[0.0; 3]; n];
         let kv = self.jvp(&v, &zero)?;
         let mut rhs: Vec<[f64; 3]> = f
             .iter()
@@ -127,8 +274,11 @@ impl Simulation {
             .map(|(f, k)| std::array::from_fn(|a| h * (f[a] + h * k[a])))
             .collect();
         project(&mut rhs, &fixed);
+        let tol = self.cfg.tolerance.unwrap_or(IMPLICIT_TOLERANCE);
+        let free = 3 * fixed.iter().filter(|f| !**f).count();
+        let choice = self.linear_choice(false, free);
         // A z = (1 + h c) M z - h^2 (df/dx) z - h (df/dv) z
-        let solve = self.cg(&rhs, &fixed, |sim, z| {
+        let apply = |sim: &mut Self, z: &[[f64; 3]]| -> Result<Vec<[f64; 3]>, PhysicsError> {
             let dx: Vec<[f64; 3]> = z.iter().map(|z| z.map(|x| h * h * x)).collect();
             let dv: Vec<[f64; 3]> = z.iter().map(|z| z.map(|x| h * x)).collect();
             let df = sim.jvp(&dx, &dv)?;
@@ -137,30 +287,80 @@ impl Simulation {
                 .zip(&m)
                 .map(|((z, d), m)| std::array::from_fn(|a| (1.0 + h * c) * m * z[a] - d[a]))
                 .collect())
-        })?;
-        let converged = solve.relative <= IMPLICIT_TOLERANCE;
+        };
+        let solve = if choice == LinearSolver::Direct {
+            let blocks = self.assemble_blocks(h * h, h)?;
+            let (x, _) = self.direct_solve(
+                &blocks,
+                Some((&m, 1.0 + h * c)),
+                &rhs,
+                &fixed,
+                (System::Implicit.what(), System::Implicit.hint()),
+            )?;
+            let mut ax = apply(self, &x)?;
+            project(&mut ax, &fixed);
+            let res: Vec<[f64; 3]> = ax
+                .iter()
+                .zip(&rhs)
+                .map(|(a, b)| std::array::from_fn(|k| b[k] - a[k]))
+                .collect();
+            let residual = rows_norm(&res);
+            let bn = rows_norm(&rhs);
+            CgOutcome {
+                x,
+                iterations: 0,
+                relative: if bn > 0.0 { residual / bn } else { 0.0 },
+                residual,
+            }
+        } else {
+            let precond = if choice == LinearSolver::Pcg {
+                let last = self
+                    .report
+                    .as_ref()
+                    .filter(|r| r.integrator == "implicit_euler")
+                    .map(|r| r.linear_iterations);
+                Some(self.implicit_precond(self.cfg.preconditioner, h, c, &m, &fixed, last)?)
+            } else {
+                None
+            };
+            let x0 = (self.solver.last_dv.len() == n).then(|| {
+                let mut x0 = self.solver.last_dv.clone();
+                project(&mut x0, &fixed);
+                x0
+            });
+            let max_it = self.max_linear_iterations(n);
+            let out = self.cg(
+                &rhs,
+                &fixed,
+                x0.as_deref(),
+                precond.as_ref(),
+                (tol, max_it),
+                System::Implicit,
+                apply,
+            )?;
+            if let Some(p) = self.solver.precond.as_mut() {
+                p.base_iterations.get_or_insert(out.iterations);
+            }
+            out
+        };
+        let converged = solve.relative <= tol;
+        let (linear_solver, preconditioner) = self.solver_names(choice);
         self.record(SolverReport {
             integrator: "implicit_euler",
             iterations: solve.iterations,
             residual: solve.residual,
             relative_residual: solve.relative,
-            tolerance: IMPLICIT_TOLERANCE,
+            tolerance: tol,
             converged,
             load_steps: 0,
             load_fraction: 1.0,
             worst_relative_residual: 0.0,
             load_stepped_steps: 0,
+            linear_solver,
+            preconditioner,
+            linear_iterations: solve.iterations,
         });
-        if !converged {
-            return Err(PhysicsError::Diverged {
-                step: self.steps + 1,
-                vertex: 0,
-                why: format!(
-                    "the linear solve of the implicit Euler step did not converge: relative residual {:.3e} above the tolerance {IMPLICIT_TOLERANCE:e} after {} conjugate-gradient iterations; try a smaller dt or a finer mesh (the solve is global: the vertex named is the first)",
-                    solve.relative, solve.iterations
-                ),
-            });
-        }
+        self.solver.last_dv.clone_from(&solve.x);
         let dvel = solve.x;
         let x = self.vertex_vec3("position")?;
         let newv: Vec<[f64; 3]> = v
@@ -178,9 +378,14 @@ impl Simulation {
         self.contact()
     }
 
-    /// Newton iterations on f(x) + `f_ext` + m g = 0 with conjugate gradients on -df/dx and a
+    /// Newton iterations on f(x) + `f_ext` + m g = 0, each solving `K du = R` (`K = -df/dx`)
+    /// with [`Config::linear_solver`] (`Auto`: the direct solver up to
+    /// [`AUTO_DIRECT_MAX_DOFS`] free degrees of freedom: the stiffness assembled from the
+    /// rules and factored, the symbolic factorization kept between iterations; else
+    /// block-Jacobi preconditioned conjugate gradients to [`NEWTON_LINEAR_TOLERANCE`]), and a
     /// backtracking line search on the residual norm; the velocity is set to zero. Converged
-    /// when the residual on the free vertices is at most [`STATIC_TOLERANCE`] of the load
+    /// when the residual on the free vertices is at most [`Config::tolerance`] (default
+    /// [`STATIC_TOLERANCE`]) of the load
     /// (gravity and external loads, or the first residual when prescribed displacements drive
     /// it). When the whole load does not converge in 30 iterations, the load (gravity,
     /// `f_ext` and prescribed displacements) is applied in increments from the last converged
@@ -233,20 +438,26 @@ impl Simulation {
         if !scale.is_finite() {
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
-                vertex: 0,
+                vertex: None,
                 why: format!(
                     "the static solve's load overflows: its size is {scale:e} (gravity times mass plus the external loads), beyond what f64 arithmetic can balance; scale the problem (units) or the load down"
                 ),
             });
         }
-        let tol = STATIC_TOLERANCE * scale;
+        let tolerance = self.cfg.tolerance.unwrap_or(STATIC_TOLERANCE);
+        let tol = tolerance * scale;
+        let free = 3 * fixed.iter().filter(|f| !**f).count();
+        let choice = self.linear_choice(true, free);
+        let (linear_solver, preconditioner) = self.solver_names(choice);
+        let mut linear_iterations = 0;
+        let mut why: Option<String> = None;
         // the rounding level of the forces: the stiffness applied to the positions is the
         // size of the forces' terms (at unit strain), each computed to a few ulps
         let zero = vec![[0.0; 3]; n];
         let mut kx = self.jvp(&x0, &zero)?;
         project(&mut kx, &fixed);
         let rounding = ROUNDING_ULPS * f64::EPSILON * norm(&kx);
-        let stall = (STALL_TOLERANCE * scale).max(rounding);
+        let stall = (STALL_TOLERANCE.max(tolerance) * scale).max(rounding);
         let mut iterations = 0;
         let mut load_steps = 0;
         let (mut s, mut ds) = (0.0f64, 1.0f64);
@@ -257,8 +468,12 @@ impl Simulation {
             let t = (s + ds).min(1.0);
             let trial = at(t, &good);
             self.set_vertex_vec3("position", &trial)?;
-            let out = self.newton(&fixed, &r0, t, (tol, stall))?;
+            let out = self.newton(&fixed, &r0, t, (tol, stall), choice)?;
             iterations += out.iterations;
+            linear_iterations += out.linear_iterations;
+            if out.why.is_some() {
+                why.clone_from(&out.why);
+            }
             if t >= 1.0 && out.residual < best {
                 best = out.residual;
                 worst = out.worst;
@@ -281,18 +496,24 @@ impl Simulation {
                         iterations,
                         residual: best,
                         relative_residual: rel,
-                        tolerance: STATIC_TOLERANCE,
+                        tolerance,
                         converged: false,
                         load_steps,
                         load_fraction: s,
                         worst_relative_residual: 0.0,
                         load_stepped_steps: 0,
+                        linear_solver,
+                        preconditioner,
+                        linear_iterations,
+                    });
+                    let cause = why.as_ref().map_or(String::new(), |w| {
+                        format!("; the last linear solve that failed: {w}")
                     });
                     return Err(PhysicsError::Diverged {
                         step: self.steps + 1,
-                        vertex: worst,
+                        vertex: Some(worst),
                         why: format!(
-                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {STATIC_TOLERANCE:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load ({:.1}% of the load reached); try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path; the largest residual force is",
+                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load ({:.1}% of the load reached){cause}; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path; the largest residual force is",
                             (1.0 / MIN_LOAD_INCREMENT).round(),
                             100.0 * s
                         ),
@@ -308,12 +529,15 @@ impl Simulation {
             iterations,
             residual: res,
             relative_residual: res / scale,
-            tolerance: STATIC_TOLERANCE,
+            tolerance,
             converged: true,
             load_steps,
             load_fraction: 1.0,
             worst_relative_residual: 0.0,
             load_stepped_steps: 0,
+            linear_solver,
+            preconditioner,
+            linear_iterations,
         });
         Ok(())
     }
@@ -366,6 +590,7 @@ impl Simulation {
         r0: &[[f64; 3]],
         t: f64,
         (tol, stall): (f64, f64),
+        choice: LinearSolver,
     ) -> Result<NewtonOutcome, PhysicsError> {
         let norm = rows_norm;
         let worst_of = |r: &[[f64; 3]]| {
@@ -391,35 +616,47 @@ impl Simulation {
                 return Ok(NewtonOutcome {
                     converged: false,
                     iterations: 0,
+                    linear_iterations: 0,
+                    why: None,
                     residual: f64::INFINITY,
                     worst: 0,
                 });
             }
         };
         let mut res = norm(&r);
-        let zero = vec![[0.0; 3]; r.len()];
         let mut iterations = 0;
-        let done = |converged, iterations, res: f64, r: &[[f64; 3]]| NewtonOutcome {
-            converged,
-            iterations,
-            residual: if res.is_finite() { res } else { f64::INFINITY },
-            worst: worst_of(r),
-        };
+        let mut linear_iterations = 0;
+        let done =
+            |converged, iterations, linear_iterations, res: f64, r: &[[f64; 3]]| NewtonOutcome {
+                converged,
+                iterations,
+                linear_iterations,
+                why: None,
+                residual: if res.is_finite() { res } else { f64::INFINITY },
+                worst: worst_of(r),
+            };
         while iterations < NEWTON_ITERATIONS {
             if res <= tol {
-                return Ok(done(true, iterations, res, &r));
+                return Ok(done(true, iterations, linear_iterations, res, &r));
             }
             if !res.is_finite() {
                 break;
             }
             iterations += 1;
-            let du = match self.cg(&r, fixed, |sim, z| {
-                Ok(sim.jvp(z, &zero)?.iter().map(|d| d.map(|x| -x)).collect())
-            }) {
-                Ok(c) => c.x,
+            let du = match self.newton_direction(&r, fixed, choice) {
+                Ok((du, its)) => {
+                    linear_iterations += its;
+                    du
+                }
                 Err(e) => {
+                    let why = match &e {
+                        PhysicsError::Diverged { why, .. } => Some(why.clone()),
+                        _ => None,
+                    };
                     attempt(e)?;
-                    return Ok(done(false, iterations, res, &r));
+                    let mut out = done(false, iterations, linear_iterations, res, &r);
+                    out.why = why;
+                    return Ok(out);
                 }
             };
             let x = self.vertex_vec3("position")?;
@@ -450,21 +687,30 @@ impl Simulation {
                 // the residual may stall at the rounding level of the forces just above the
                 // tolerance (small loads on stiff models): close enough when within
                 // STALL_TOLERANCE
-                return Ok(done(res <= stall, iterations, res, &r));
+                return Ok(done(res <= stall, iterations, linear_iterations, res, &r));
             };
             r = rt;
             res = nt;
         }
-        Ok(done(res <= tol, iterations, res, &r))
+        Ok(done(res <= tol, iterations, linear_iterations, res, &r))
     }
 
-    /// Conjugate gradients on `apply`, with fixed vertices' components held at zero; relative
-    /// residual 1e-12, at most 10 n iterations; returns the solution, the iterations and the
-    /// relative residual reached.
+    /// Preconditioned conjugate gradients on `apply` (symmetric positive definite on the
+    /// free components), fixed vertices' components held at zero, from `x0` (zero when
+    /// None), with the preconditioner `precond` (none when None), until the residual is at
+    /// most `tol` times `|b|` or after `max_iterations`; returns the solution, the
+    /// iterations and the relative residual reached (the caller compares it with `tol`).
+    /// Errors: [`PhysicsError::Diverged`] without a vertex (the solve is global) when
+    /// `p^T A p` is not positive or not finite, saying what to try for `system`.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn cg(
         &mut self,
         b: &[[f64; 3]],
         fixed: &[bool],
+        x0: Option<&[[f64; 3]]>,
+        precond: Option<&linear::Precond>,
+        (tol, max_iterations): (f64, usize),
+        system: System,
         mut apply: impl FnMut(&mut Self, &[[f64; 3]]) -> Result<Vec<[f64; 3]>, PhysicsError>,
     ) -> Result<CgOutcome, PhysicsError> {
         let n = b.len();
@@ -474,50 +720,141 @@ impl Simulation {
                 .map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
                 .sum::<f64>()
         };
-        let mut x = vec![[0.0; 3]; n];
-        let mut r = b.to_vec();
-        let mut p = r.clone();
-        let mut rr = dot(&r, &r);
-        let rr0 = rr;
-        let tol = 1e-24 * rr;
-        let mut iterations = 0;
-        for _ in 0..(10 * 3 * n).max(50) {
-            if rr <= tol || rr == 0.0 {
-                break;
+        let bb = dot(b, b);
+        if bb == 0.0 {
+            return Ok(CgOutcome {
+                x: vec![[0.0; 3]; n],
+                iterations: 0,
+                relative: 0.0,
+                residual: 0.0,
+            });
+        }
+        let (mut x, mut r) = match x0 {
+            Some(x0) if x0.iter().flatten().any(|v| *v != 0.0) => {
+                let mut ax = apply(self, x0)?;
+                project(&mut ax, fixed);
+                let r: Vec<[f64; 3]> = b
+                    .iter()
+                    .zip(&ax)
+                    .map(|(b, a)| std::array::from_fn(|k| b[k] - a[k]))
+                    .collect();
+                // a guess worse than none is dropped
+                if dot(&r, &r) < bb {
+                    (x0.to_vec(), r)
+                } else {
+                    (vec![[0.0; 3]; n], b.to_vec())
+                }
             }
+            _ => (vec![[0.0; 3]; n], b.to_vec()),
+        };
+        let precondition = |r: &[[f64; 3]]| match precond {
+            Some(p) => {
+                let mut z = p.apply(r);
+                project(&mut z, fixed);
+                z
+            }
+            None => r.to_vec(),
+        };
+        let mut z = precondition(&r);
+        let mut p = z.clone();
+        let mut rz = dot(&r, &z);
+        let mut rr = dot(&r, &r);
+        let target = tol * tol * bb;
+        let mut iterations = 0;
+        while rr > target && iterations < max_iterations {
             iterations += 1;
             let mut ap = apply(self, &p)?;
             project(&mut ap, fixed);
             let pap = dot(&p, &ap);
-            if pap <= 0.0 || !pap.is_finite() {
+            if pap <= 0.0 || !pap.is_finite() || rz <= 0.0 || rz.is_nan() {
                 return Err(PhysicsError::Diverged {
                     step: self.steps + 1,
-                    vertex: 0,
-                    why: format!("the linear system is not positive definite (p^T A p = {pap:e})"),
+                    vertex: None,
+                    why: format!(
+                        "{} is not positive definite for conjugate gradients (p^T A p = {pap:.3e} at iteration {iterations}): {}",
+                        system.what(),
+                        system.hint()
+                    ),
                 });
             }
-            let alpha = rr / pap;
+            let alpha = rz / pap;
             for i in 0..n {
                 for a in 0..3 {
                     x[i][a] += alpha * p[i][a];
                     r[i][a] -= alpha * ap[i][a];
                 }
             }
-            let rr_new = dot(&r, &r);
-            let beta = rr_new / rr;
-            rr = rr_new;
+            z = precondition(&r);
+            let rz_new = dot(&r, &z);
+            rr = dot(&r, &r);
+            let beta = rz_new / rz;
+            rz = rz_new;
             for i in 0..n {
                 for a in 0..3 {
-                    p[i][a] = r[i][a] + beta * p[i][a];
+                    p[i][a] = z[i][a] + beta * p[i][a];
                 }
             }
         }
         Ok(CgOutcome {
             x,
             iterations,
-            relative: if rr0 > 0.0 { (rr / rr0).sqrt() } else { 0.0 },
+            relative: (rr / bb).sqrt(),
             residual: rr.sqrt(),
         })
+    }
+
+    /// The Newton direction `du` with `K du = r` (`K = -df/dx` on the free components) by
+    /// the static solve's linear solver, and the iterations it took.
+    fn newton_direction(
+        &mut self,
+        r: &[[f64; 3]],
+        fixed: &[bool],
+        choice: LinearSolver,
+    ) -> Result<(Vec<[f64; 3]>, usize), PhysicsError> {
+        let n = r.len();
+        let zero = vec![[0.0; 3]; n];
+        let apply = |sim: &mut Self, z: &[[f64; 3]]| -> Result<Vec<[f64; 3]>, PhysicsError> {
+            Ok(sim.jvp(z, &zero)?.iter().map(|d| d.map(|x| -x)).collect())
+        };
+        let mut choice = choice;
+        if choice == LinearSolver::Direct {
+            let blocks = self.assemble_blocks(1.0, 0.0)?;
+            match self.direct_solve(
+                &blocks,
+                None,
+                r,
+                fixed,
+                (System::Stiffness.what(), System::Stiffness.hint()),
+            ) {
+                Ok((x, _)) => return Ok((x, 0)),
+                // auto: a singular stiffness (a mechanism the load does not excite) may
+                // still have a solution conjugate gradients find in its range
+                Err(PhysicsError::Diverged { .. })
+                    if self.cfg.linear_solver == LinearSolver::Auto =>
+                {
+                    choice = LinearSolver::Pcg;
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        let precond = if choice == LinearSolver::Pcg {
+            let d = self.diagonal_blocks(1.0, 0.0)?;
+            let k: Vec<[[f64; 3]; 3]> = d.iter().map(|b| b.map(|row| row.map(|v| -v))).collect();
+            Some(linear::Precond::build(self.cfg.preconditioner, &k, fixed))
+        } else {
+            None
+        };
+        let max_it = self.max_linear_iterations(n);
+        let out = self.cg(
+            r,
+            fixed,
+            None,
+            precond.as_ref(),
+            (NEWTON_LINEAR_TOLERANCE, max_it),
+            System::Stiffness,
+            apply,
+        )?;
+        Ok((out.x, out.iterations))
     }
 }
 

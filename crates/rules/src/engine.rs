@@ -984,6 +984,82 @@ impl RuleSet {
             .sum()
     }
 
+    /// For every match of rule `name` that [`RuleSet::apply_everywhere`] applies (a guard's
+    /// false matches left out), the darts its program and guard can reach: every dart of its
+    /// left nodes, and every dart of each orbit the rule reads or writes through a node (an
+    /// embedding's orbit, an aggregate's orbit), except the orbits whose labels all belong
+    /// to `within`: those stay inside the `within` orbit of the node's dart, which the
+    /// caller resolves itself (a Jacobian's coupling graph passes the vertex orbit, so that
+    /// only orbits that leave a vertex are walked). Darts may repeat within a footprint.
+    /// What a simulation builds the vertex coupling graph of its Jacobian-vector product
+    /// rules from.
+    pub fn match_footprints(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        within: OrbitType,
+    ) -> Result<Vec<Vec<Dart>>, ApplyError> {
+        fn walk(e: &TExpr, embs: &[EmbDecl], out: &mut Vec<(usize, OrbitType)>) {
+            match e {
+                TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
+                TExpr::Read { node, emb } => out.push((*node, embs[*emb].orbit)),
+                TExpr::Agg { orbit, node, .. } => out.push((*node, *orbit)),
+                TExpr::Bin(_, a, c) => {
+                    walk(a, embs, out);
+                    walk(c, embs, out);
+                }
+                TExpr::Un(_, a) | TExpr::ToReal(a) => walk(a, embs, out),
+                TExpr::Call(_, args) => args.iter().for_each(|a| walk(a, embs, out)),
+                TExpr::If(c, a, d) => {
+                    walk(c, embs, out);
+                    walk(a, embs, out);
+                    walk(d, embs, out);
+                }
+                TExpr::Block(lets, r) => {
+                    for (_, v) in lets {
+                        walk(v, embs, out);
+                    }
+                    walk(r, embs, out);
+                }
+            }
+        }
+        let b = self.bind(g, name, params)?;
+        let ms = find_all(g, &b, &mut Poll::new(&never))?;
+        let mut reach: Vec<(usize, OrbitType)> = Vec::new();
+        for st in &b.rule.program {
+            match st {
+                TStmt::Let(_, v) => walk(v, b.embs, &mut reach),
+                TStmt::Write {
+                    node, emb, value, ..
+                } => {
+                    reach.push((*node, b.embs[*emb].orbit));
+                    walk(value, b.embs, &mut reach);
+                }
+            }
+        }
+        if let Some(guard) = &b.rule.guard {
+            walk(guard, b.embs, &mut reach);
+        }
+        reach.retain(|(_, o)| !o.is_subset_of(within));
+        reach.sort_unstable_by_key(|(n, o)| (*n, o.mask()));
+        reach.dedup();
+        Ok(ms
+            .iter()
+            .map(|m| {
+                let mut out: Vec<Dart> = m.all_darts().collect();
+                for &(node, o) in &reach {
+                    if let Some(ds) = m.darts.get(node) {
+                        for &d in ds {
+                            out.extend(g.orbit(d, o));
+                        }
+                    }
+                }
+                out
+            })
+            .collect())
+    }
+
     /// The number of matches [`RuleSet::apply_everywhere`] would apply.
     pub fn count_matches(
         &self,

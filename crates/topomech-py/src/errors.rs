@@ -301,7 +301,8 @@ fn mesh_error(msg: String, option: Option<(&'static str, &'static str)>) -> PyEr
     })
 }
 
-/// A `DivergenceError` with `step`, `vertex` and `why` for a divergence, else a
+/// A `DivergenceError` with `step`, `vertex` (None for a failure of a global linear solve)
+/// and `why` for a divergence, else a
 /// `SimulationError` with the kernel's message.
 fn physics_error(e: &PhysicsError) -> PyErr {
     let PhysicsError::Diverged { step, vertex, why } = e else {

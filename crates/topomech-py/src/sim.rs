@@ -22,8 +22,9 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString, PyTuple};
 use topomech_gmap::{EmbeddingType, OrbitType, Value};
 use topomech_physics::{
-    is_additive, shipped_models, Blade, Config, Criterion, Cut, Fracture, Ground, Integrator,
-    MaterialRegion, ModelSpec, Simulation, TimedEvent, TopologyChange,
+    is_additive, shipped_models, Blade, Config, Criterion, Csr, Cut, Fracture, Ground, Integrator,
+    LinearSolver, MaterialRegion, ModelSpec, Preconditioner, Simulation, TimedEvent,
+    TopologyChange,
 };
 use topomech_rules::Val;
 
@@ -53,7 +54,52 @@ const CONFIG_KEYS: &[&str] = &[
     "fracture",
     "integrator",
     "dt",
+    "linear_solver",
+    "preconditioner",
+    "tolerance",
+    "max_iterations",
 ];
+
+/// The linear solvers' names, as [`LinearSolver::parse`] reads them.
+const LINEAR_SOLVERS: &[&str] = &["auto", "cg", "pcg", "direct"];
+
+/// The preconditioners' names, as [`Preconditioner::parse`] reads them.
+const PRECONDITIONERS: &[&str] = &["jacobi", "block_jacobi"];
+
+/// An int >= 1 (not a bool): a `TypeError` for another type, a `ValueError` below 1.
+fn count_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<usize> {
+    if obj.is_instance_of::<PyBool>() || !obj.is_instance_of::<pyo3::types::PyInt>() {
+        return Err(type_error(format!(
+            "{what} must be an int, got {}",
+            type_name(obj)
+        )));
+    }
+    match obj.extract::<i64>() {
+        Ok(v) if v >= 1 => Ok(usize::try_from(v).unwrap_or(usize::MAX)),
+        Ok(v) => Err(value_error(format!("{what} must be at least 1, got {v}"))),
+        Err(_) => Err(value_error(format!("{what} is out of range: {obj}"))),
+    }
+}
+
+/// A kernel CSR matrix as numpy arrays `(indptr, indices, data, n)`.
+#[allow(clippy::type_complexity)]
+fn csr_to_py(
+    py: Python<'_>,
+    m: Csr,
+) -> (
+    Bound<'_, PyArray1<i64>>,
+    Bound<'_, PyArray1<i64>>,
+    Bound<'_, PyArray1<f64>>,
+    usize,
+) {
+    let to_i64 = |v: Vec<usize>| v.into_iter().map(|x| x as i64).collect::<Vec<i64>>();
+    (
+        to_i64(m.indptr).into_pyarray(py),
+        to_i64(m.indices).into_pyarray(py),
+        m.data.into_pyarray(py),
+        m.n,
+    )
+}
 
 /// The fracture criteria, as `fracture`'s `criterion` names them.
 const CRITERIA: &[&str] = &["stress", "strain"];
@@ -645,6 +691,34 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
                     ))
                 })?;
             }
+            "linear_solver" => {
+                let name = str_arg(v, k)?;
+                cfg.linear_solver = LinearSolver::parse(&name).ok_or_else(|| {
+                    value_error(format!(
+                        "unknown linear_solver '{name}': expected one of {}",
+                        LINEAR_SOLVERS.join(", ")
+                    ))
+                })?;
+            }
+            "preconditioner" => {
+                let name = str_arg(v, k)?;
+                cfg.preconditioner = Preconditioner::parse(&name).ok_or_else(|| {
+                    value_error(format!(
+                        "unknown preconditioner '{name}': expected one of {}",
+                        PRECONDITIONERS.join(", ")
+                    ))
+                })?;
+            }
+            "tolerance" => {
+                let t = real_arg(v, k)?;
+                if !(t > 0.0 && t < 1.0) {
+                    return Err(value_error(format!(
+                        "tolerance must be a relative residual in (0, 1), got {t}"
+                    )));
+                }
+                cfg.tolerance = Some(t);
+            }
+            "max_iterations" => cfg.max_iterations = Some(count_arg(v, k)?),
             _ => {
                 return Err(type_error(format!(
                     "unknown configuration key '{k}' (known: {})",
@@ -909,8 +983,11 @@ impl PySimulation {
     /// conjugate-gradient iterations), `residual`, `relative_residual` (to the load),
     /// `tolerance`, `converged`, `load_steps` (the load increments taken), `load_fraction`
     /// (reached), `worst_relative_residual` (over every step so far) and `load_stepped_steps`
-    /// (steps that needed more than one increment); None before the first such step and for
-    /// the explicit integrators. After a failed step it describes the failure.
+    /// (steps that needed more than one increment), `linear_solver` (`cg`, `pcg` or `direct`:
+    /// what `auto` chose), `preconditioner` (`jacobi`, `block_jacobi`, or `none` for `cg` and
+    /// `direct`) and `linear_iterations` (iterations of the iterative linear solver over the
+    /// step, 0 for `direct`); None before the first such step and for the explicit
+    /// integrators. After a failed step it describes the failure.
     fn solver_report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let Some(r) = self.read(|s| Ok(s.solver_report().cloned()))? else {
             return Ok(None);
@@ -926,7 +1003,51 @@ impl PySimulation {
         d.set_item("load_fraction", r.load_fraction)?;
         d.set_item("worst_relative_residual", r.worst_relative_residual)?;
         d.set_item("load_stepped_steps", r.load_stepped_steps)?;
+        d.set_item("linear_solver", r.linear_solver)?;
+        d.set_item("preconditioner", r.preconditioner)?;
+        d.set_item("linear_iterations", r.linear_iterations)?;
         Ok(Some(d))
+    }
+
+    /// The stiffness matrix K = -df/dx at the current positions and velocities, assembled
+    /// from the models' Jacobian-vector product rules (compressed probing, Curtis, Powell &
+    /// Reid 1974): `(indptr, indices, data, n)` of a CSR matrix, `n = 3 V`, degree of freedom
+    /// `3 i + a` being component `a` of row (vertex) `i`, fixed vertices included (no
+    /// boundary condition applied), column indices sorted per row; int64, int64, float64
+    /// arrays, N/m. Symmetric for the shipped models. Raises `SimulationError` when the
+    /// models' rules cannot be assembled by probing (a jvp rule reaching vertices its
+    /// matches do not name), or a rule fails.
+    #[allow(clippy::type_complexity)]
+    fn stiffness_matrix<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<f64>>,
+        usize,
+    )> {
+        let mut this = exclusive(slf)?;
+        let m = this.run(py, |sim| Ok(sim.stiffness_matrix()?))?;
+        Ok(csr_to_py(py, m))
+    }
+
+    /// The lumped mass matrix: `(indptr, indices, data, n)` of a diagonal CSR matrix as
+    /// `stiffness_matrix` gives (same order), each vertex's mass (kg) on its 3 degrees of
+    /// freedom.
+    #[allow(clippy::type_complexity)]
+    fn mass_matrix<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<f64>>,
+        usize,
+    )> {
+        let mut this = exclusive(slf)?;
+        let m = this.run(py, |sim| Ok(sim.mass_matrix()?))?;
+        Ok(csr_to_py(py, m))
     }
 
     /// The topology changes so far, in order: dicts `{"step": after which step, "time",
