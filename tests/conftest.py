@@ -3,6 +3,7 @@ kernel (unique edges and faces from the point and cell lists)."""
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -227,3 +228,14 @@ def mixed_volume() -> tuple[np.ndarray, list[tuple[str, Any]]]:
         ("pyramid", np.array([[4, 5, 6, 7, 8]])),
         ("tetra", np.array([tet])),
     ]
+
+
+@pytest.fixture(autouse=True)
+def _sigpipe_ignored() -> Iterable[None]:
+    """Python ignores SIGPIPE (a write to a closed pipe raises BrokenPipeError instead), but
+    gmsh's initialize() resets it to the default in C, where signal.getsignal cannot see it:
+    after a test that meshes with gmsh, a later test whose encoder subprocess dies (the MP4
+    writer's) would kill the whole pytest process with SIGPIPE. Restored after every test."""
+    yield
+    if hasattr(signal, "SIGPIPE"):
+        signal.signal(signal.SIGPIPE, signal.SIG_IGN)

@@ -285,7 +285,9 @@ def test_each_integrator_matches_linear_fem_at_small_strain(
 def test_models_are_listed() -> None:
     for kind in KINDS:
         listed = [m for m in topomech.available_models() if m["kind"] == kind]
-        assert listed == [{"kind": kind, "dims": [3], "params": {}, "needs": "tetrahedra"}]
+        assert listed == [
+            {"kind": kind, "dims": [3], "params": {}, "needs": "tetrahedra", "per_element": True}
+        ]
 
 
 @pytest.mark.parametrize("kind", KINDS)

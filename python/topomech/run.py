@@ -693,7 +693,7 @@ def run_scene(
                 "type": "divergence",
                 "message": str(e),
                 "step": int(e.step),
-                "vertex": int(e.vertex),
+                "vertex": None if e.vertex is None else int(e.vertex),
             }
         except SimulationError as e:
             missed = _missed_event(sc, sim, str(e))
