@@ -363,3 +363,57 @@ def test_modal_frequency_is_what_the_dynamics_do() -> None:
     # Euler-Bernoulli cantilever: w1 = 1.8751^2 sqrt(E I / (rho A L^4)), I / A = h^2 / 12
     eb = 1.8751**2 * math.sqrt(1e6 * 0.125**2 / 12 / 1000.0)
     assert eb < w < 2 * eb, (w, eb)
+
+
+def _heavy_cantilever(**kw: Any) -> topomech.Simulation:
+    """A spring cantilever (6 x 1 x 1 cubes of tetrahedra, 2 m long) clamped at x = 0, no
+    gravity: the load is set on its tip by the caller."""
+    flat = topomech._core.box(6, 1, 1, 2.0, 0.25, 0.25, "tetra")
+    return topomech.Simulation(
+        topomech.GMap.from_flat(*flat),
+        models=[{"kind": "stretch_elementary", "stiffness": 1e3}],
+        gravity=[0.0, 0.0, 0.0],
+        fixed=["x < 1e-9"],
+        integrator="static",
+        dt=1.0,
+        **kw,
+    )
+
+
+def _tip_load(sim: topomech.Simulation, total: float) -> np.ndarray:
+    load = np.zeros((sim.n_vertices, 3))
+    tip = sim.rest_positions()[:, 0] > 2.0 - 1e-9
+    load[tip, 1] = -total / tip.sum()
+    return load
+
+
+@pytest.mark.parametrize("solver", ["direct", "pcg"])
+def test_load_stepping_equals_a_solve_in_100_small_load_steps(solver: str) -> None:
+    """A tip load large enough that Newton from rest fails on the whole load (the report
+    says the solve took several load increments) converges by automatic load stepping, and
+    lands where 100 static steps of 1/100 of the load each land: the same equilibrium
+    branch, to 1e-8 of the deflection (both solved to a relative residual of 1e-12, and the
+    stiffness there is well conditioned: a few ulps of the forces move the solution by
+    less). The residual is reported."""
+    heavy = 40.0
+    one = _heavy_cantilever(linear_solver=solver, tolerance=1e-12)
+    one.set_external_forces(_tip_load(one, heavy))
+    one.step()
+    report = one.solver_report()
+    assert report is not None
+    assert report["converged"] is True
+    assert report["load_steps"] > 1, report  # one Newton solve of the whole load failed
+    assert report["relative_residual"] <= 1e-12
+    assert report["linear_solver"] == solver
+
+    ramp = _heavy_cantilever(linear_solver=solver, tolerance=1e-12)
+    for k in range(1, 101):
+        ramp.set_external_forces(_tip_load(ramp, heavy * k / 100))
+        ramp.step()
+        r = ramp.solver_report()
+        assert r is not None
+        assert r["converged"], (k, r)
+    deflection = np.abs(one.displacements()).max()
+    assert deflection > 0.5  # large: the nonlinear regime
+    diff = np.abs(one.positions() - ramp.positions()).max()
+    assert diff <= 1e-8 * deflection, diff
