@@ -29,7 +29,8 @@ use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::linalg::solvers::SolveCore;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky,
+    SymmetricOrdering,
 };
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -253,6 +254,15 @@ pub(crate) struct Direct {
     /// The whole matrix's pattern (row by row: the CSC of its transpose), its sources and
     /// its symbolic LU factorization, built the first time a matrix is not symmetric.
     lu: Option<LuPattern>,
+    /// The last numeric factorization (for [`Simulation::direct_resolve`]).
+    numeric: Option<Numeric>,
+}
+
+/// A numeric factorization kept for more solves with the same matrix.
+enum Numeric {
+    Llt(Vec<f64>),
+    Ldlt(Vec<f64>),
+    Lu(Box<Lu<usize, f64>>),
 }
 
 /// The whole matrix's pattern for LU: column pointers, row indices, each entry's source in
@@ -645,6 +655,9 @@ impl Simulation {
                 "{what} is singular (a loaded component of a vertex has no stiffness at all): {hint}"
             )));
         }
+        if let Some(d) = self.solver.direct.as_mut() {
+            d.numeric = None;
+        }
         if !self.symmetric(blocks, fixed) {
             let x = self.lu_solve(blocks, mass_shift, b, (what, hint))?;
             return Ok((x, Factor::Lu));
@@ -743,6 +756,73 @@ impl Simulation {
                 "{what} is singular (its factorization gives a non-finite solution): {hint}"
             )));
         }
+        let dof = d.dof.clone();
+        if let Some(d) = self.solver.direct.as_mut() {
+            d.numeric = Some(match &factor {
+                Factor::Llt => Numeric::Llt(lvals),
+                _ => Numeric::Ldlt(lvals),
+            });
+        }
+        let mut out = vec![[0.0; 3]; b.len()];
+        for (i, o) in out.iter_mut().enumerate() {
+            for a in 0..3 {
+                let q = dof[3 * i + a];
+                if q != usize::MAX {
+                    o[a] = x[q];
+                }
+            }
+        }
+        Ok((out, factor))
+    }
+
+    /// Solves `A z = b` with the last numeric factorization of [`Simulation::direct_solve`]
+    /// (a lagged Jacobian: the chord steps of a static solve), None when there is none for
+    /// the current map state and fixed vertices.
+    pub(crate) fn direct_resolve(&self, b: &[[f64; 3]], fixed: &[bool]) -> Option<Vec<[f64; 3]>> {
+        let d = self.solver.direct.as_ref()?;
+        let numeric = d.numeric.as_ref()?;
+        let same = d.identity == self.g.identity()
+            && d.dof.len() == 3 * fixed.len()
+            && (0..d.dof.len()).all(|q| !fixed[q / 3] || d.dof[q] == usize::MAX);
+        if !same {
+            return None;
+        }
+        let nfree = d.nfree;
+        let mut x = vec![0.0; nfree];
+        for (i, r) in b.iter().enumerate() {
+            for a in 0..3 {
+                let q = d.dof[3 * i + a];
+                if q != usize::MAX {
+                    x[q] = r[a];
+                } else if !fixed[i] && r[a] != 0.0 {
+                    // a load on a component the factorization left out
+                    return None;
+                }
+            }
+        }
+        let par = Par::Seq;
+        let rhs = MatMut::from_column_major_slice_mut(&mut x, nfree, 1);
+        match numeric {
+            Numeric::Lu(lu) => lu.solve_transpose_in_place_with_conj(Conj::No, rhs),
+            Numeric::Llt(v) | Numeric::Ldlt(v) => {
+                let mut mem =
+                    MemBuffer::try_new(d.symbolic.solve_in_place_scratch::<f64>(1, par)).ok()?;
+                let stack = MemStack::new(&mut mem);
+                if let Numeric::Llt(_) = numeric {
+                    LltRef::new(&d.symbolic, v).solve_in_place_with_conj(Conj::No, rhs, par, stack);
+                } else {
+                    LdltRef::new(&d.symbolic, v).solve_in_place_with_conj(
+                        Conj::No,
+                        rhs,
+                        par,
+                        stack,
+                    );
+                }
+            }
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
         let mut out = vec![[0.0; 3]; b.len()];
         for (i, o) in out.iter_mut().enumerate() {
             for a in 0..3 {
@@ -752,7 +832,7 @@ impl Simulation {
                 }
             }
         }
-        Ok((out, factor))
+        Some(out)
     }
 
     /// The degrees of freedom left out of a direct solve (`3 V`): those of fixed vertices, and
@@ -902,6 +982,7 @@ impl Simulation {
             Conj::No,
             MatMut::from_column_major_slice_mut(&mut x, nfree, 1),
         );
+        d.numeric = Some(Numeric::Lu(Box::new(lu)));
         if x.iter().any(|v| !v.is_finite()) {
             return Err(fail(format!(
                 "{what} is singular (its factorization gives a non-finite solution): {hint}"
@@ -985,6 +1066,7 @@ impl Simulation {
             source,
             symbolic,
             lu: None,
+            numeric: None,
         })
     }
 }
