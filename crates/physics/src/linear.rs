@@ -1001,7 +1001,7 @@ impl Simulation {
     }
 
     /// The free degrees of freedom, the lower triangle's pattern on them and its symbolic
-    /// Cholesky factorization (an approximate minimum degree ordering, faer's default).
+    /// Cholesky factorization (ordered by [`nested_dissection`]).
     fn direct_pattern(&mut self, held: &[bool]) -> Result<Direct, PhysicsError> {
         let identity = self.g.identity();
         let step = self.steps + 1;
@@ -1044,10 +1044,11 @@ impl Simulation {
                 col_ptr.push(row_idx.len());
             }
         }
+        let (fwd, inv) = nested_dissection(&self.vertex_vec3("position")?, c, &dof, nfree);
         let symbolic = factorize_symbolic_cholesky(
             SymbolicSparseColMatRef::new_checked(nfree, nfree, &col_ptr, None, &row_idx),
             Side::Lower,
-            SymmetricOrdering::default(),
+            SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(&fwd, &inv, nfree)),
             CholeskySymbolicParams::default(),
         )
         .map_err(|e| PhysicsError::Diverged {
@@ -1069,4 +1070,83 @@ impl Simulation {
             numeric: None,
         })
     }
+}
+
+/// A fill-reducing ordering of the free degrees of freedom by geometric nested dissection
+/// (George 1973): the free vertices are split at the median of their positions along the
+/// longest side of their bounding box, the vertices of the lower half coupled to the upper
+/// half form the separator, ordered last, and both halves are ordered the same way down to
+/// 64 vertices. On 3D meshes it fills the Cholesky factor much less than a minimum degree
+/// ordering. Returns the permutation `(forward, inverse)`: `forward[new] = old`.
+fn nested_dissection(
+    pos: &[[f64; 3]],
+    c: &Coupling,
+    dof: &[usize],
+    nfree: usize,
+) -> (Vec<usize>, Vec<usize>) {
+    fn dissect(
+        ids: &mut [usize],
+        pos: &[[f64; 3]],
+        c: &Coupling,
+        mark: &mut [usize],
+        stamp: &mut usize,
+        out: &mut Vec<usize>,
+    ) {
+        if ids.len() <= 64 {
+            out.extend_from_slice(ids);
+            return;
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for &v in ids.iter() {
+            for a in 0..3 {
+                lo[a] = lo[a].min(pos[v][a]);
+                hi[a] = hi[a].max(pos[v][a]);
+            }
+        }
+        let axis = (0..3)
+            .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
+            .unwrap_or(0);
+        ids.sort_unstable_by(|&a, &b| pos[a][axis].total_cmp(&pos[b][axis]).then(a.cmp(&b)));
+        let mid = ids.len() / 2;
+        *stamp += 1;
+        let upper = *stamp;
+        for &v in &ids[mid..] {
+            mark[v] = upper;
+        }
+        let (mut lower, mut sep) = (Vec::new(), Vec::new());
+        for &v in &ids[..mid] {
+            if c.adj[c.ptr[v]..c.ptr[v + 1]]
+                .iter()
+                .any(|&j| mark[j] == upper)
+            {
+                sep.push(v);
+            } else {
+                lower.push(v);
+            }
+        }
+        let mut upper_ids = ids[mid..].to_vec();
+        dissect(&mut lower, pos, c, mark, stamp, out);
+        dissect(&mut upper_ids, pos, c, mark, stamp, out);
+        out.extend(sep);
+    }
+    let mut ids: Vec<usize> = (0..c.n)
+        .filter(|&i| (0..3).any(|a| dof[3 * i + a] != usize::MAX))
+        .collect();
+    let mut mark = vec![0; c.n];
+    let mut stamp = 0;
+    let mut order = Vec::with_capacity(ids.len());
+    dissect(&mut ids, pos, c, &mut mark, &mut stamp, &mut order);
+    let mut fwd = Vec::with_capacity(nfree);
+    for v in order {
+        for a in 0..3 {
+            if dof[3 * v + a] != usize::MAX {
+                fwd.push(dof[3 * v + a]);
+            }
+        }
+    }
+    let mut inv = vec![0; nfree];
+    for (new, &old) in fwd.iter().enumerate() {
+        inv[old] = new;
+    }
+    (fwd, inv)
 }

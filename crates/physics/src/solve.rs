@@ -62,7 +62,7 @@ pub const NEWTON_LINEAR_TOLERANCE: f64 = 1e-12;
 /// solves a static step with [`LinearSolver::Direct`] (above: [`LinearSolver::Pcg`]).
 /// Measured on co-rotational cantilevers under gravity to 1e-8 (`make bench`, one thread):
 /// direct 0.2 s against block-Jacobi PCG 1.0 s at 1,500 tetrahedra, 4 s against 24 s at
-/// 12,000, 150 s at 10^5 (57k free degrees of freedom; PCG, whose iterations grow with the
+/// 12,000, 89 s at 10^5 (57k free degrees of freedom; PCG, whose iterations grow with the
 /// mesh, is slower still there). The limit bounds the factor's memory: its fill grows faster
 /// than the degrees of freedom in 3D (about 4 GB at 57k).
 pub const AUTO_DIRECT_MAX_DOFS: usize = 100_000;
