@@ -64,7 +64,8 @@ pub const NEWTON_LINEAR_TOLERANCE: f64 = 1e-12;
 /// direct 0.2 s against block-Jacobi PCG 1.0 s at 1,500 tetrahedra, 4 s against 24 s at
 /// 12,000, 89 s at 10^5 (57k free degrees of freedom; PCG, whose iterations grow with the
 /// mesh, is slower still there). The limit bounds the factor's memory: its fill grows faster
-/// than the degrees of freedom in 3D (about 4 GB at 57k).
+/// than the degrees of freedom in 3D (the process held 4 GB at 57k with a minimum degree
+/// ordering; nested dissection, now used, fills less).
 pub const AUTO_DIRECT_MAX_DOFS: usize = 100_000;
 /// Implicit Euler steps between two rebuilds of its preconditioner (see
 /// [`Simulation::solver_report`] and the rules in `implicit_euler`'s docs).
