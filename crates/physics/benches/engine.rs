@@ -27,6 +27,7 @@
 //!   empty or `0` skips it): implicit against symplectic Euler, iterations of cg, Jacobi-
 //!   and block-Jacobi-PCG, static cantilevers (issue 17)
 //! - `TOPOMECH_BENCH_SOLVER_STEPS`: timed steps per solver case (default 5)
+//! - `TOPOMECH_BENCH_SOLVER_PARTS`: `implicit`, `static` or both (the default)
 
 mod baselines;
 #[path = "../tests/common/renamed.rs"]
@@ -1136,6 +1137,13 @@ fn static_cantilever(target: usize, against: topomech_physics::LinearSolver) -> 
         c.tolerance = Some(1e-8);
     });
     let n = s.n_vertices();
+    // one-off costs apart: the coupling graph and its colorings, one assembly
+    let graph = seconds(|| {
+        s.coupling_colors().expect("the coupling graph");
+    });
+    let assembly = seconds(|| {
+        black_box(s.stiffness_matrix().expect("an assembly"));
+    });
     let t = seconds(|| s.step().expect("a static solve"));
     let r = s.solver_report().expect("a report").clone();
     let u = deflection(&s);
@@ -1159,13 +1167,14 @@ fn static_cantilever(target: usize, against: topomech_physics::LinearSolver) -> 
         .fold(0.0f64, f64::max);
     let scale = u2.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
     println!(
-        "  static cantilever, {} tets ({n} vertices): {:.2} s with {} ({} Newton iterations, {} load steps, relative residual {:.2e}), tip deflection {tip:.4e} m; against {} ({:.2} s, {} linear iterations): max difference {:.2e} of the deflection",
+        "  static cantilever, {} tets ({n} vertices): {:.2} s with {} ({} Newton iterations, {} load steps, relative residual {:.2e}; plus the coupling graph {graph:.2} s: {:.2} s in all; one assembly {assembly:.2} s), tip deflection {tip:.4e} m; against {} ({:.2} s, {} linear iterations): max difference {:.2e} of the deflection",
         Model::Corotational.cells(target).1,
         t,
         r.linear_solver,
         r.iterations,
         r.load_steps,
         r.relative_residual,
+        graph + t,
         r2.linear_solver,
         t2,
         r2.linear_iterations,
@@ -1178,6 +1187,9 @@ fn static_cantilever(target: usize, against: topomech_physics::LinearSolver) -> 
         ),
         ("vertices", J::num(n as f64)),
         ("time_s", J::num(t)),
+        ("coupling_graph_s", J::num(graph)),
+        ("total_s", J::num(graph + t)),
+        ("assembly_s", J::num(assembly)),
         ("linear_solver", J::str(r.linear_solver)),
         ("newton_iterations", J::num(r.iterations as f64)),
         ("load_steps", J::num(r.load_steps as f64)),
@@ -1214,9 +1226,16 @@ fn solvers() -> J {
     pool.install(|| {
         let mut implicit = Vec::new();
         let mut statics = Vec::new();
+        let parts = std::env::var("TOPOMECH_BENCH_SOLVER_PARTS")
+            .unwrap_or_else(|_| "implicit,static".into());
         for &target in &sizes {
-            for kind in ["corotational", "stretch_cumulated"] {
-                implicit.push(implicit_vs_symplectic(kind, target, steps));
+            if parts.contains("implicit") {
+                for kind in ["corotational", "stretch_cumulated"] {
+                    implicit.push(implicit_vs_symplectic(kind, target, steps));
+                }
+            }
+            if !parts.contains("static") {
+                continue;
             }
             let against = if target <= 20_000 {
                 topomech_physics::LinearSolver::Pcg

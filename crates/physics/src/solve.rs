@@ -60,11 +60,13 @@ pub const IMPLICIT_TOLERANCE: f64 = 1e-6;
 pub const NEWTON_LINEAR_TOLERANCE: f64 = 1e-12;
 /// The most free degrees of freedom (3 per free vertex) for which [`LinearSolver::Auto`]
 /// solves a static step with [`LinearSolver::Direct`] (above: [`LinearSolver::Pcg`]).
-/// Measured on cantilevers (`make bench`): assembly plus a sparse Cholesky factorization
-/// costs less than one preconditioned conjugate-gradient solve of the stiffness to 1e-12
-/// at every size measured up to 10^5 tetrahedra; the limit keeps the factor's memory
-/// (fill-in grows faster than the degrees of freedom in 3D) to a few GB.
-pub const AUTO_DIRECT_MAX_DOFS: usize = 300_000;
+/// Measured on co-rotational cantilevers under gravity to 1e-8 (`make bench`, one thread):
+/// direct 0.2 s against block-Jacobi PCG 1.0 s at 1,500 tetrahedra, 4 s against 24 s at
+/// 12,000, 89 s at 10^5 (57k free degrees of freedom; PCG, whose iterations grow with the
+/// mesh, is slower still there). The limit bounds the factor's memory: its fill grows faster
+/// than the degrees of freedom in 3D (the process held 4 GB at 57k with a minimum degree
+/// ordering; nested dissection, now used, fills less).
+pub const AUTO_DIRECT_MAX_DOFS: usize = 100_000;
 /// Implicit Euler steps between two rebuilds of its preconditioner (see
 /// [`Simulation::solver_report`] and the rules in `implicit_euler`'s docs).
 pub const PRECOND_REFRESH_STEPS: u64 = 50;
@@ -78,6 +80,9 @@ const ROUNDING_ULPS: f64 = 1e3;
 pub const MIN_LOAD_INCREMENT: f64 = 1.0 / 1024.0;
 /// Newton iterations allowed for one load increment.
 const NEWTON_ITERATIONS: usize = 30;
+/// With the direct solver, a static Newton iteration reuses the last factorization (a chord
+/// step) when the step before cut the residual to at most this fraction of what it was.
+pub const CHORD_RATIO: f64 = 0.8;
 /// Halvings of a Newton step the line search tries before giving up on the increment.
 const LINE_SEARCH_HALVINGS: usize = 10;
 
@@ -383,7 +388,10 @@ impl Simulation {
     /// [`AUTO_DIRECT_MAX_DOFS`] free degrees of freedom: the stiffness assembled from the
     /// rules and factored, the symbolic factorization kept between iterations; else
     /// block-Jacobi preconditioned conjugate gradients to [`NEWTON_LINEAR_TOLERANCE`]), and a
-    /// backtracking line search on the residual norm; the velocity is set to zero. Converged
+    /// backtracking line search on the residual norm (with the direct solver, the last
+    /// factorization is reused, as chord steps, while each step cuts the residual to
+    /// at most [`CHORD_RATIO`] of what it was: an assembly costs 3 products of the rules per color of a distance-2
+    /// coloring, a reused factorization one triangular solve); the velocity is set to zero. Converged
     /// when the residual on the free vertices is at most [`Config::tolerance`] (default
     /// [`STATIC_TOLERANCE`]) of the load
     /// (gravity and external loads, or the first residual when prescribed displacements drive
@@ -626,6 +634,16 @@ impl Simulation {
         let mut res = norm(&r);
         let mut iterations = 0;
         let mut linear_iterations = 0;
+        // chord steps: with the direct solver, the last factorization is reused while each
+        // step cuts the residual to CHORD_RATIO of what it was or less (an assembly costs 3 products of the rules per
+        // color of a distance-2 coloring, a reused factorization one triangular solve); a
+        // step whose line search fails on a reused factorization is retried with a fresh one
+        let mut lagged = false;
+        let cap = if choice == LinearSolver::Direct {
+            2 * NEWTON_ITERATIONS
+        } else {
+            NEWTON_ITERATIONS
+        };
         let done =
             |converged, iterations, linear_iterations, res: f64, r: &[[f64; 3]]| NewtonOutcome {
                 converged,
@@ -635,7 +653,7 @@ impl Simulation {
                 residual: if res.is_finite() { res } else { f64::INFINITY },
                 worst: worst_of(r),
             };
-        while iterations < NEWTON_ITERATIONS {
+        while iterations < cap {
             if res <= tol {
                 return Ok(done(true, iterations, linear_iterations, res, &r));
             }
@@ -643,10 +661,10 @@ impl Simulation {
                 break;
             }
             iterations += 1;
-            let du = match self.newton_direction(&r, fixed, choice) {
-                Ok((du, its)) => {
+            let (du, reused) = match self.newton_direction(&r, fixed, choice, lagged) {
+                Ok((du, its, reused)) => {
                     linear_iterations += its;
-                    du
+                    (du, reused)
                 }
                 Err(e) => {
                     let why = match &e {
@@ -684,11 +702,16 @@ impl Simulation {
             }
             let Some((rt, nt)) = accepted else {
                 self.set_vertex_vec3("position", &x)?;
+                if reused {
+                    lagged = false;
+                    continue;
+                }
                 // the residual may stall at the rounding level of the forces just above the
                 // tolerance (small loads on stiff models): close enough when within
                 // STALL_TOLERANCE
                 return Ok(done(res <= stall, iterations, linear_iterations, res, &r));
             };
+            lagged = nt <= CHORD_RATIO * res;
             r = rt;
             res = nt;
         }
@@ -804,19 +827,26 @@ impl Simulation {
     }
 
     /// The Newton direction `du` with `K du = r` (`K = -df/dx` on the free components) by
-    /// the static solve's linear solver, and the iterations it took.
+    /// the static solve's linear solver, the iterations it took, and whether it came from
+    /// the last factorization (`lagged`: asked for and available, direct solver only).
     fn newton_direction(
         &mut self,
         r: &[[f64; 3]],
         fixed: &[bool],
         choice: LinearSolver,
-    ) -> Result<(Vec<[f64; 3]>, usize), PhysicsError> {
+        lagged: bool,
+    ) -> Result<(Vec<[f64; 3]>, usize, bool), PhysicsError> {
         let n = r.len();
         let zero = vec![[0.0; 3]; n];
         let apply = |sim: &mut Self, z: &[[f64; 3]]| -> Result<Vec<[f64; 3]>, PhysicsError> {
             Ok(sim.jvp(z, &zero)?.iter().map(|d| d.map(|x| -x)).collect())
         };
         let mut choice = choice;
+        if choice == LinearSolver::Direct && lagged {
+            if let Some(x) = self.direct_resolve(r, fixed) {
+                return Ok((x, 0, true));
+            }
+        }
         if choice == LinearSolver::Direct {
             let blocks = self.assemble_blocks(1.0, 0.0)?;
             match self.direct_solve(
@@ -826,7 +856,7 @@ impl Simulation {
                 fixed,
                 (System::Stiffness.what(), System::Stiffness.hint()),
             ) {
-                Ok((x, _)) => return Ok((x, 0)),
+                Ok((x, _)) => return Ok((x, 0, false)),
                 // auto: a singular stiffness (a mechanism the load does not excite) may
                 // still have a solution conjugate gradients find in its range
                 Err(PhysicsError::Diverged { .. })
@@ -854,7 +884,7 @@ impl Simulation {
             System::Stiffness,
             apply,
         )?;
-        Ok((out.x, out.iterations))
+        Ok((out.x, out.iterations, false))
     }
 }
 
