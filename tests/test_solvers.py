@@ -81,6 +81,12 @@ def _scene(extra: str = "", kind: str = "implicit_euler") -> str:
         ("tolerance = nan", "integrator.tolerance", "finite"),
         ('tolerance = "1e-6"', "integrator.tolerance", "number"),
         ("max_iterations = 0", "integrator.max_iterations", ">= 1"),
+        (
+            'linear_solver = "direct"\nmax_iterations = 10',
+            "integrator.max_iterations",
+            "the direct solver iterates nothing",
+        ),
+        ("tolerance = 1e-300", "integrator.tolerance", "at least 1e-14"),
         ("max_iterations = 2.5", "integrator.max_iterations", "integer"),
     ],
 )
@@ -195,7 +201,8 @@ def test_unmet_tolerance_warns_and_is_reported(
     assert s["steps_not_converged"] == 4
     assert s["converged"] is False
     assert s["max_relative_residual"] > 1e-6
-    assert "did not reach its tolerance in 4 of 4 steps" in err, err
+    assert "(cg) did not reach its tolerance in 4 of 4 steps" in err, err
+    assert 'linear_solver = "pcg" or "direct"' in err, err
     assert "max_iterations" in err
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -417,3 +424,73 @@ def test_load_stepping_equals_a_solve_in_100_small_load_steps(solver: str) -> No
     assert deflection > 0.5  # large: the nonlinear regime
     diff = np.abs(one.positions() - ramp.positions()).max()
     assert diff <= 1e-8 * deflection, diff
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "words"),
+    [
+        ({"integrator": "explicit_euler", "linear_solver": "cg"}, "linear_solver: only used"),
+        ({"integrator": "symplectic_euler", "tolerance": 1e-3}, "tolerance: only used"),
+        (
+            {"integrator": "implicit_euler", "linear_solver": "cg", "preconditioner": "jacobi"},
+            "preconditioner: only used by linear_solver='pcg'",
+        ),
+        (
+            {"integrator": "static", "linear_solver": "direct", "max_iterations": 5},
+            "max_iterations: the direct solver iterates nothing",
+        ),
+    ],
+)
+def test_python_refuses_solver_keys_that_would_be_ignored(
+    kwargs: dict[str, Any], words: str
+) -> None:
+    g = _box(2, 1, 1, 1.0, 0.5, 0.5)
+    with pytest.raises(topomech.SimulationError, match=words):
+        topomech.Simulation(g, models=["linear_fem"], **kwargs)
+
+
+def test_python_takes_numpy_integers_and_refuses_tiny_tolerances() -> None:
+    g = _box(2, 1, 1, 1.0, 0.5, 0.5)
+    sim = topomech.Simulation(
+        g, models=["linear_fem"], integrator="implicit_euler", max_iterations=np.int64(5)
+    )
+    sim.step()
+    with pytest.raises(topomech.SimulationError, match="1e-14"):
+        topomech.Simulation(g, models=["linear_fem"], integrator="static", tolerance=1e-300)
+
+
+def test_simulation_step_warns_when_a_solve_stops_above_its_tolerance() -> None:
+    """Simulation.step() itself (not only topomech run) says when an implicit Euler step
+    was taken with a linear solve stopped at max_iterations: one SolverWarning per call."""
+    sim = parse_scene(_scene('linear_solver = "cg"\nmax_iterations = 1'), "beam.toml").build()
+    with pytest.warns(topomech.SolverWarning, match="3 of the 3 steps did not reach"):
+        sim.step(3)
+    report = sim.solver_report()
+    assert report is not None
+    assert report["not_converged_steps"] == 3
+    good = parse_scene(_scene(), "beam.toml").build()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        good.step(3)  # converged: no warning
+
+
+def test_matrices_refused_for_a_model_without_jacobian_rules() -> None:
+    """A model without jvp rules would be missing from the matrix (silently zero): refused,
+    naming it."""
+    g = topomech.GMap.from_flat(*topomech._core.grid(3, 3, 1.0, 1.0, "triangle"))
+    sim = topomech.Simulation(g, models=["bending_angular", "stretch_cumulated"])
+    with pytest.raises(topomech.SimulationError, match="model 'bending_angular' has no Jacobian"):
+        sim.stiffness_matrix()
+
+
+def test_failed_static_step_is_in_solver_csv(tmp_path: Path) -> None:
+    """A static step that fails ends the run (exit 1); solver.csv and the summary's totals
+    still have its row."""
+    code, summary, out = _run(tmp_path, 'linear_solver = "cg"\nmax_iterations = 1', "static")
+    assert code == 1
+    s = summary["solver"]
+    assert s["steps_solved"] == 1
+    assert s["steps_not_converged"] == 1
+    with (Path(out) / "solver.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["step"], r["converged"]) for r in rows] == [("1", "0")]

@@ -47,14 +47,17 @@ class SolverLog:
     def __init__(self) -> None:
         self.rows: list[dict[str, Any]] = []
 
-    def after_step(self, sim: Simulation) -> None:
-        """Keeps the report of the step just taken (nothing for the explicit integrators)."""
+    def after_step(self, sim: Simulation, *, failed: bool = False) -> None:
+        """Keeps the report of the step just taken, or (``failed``) of the step that failed
+        (the simulation's state is the one before it); nothing for the explicit
+        integrators."""
         r = sim.solver_report()
         if r is None:
             return
         self.rows.append(
             {
-                "step": sim.steps,
+                "failed": failed,
+                "step": sim.steps + 1 if failed else sim.steps,
                 "time": sim.time,
                 "integrator": r["integrator"],
                 "linear_solver": r.get("linear_solver", "cg"),
@@ -109,20 +112,21 @@ class SolverLog:
     def warning(self) -> str | None:
         """The message of the run's :class:`SolverWarning`, or None when every solve
         converged."""
-        bad = self.not_converged()
-        if not bad:
-            return None
-        worst = max(
-            (r for r in self.rows if not r["converged"]), key=lambda r: r["relative_residual"]
-        )
+        taken = [r for r in self.rows if not r["converged"] and not r["failed"]]
+        if not taken:
+            return None  # a failed step is the run's error, not a warning
+        worst = max(taken, key=lambda r: r["relative_residual"])
+        bad = [r["step"] for r in taken]
         first = ", ".join(str(s) for s in bad[:5]) + (", ..." if len(bad) > 5 else "")
+        used = worst["linear_solver"]
+        others = " or ".join(f'"{x}"' for x in ("pcg", "direct") if x != used)
         return (
-            f"the linear solve did not reach its tolerance in {len(bad)} of {len(self.rows)} "
-            f"steps (steps {first}; worst relative residual {worst['relative_residual']:.3e} "
-            f"against {worst['tolerance']:g} at step {worst['step']}); those steps used the "
-            "approximate solution found: raise integrator.max_iterations, use "
-            'linear_solver = "direct" or "pcg", or a smaller dt (per-step figures: '
-            "solver.csv)"
+            f"the linear solve ({used}) did not reach its tolerance in {len(bad)} of "
+            f"{len(self.rows)} steps (steps {first}; worst relative residual "
+            f"{worst['relative_residual']:.3e} against {worst['tolerance']:g} at step "
+            f"{worst['step']}, after {worst['linear_iterations']} iterations); those steps "
+            f"used the approximate solution found: raise integrator.max_iterations, use "
+            f"linear_solver = {others}, or a smaller dt (per-step figures: solver.csv)"
         )
 
 

@@ -34,6 +34,8 @@ before that step.
 
 from __future__ import annotations
 
+import operator
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypedDict, Union
@@ -44,6 +46,7 @@ import numpy.typing as npt
 from topomech import _core
 from topomech._core import DivergenceError, SimulationError
 from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_array
+from topomech._solver_log import SolverWarning
 from topomech.models import Model, ParamDefault, model_files_of
 
 if TYPE_CHECKING:
@@ -128,6 +131,46 @@ def available_models() -> list[ModelInfo]:
         )
         for m in _core.models()
     ]
+
+
+#: The integrators that solve linear systems (the solver keys apply to them only).
+_SOLVING = ("implicit_euler", "static")
+
+
+def _check_solver_keys(cfg: Mapping[str, Any]) -> None:
+    """Refuses solver keys that would be ignored: any with an explicit integrator,
+    ``preconditioner`` with a solver other than ``pcg`` or ``auto``, ``max_iterations`` with
+    ``direct`` (it iterates nothing). Raises :class:`SimulationError` naming the key."""
+    given = [
+        k for k in ("linear_solver", "preconditioner", "tolerance", "max_iterations") if k in cfg
+    ]
+    integrator = cfg.get("integrator", "symplectic_euler")
+    if given and isinstance(integrator, str) and integrator not in _SOLVING:
+        raise SimulationError(
+            f"{given[0]}: only used by the integrators 'implicit_euler' and 'static', and "
+            f"this simulation's is {integrator!r}"
+        )
+    solver = cfg.get("linear_solver", "auto")
+    if "preconditioner" in cfg and solver not in ("auto", "pcg"):
+        raise SimulationError(
+            f"preconditioner: only used by linear_solver='pcg' (or 'auto'), not {solver!r}"
+        )
+    if "max_iterations" in cfg and solver == "direct":
+        raise SimulationError(
+            "max_iterations: the direct solver iterates nothing (it applies to 'cg', 'pcg' "
+            "and 'auto')"
+        )
+
+
+def _index(v: Any, what: str) -> Any:
+    """``v`` as a Python int when it is an integer of any kind (numpy's included); left as
+    it is otherwise, for the kernel to refuse with its message."""
+    if isinstance(v, bool):
+        return v
+    try:
+        return operator.index(v)
+    except TypeError:
+        return v
 
 
 def _csr(parts: tuple[Any, Any, Any, int]) -> scipy.sparse.csr_matrix:
@@ -221,7 +264,10 @@ class Simulation:
         **kwargs: Any,
     ) -> None:
         cfg = dict(config) if config is not None else None
+        _check_solver_keys({**(cfg or {}), **kwargs})
         for where in (cfg, kwargs):
+            if where is not None and "max_iterations" in where:
+                where["max_iterations"] = _index(where["max_iterations"], "max_iterations")
             if where is not None and isinstance(where.get("models"), (list, tuple)):
                 _check_dimensions(where["models"], gmap)
                 models, files = model_files_of(list(where["models"]))
@@ -251,10 +297,26 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Runs ``n`` time steps; raises :class:`DivergenceError` on divergence, and when a
-        ``static`` or ``implicit_euler`` step's solve does not converge (its message gives the
-        relative residual and the tolerance; :meth:`solver_report` the details). The state is
-        then the one before the failed step."""
+        ``static`` step's solve does not converge or an ``implicit_euler`` step's linear
+        system breaks down (not positive definite, singular; the message gives the relative
+        residual and the tolerance; :meth:`solver_report` the details). The state is then the
+        one before the failed step. An ``implicit_euler`` step whose ``cg``/``pcg`` stops at
+        ``max_iterations`` above its tolerance is taken with the approximate solution and
+        raises one :class:`topomech.SolverWarning` for the call."""
+        report = self._core.solver_report()
+        before = report["not_converged_steps"] if report is not None else 0
         self._core.step(n)
+        report = self._core.solver_report()
+        if report is not None and report["not_converged_steps"] > before:
+            warnings.warn(
+                f"{report['not_converged_steps'] - before} of the {n} steps did not reach "
+                f"the tolerance {report['tolerance']:g} (the last: relative residual "
+                f"{report['relative_residual']:.3e} with {report['linear_solver']}): they "
+                "used the approximate solution found; raise max_iterations, or use "
+                "linear_solver='direct'",
+                SolverWarning,
+                stacklevel=2,
+            )
 
     # ------------------------------------------------------------------ topology
 

@@ -582,9 +582,11 @@ impl Simulation {
     /// (co-rotational models give their warped stiffness `R K R^T`, without the rotation's
     /// derivative, as their jvp rules do). Gravity and the viscous damping `integrator`
     /// damping are not in it (they do not depend on the positions).
-    /// Errors: a rule's failure; [`PhysicsError::Model`] when the models' rules couple
-    /// vertices their matches do not reach (the matrix cannot be built by probing).
+    /// Errors: a rule's failure; [`PhysicsError::Model`] when a model has no Jacobian rules
+    /// (`jvp`: its stiffness would be missing from the matrix), or when the models' rules
+    /// couple vertices their matches do not reach (the matrix cannot be built by probing).
     pub fn stiffness_matrix(&mut self) -> Result<Csr, PhysicsError> {
+        self.models_have_jvp("stiffness_matrix")?;
         let b = self.assemble_blocks(1.0, 0.0)?;
         Ok(self.blocks_to_csr(&b, |_, _, v| -v))
     }
@@ -594,8 +596,21 @@ impl Simulation {
     /// shape, order and errors), in N s/m; the global viscous damping (`damping`, a mass
     /// proportional term `c M`) is not in it.
     pub fn damping_matrix(&mut self) -> Result<Csr, PhysicsError> {
+        self.models_have_jvp("damping_matrix")?;
         let b = self.assemble_blocks(0.0, 1.0)?;
         Ok(self.blocks_to_csr(&b, |_, _, v| -v))
+    }
+
+    /// [`PhysicsError::Model`] naming the first model without Jacobian rules: `what` (a
+    /// matrix) cannot be built from them.
+    fn models_have_jvp(&self, what: &str) -> Result<(), PhysicsError> {
+        match self.defs.iter().find(|d| d.jvp.is_empty()) {
+            Some(def) => Err(PhysicsError::Model(format!(
+                "{what}: model '{}' has no Jacobian rules (jvp), so its stiffness cannot be part of the matrix; add jvp rules to its declaration",
+                def.name
+            ))),
+            None => Ok(()),
+        }
     }
 
     /// The lumped mass matrix: diagonal, `3 V` x `3 V` in vertex-row order, each vertex's

@@ -284,9 +284,9 @@ impl Simulation {
             )));
         }
         if let Some(t) = cfg.tolerance {
-            if !(t > 0.0 && t < 1.0) {
+            if !(MIN_TOLERANCE..1.0).contains(&t) {
                 return Err(PhysicsError::Config(format!(
-                    "integrator.tolerance must be a relative residual in (0, 1), got {t}"
+                    "integrator.tolerance must be a relative residual in [{MIN_TOLERANCE:e}, 1), got {t:e} (below {MIN_TOLERANCE:e} rounding in f64 arithmetic hides whether a solve reached it)"
                 )));
             }
         }

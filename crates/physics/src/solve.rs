@@ -39,6 +39,10 @@ pub struct SolverReport {
     pub worst_relative_residual: f64,
     /// How many static steps so far needed more than one load increment.
     pub load_stepped_steps: usize,
+    /// How many static or implicit Euler steps so far did not reach their tolerance (an
+    /// implicit Euler step taken with the approximate solution of a linear solve stopped at
+    /// `max_iterations`, or a static step that failed).
+    pub not_converged_steps: usize,
     /// The linear solver used: `cg`, `pcg` or `direct` (what [`LinearSolver::Auto`] chose;
     /// with `Auto`, a Newton iteration whose direct solve finds the stiffness singular is
     /// solved by `pcg` instead, its iterations counted in `linear_iterations`).
@@ -49,6 +53,11 @@ pub struct SolverReport {
     /// iteration of a static solve); 0 for `direct`.
     pub linear_iterations: usize,
 }
+
+/// The smallest [`Config::tolerance`] accepted: a relative residual below it is within
+/// rounding of f64 arithmetic (a few ulps times the matrix's condition), so whether a solve
+/// reached it says nothing.
+pub const MIN_TOLERANCE: f64 = 1e-14;
 
 /// The relative residual a static solve must reach (the default of [`Config::tolerance`]).
 pub const STATIC_TOLERANCE: f64 = 1e-10;
@@ -361,6 +370,7 @@ impl Simulation {
             load_fraction: 1.0,
             worst_relative_residual: 0.0,
             load_stepped_steps: 0,
+            not_converged_steps: 0,
             linear_solver,
             preconditioner,
             linear_iterations: solve.iterations,
@@ -510,6 +520,7 @@ impl Simulation {
                         load_fraction: s,
                         worst_relative_residual: 0.0,
                         load_stepped_steps: 0,
+                        not_converged_steps: 0,
                         linear_solver,
                         preconditioner,
                         linear_iterations,
@@ -543,6 +554,7 @@ impl Simulation {
             load_fraction: 1.0,
             worst_relative_residual: 0.0,
             load_stepped_steps: 0,
+            not_converged_steps: 0,
             linear_solver,
             preconditioner,
             linear_iterations,
@@ -553,10 +565,15 @@ impl Simulation {
     /// Keeps `r` as the last step's report, with the run's worst relative residual and count
     /// of load-stepped steps carried over from the previous one.
     pub(crate) fn record(&mut self, mut r: SolverReport) {
-        let (worst, stepped) = self.report.as_ref().map_or((0.0, 0), |p| {
-            (p.worst_relative_residual, p.load_stepped_steps)
+        let (worst, stepped, unmet) = self.report.as_ref().map_or((0.0, 0, 0), |p| {
+            (
+                p.worst_relative_residual,
+                p.load_stepped_steps,
+                p.not_converged_steps,
+            )
         });
         r.worst_relative_residual = worst.max(r.relative_residual);
+        r.not_converged_steps = unmet + usize::from(!r.converged);
         r.load_stepped_steps =
             stepped + usize::from(r.integrator == "static" && (r.load_steps > 1 || !r.converged));
         self.report = Some(r);

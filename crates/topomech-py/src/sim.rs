@@ -982,7 +982,8 @@ impl PySimulation {
     /// `integrator`, `iterations` (Newton iterations over every load increment, or
     /// conjugate-gradient iterations), `residual`, `relative_residual` (to the load),
     /// `tolerance`, `converged`, `load_steps` (the load increments taken), `load_fraction`
-    /// (reached), `worst_relative_residual` (over every step so far) and `load_stepped_steps`
+    /// (reached), `worst_relative_residual` (over every step so far), `not_converged_steps`
+    /// (steps so far that did not reach their tolerance) and `load_stepped_steps`
     /// (steps that needed more than one increment), `linear_solver` (`cg`, `pcg` or `direct`:
     /// what `auto` chose), `preconditioner` (`jacobi`, `block_jacobi`, or `none` for `cg` and
     /// `direct`) and `linear_iterations` (iterations of the iterative linear solver over the
@@ -1003,6 +1004,7 @@ impl PySimulation {
         d.set_item("load_fraction", r.load_fraction)?;
         d.set_item("worst_relative_residual", r.worst_relative_residual)?;
         d.set_item("load_stepped_steps", r.load_stepped_steps)?;
+        d.set_item("not_converged_steps", r.not_converged_steps)?;
         d.set_item("linear_solver", r.linear_solver)?;
         d.set_item("preconditioner", r.preconditioner)?;
         d.set_item("linear_iterations", r.linear_iterations)?;

@@ -50,6 +50,8 @@ INTEGRATORS = ("explicit_euler", "symplectic_euler", "implicit_euler", "static")
 LINEAR_SOLVERS = ("auto", "cg", "pcg", "direct")
 #: The preconditioners of ``pcg`` (``integrator.preconditioner``).
 PRECONDITIONERS = ("jacobi", "block_jacobi")
+#: The smallest ``integrator.tolerance`` (the kernel's ``MIN_TOLERANCE``).
+MIN_TOLERANCE = 1e-14
 #: The ``[integrator]`` keys of the linear solver.
 SOLVER_KEYS = ("linear_solver", "preconditioner", "tolerance", "max_iterations")
 #: The integrators that solve linear systems (the only ones the solver keys apply to).
@@ -333,7 +335,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     out.done()
     events = _events(top.tables("event"), fail)
     fracture = _fracture(top, fail)
-    top.done()
+    top.done(("fracture", "initial"))  # read with has() when absent
 
     config: dict[str, Any] = {
         "models": models,
@@ -408,6 +410,18 @@ def _solver(integ: _Table, kind: str, fail: _Fail) -> dict[str, Any]:
         out["tolerance"] = tol
     if integ.has("max_iterations"):
         out["max_iterations"] = integ.integer("max_iterations", minimum=1)
+        if out.get("linear_solver") == "direct":
+            raise fail(
+                integ.key("max_iterations"),
+                'the direct solver iterates nothing (max_iterations applies to "cg", "pcg" '
+                'and "auto")',
+            )
+    if integ.has("tolerance") and not out["tolerance"] >= MIN_TOLERANCE:
+        raise fail(
+            integ.key("tolerance"),
+            f"must be at least {MIN_TOLERANCE:g}, got {out['tolerance']:g} (below it rounding "
+            "in f64 arithmetic hides whether a solve reached it)",
+        )
     return out
 
 
