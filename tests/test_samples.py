@@ -117,3 +117,21 @@ def test_the_script_writes_the_same_meshes(tmp_path: Path) -> None:
         assert _content(again) == _content(shipped), name
         if name != "block.vtu" or f"meshio v{meshio.__version__}" in shipped.read_text():
             assert again.read_bytes() == shipped.read_bytes(), name
+
+
+def test_copy_keeps_an_edited_sample_unless_told(tmp_path: Path) -> None:
+    """Copying again keeps identical files; a sample the user edited is not replaced (the
+    error names it) unless overwrite; a file given as the folder is refused."""
+    from topomech.samples import copy_samples, sample
+
+    copy_samples(tmp_path)
+    edited = tmp_path / "beam.msh"
+    edited.write_bytes(edited.read_bytes() + b"% mine\n")
+    with pytest.raises(FileExistsError) as e:
+        copy_samples(tmp_path)
+    assert e.value.filename == str(edited)
+    assert edited.read_bytes().endswith(b"% mine\n")  # nothing lost
+    copy_samples(tmp_path, overwrite=True)
+    assert edited.read_bytes() == sample("beam.msh").read_bytes()
+    with pytest.raises(NotADirectoryError):
+        copy_samples(edited)

@@ -1048,6 +1048,11 @@ def _add_samples(sub: Any) -> None:
         ),
     )
     p.add_argument("--copy", metavar="DIR", type=Path, help="copy every sample into DIR")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="with --copy: replace files of the samples' names that differ from them",
+    )
     p.set_defaults(run=_run_samples)
 
 
@@ -1055,7 +1060,7 @@ def _run_samples(args: argparse.Namespace) -> int:
     from topomech.samples import copy_samples, sample, samples
 
     if args.copy is not None:
-        for path in copy_samples(args.copy):
+        for path in copy_samples(args.copy, overwrite=args.overwrite):
             print(f"wrote {path}")
         return EXIT_OK
     for name, what in samples().items():

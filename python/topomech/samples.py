@@ -13,6 +13,7 @@ them into a folder. ``scripts/make_samples.py`` in the repository writes them.
 
 from __future__ import annotations
 
+import errno
 import shutil
 from pathlib import Path
 
@@ -39,9 +40,29 @@ def sample(name: str) -> Path:
     return _DATA / name
 
 
-def copy_samples(folder: str | Path = ".") -> list[Path]:
-    """Copies every sample into ``folder`` (made if missing; files of the same name are
-    replaced) and returns the paths written."""
+def copy_samples(folder: str | Path = ".", *, overwrite: bool = False) -> list[Path]:
+    """Copies every sample into ``folder`` (made if missing) and returns their paths there.
+    A file of the same name that already holds the sample is kept; one that differs (a
+    sample the user edited) is replaced only with ``overwrite``, else
+    :class:`FileExistsError` names it before anything is copied. :class:`NotADirectoryError`
+    when ``folder`` is a file."""
     out = Path(folder)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(
+            errno.ENOTDIR, "not a folder: samples are copied into one", str(out)
+        )
     out.mkdir(parents=True, exist_ok=True)
-    return [Path(shutil.copyfile(sample(name), out / name)) for name in SAMPLES]
+    targets = [(sample(name), out / name) for name in SAMPLES]
+    if not overwrite:
+        for src, dst in targets:
+            if dst.exists() and (not dst.is_file() or dst.read_bytes() != src.read_bytes()):
+                raise FileExistsError(
+                    errno.EEXIST,
+                    "exists and differs from the sample (edited?); not replaced without "
+                    "overwrite (topomech samples --copy DIR --overwrite)",
+                    str(dst),
+                )
+    for src, dst in targets:
+        if not (dst.is_file() and dst.read_bytes() == src.read_bytes()):
+            shutil.copyfile(src, dst)
+    return [dst for _, dst in targets]
