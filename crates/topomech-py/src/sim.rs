@@ -989,8 +989,11 @@ impl PySimulation {
     /// `direct`) and `linear_iterations` (iterations of the iterative linear solver over the
     /// step, 0 for `direct`); None before the first such step and for the explicit
     /// integrators. After a failed step it describes the failure.
-    fn solver_report<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let Some(r) = self.read(|s| Ok(s.solver_report().cloned()))? else {
+    fn solver_report<'py>(
+        slf: &Bound<'_, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(r) = shared(slf)?.read(|s| Ok(s.solver_report().cloned()))? else {
             return Ok(None);
         };
         let d = PyDict::new(py);
