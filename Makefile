@@ -99,8 +99,8 @@ docs-pictures: $(DEVELOP_STAMP)
 demo: $(DEVELOP_STAMP)
 	@$(VENV)/bin/topomech demo --overwrite
 
-# About 10 minutes on 2 cores before the solver section (issue 17: about 4 more, not timed as a
-# whole yet); the engine bench skips, and records as skipped, a size that the
+# About 10 minutes on 2 cores before the solver section was added (issue 17; the whole is not
+# timed yet); the engine bench skips, and records as skipped, a size that the
 # previous one predicts over its budget (TOPOMECH_BENCH_* variables: crates/physics/benches/engine.rs).
 bench:
 	set -o pipefail; $(CARGO) bench -p topomech-gmap | tee bench/kernel.txt
