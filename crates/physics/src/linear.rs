@@ -449,14 +449,7 @@ impl Simulation {
         let mut dv = vec![[0.0; 3]; n];
         for c in 0..ncolors {
             for k in 0..3 {
-                for i in 0..n {
-                    let on = if color[i] == c { 1.0 } else { 0.0 };
-                    dx[i] = [0.0; 3];
-                    dv[i] = [0.0; 3];
-                    dx[i][k] = hx * on;
-                    dv[i][k] = hv * on;
-                }
-                let r = self.jvp(&dx, &dv)?;
+                let r = self.probe(&color, c, k, (hx, hv), (&mut dx, &mut dv))?;
                 for i in 0..n {
                     if color[i] == c {
                         for a in 0..3 {
@@ -467,6 +460,26 @@ impl Simulation {
             }
         }
         Ok(out)
+    }
+
+    /// The product of `hx df/dx + hv df/dv` with the unit vector of component `k` on the
+    /// vertices of color `c` (zero elsewhere), in the scratch vectors `dx`, `dv`.
+    fn probe(
+        &mut self,
+        color: &[usize],
+        c: usize,
+        k: usize,
+        (hx, hv): (f64, f64),
+        (dx, dv): (&mut [[f64; 3]], &mut [[f64; 3]]),
+    ) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        for i in 0..color.len() {
+            let on = if color[i] == c { 1.0 } else { 0.0 };
+            dx[i] = [0.0; 3];
+            dv[i] = [0.0; 3];
+            dx[i][k] = hx * on;
+            dv[i][k] = hv * on;
+        }
+        self.jvp(dx, dv)
     }
 
     /// `J = hx df/dx + hv df/dv` assembled by 3x3 blocks on the coupling graph by
@@ -491,14 +504,7 @@ impl Simulation {
         let mut dv = vec![[0.0; 3]; n];
         for c in 0..ncolors {
             for k in 0..3 {
-                for i in 0..n {
-                    let on = if color[i] == c { 1.0 } else { 0.0 };
-                    dx[i] = [0.0; 3];
-                    dv[i] = [0.0; 3];
-                    dx[i][k] = hx * on;
-                    dv[i][k] = hv * on;
-                }
-                let r = self.jvp(&dx, &dv)?;
+                let r = self.probe(&color, c, k, (hx, hv), (&mut dx, &mut dv))?;
                 for i in 0..n {
                     for p in ptr[i]..ptr[i + 1] {
                         if color[adj[p]] == c {

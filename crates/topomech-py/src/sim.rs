@@ -614,6 +614,23 @@ fn model_file_arg(obj: &Bound<'_, PyAny>, i: usize) -> Result<(String, String)> 
     ))
 }
 
+/// The value of the string `obj` named in `names`, parsed by `parse`; `TypeError` for a
+/// non-string, `ValueError` naming the key `what` and the allowed names otherwise.
+fn choice_arg<T>(
+    obj: &Bound<'_, PyAny>,
+    what: &str,
+    parse: impl Fn(&str) -> Option<T>,
+    names: &[&str],
+) -> Result<T> {
+    let name = str_arg(obj, what)?;
+    parse(&name).ok_or_else(|| {
+        value_error(format!(
+            "unknown {what} '{name}': expected one of {}",
+            names.join(", ")
+        ))
+    })
+}
+
 /// A [`Config`] from `{key: value}` entries (unset keys keep [`Config::default`]).
 fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
     let mut cfg = Config::default();
@@ -682,32 +699,12 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
                     Some(fracture_arg(v)?)
                 };
             }
-            "integrator" => {
-                let name = str_arg(v, k)?;
-                cfg.integrator = Integrator::parse(&name).ok_or_else(|| {
-                    value_error(format!(
-                        "unknown integrator '{name}': expected one of {}",
-                        INTEGRATORS.join(", ")
-                    ))
-                })?;
-            }
+            "integrator" => cfg.integrator = choice_arg(v, k, Integrator::parse, INTEGRATORS)?,
             "linear_solver" => {
-                let name = str_arg(v, k)?;
-                cfg.linear_solver = LinearSolver::parse(&name).ok_or_else(|| {
-                    value_error(format!(
-                        "unknown linear_solver '{name}': expected one of {}",
-                        LINEAR_SOLVERS.join(", ")
-                    ))
-                })?;
+                cfg.linear_solver = choice_arg(v, k, LinearSolver::parse, LINEAR_SOLVERS)?;
             }
             "preconditioner" => {
-                let name = str_arg(v, k)?;
-                cfg.preconditioner = Preconditioner::parse(&name).ok_or_else(|| {
-                    value_error(format!(
-                        "unknown preconditioner '{name}': expected one of {}",
-                        PRECONDITIONERS.join(", ")
-                    ))
-                })?;
+                cfg.preconditioner = choice_arg(v, k, Preconditioner::parse, PRECONDITIONERS)?;
             }
             "tolerance" => {
                 let t = real_arg(v, k)?;
