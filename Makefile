@@ -1,7 +1,8 @@
 # topomech: build, test and demo targets. Needs Rust (cargo) and Python 3.9+ (3.11 preferred).
 #
 #   make venv     .venv with the build and test tools
-#   make develop  build the extension (release) and install the package into .venv
+#   make develop  build the extension (release, the wheel's build) and install the package
+#                 into .venv (editable)
 #   make test     cargo fmt/clippy/test, then ruff, mypy, stubtest and pytest (with the wheel's
 #                 test: its build starts first, in the background)
 #   make wheel    a stripped abi3 manylinux2014 wheel into target/wheels (scripts/wheel.py)
@@ -34,7 +35,7 @@ DEVELOP_STAMP := $(VENV)/.stamp-develop
 # Linters are pinned to a minor (ruff) or major (mypy) version: new releases add checks.
 DEV_TOOLS := maturin>=1.9.4,<2 numpy meshio pytest hypothesis ruff>=0.17,<0.18 mypy>=2,<3 \
 	pillow>=10.1 matplotlib>=3.7 scipy imageio-ffmpeg>=0.4.9 playwright>=1.40 scikit-fem gmsh \
-	nbclient ipykernel ziglang>=0.13
+	nbclient ipykernel ziglang>=0.13 pytest-xdist
 
 .PHONY: venv develop test rust-test py-test lint demo bench clean browser docs-pictures
 
@@ -53,11 +54,15 @@ $(VENV_STAMP):
 
 develop: $(DEVELOP_STAMP)
 
+# The extension is the wheel's (scripts/wheel.py develop: the zig release build, installed as
+# an editable package, as `maturin develop` would): one release build serves both. Where
+# the wheel cannot be built (no zig; exit 2), `maturin develop --release` does it instead.
 $(DEVELOP_STAMP): $(VENV_STAMP) $(RUST_SOURCES) pyproject.toml
 	@echo "make: building the extension and installing the package (log: $(VENV)/develop.log)"
-	@VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH \
-		$(VENV)/bin/maturin develop --release --quiet > $(VENV)/develop.log 2>&1 \
-		|| { cat $(VENV)/develop.log >&2; echo "make: the build failed (log: $(VENV)/develop.log)" >&2; exit 1; }
+	@VIRTUAL_ENV=$(abspath $(VENV)) PATH=$(abspath $(VENV))/bin:$$PATH; export VIRTUAL_ENV PATH; \
+		$(VPY) scripts/wheel.py develop > $(VENV)/develop.log 2>&1; rc=$$?; \
+		if [ $$rc = 2 ]; then $(VENV)/bin/maturin develop --release --quiet >> $(VENV)/develop.log 2>&1; rc=$$?; fi; \
+		if [ $$rc != 0 ]; then cat $(VENV)/develop.log >&2; echo "make: the build failed (log: $(VENV)/develop.log)" >&2; exit 1; fi
 	@touch $@
 
 test: wheel-start rust-test develop lint py-test
@@ -74,7 +79,7 @@ lint: $(DEVELOP_STAMP)
 	MYPY_CACHE_DIR=$(VENV)/.mypy_cache $(VPY) -m mypy.stubtest topomech._core
 
 py-test: $(DEVELOP_STAMP) browser
-	$(VPY) -m pytest -q
+	$(VPY) -m pytest -q -n auto
 
 # The wheel: a release build with zig (the ziglang package) for glibc 2.17, in target/wheel
 # (its log: .venv/wheel.log, printed when it fails); up to date when newer than every source.

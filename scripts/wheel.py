@@ -13,23 +13,33 @@ and linking against it would make a wheel for this glibc only).
     python scripts/wheel.py path     wait for a build started by `start` (if one runs), then
                                      print the wheel's path when it is newer than every
                                      source; exit 3 when there is none
+    python scripts/wheel.py develop  `make develop`: wait for or build the wheel, then install
+                                     it into .venv as an editable install, like `maturin
+                                     develop` (the wheel's extension copied into
+                                     python/topomech, a .pth naming python/), so that the
+                                     release build is done once for both
 
 The build has a target folder of its own (target/wheel, or $TOPOMECH_WHEEL_TARGET_DIR:
-another target triple and no debug information, so nothing is shared with `make
-develop`'s build in target/); the wheel goes to target/wheels (or $TOPOMECH_WHEEL_DIR). Exit
+zig's linker is part of cargo's fingerprints, so nothing could be shared with a plain
+release build in target/; `make develop` therefore installs this build, see `develop`);
+the wheel goes to target/wheels (or $TOPOMECH_WHEEL_DIR). Exit
 status: 0 built; 1 the build failed (the log is printed); 2 it cannot be built here
 (no cargo, or no zig and ziglang cannot be installed), saying why.
 """
 
 from __future__ import annotations
 
+import base64
 import contextlib
+import hashlib
 import os
 import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -239,8 +249,67 @@ def path() -> int:
     return 0
 
 
+def develop() -> int:
+    """An editable install from the wheel: the wheel's files minus the package's, plus a
+    ``topomech.pth`` naming ``python/``, installed by pip (entry point, metadata); the
+    wheel's extension module copied into ``python/topomech``. The same as ``maturin develop``
+    gives, without a second release build (zig's linker makes it a different build)."""
+    code = path()
+    if code == 3:
+        code = build()
+        if code == 0:
+            code = path()
+    if code != 0:
+        return code
+    wheel = fresh_wheel()
+    assert wheel is not None
+    py = python()
+    with tempfile.TemporaryDirectory() as tmp, zipfile.ZipFile(wheel) as src:
+        editable = Path(tmp) / wheel.name
+        records = []
+        with zipfile.ZipFile(editable, "w", zipfile.ZIP_DEFLATED) as dst:
+            pth = f"{ROOT / 'python'}\n".encode()
+            for info in src.infolist():
+                name = info.filename
+                if name.startswith("topomech/"):
+                    if name == "topomech/_core.abi3.so":
+                        so = ROOT / "python" / "topomech" / "_core.abi3.so"
+                        tmp_so = so.with_suffix(".so.tmp")
+                        tmp_so.write_bytes(src.read(info))
+                        tmp_so.chmod(0o755)
+                        tmp_so.replace(so)  # atomic: a running import keeps the old file
+                    continue
+                if name.endswith(".dist-info/RECORD"):
+                    record = name
+                    continue
+                data = src.read(info)
+                dst.writestr(info, data)
+                records.append(_record_line(name, data))
+            dst.writestr("topomech.pth", pth)
+            records.append(_record_line("topomech.pth", pth))
+            records.append(f"{record},,")
+            dst.writestr(record, "\n".join(records) + "\n")
+        r = subprocess.run(
+            [py, "-m", "pip", "install", "--quiet", "--no-deps", "--force-reinstall", str(editable)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    if r.returncode != 0:
+        sys.stderr.write(r.stdout + r.stderr)
+        print("make: installing the editable package failed", file=sys.stderr)
+        return 1
+    print(f"make: installed topomech (editable) from {_describe(wheel)}")
+    return 0
+
+
+def _record_line(name: str, data: bytes) -> str:
+    digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
+    return f"{name},sha256={digest},{len(data)}"
+
+
 def main(argv: list[str]) -> int:
-    commands = {"build": build, "start": start, "path": path}
+    commands = {"build": build, "start": start, "path": path, "develop": develop}
     if len(argv) != 1 or argv[0] not in commands:
         print(__doc__, file=sys.stderr)
         return 64
