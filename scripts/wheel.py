@@ -290,7 +290,16 @@ def develop() -> int:
             records.append(f"{record},,")
             dst.writestr(record, "\n".join(records) + "\n")
         r = subprocess.run(
-            [py, "-m", "pip", "install", "--quiet", "--no-deps", "--force-reinstall", str(editable)],
+            [
+                py,
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--no-deps",
+                "--force-reinstall",
+                str(editable),
+            ],
             capture_output=True,
             text=True,
             check=False,
