@@ -475,12 +475,99 @@ fn not_measured(
 }
 
 /// Runs one case; `None` for the JSON means the engine and the baseline disagree (fatal).
+/// The machine's rates for the hardware limit of a step (see [`baselines::Work`]), measured
+/// on one thread in this run: best of 5 repeats of each probe.
+#[derive(Clone, Copy, Debug)]
+struct Rates {
+    /// Memory bandwidth (bytes/s): the triad `a = b + s c` on three arrays of 64 MiB each
+    /// (twice the largest L3 of the machines we run on), counting 24 bytes per element.
+    bandwidth: f64,
+    /// Additions and multiplications (per s): 16 independent chains `x = x a + b`, which the
+    /// compiler may vectorize as it may the baselines (the same flags build both).
+    flops: f64,
+    /// Square roots and divisions (per s): 8 independent chains of one of each.
+    sqrt_div: f64,
+}
+
+fn best_of(repeats: usize, mut f: impl FnMut() -> f64) -> f64 {
+    (0..repeats).map(|_| f()).fold(f64::INFINITY, f64::min)
+}
+
+fn probe_rates() -> Rates {
+    let n = 1 << 23;
+    let b = vec![1.0f64; n];
+    let c = vec![2.0f64; n];
+    let mut a = vec![0.0f64; n];
+    let s = black_box(0.5);
+    let triad = best_of(5, || {
+        let t = Instant::now();
+        for ((a, b), c) in a.iter_mut().zip(&b).zip(&c) {
+            *a = b + s * c;
+        }
+        black_box(&mut a);
+        t.elapsed().as_secs_f64()
+    });
+    let iters = 4_000_000usize;
+    let fl = best_of(5, || {
+        let (m, k) = (black_box(0.999_999_9), black_box(1e-9));
+        let mut x = [1.0f64; 16];
+        let t = Instant::now();
+        for _ in 0..iters {
+            for v in &mut x {
+                *v = *v * m + k;
+            }
+        }
+        black_box(x);
+        t.elapsed().as_secs_f64()
+    });
+    let sq_iters = 1_000_000usize;
+    let sq = best_of(5, || {
+        let c = black_box(1.000_001);
+        let mut x = [2.0f64; 8];
+        let t = Instant::now();
+        for _ in 0..sq_iters {
+            for v in &mut x {
+                *v = c / (*v).sqrt();
+            }
+        }
+        black_box(x);
+        t.elapsed().as_secs_f64()
+    });
+    Rates {
+        bandwidth: 24.0 * n as f64 / triad,
+        flops: 2.0 * 16.0 * iters as f64 / fl,
+        sqrt_div: 2.0 * 8.0 * sq_iters as f64 / sq,
+    }
+}
+
+impl Rates {
+    fn json(&self) -> J {
+        J::Obj(vec![
+            ("bandwidth_bytes_per_s", J::num(self.bandwidth)),
+            ("flops_per_s", J::num(self.flops)),
+            ("sqrt_div_per_s", J::num(self.sqrt_div)),
+        ])
+    }
+
+    /// The least time of a step doing `w` (s), and which bound sets it.
+    fn limit(&self, w: baselines::Work) -> (f64, &'static str) {
+        let memory = w.bytes / self.bandwidth;
+        let compute = w.flops / self.flops + w.sqrt_div / self.sqrt_div;
+        if memory >= compute {
+            (memory, "memory")
+        } else {
+            (compute, "arithmetic")
+        }
+    }
+}
+
 fn run_case(
     model: Model,
     target: usize,
     threads: &[usize],
     prev: &[Measured],
     budget: &Budget,
+    rates: &Rates,
 ) -> (J, Option<Measured>) {
     let (cells, elements) = model.cells(target);
     let left = budget.left().min(budget.case_s);
@@ -698,6 +785,18 @@ fn run_case(
         ),
         ("baseline", baseline.json()),
         ("ratio", J::num(ratio)),
+        ("limit", {
+            let w = check.work();
+            let (limit_s, bound) = rates.limit(w);
+            J::Obj(vec![
+                ("step_s", J::num(limit_s)),
+                ("bound", J::str(bound)),
+                ("bytes", J::num(w.bytes)),
+                ("flops", J::num(w.flops)),
+                ("sqrt_div", J::num(w.sqrt_div)),
+                ("baseline_over_limit", J::num(baseline.step_s / limit_s)),
+            ])
+        }),
         ("engine_ns_per_element", J::num(t1 * 1e9 / elements as f64)),
         (
             "baseline_ns_per_element",
@@ -1284,18 +1383,26 @@ fn main() {
         "engine vs hand-written baselines: one full step (forces, accumulation, symplectic Euler), \
          median of up to {MAX_SAMPLES} samples; engine in rayon pools of {threads:?} threads"
     );
+    let rates = probe_rates();
+    println!(
+        "hardware rates (1 thread): {:.1} GB/s triad, {:.2} Gflop/s, {:.3} G sqrt-or-div/s",
+        rates.bandwidth / 1e9,
+        rates.flops / 1e9,
+        rates.sqrt_div / 1e9
+    );
     // size by size, so that a tight budget skips the largest sizes of every model alike
     let mut cases = Vec::new();
     let mut measured: Vec<Vec<Measured>> = vec![Vec::new(); models.len()];
     for &target in &sizes {
         for (k, &model) in models.iter().enumerate() {
-            let (json, m) = run_case(model, target, &threads, &measured[k], &budget);
+            let (json, m) = run_case(model, target, &threads, &measured[k], &budget, &rates);
             cases.push(json);
             measured[k].extend(m);
         }
     }
     let results = J::Obj(vec![
         ("machine", machine()),
+        ("rates", rates.json()),
         (
             "settings",
             J::Obj(vec![

@@ -1,6 +1,6 @@
 //! A time step: forces, accumulation and the explicit integrators.
 
-use topomech_gmap::{ColumnMut, Dart, EmbeddingId};
+use topomech_gmap::{ColumnMut, Dart, EmbeddingId, GMap};
 use topomech_rules::{ApplyError, Params, Val};
 
 use crate::{Integrator, PhysicsError, Simulation};
@@ -183,12 +183,34 @@ impl Simulation {
     /// Computes every model's forces and their sum `force` on each vertex.
     pub fn forces(&mut self) -> Result<(), PhysicsError> {
         // force embeddings (named f_*) are rewritten every step; a pattern that no longer
-        // matches after a topology change must not leave a stale force behind
-        for k in 0..self.g.embeddings().len() {
-            let e = &self.g.embeddings()[k];
-            // (but not the external loads, which the user sets once)
-            if e.name().starts_with("f_") && e.name() != "f_ext" && e.derived().is_none() {
-                let id = topomech_gmap::EmbeddingId(k as u32);
+        // matches after a topology change must not leave a stale force behind (but not the
+        // external loads, which the user sets once)
+        let forces: Vec<topomech_gmap::EmbeddingId> = (0..self.g.embeddings().len())
+            .map(|k| topomech_gmap::EmbeddingId(k as u32))
+            .filter(|&id| {
+                let e = self.g.embedding(id);
+                e.name().starts_with("f_") && e.name() != "f_ext" && e.derived().is_none()
+            })
+            .collect();
+        // The reset is needed only when the step rules may write other slots than they did
+        // last time: after a topology change, after a write by anyone else (a user, a solver),
+        // or where a guard decides per step which matches write. Otherwise every slot they
+        // write is overwritten and every other slot still holds the reset's zero.
+        let writes =
+            |g: &GMap| -> Vec<u64> { forces.iter().map(|&id| g.embedding(id).writes()).collect() };
+        let unguarded = self.defs.iter().all(|def| {
+            def.step
+                .iter()
+                .all(|(r, _)| self.rules.rule(r).is_ok_and(|r| r.guard.is_none()))
+        });
+        let clean = unguarded
+            && self
+                .forces_written
+                .as_ref()
+                .is_some_and(|(id, w)| *id == self.g.identity() && *w == writes(&self.g));
+        self.forces_written = None;
+        if !clean {
+            for &id in &forces {
                 self.g
                     .reset_values(id)
                     .map_err(|e| PhysicsError::Config(e.to_string()))?;
@@ -200,6 +222,7 @@ impl Simulation {
                 self.rules.apply_everywhere(&mut self.g, r, p)?;
             }
         }
+        self.forces_written = Some((self.g.identity(), writes(&self.g)));
         self.rules
             .apply_everywhere(&mut self.g, "accumulate", &none)?;
         Ok(())

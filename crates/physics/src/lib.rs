@@ -103,6 +103,10 @@ pub struct Simulation {
     /// What the linear solvers keep between solves (coupling graph, colorings, symbolic
     /// factorization, the implicit Euler preconditioner and warm start).
     solver: linear::SolverCache,
+    /// The map's identity and the write counts of the force embeddings (`f_*`) when the last
+    /// [`Simulation::forces`] ended: while both are unchanged and no step rule has a guard,
+    /// the step rules write the same slots as last time, so the force columns need no reset.
+    forces_written: Option<((u64, u64), Vec<u64>)>,
 }
 
 /// Whether a vertex embedding holds a share of a row's quantity (masses and forces: `mass`,

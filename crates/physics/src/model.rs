@@ -253,6 +253,15 @@ pub(crate) fn model_files(cfg: &Config, dim: usize) -> Result<Vec<(String, Strin
         dims.sort_unstable();
         dims.dedup();
         if dims.is_empty() {
+            // a user's file that does not parse declares nothing: its error, not "unknown"
+            for (file, text) in &cfg.model_files {
+                if let Err(e) = topomech_rules::parser::parse(text) {
+                    return Err(PhysicsError::Model(format!(
+                        "{file}:{}:{}: error[syntax]: {} (model '{kind}' is declared in no file that parses)",
+                        e.pos.line, e.pos.col, e.message
+                    )));
+                }
+            }
             let mut known: Vec<&str> = Vec::new();
             for n in names.iter().chain(&user).flatten() {
                 if !known.contains(&n.as_str()) {

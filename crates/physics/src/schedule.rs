@@ -571,6 +571,7 @@ impl Simulation {
             blades_opened: vec![0; cfg_blades],
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
+            forces_written: None,
             report: None,
             static_base: Vec::new(),
             solver: linear::SolverCache::default(),

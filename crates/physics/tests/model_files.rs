@@ -422,3 +422,95 @@ fn a_model_listed_twice_is_refused() {
         "{err}"
     );
 }
+
+/// A step rule with a guard writes its force only where the guard holds, and the set of
+/// vertices changes from step to step: every force column must then be reset before the
+/// step rules run (a vertex whose guard stopped holding must not keep last step's force).
+/// `Simulation::forces` skips that reset only where no step rule has a guard and nothing
+/// changed since its last run; this test fails if the skip ignores the guard. The model
+/// pushes up (+y, against gravity; 1 N) every vertex that sank more than 1 mm below its rest
+/// position; gravity and the push make vertices sink and rise across that line. After each
+/// step, `forces()` is recomputed and each vertex's `f_push` must be exactly the push or
+/// exactly zero, as the guard on its current position says.
+#[test]
+// exact comparisons: the rule writes `up` itself, the reset writes zeros
+#[allow(clippy::float_cmp)]
+fn a_guarded_step_rule_leaves_no_stale_force() {
+    let file = "dimension 3
+embedding f_push : vec3 on <1,2,3>
+rule push(up: vec3) {
+  left { v : <1,2,3> hook }
+  where dot(v.position - v.rest, up) < -0.001
+  compute { v.f_push = up }
+}
+rule push_init {
+  left { v : <1,2,3> hook }
+  compute { v.f_push = 0.0 * v.position }
+}
+model push(up: vec3 = vec3(0.0, 1.0, 0.0)) {
+  init   push_init
+  step   push(up)
+  forces f_push
+}
+";
+    let mesh = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("push", &[])],
+        model_files: vec![written("push", "push.tmr", file)],
+        // vertex weights of about 0.3 N against the 1 N push: vertices rise back
+        density: 0.3,
+        integrator: Integrator::SymplecticEuler,
+        dt: 1e-3,
+        ..Config::default()
+    };
+    let mut s = Simulation::new(g, cfg).unwrap();
+    let (mut pushed, mut released) = (0, 0);
+    let mut was: Vec<bool> = Vec::new();
+    for _ in 0..400 {
+        s.step().unwrap();
+        s.forces().unwrap();
+        let x = s.vertex_vec3("position").unwrap();
+        let rest = s.vertex_vec3("rest").unwrap();
+        let f = s.vertex_vec3("f_push").unwrap();
+        let now: Vec<bool> = (0..x.len())
+            .map(|v| x[v][1] - rest[v][1] < -0.001)
+            .collect();
+        for v in 0..x.len() {
+            let want = if now[v] { [0.0, 1.0, 0.0] } else { [0.0; 3] };
+            assert_eq!(
+                f[v], want,
+                "vertex {v}: f_push {:?}, guard {}",
+                f[v], now[v]
+            );
+            if let Some(&before) = was.get(v) {
+                pushed += usize::from(now[v] && !before);
+                released += usize::from(!now[v] && before);
+            }
+        }
+        was = now;
+    }
+    // the guard changed both ways during the run, so the check above saw both transitions
+    assert!(
+        pushed > 0 && released > 0,
+        "pushed {pushed}, released {released}"
+    );
+}
+
+/// A user's model file with a syntax error: the simulation says where (`file:line:col`), not
+/// that the model it would have declared is unknown.
+#[test]
+fn a_model_file_that_does_not_parse_is_reported_where() {
+    let file = "dimension 3\nmodel broken(up: vec3 = [0.0, 1.0, 0.0]) {\n  forces f_x\n}\n";
+    let mesh = cuboid([1, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let (path, text) = written("broken", "broken.tmr", file);
+    let cfg = Config {
+        models: vec![model("broken", &[])],
+        model_files: vec![(path.clone(), text)],
+        ..Config::default()
+    };
+    let e = Simulation::new(g, cfg).expect_err("refused").to_string();
+    assert!(e.contains(&format!("{path}:2:")), "{e}");
+    assert!(e.contains("syntax") && !e.contains("unknown model"), "{e}");
+}

@@ -52,6 +52,34 @@ pub trait Baseline {
     fn positions(&self) -> &[V3];
     /// Bytes of every array the baseline keeps.
     fn memory_bytes(&self) -> usize;
+    /// What one step must do at least (see [`Work`]).
+    fn work(&self) -> Work;
+}
+
+/// The least work of one step, counted from the kernel's formulas: the compulsory memory
+/// traffic (every array streamed once: read, or read and written; gathers of vertex data
+/// through the element lists counted once per vertex, as if the vertex arrays stayed in
+/// cache) and the arithmetic. Used by the bench for the hardware limit of a step, `max(bytes /
+/// bandwidth, flops / flop rate + sqrt_div / sqrt-and-division rate)`, all three rates
+/// measured by probes in the same run.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Work {
+    /// Bytes moved between memory and the core.
+    pub bytes: f64,
+    /// Additions, subtractions and multiplications.
+    pub flops: f64,
+    /// Square roots and divisions (each far slower than a multiplication).
+    pub sqrt_div: f64,
+}
+
+impl Work {
+    fn add(self, o: Work) -> Work {
+        Work {
+            bytes: self.bytes + o.bytes,
+            flops: self.flops + o.flops,
+            sqrt_div: self.sqrt_div + o.sqrt_div,
+        }
+    }
 }
 
 /// The vertex state and the integrator, shared by the three baselines.
@@ -125,6 +153,18 @@ impl State {
     fn memory_bytes(&self) -> usize {
         let n = self.x.len();
         n * (4 * 24 + 8 + 1)
+    }
+
+    /// Symplectic Euler and the force column: per vertex, x and v read and written (96 B),
+    /// f written by the force pass and read here (48 B), 1/m and the fixed flag (9 B); per
+    /// component 4 operations for the acceleration and 2 each for v and x.
+    fn work(&self) -> Work {
+        let n = self.x.len() as f64;
+        Work {
+            bytes: n * (96.0 + 48.0 + 9.0),
+            flops: n * 3.0 * 8.0,
+            sqrt_div: 0.0,
+        }
     }
 }
 
@@ -231,6 +271,17 @@ impl Baseline for Cloth {
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.edges.len() * (8 + 24)
+    }
+    /// Per edge: its two vertex numbers and three parameters (32 B); d (3), l^2 (5), u (3),
+    /// the spring and damper force (12), the two updates (9): 32 operations, one sqrt and
+    /// one division.
+    fn work(&self) -> Work {
+        let e = self.edges.len() as f64;
+        self.s.work().add(Work {
+            bytes: e * 32.0,
+            flops: e * 32.0,
+            sqrt_div: e * 2.0,
+        })
     }
 }
 
@@ -346,6 +397,19 @@ impl Baseline for Corotational {
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.tets.len() * (16 + 72 + 96 + 1152)
     }
+    /// Per tet: vertex numbers, Dm^-1, rest positions and the 12x12 stiffness (1,336 B);
+    /// edges (9), F (45), y = R^T x - X (72), K y (276), f = -R g (72): 474 operations; the
+    /// polar decomposition counted as one scaled Newton iteration (cofactors, determinant,
+    /// the two norms and the update: about 102 operations, 2 square roots and 2 divisions).
+    /// The baseline takes several iterations: the count is a lower bound.
+    fn work(&self) -> Work {
+        let t = self.tets.len() as f64;
+        self.s.work().add(Work {
+            bytes: t * 1336.0,
+            flops: t * (474.0 + 102.0),
+            sqrt_div: t * 4.0,
+        })
+    }
 }
 
 /// Mass-tensor tetrahedra, tensors cumulated on vertices and edges.
@@ -427,6 +491,17 @@ impl Baseline for MassTensor {
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.u.len() * (24 + 72) + self.edges.len() * (8 + 144)
+    }
+    /// Per vertex: the rest position and the vertex tensor read, u written and read (144 B);
+    /// u (3), K_ii u (15), its negation (3). Per edge: its vertex numbers and two tensors
+    /// (152 B); two products (30) and the two updates (6).
+    fn work(&self) -> Work {
+        let (n, e) = (self.u.len() as f64, self.edges.len() as f64);
+        self.s.work().add(Work {
+            bytes: n * 144.0 + e * 152.0,
+            flops: n * 21.0 + e * 36.0,
+            sqrt_div: 0.0,
+        })
     }
 }
 
