@@ -84,8 +84,10 @@ def limit_section(res: dict[str, Any]) -> list[str]:
         "roots and divisions / their rate): the compulsory traffic and the arithmetic of the "
         "baseline's formulas (`Work` in `crates/physics/benches/baselines`; the co-rotational "
         "polar decomposition counted as one Newton iteration, a lower bound), the rates "
-        f"probed in this run on one thread: {rates['bandwidth_bytes_per_s'] / 1e9:.1f} GB/s "
-        f"(triad on 3 x 64 MiB), {rates['flops_per_s'] / 1e9:.2f} Gflop/s, "
+        "probed in this run on one thread: the bandwidth of a triad over the case's working "
+        "set (in cache for the small cases; "
+        f"{rates['bandwidth_bytes_per_s'] / 1e9:.1f} GB/s from memory, on 3 x 64 MiB), "
+        f"{rates['flops_per_s'] / 1e9:.2f} Gflop/s, "
         f"{rates['sqrt_div_per_s'] / 1e9:.3f} G square roots or divisions/s."
     )
     out.append("")
@@ -98,7 +100,7 @@ def limit_section(res: dict[str, Any]) -> list[str]:
                 f"{fmt_int(c['elements'])} {c['element']}s",
                 fmt_ms(c["baseline"]["step_s"]),
                 fmt_ms(lim["step_s"]),
-                lim["bound"],
+                f"{lim['bound']} ({lim['bandwidth_bytes_per_s'] / 1e9:.0f} GB/s)",
                 f"**{fmt_num(lim['baseline_over_limit'])}**",
                 fmt_num(c["ratio"]),
                 fmt_num((engine_step(c, 1) or c["engine"][0]["step_s"]) / lim["step_s"]),

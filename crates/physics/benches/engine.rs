@@ -479,8 +479,10 @@ fn not_measured(
 /// on one thread in this run: best of 5 repeats of each probe.
 #[derive(Clone, Copy, Debug)]
 struct Rates {
-    /// Memory bandwidth (bytes/s): the triad `a = b + s c` on three arrays of 64 MiB each
-    /// (twice the largest L3 of the machines we run on), counting 24 bytes per element.
+    /// Memory bandwidth (bytes/s) from DRAM: the triad `a = b + s c` on three arrays of
+    /// 64 MiB each (twice the largest L3 of the machines we run on), 24 bytes per element.
+    /// Each case's limit uses [`triad_bandwidth`] at its own working set instead (a case
+    /// that fits in cache streams at the cache's bandwidth).
     bandwidth: f64,
     /// Additions and multiplications (per s): 16 independent chains `x = x a + b`, which the
     /// compiler may vectorize as it may the baselines (the same flags build both).
@@ -493,20 +495,29 @@ fn best_of(repeats: usize, mut f: impl FnMut() -> f64) -> f64 {
     (0..repeats).map(|_| f()).fold(f64::INFINITY, f64::min)
 }
 
-fn probe_rates() -> Rates {
-    let n = 1 << 23;
+/// The triad's bandwidth (bytes/s) over three arrays holding `bytes` in all (at least 96 KiB,
+/// at most 192 MiB, past which it is DRAM's): best of 5, each of at least ~50 MB moved.
+fn triad_bandwidth(bytes: f64) -> f64 {
+    let n = ((bytes / 24.0) as usize).clamp(4096, 1 << 23);
     let b = vec![1.0f64; n];
     let c = vec![2.0f64; n];
     let mut a = vec![0.0f64; n];
     let s = black_box(0.5);
-    let triad = best_of(5, || {
+    let reps = (2_000_000 / n).max(1);
+    let t = best_of(5, || {
         let t = Instant::now();
-        for ((a, b), c) in a.iter_mut().zip(&b).zip(&c) {
-            *a = b + s * c;
+        for _ in 0..reps {
+            for ((a, b), c) in a.iter_mut().zip(&b).zip(&c) {
+                *a = b + s * c;
+            }
+            black_box(&mut a);
         }
-        black_box(&mut a);
         t.elapsed().as_secs_f64()
     });
+    24.0 * (n * reps) as f64 / t
+}
+
+fn probe_rates() -> Rates {
     let iters = 4_000_000usize;
     let fl = best_of(5, || {
         let (m, k) = (black_box(0.999_999_9), black_box(1e-9));
@@ -534,7 +545,7 @@ fn probe_rates() -> Rates {
         t.elapsed().as_secs_f64()
     });
     Rates {
-        bandwidth: 24.0 * n as f64 / triad,
+        bandwidth: triad_bandwidth(f64::INFINITY),
         flops: 2.0 * 16.0 * iters as f64 / fl,
         sqrt_div: 2.0 * 8.0 * sq_iters as f64 / sq,
     }
@@ -549,14 +560,16 @@ impl Rates {
         ])
     }
 
-    /// The least time of a step doing `w` (s), and which bound sets it.
-    fn limit(&self, w: baselines::Work) -> (f64, &'static str) {
-        let memory = w.bytes / self.bandwidth;
+    /// The least time of a step doing `w` (s), and which bound sets it; the bandwidth is the
+    /// triad's over a working set of `w.bytes`.
+    fn limit(&self, w: baselines::Work) -> (f64, &'static str, f64) {
+        let bandwidth = triad_bandwidth(w.bytes);
+        let memory = w.bytes / bandwidth;
         let compute = w.flops / self.flops + w.sqrt_div / self.sqrt_div;
         if memory >= compute {
-            (memory, "memory")
+            (memory, "memory", bandwidth)
         } else {
-            (compute, "arithmetic")
+            (compute, "arithmetic", bandwidth)
         }
     }
 }
@@ -787,10 +800,11 @@ fn run_case(
         ("ratio", J::num(ratio)),
         ("limit", {
             let w = check.work();
-            let (limit_s, bound) = rates.limit(w);
+            let (limit_s, bound, bandwidth) = rates.limit(w);
             J::Obj(vec![
                 ("step_s", J::num(limit_s)),
                 ("bound", J::str(bound)),
+                ("bandwidth_bytes_per_s", J::num(bandwidth)),
                 ("bytes", J::num(w.bytes)),
                 ("flops", J::num(w.flops)),
                 ("sqrt_div", J::num(w.sqrt_div)),
