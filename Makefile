@@ -7,7 +7,8 @@
 #                 test: its build starts first, in the background)
 #   make wheel    a stripped abi3 manylinux2014 wheel into target/wheels (scripts/wheel.py)
 #   make demo     run `topomech demo` (writes out/demo)
-#   make bench    kernel benchmarks, the cost of topology changes, the engine against
+#   make bench    kernel benchmarks, the cost of topology changes (and of cuts against the faces
+#                 they unsew at 1e4/1e5/1e6 tets: bench/topology.png), the engine against
 #                 hand-written baselines (writes bench/results.md, bench/results.json and
 #                 the kernel's and topology's output, bench/kernel.txt, bench/topology.txt),
 #                 then `make readme-perf`
@@ -110,6 +111,9 @@ demo: $(DEVELOP_STAMP)
 bench:
 	set -o pipefail; $(CARGO) bench -p topomech-gmap | tee bench/kernel.txt
 	set -o pipefail; $(CARGO) bench -p topomech-physics --bench topology | tee bench/topology.txt
+	$(CARGO) bench -p topomech-physics --bench cut_scaling
+	@$(MAKE) --no-print-directory $(VENV_STAMP)
+	$(VPY) bench/topology_plot.py
 	$(CARGO) bench -p topomech-physics --bench engine
 	$(PYTHON) bench/report.py
 	@$(MAKE) --no-print-directory bench-previews

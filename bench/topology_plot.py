@@ -1,0 +1,92 @@
+#!/usr/bin/env python3
+"""Draws bench/topology.png and writes bench/topology_scaling.md from
+bench/topology_scaling.json (`cargo bench -p topomech-physics --bench cut_scaling`): the cost
+of a cut, with the first step after it, in steady steps, against the faces it unsewed, one
+line per mesh size. Needs matplotlib (in the project's .venv).
+
+    python bench/topology_plot.py [--results bench/topology_scaling.json] [--out bench]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+
+
+def table(res: dict[str, Any]) -> list[str]:
+    out = [
+        "# Cut cost against faces unsewn",
+        "",
+        "`cargo bench -p topomech-physics --bench cut_scaling` (`crates/physics/benches/"
+        f"cut_scaling.rs`): boxes of tetrahedra, {res['model']}, {res['threads']} thread. Each "
+        "cut is the square a blade sweeps across part of a cross-section "
+        "(`Simulation::cut_swept`), timed with the first step after it, in steady steps of "
+        "the same mesh. Target (issue 16): at 10^5 tets, a cut of about 1,300 faces plus the "
+        "next step under 10 steps, a single-face cut plus the next step under 2.",
+        "",
+        "| tets | steady step ms | square (fraction of the section) | faces unsewn "
+        "| cut ms | next step ms | steps |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for s in res["sizes"]:
+        if s.get("status") != "ok":
+            out.append(f"| {s['tets']:,} | - | - | - | - | - | {s.get('status')} |")
+            continue
+        for c in s["cuts"]:
+            out.append(
+                f"| {s['tets']:,} | {s['step_s'] * 1e3:.2f} | {c['fraction']:g} | {c['faces']:,} "
+                f"| {c['cut_s'] * 1e3:.1f} | {c['next_step_s'] * 1e3:.1f} | {c['steps']:.1f} |"
+            )
+    return out
+
+
+def plot(res: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
+    for s in res["sizes"]:
+        if s.get("status") != "ok":
+            continue
+        cuts = [c for c in s["cuts"] if c["faces"] > 0]
+        ax.plot(
+            [c["faces"] for c in cuts],
+            [c["steps"] for c in cuts],
+            marker="o",
+            label=f"{s['tets']:,} tets (step {s['step_s'] * 1e3:.1f} ms)",
+        )
+    ax.axhline(10, color="grey", linestyle="--", linewidth=0.8)
+    ax.text(1.1, 10.5, "target at 10^5: 10 steps", color="grey", fontsize=8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("faces unsewn by the cut")
+    ax.set_ylabel("cut + next step, in steady steps")
+    ax.set_title(f"Cut cost ({res['model']}, {res['threads']} thread)")
+    ax.grid(True, which="both", linewidth=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--results", type=Path, default=HERE / "topology_scaling.json")
+    ap.add_argument("--out", type=Path, default=HERE)
+    args = ap.parse_args(argv)
+    res = json.loads(args.results.read_text(encoding="utf-8"))
+    md = args.out / "topology_scaling.md"
+    md.write_text("\n".join(table(res)) + "\n", encoding="utf-8")
+    plot(res, args.out / "topology.png")
+    print(f"wrote {md} and {args.out / 'topology.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,153 @@
+//! The cost of a cut against the number of faces it unsews, at several mesh sizes (issue 16:
+//! it should grow with the faces unsewn, not with the mesh). On boxes of about 10^4, 10^5
+//! and 10^6 tetrahedra (`TOPOMECH_CUT_SIZES`, default `1e4,1e5,1e6`), cumulated springs, one
+//! thread: a steady step is timed (median of 3), then cuts of growing extent, each the
+//! square a blade sweeps across part of a cross-section (`Simulation::cut_swept`), at a
+//! different x each so that none reuses another's faces. Each cut is timed with the first
+//! step after it (what it costs a run), and reported in steady steps.
+//!
+//! Writes `bench/topology_scaling.json` (or `$TOPOMECH_BENCH_OUT/topology_scaling.json`);
+//! `bench/topology_plot.py` draws `bench/topology.png` and the table in
+//! `bench/topology_scaling.md` from it. A size whose set-up would not fit in the memory
+//! available (about 6 KB per tetrahedron) is skipped and recorded as such.
+
+use std::fmt::Write as _;
+use std::hint::black_box;
+use std::time::Instant;
+
+use topomech_gmap::generators::{cuboid, BoxElement};
+use topomech_gmap::mesh::{build, BuildOptions};
+use topomech_physics::{Config, ModelSpec, Simulation};
+
+/// Bytes per tetrahedron the simulation needs at most (map, plans, the first step's
+/// planning), for the memory check.
+const BYTES_PER_TET: f64 = 6000.0;
+
+fn simulation(n: [usize; 3]) -> Simulation {
+    let (g, _) = build(
+        &cuboid(n, [2.0, 1.0, 1.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .expect("valid");
+    let cfg = Config {
+        models: vec![ModelSpec {
+            kind: "stretch_cumulated".into(),
+            params: [("stiffness".to_string(), topomech_rules::Val::F(1e4))].into(),
+        }],
+        fixed: vec!["x < 1e-9".into()],
+        ..Config::default()
+    };
+    Simulation::new(g, cfg).expect("builds")
+}
+
+fn seconds(f: impl FnOnce()) -> f64 {
+    let t = Instant::now();
+    f();
+    t.elapsed().as_secs_f64()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn mem_available() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = s.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024.0)
+}
+
+/// Cells of a 2 x 1 x 1 box with about `target` tetrahedra (6 per cube): n x n/2 x n/2.
+fn cells(target: usize) -> [usize; 3] {
+    let k = ((target as f64 / 6.0 / 0.25).cbrt()).round().max(4.0) as usize;
+    [k, (k / 2).max(2), (k / 2).max(2)]
+}
+
+fn main() {
+    let sizes: Vec<usize> = std::env::var("TOPOMECH_CUT_SIZES")
+        .unwrap_or_else(|_| "1e4,1e5,1e6".into())
+        .split(',')
+        .filter_map(|s| s.trim().parse::<f64>().ok())
+        .map(|x| x as usize)
+        .collect();
+    let out_dir = std::env::var("TOPOMECH_BENCH_OUT").map_or_else(
+        |_| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../bench"),
+        std::path::PathBuf::from,
+    );
+    // the square's side as a fraction of the cross-section's (1 x 1): from a face or two to
+    // the whole section
+    let fractions = [0.02, 0.1, 0.3, 0.6, 1.0];
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
+    let mut json =
+        String::from("{\n  \"model\": \"stretch_cumulated\",\n  \"threads\": 1,\n  \"sizes\": [");
+    println!("cut cost against faces unsewn (stretch_cumulated, one thread; a cut with the first step after it, in steady steps):");
+    for (si, &target) in sizes.iter().enumerate() {
+        let n = cells(target);
+        let tets = 6 * n[0] * n[1] * n[2];
+        if si > 0 {
+            json.push(',');
+        }
+        if let Some(avail) = mem_available() {
+            if tets as f64 * BYTES_PER_TET > 0.8 * avail {
+                println!(
+                    "  {tets} tets: skipped (about {:.1} GiB needed, {:.1} GiB available)",
+                    tets as f64 * BYTES_PER_TET / 1073741824.0,
+                    avail / 1073741824.0
+                );
+                let _ = write!(
+                    json,
+                    "\n    {{\"tets\": {tets}, \"status\": \"skipped: memory\"}}"
+                );
+                continue;
+            }
+        }
+        pool.install(|| {
+            let setup = Instant::now();
+            let mut s = simulation(n);
+            s.step().expect("steps");
+            let setup_s = setup.elapsed().as_secs_f64();
+            let step_s = median(
+                (0..3)
+                    .map(|_| seconds(|| black_box(s.step()).expect("steps")))
+                    .collect(),
+            );
+            let _ = write!(
+                json,
+                "\n    {{\"tets\": {tets}, \"status\": \"ok\", \"setup_and_first_step_s\": {setup_s}, \"step_s\": {step_s}, \"cuts\": ["
+            );
+            println!("  {tets} tets: steady step {:.2} ms", step_s * 1e3);
+            for (k, &w) in fractions.iter().enumerate() {
+                // a square of side w in the plane x = x_k, swept by a segment along z moving
+                // along y, centred on the cross-section
+                let x = 0.25 + 0.3 * k as f64;
+                let (lo, hi) = (0.5 - w / 2.0, 0.5 + w / 2.0);
+                let from = [[x, hi, lo], [x, hi, hi]];
+                let to = [[x, lo, lo], [x, lo, hi]];
+                let mut faces = 0;
+                let cut_s = seconds(|| faces = s.cut_swept(from, to).expect("cuts").unsewn);
+                let next_s = seconds(|| black_box(s.step()).expect("steps"));
+                let total = (cut_s + next_s) / step_s;
+                println!(
+                    "    square {w:4.2} of the section: {faces:6} faces unsewn, cut {:9.1} ms + next step {:9.1} ms = {total:8.1} steps",
+                    cut_s * 1e3,
+                    next_s * 1e3
+                );
+                let _ = write!(
+                    json,
+                    "{}\n      {{\"fraction\": {w}, \"faces\": {faces}, \"cut_s\": {cut_s}, \"next_step_s\": {next_s}, \"steps\": {total}}}",
+                    if k > 0 { "," } else { "" }
+                );
+            }
+            json.push_str("\n    ]}");
+        });
+    }
+    json.push_str("\n  ]\n}\n");
+    std::fs::create_dir_all(&out_dir).expect("the output directory");
+    let path = out_dir.join("topology_scaling.json");
+    std::fs::write(&path, json).expect("write topology_scaling.json");
+    println!("wrote {}", path.display());
+}
