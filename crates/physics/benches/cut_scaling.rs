@@ -95,8 +95,8 @@ fn main() {
             if tets as f64 * BYTES_PER_TET > 0.8 * avail {
                 println!(
                     "  {tets} tets: skipped (about {:.1} GiB needed, {:.1} GiB available)",
-                    tets as f64 * BYTES_PER_TET / 1073741824.0,
-                    avail / 1073741824.0
+                    tets as f64 * BYTES_PER_TET / 1_073_741_824.0,
+                    avail / 1_073_741_824.0
                 );
                 let _ = write!(
                     json,
