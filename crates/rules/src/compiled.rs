@@ -1333,8 +1333,7 @@ impl Plan {
         }
         // a non-finite value is never written: one pass over the outputs (no early exit, so
         // that it vectorizes), the interpreter then names the rule, embedding and dart
-        // (native code checked its values itself: see `jit::NON_FINITE`)
-        if !native_done && self.out.iter().fold(false, |bad, x| bad | !x.is_finite()) {
+        if self.out.iter().fold(false, |bad, x| bad | !x.is_finite()) {
             return unsupported("a non-finite value");
         }
         // writes of one orbit by two writes must agree
