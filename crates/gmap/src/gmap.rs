@@ -39,6 +39,39 @@ pub struct GMap {
     pub(crate) version: u64,
     pub(crate) embeddings: Vec<Embedding>,
     pub(crate) id: MapId,
+    /// The darts changed since some version, when tracking is on (see
+    /// [`GMap::track_changes`]).
+    pub(crate) log: Option<ChangeLog>,
+}
+
+/// The darts whose links or embedding slots changed, or that were created or removed, each
+/// tagged with the topology version the map had when it changed (the version before the
+/// operation's increment, or a later one: a tag is never earlier than the change).
+#[derive(Clone, Debug)]
+pub(crate) struct ChangeLog {
+    /// The log covers every change made at versions `>= from`.
+    from: u64,
+    entries: Vec<(u64, u32)>,
+}
+
+/// At most this many entries (or a quarter of the darts, if more) are kept: past it the
+/// older half is dropped (the versions it covered are then no longer answered).
+const LOG_MIN_LIMIT: usize = 1 << 16;
+
+/// Records that dart `d` changed while the map was at `version` (a free function, so that it
+/// can be called while an embedding of the map is borrowed).
+#[inline]
+pub(crate) fn note(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize) {
+    let Some(l) = log else { return };
+    l.entries.push((version, d));
+    if l.entries.len() > LOG_MIN_LIMIT.max(capacity / 4) {
+        // drop every entry tagged up to the middle one's tag: the log then answers from the
+        // next version on
+        let t = l.entries[l.entries.len() / 2].0;
+        let keep = l.entries.partition_point(|e| e.0 <= t);
+        l.entries.drain(..keep);
+        l.from = l.from.max(t + 1);
+    }
 }
 
 /// A number naming one map object: every map, and every clone of one, gets its own, so a cache
@@ -94,6 +127,7 @@ impl GMap {
             version: 0,
             embeddings: Vec::new(),
             id: MapId::fresh(),
+            log: None,
         })
     }
 
@@ -127,6 +161,35 @@ impl GMap {
     #[inline]
     pub fn identity(&self) -> (u64, u64) {
         (self.id.0, self.version)
+    }
+
+    /// Starts recording which darts change (links, embedding slots, creation, removal), so
+    /// that [`GMap::changed_since`] can answer for the versions from now on. Does nothing
+    /// when it records already. A clone records too (from its own creation on).
+    pub fn track_changes(&mut self) {
+        if self.log.is_none() {
+            self.log = Some(ChangeLog {
+                from: self.version,
+                entries: Vec::new(),
+            });
+        }
+    }
+
+    /// Every dart whose links or embedding slots changed, or that was created or removed,
+    /// since the map had topology version `version` (each once, in no particular order;
+    /// removed darts included). `None` when the record does not cover that version (not
+    /// tracked then, or dropped since: the record is bounded), or `version` is in the
+    /// future. What a cache keyed by [`GMap::identity`] can patch itself from.
+    pub fn changed_since(&self, version: u64) -> Option<Vec<Dart>> {
+        let l = self.log.as_ref()?;
+        if version < l.from || version > self.version {
+            return None;
+        }
+        let start = l.entries.partition_point(|e| e.0 < version);
+        let mut out: Vec<Dart> = l.entries[start..].iter().map(|e| Dart(e.1)).collect();
+        out.sort_unstable();
+        out.dedup();
+        Some(out)
     }
 
     /// Whether `d` is a live dart of this map.
@@ -190,6 +253,8 @@ impl GMap {
                 a[iu] = i;
             }
             self.n_alive += 1;
+            let cap = self.capacity();
+            note(&mut self.log, self.version, i, cap);
             self.version += 1;
             for e in &mut self.embeddings {
                 if e.is_direct() {
@@ -221,6 +286,9 @@ impl GMap {
         }
         self.alive.resize(end, true);
         self.n_alive += k;
+        for d in first..end {
+            note(&mut self.log, self.version, d as u32, end);
+        }
         self.version += 1;
         for e in &mut self.embeddings {
             let w = e.ty.width();
@@ -254,6 +322,8 @@ impl GMap {
         self.alive[d.index()] = false;
         self.free_darts.push(d.0);
         self.n_alive -= 1;
+        let cap = self.capacity();
+        note(&mut self.log, self.version, d.0, cap);
         self.version += 1;
         for e in &mut self.embeddings {
             if !e.is_direct() {
@@ -285,6 +355,9 @@ impl GMap {
         }
         self.alpha[i][a.index()] = b.0;
         self.alpha[i][b.index()] = a.0;
+        let cap = self.capacity();
+        note(&mut self.log, self.version, a.0, cap);
+        note(&mut self.log, self.version, b.0, cap);
         self.version += 1;
         Ok(())
     }
@@ -299,6 +372,9 @@ impl GMap {
         }
         self.alpha[i][a.index()] = a.0;
         self.alpha[i][b.index()] = b.0;
+        let cap = self.capacity();
+        note(&mut self.log, self.version, a.0, cap);
+        note(&mut self.log, self.version, b.0, cap);
         self.version += 1;
         Ok(b)
     }
