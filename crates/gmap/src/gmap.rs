@@ -52,9 +52,12 @@ pub(crate) struct ChangeLog {
     /// The log covers every change made at versions `>= from`.
     from: u64,
     entries: Vec<(u64, u32)>,
+    /// Per dart, one more than the tag of its last entry (0: none), so that a dart is
+    /// listed once per tag (a re-slotting touches it once per embedding).
+    last: Vec<u64>,
 }
 
-/// At most this many entries (or a quarter of the darts, if more) are kept: past it the
+/// At most this many entries (or one per dart of the map, if more) are kept: past it the
 /// older half is dropped (the versions it covered are then no longer answered).
 const LOG_MIN_LIMIT: usize = 1 << 16;
 
@@ -63,8 +66,16 @@ const LOG_MIN_LIMIT: usize = 1 << 16;
 #[inline]
 pub(crate) fn note(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize) {
     let Some(l) = log else { return };
+    let i = d as usize;
+    if i >= l.last.len() {
+        l.last.resize((i + 1).max(capacity), 0);
+    }
+    if l.last[i] == version + 1 {
+        return;
+    }
+    l.last[i] = version + 1;
     l.entries.push((version, d));
-    if l.entries.len() > LOG_MIN_LIMIT.max(capacity / 4) {
+    if l.entries.len() > LOG_MIN_LIMIT.max(capacity) {
         // drop every entry tagged up to the middle one's tag: the log then answers from the
         // next version on
         let t = l.entries[l.entries.len() / 2].0;
@@ -171,6 +182,7 @@ impl GMap {
             self.log = Some(ChangeLog {
                 from: self.version,
                 entries: Vec::new(),
+                last: vec![0; self.capacity()],
             });
         }
     }

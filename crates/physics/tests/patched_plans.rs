@@ -93,15 +93,27 @@ fn check_forces(s: &mut Simulation, what: &str) {
     s.forces().unwrap();
     let fresh = s.vertex_vec3("force").unwrap();
     close(&patched, &fresh, what);
-    assert!(patched.iter().flatten().any(|x| *x != 0.0), "{what}: forces");
+    assert!(
+        patched.iter().flatten().any(|x| *x != 0.0),
+        "{what}: forces"
+    );
 }
 
 /// After a change: the map valid, mass and momentum kept, forces as from scratch, and plans
 /// patched since `patches_before`.
-fn check_change(s: &mut Simulation, mass: f64, momentum: [f64; 3], patches_before: usize, what: &str) {
+fn check_change(
+    s: &mut Simulation,
+    mass: f64,
+    momentum: [f64; 3],
+    patches_before: usize,
+    what: &str,
+) {
     assert!(s.gmap().is_valid(), "{what}: {:?}", s.gmap().validate());
     let m = s.total_mass().unwrap();
-    assert!((m - mass).abs() <= 1e-12 * mass, "{what}: mass {m} vs {mass}");
+    assert!(
+        (m - mass).abs() <= 1e-12 * mass,
+        "{what}: mass {m} vs {mass}"
+    );
     let p = s.momentum().unwrap();
     let scale = momentum.iter().fold(1e-300f64, |a, x| a.max(x.abs()));
     for k in 0..3 {
@@ -151,11 +163,7 @@ fn a_single_face_cut_patches_the_plans() {
     // one interior face (3D) or edge (2D): only its centroid passes the predicate; a
     // predicate cut is a timed event, done during the step
     for (mesh, pred, three) in [
-        (
-            box3(),
-            "x > 0.99 && x < 1.01 && y < 0.2 && z < 0.34",
-            true,
-        ),
+        (box3(), "x > 0.99 && x < 1.01 && y < 0.2 && z < 0.34", true),
         (grid2(), "x > 0.99 && x < 1.01 && y < 0.2", false),
     ] {
         let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
@@ -241,7 +249,10 @@ fn a_blade_sweeping_over_several_steps_patches_the_plans() {
             r.step().unwrap();
             let what = format!("blade step {step}");
             assert!(s.gmap().is_valid(), "{what}");
-            assert!((s.total_mass().unwrap() - mass).abs() <= 1e-12 * mass, "{what}");
+            assert!(
+                (s.total_mass().unwrap() - mass).abs() <= 1e-12 * mass,
+                "{what}"
+            );
             close(
                 &s.vertex_vec3("position").unwrap(),
                 &r.vertex_vec3("position").unwrap(),

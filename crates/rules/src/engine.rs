@@ -1069,8 +1069,10 @@ impl RuleSet {
         let mut used = Marks::with_capacity(cap);
         let mut prints: HashMap<Vec<u32>, (), FastHash> = HashMap::default();
         let mut new: Vec<Match> = Vec::new();
+        // a candidate tried once gives the same answer again (its match, the guard at it)
+        let mut tried = Marks::with_capacity(cap);
         for h in candidates {
-            if used.is_marked(h) || ix.live_at(h).is_some() {
+            if !tried.mark(h) || used.is_marked(h) || ix.live_at(h).is_some() {
                 continue;
             }
             let Ok(m) = match_at(g, rule, &[h]) else {
