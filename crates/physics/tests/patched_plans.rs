@@ -5,7 +5,8 @@
 //! scratch to 1e-12 of their scale, the mass and the momentum are kept, and a run in
 //! lockstep with one whose plans are rebuilt every step stays the same.
 
-#![allow(clippy::doc_markdown)]
+// Numeric test code (and the shared helpers): index loops mirror the math.
+#![allow(clippy::doc_markdown, clippy::needless_range_loop)]
 
 mod common;
 

@@ -1296,6 +1296,7 @@ impl Plan {
     /// (numbered `numbers`) appended: what [`Plan::build`] gives for the kept and the new
     /// matches, up to the order of the rows. `g` must be the map the new matches were found
     /// on, and every kept row's index arrays must still hold on it (the caller's proof).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn patch(
         self,
         rule: &Rule,

@@ -401,7 +401,9 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
 /// It keeps, per computation rule, the matches its last global application found (a *plan*):
 /// a cache derived from the map, keyed by the topology version and by the write counts of the
 /// embeddings the rule's guard reads, so it is rebuilt exactly when what it was computed from
-/// changed, and never a second source of truth.
+/// changed, and never a second source of truth. After a topology change a plan is patched
+/// instead where that gives what a rebuild gives (see `RuleSet::patch_plan`): the matches
+/// around the changed darts dropped and found again, the others kept.
 #[derive(Debug)]
 pub struct RuleSet {
     checked: Checked,
@@ -979,9 +981,7 @@ impl RuleSet {
             return None;
         }
         let Plan { kind, index, .. } = old;
-        let Some(mut ix) = index else {
-            return None;
-        };
+        let mut ix = index?;
         let b = self.bind(g, name, params).ok()?;
         let rule = b.rule;
         if !patchable(rule, b.embs)
@@ -991,9 +991,7 @@ impl RuleSet {
         {
             return None;
         }
-        let Some(changed) = g.changed_since(old.identity.1) else {
-            return None;
-        };
+        let changed = g.changed_since(old.identity.1)?;
         let compiled = match kind {
             PlanKind::Compiled(p) => Some(p),
             PlanKind::Matches(ms) if ms.is_empty() && self.compile => None,
@@ -1067,7 +1065,8 @@ impl RuleSet {
         // new matches, from the candidate hooks not in a kept match's hook orbit
         let hook = rule.hooks[0];
         let mut used = Marks::with_capacity(cap);
-        let mut prints: HashMap<Vec<u32>, (), FastHash> = HashMap::default();
+        let mut prints: std::collections::HashSet<Vec<u32>, FastHash> =
+            std::collections::HashSet::default();
         let mut new: Vec<Match> = Vec::new();
         // a candidate tried once gives the same answer again (its match, the guard at it)
         let mut tried = Marks::with_capacity(cap);
@@ -1094,7 +1093,7 @@ impl RuleSet {
             }
             let mut key: Vec<u32> = m.all_darts().map(|x| x.0).collect();
             key.sort_unstable();
-            if prints.insert(key, ()).is_some() {
+            if !prints.insert(key) {
                 continue;
             }
             new.push(m);
