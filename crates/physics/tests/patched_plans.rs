@@ -242,9 +242,9 @@ fn a_blade_sweeping_over_several_steps_patches_the_plans() {
         shake(&mut r);
         s.forces().unwrap();
         let mut cuts = 0;
+        let patches = s.rules().plan_patches();
         for step in 0..5 {
             let mass = s.total_mass().unwrap();
-            let patches = s.rules().plan_patches();
             s.step().unwrap();
             r.set_compiled(true);
             r.step().unwrap();
@@ -268,10 +268,13 @@ fn a_blade_sweeping_over_several_steps_patches_the_plans() {
                 cuts = s.topology_changes().len();
                 // the blade cut during this step: the next forces patch the plans
                 check_forces(&mut s, &what);
-                let _ = patches;
             }
         }
         assert!(cuts >= 2, "the blade cut in {cuts} steps only");
+        assert!(
+            s.rules().plan_patches() > patches,
+            "no plan was patched during the sweep"
+        );
     }
 }
 
