@@ -922,12 +922,47 @@ impl GMap {
         let w = src.ty.width();
         let mut m = Marks::with_capacity(self.capacity());
         let mut seen: Vec<usize> = Vec::new();
-        for d in self.darts() {
+        // Only the orbits around what changed since the last refresh, when the source was not
+        // written since and the change log covers that version: an orbit of `e` holding no
+        // dart of the source orbits of the changed darts is the same orbit, on the same slot,
+        // over the same source slots holding the same values (a topology change re-slots and
+        // recombines only orbits holding a changed dart), so its value stands.
+        let local: Option<Vec<Dart>> = match e.refreshed_at {
+            Some((v, writes)) if writes == src.writes => self.changed_since(v).map(|changed| {
+                let mut near = Marks::with_capacity(self.capacity());
+                let mut out = Vec::new();
+                for &c in &changed {
+                    if self.is_alive(c) && !near.is_marked(c) {
+                        self.visit_orbit(c, src.orbit, &mut near, |x| out.push(x));
+                    }
+                }
+                out
+            }),
+            _ => None,
+        };
+        let all: Vec<Dart>;
+        let starts: &[Dart] = if let Some(l) = &local {
+            l
+        } else {
+            all = self.darts().collect();
+            &all
+        };
+        // a local refresh walks each orbit from its smallest dart, as the full one (which
+        // meets it there first): the same order of the source slots, the same sums bit for bit
+        let mut walk = Marks::with_capacity(if local.is_some() { self.capacity() } else { 0 });
+        for &d in starts {
             if m.is_marked(d) {
                 continue;
             }
+            let (d, marks) = if local.is_some() {
+                let mut lo = d;
+                self.visit_orbit(d, e.orbit, &mut m, |x| lo = lo.min(x));
+                (lo, &mut walk)
+            } else {
+                (d, &mut m)
+            };
             seen.clear();
-            self.visit_orbit(d, e.orbit, &mut m, |x| {
+            self.visit_orbit(d, e.orbit, marks, |x| {
                 let s = src.slot(x);
                 if !seen.contains(&s) {
                     seen.push(s);

@@ -89,3 +89,59 @@ fn unsewn_faces_and_their_orbits_are_listed_and_nothing_else_changed() {
     let c = g.clone();
     assert_eq!(c.changed_since(v0).unwrap(), all);
 }
+
+/// A derived embedding refreshed after a change recomputes only the orbits around the
+/// changed darts: it then equals one computed from scratch on the new map, for sums, means
+/// and counts, after every change of a sequence.
+#[test]
+fn a_local_refresh_of_derived_embeddings_equals_a_full_one() {
+    use topomech_gmap::{Aggregate, EmbeddingType, Policy, Value};
+    let (mut g, _) = build(
+        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let dim = g.dimension();
+    // a value per <2>-orbit (a pair of darts in a volume), aggregated per vertex and edge
+    let src_orbit = OrbitType::parse("<2>").unwrap();
+    let src = g
+        .add_embedding("w", EmbeddingType::F64, src_orbit, Policy::Sum)
+        .unwrap();
+    for (k, d) in g.orbit_representatives(src_orbit).into_iter().enumerate() {
+        g.set_value(src, d, &Value::Real(vec![1.0 + k as f64 * 0.37]))
+            .unwrap();
+    }
+    let aggs = [Aggregate::Sum, Aggregate::Mean, Aggregate::Count];
+    let orbits = [OrbitType::vertex(dim), OrbitType::edge(dim)];
+    let mut names = Vec::new();
+    for (i, agg) in aggs.into_iter().enumerate() {
+        for (j, o) in orbits.into_iter().enumerate() {
+            let name = format!("d{i}{j}");
+            g.add_derived(&name, "w", o, agg).unwrap();
+            names.push((name, o, agg));
+        }
+    }
+    g.track_changes();
+    for round in 0..3 {
+        let d = g
+            .darts()
+            .filter(|&d| !g.is_free(3, d))
+            .nth(7 * round)
+            .unwrap();
+        g.unsew(3, d).unwrap();
+        g.refresh_derived(); // local
+        let mut fresh = g.clone();
+        for (name, o, agg) in &names {
+            let full = format!("{name}_full");
+            let f = fresh.add_derived(&full, "w", *o, *agg).unwrap(); // from scratch
+            let l = fresh.require(name).unwrap();
+            for x in fresh.darts() {
+                assert_eq!(
+                    fresh.value(l, x).unwrap(),
+                    fresh.value(f, x).unwrap(),
+                    "round {round}: {name} at {x}"
+                );
+            }
+        }
+    }
+}
