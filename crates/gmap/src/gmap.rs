@@ -39,6 +39,50 @@ pub struct GMap {
     pub(crate) version: u64,
     pub(crate) embeddings: Vec<Embedding>,
     pub(crate) id: MapId,
+    /// The darts changed since some version, when tracking is on (see
+    /// [`GMap::track_changes`]).
+    pub(crate) log: Option<ChangeLog>,
+}
+
+/// The darts whose links or embedding slots changed, or that were created or removed, each
+/// tagged with the topology version the map had when it changed (the version before the
+/// operation's increment, or a later one: a tag is never earlier than the change).
+#[derive(Clone, Debug)]
+pub(crate) struct ChangeLog {
+    /// The log covers every change made at versions `>= from`.
+    from: u64,
+    entries: Vec<(u64, u32)>,
+    /// Per dart, one more than the tag of its last entry (0: none), so that a dart is
+    /// listed once per tag (a re-slotting touches it once per embedding).
+    last: Vec<u64>,
+}
+
+/// At most this many entries (or one per dart of the map, if more) are kept: past it the
+/// older half is dropped (the versions it covered are then no longer answered).
+const LOG_MIN_LIMIT: usize = 1 << 16;
+
+/// Records that dart `d` changed while the map was at `version` (a free function, so that it
+/// can be called while an embedding of the map is borrowed).
+#[inline]
+pub(crate) fn note(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize) {
+    let Some(l) = log else { return };
+    let i = d as usize;
+    if i >= l.last.len() {
+        l.last.resize((i + 1).max(capacity), 0);
+    }
+    if l.last[i] == version + 1 {
+        return;
+    }
+    l.last[i] = version + 1;
+    l.entries.push((version, d));
+    if l.entries.len() > LOG_MIN_LIMIT.max(capacity) {
+        // drop every entry tagged up to the middle one's tag: the log then answers from the
+        // next version on
+        let t = l.entries[l.entries.len() / 2].0;
+        let keep = l.entries.partition_point(|e| e.0 <= t);
+        l.entries.drain(..keep);
+        l.from = l.from.max(t + 1);
+    }
 }
 
 /// A number naming one map object: every map, and every clone of one, gets its own, so a cache
@@ -94,6 +138,7 @@ impl GMap {
             version: 0,
             embeddings: Vec::new(),
             id: MapId::fresh(),
+            log: None,
         })
     }
 
@@ -127,6 +172,36 @@ impl GMap {
     #[inline]
     pub fn identity(&self) -> (u64, u64) {
         (self.id.0, self.version)
+    }
+
+    /// Starts recording which darts change (links, embedding slots, creation, removal), so
+    /// that [`GMap::changed_since`] can answer for the versions from now on. Does nothing
+    /// when it records already. A clone records too (from its own creation on).
+    pub fn track_changes(&mut self) {
+        if self.log.is_none() {
+            self.log = Some(ChangeLog {
+                from: self.version,
+                entries: Vec::new(),
+                last: vec![0; self.capacity()],
+            });
+        }
+    }
+
+    /// Every dart whose links or embedding slots changed, or that was created or removed,
+    /// since the map had topology version `version` (each once, in no particular order;
+    /// removed darts included). `None` when the record does not cover that version (not
+    /// tracked then, or dropped since: the record is bounded), or `version` is in the
+    /// future. What a cache keyed by [`GMap::identity`] can patch itself from.
+    pub fn changed_since(&self, version: u64) -> Option<Vec<Dart>> {
+        let l = self.log.as_ref()?;
+        if version < l.from || version > self.version {
+            return None;
+        }
+        let start = l.entries.partition_point(|e| e.0 < version);
+        let mut out: Vec<Dart> = l.entries[start..].iter().map(|e| Dart(e.1)).collect();
+        out.sort_unstable();
+        out.dedup();
+        Some(out)
     }
 
     /// Whether `d` is a live dart of this map.
@@ -190,6 +265,8 @@ impl GMap {
                 a[iu] = i;
             }
             self.n_alive += 1;
+            let cap = self.capacity();
+            note(&mut self.log, self.version, i, cap);
             self.version += 1;
             for e in &mut self.embeddings {
                 if e.is_direct() {
@@ -221,6 +298,9 @@ impl GMap {
         }
         self.alive.resize(end, true);
         self.n_alive += k;
+        for d in first..end {
+            note(&mut self.log, self.version, d as u32, end);
+        }
         self.version += 1;
         for e in &mut self.embeddings {
             let w = e.ty.width();
@@ -254,6 +334,8 @@ impl GMap {
         self.alive[d.index()] = false;
         self.free_darts.push(d.0);
         self.n_alive -= 1;
+        let cap = self.capacity();
+        note(&mut self.log, self.version, d.0, cap);
         self.version += 1;
         for e in &mut self.embeddings {
             if !e.is_direct() {
@@ -285,6 +367,9 @@ impl GMap {
         }
         self.alpha[i][a.index()] = b.0;
         self.alpha[i][b.index()] = a.0;
+        let cap = self.capacity();
+        note(&mut self.log, self.version, a.0, cap);
+        note(&mut self.log, self.version, b.0, cap);
         self.version += 1;
         Ok(())
     }
@@ -299,6 +384,9 @@ impl GMap {
         }
         self.alpha[i][a.index()] = a.0;
         self.alpha[i][b.index()] = b.0;
+        let cap = self.capacity();
+        note(&mut self.log, self.version, a.0, cap);
+        note(&mut self.log, self.version, b.0, cap);
         self.version += 1;
         Ok(b)
     }
@@ -834,12 +922,47 @@ impl GMap {
         let w = src.ty.width();
         let mut m = Marks::with_capacity(self.capacity());
         let mut seen: Vec<usize> = Vec::new();
-        for d in self.darts() {
+        // Only the orbits around what changed since the last refresh, when the source was not
+        // written since and the change log covers that version: an orbit of `e` holding no
+        // dart of the source orbits of the changed darts is the same orbit, on the same slot,
+        // over the same source slots holding the same values (a topology change re-slots and
+        // recombines only orbits holding a changed dart), so its value stands.
+        let local: Option<Vec<Dart>> = match e.refreshed_at {
+            Some((v, writes)) if writes == src.writes => self.changed_since(v).map(|changed| {
+                let mut near = Marks::with_capacity(self.capacity());
+                let mut out = Vec::new();
+                for &c in &changed {
+                    if self.is_alive(c) && !near.is_marked(c) {
+                        self.visit_orbit(c, src.orbit, &mut near, |x| out.push(x));
+                    }
+                }
+                out
+            }),
+            _ => None,
+        };
+        let all: Vec<Dart>;
+        let starts: &[Dart] = if let Some(l) = &local {
+            l
+        } else {
+            all = self.darts().collect();
+            &all
+        };
+        // a local refresh walks each orbit from its smallest dart, as the full one (which
+        // meets it there first): the same order of the source slots, the same sums bit for bit
+        let mut walk = Marks::with_capacity(if local.is_some() { self.capacity() } else { 0 });
+        for &d in starts {
             if m.is_marked(d) {
                 continue;
             }
+            let (d, marks) = if local.is_some() {
+                let mut lo = d;
+                self.visit_orbit(d, e.orbit, &mut m, |x| lo = lo.min(x));
+                (lo, &mut walk)
+            } else {
+                (d, &mut m)
+            };
             seen.clear();
-            self.visit_orbit(d, e.orbit, &mut m, |x| {
+            self.visit_orbit(d, e.orbit, marks, |x| {
                 let s = src.slot(x);
                 if !seen.contains(&s) {
                     seen.push(s);

@@ -228,6 +228,14 @@ impl GMap {
             }
         }
         // from here on the map changes for good
+        let cap = self.capacity();
+        for &(_, a, prev) in old {
+            crate::gmap::note(&mut self.log, self.version, a, cap);
+            crate::gmap::note(&mut self.log, self.version, prev, cap);
+        }
+        for d in fresh.iter().chain(remove) {
+            crate::gmap::note(&mut self.log, self.version, d.0, cap);
+        }
         self.version += 1;
         for (k, plan) in plans.into_iter().enumerate() {
             if let Some(p) = plan {
@@ -407,6 +415,7 @@ impl GMap {
     }
 
     fn apply_reslot(&mut self, k: usize, plan: &Reslot) {
+        let cap = self.capacity();
         let e = &mut self.embeddings[k];
         let w = e.ty.width();
         let policy = if e.derived.is_some() {
@@ -457,6 +466,7 @@ impl GMap {
             for &d in &plan.darts[o.darts.clone()] {
                 let s = e.slot_of[d.index()] as usize;
                 if s != target {
+                    crate::gmap::note(&mut self.log, self.version, d.0, cap);
                     e.slot_use[s] -= 1;
                     if e.slot_use[s] == 0 {
                         emptied.push(s);

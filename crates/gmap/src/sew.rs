@@ -97,9 +97,12 @@ impl GMap {
     /// Sews `a` and `b` along dimension `i` (see the module docs). On error nothing changes.
     pub fn sew(&mut self, i: usize, a: Dart, b: Dart) -> Result<(), SewError> {
         let pairs = self.sew_pairs(i, a, b)?;
+        let cap = self.capacity();
         for &(x, y) in &pairs {
             self.alpha[i][x.index()] = y.0;
             self.alpha[i][y.index()] = x.0;
+            crate::gmap::note(&mut self.log, self.version, x.0, cap);
+            crate::gmap::note(&mut self.log, self.version, y.0, cap);
         }
         self.version += 1;
         if let Err(name) = self.merge_embeddings(i, &pairs, true) {
@@ -138,9 +141,12 @@ impl GMap {
                 pairs.push((x, y));
             }
         }
+        let cap = self.capacity();
         for &(x, y) in &pairs {
             self.alpha[i][x.index()] = x.0;
             self.alpha[i][y.index()] = y.0;
+            crate::gmap::note(&mut self.log, self.version, x.0, cap);
+            crate::gmap::note(&mut self.log, self.version, y.0, cap);
         }
         self.version += 1;
         if let Err(name) = self.split_embeddings(i, &pairs, true) {
@@ -212,6 +218,9 @@ impl GMap {
                 }
                 e.slot_use[target] = darts.len() as u32;
                 for d in darts {
+                    if e.slot_of[d.index()] != target as u32 {
+                        crate::gmap::note(&mut self.log, self.version, d.0, cap);
+                    }
                     e.slot_of[d.index()] = target as u32;
                 }
             }
@@ -267,6 +276,7 @@ impl GMap {
                     e.values.copy_slot(w, s, ns);
                     for d in part {
                         e.slot_of[d.index()] = ns as u32;
+                        crate::gmap::note(&mut self.log, self.version, d.0, cap);
                     }
                     new_slots.push(ns);
                 }

@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use topomech_gmap::generators::{cuboid, BoxElement};
 use topomech_gmap::mesh::{build, BuildOptions};
-use topomech_physics::{Blade, Config, Criterion, Cut, Fracture, ModelSpec, Simulation};
+use topomech_physics::{
+    Blade, Config, Criterion, Cut, Fracture, ModelSpec, Simulation, TimedEvent,
+};
 
 fn simulation(n: [usize; 3]) -> Simulation {
     simulation_with(n, None, vec![])
@@ -18,6 +20,16 @@ fn simulation(n: [usize; 3]) -> Simulation {
 /// The box, with a fracture criterion tested after every step when `fracture` is given, and
 /// `blades` moving through it.
 fn simulation_with(n: [usize; 3], fracture: Option<Fracture>, blades: Vec<Blade>) -> Simulation {
+    simulation_events(n, fracture, blades, vec![])
+}
+
+/// [`simulation_with`], with timed events.
+fn simulation_events(
+    n: [usize; 3],
+    fracture: Option<Fracture>,
+    blades: Vec<Blade>,
+    events: Vec<TimedEvent>,
+) -> Simulation {
     let (g, _) = build(
         &cuboid(n, [2.0, 1.0, 1.0], BoxElement::Tetra),
         &BuildOptions::default(),
@@ -31,6 +43,7 @@ fn simulation_with(n: [usize; 3], fracture: Option<Fracture>, blades: Vec<Blade>
         fixed: vec!["x < 1e-9".into()],
         fracture,
         blades,
+        events,
         ..Config::default()
     };
     Simulation::new(g, cfg).expect("builds")
@@ -140,6 +153,22 @@ fn main() {
         }
     });
     let blade_faces: usize = bladed.topology_changes().iter().map(|c| c.unsewn).sum();
+    // one face cut (a predicate cut, a timed event at the end of the third step): that step
+    // and the next, against plain steps
+    let mut single = simulation_events(
+        n,
+        None,
+        vec![],
+        vec![TimedEvent {
+            time: 3.0 * dt,
+            cut: Cut::Where("x > 0.99 && x < 1.01 && y < 0.02 && z < 0.03".into()),
+        }],
+    );
+    single.step().expect("steps");
+    let single_plain = seconds(|| black_box(single.step()).expect("steps"));
+    let single_cut = seconds(|| black_box(single.step()).expect("steps"));
+    let single_next = seconds(|| black_box(single.step()).expect("steps"));
+    let single_faces: usize = single.topology_changes().iter().map(|c| c.unsewn).sum();
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
@@ -161,6 +190,7 @@ fn main() {
     println!("  the first step after it (plans rebuilt)                          {:8.1} ms  = {:.2} steps", at * 1e3, at / st);
     println!("  one fracture burst ({burst_faces} faces opened)                        {:8.1} ms  = {:.2} steps", bt * 1e3, bt / st);
     println!("  {blade_steps} steps with a blade moving through the middle ({blade_faces} faces)  {:8.1} ms  = {:.1}x the same steps without it ({:.1} ms)", with * 1e3, with / without, without * 1e3);
+    println!("  a step cutting {single_faces} face(s) (predicate event), then the next       {:8.1} ms + {:.1} ms  = {:.2} + {:.2} steps (a plain step of that run: {:.1} ms)", single_cut * 1e3, single_next * 1e3, single_cut / st, single_next / st, single_plain * 1e3);
     let (ps, bs) = (median(&mut plain_steps), median(&mut brittle_steps));
     println!("  a step with fracture enabled, nothing breaking (median of 5)    {:8.1} ms  = {:.2} steps without ({:.1} ms)", bs * 1e3, bs / ps, ps * 1e3);
 }

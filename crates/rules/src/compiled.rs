@@ -281,6 +281,20 @@ pub(crate) struct Program {
     pub(crate) writes: Vec<(usize, usize, R, Vec<usize>)>,
 }
 
+impl Program {
+    /// The orbit types the program aggregates over (the orbits its rows walk, besides the
+    /// darts of the match).
+    pub(crate) fn agg_orbits(&self) -> Vec<OrbitType> {
+        let mut v: Vec<OrbitType> = Vec::new();
+        for a in &self.aggs {
+            if !v.contains(&a.orbit) {
+                v.push(a.orbit);
+            }
+        }
+        v
+    }
+}
+
 struct Compiler<'a> {
     rule: &'a Rule,
     embs: &'a [EmbDecl],
@@ -919,6 +933,11 @@ pub(crate) struct Plan {
     /// Native code for the program (see [`crate::jit`]), compiled at the first run when the
     /// plan was built with the switch on.
     native: NativeState,
+    /// Per domain row, the number of its match (see [`Plan::patch`]).
+    row_match: Vec<u32>,
+    /// Per write, every (domain row, slot) it writes, owners and duplicates alike (what
+    /// `targets` and `dups` are computed from again after a patch).
+    writes: Vec<Vec<(u32, u32)>>,
 }
 
 /// Whether and how a plan runs native code.
@@ -959,23 +978,38 @@ fn class_reps(m: &Match, arity: usize, uniform: &[usize], rep: &mut Vec<u32>) {
     }
 }
 
-impl Plan {
-    /// Index arrays of `matches` on `g`, whose embeddings for the rule are `ids`.
-    pub(crate) fn build(
-        prog: Program,
+/// The per-row arrays of some matches (a plan's, or those a patch appends).
+#[derive(Debug, Default)]
+struct Rows {
+    /// Per domain row, the number of its match (as the caller numbers matches).
+    row_match: Vec<u32>,
+    gathers: Vec<Vec<u32>>,
+    /// Per aggregate: offsets (rows + 1, from 0) and slots; offsets `[0]` for a count.
+    csr: Vec<(Vec<u32>, Vec<u32>)>,
+    counts: Vec<Vec<f64>>,
+    /// Per write: every (domain row, slot) it writes, owners and duplicates alike.
+    writes: Vec<Vec<(u32, u32)>>,
+}
+
+impl Rows {
+    /// The rows of `matches` (numbered `ids[k]` for `matches[k]`), the first one numbered
+    /// `base`.
+    fn of(
+        prog: &Program,
         rule: &Rule,
         g: &GMap,
-        ids: &[EmbeddingId],
+        emb_ids: &[EmbeddingId],
         matches: &[Match],
-        jit_on: bool,
-    ) -> Plan {
+        ids: &[u32],
+        base: usize,
+    ) -> Rows {
         let nw = prog.writes.len();
         // domain rows: the class representatives of every write
         let mut domain: Vec<(u32, u32)> = Vec::new();
         let mut write_rows: Vec<Vec<(u32, Dart)>> = vec![Vec::new(); nw];
         let mut rep = Vec::new();
         let mut reps: Vec<Vec<u32>> = vec![Vec::new(); nw];
-        let mut evaluations = 0;
+        let mut row_match = Vec::new();
         for (mi, m) in matches.iter().enumerate() {
             for (w, (_, _, _, uniform)) in prog.writes.iter().enumerate() {
                 class_reps(m, rule.arity, uniform, &mut rep);
@@ -986,17 +1020,17 @@ impl Plan {
                         .filter(|(r, x)| **x as usize == *r)
                         .map(|(_, x)| *x),
                 );
-                evaluations += reps[w].len();
             }
             let mut rows: Vec<u32> = reps.iter().flatten().copied().collect();
             rows.sort_unstable();
             rows.dedup();
-            let base = domain.len() as u32;
+            let first = domain.len();
             domain.extend(rows.iter().map(|&r| (mi as u32, r)));
+            row_match.extend(std::iter::repeat_n(ids[mi], rows.len()));
             for (w, (node, _, _, _)) in prog.writes.iter().enumerate() {
                 for &r in &reps[w] {
                     let k = rows.binary_search(&r).expect("a representative is a row");
-                    write_rows[w].push((base + k as u32, m.darts[*node][r as usize]));
+                    write_rows[w].push(((base + first + k) as u32, m.darts[*node][r as usize]));
                 }
             }
         }
@@ -1009,7 +1043,7 @@ impl Plan {
             .reads
             .iter()
             .map(|rk| {
-                let e = g.embedding(ids[rk.emb]);
+                let e = g.embedding(emb_ids[rk.emb]);
                 (0..n)
                     .map(|row| e.slot(dart(rk.node, row)) as u32)
                     .collect()
@@ -1027,7 +1061,7 @@ impl Plan {
                 match ak.emb {
                     None => cnt.push(darts.len() as f64),
                     Some(emb) => {
-                        let e = g.embedding(ids[emb]);
+                        let e = g.embedding(emb_ids[emb]);
                         let start = slots.len();
                         for x in darts {
                             let s = e.slot(x) as u32;
@@ -1043,12 +1077,164 @@ impl Plan {
             csr.push((offs, slots));
             counts.push(cnt);
         }
-        // scatter targets, each slot written once; later writes of a slot are compared
-        let mut targets = Vec::with_capacity(nw);
+        let writes = prog
+            .writes
+            .iter()
+            .zip(write_rows)
+            .map(|((_, emb, _, _), rows)| {
+                let e = g.embedding(emb_ids[*emb]);
+                rows.into_iter()
+                    .map(|(row, d)| (row, e.slot(d) as u32))
+                    .collect()
+            })
+            .collect();
+        Rows {
+            row_match,
+            gathers,
+            csr,
+            counts,
+            writes,
+        }
+    }
+
+    /// The rows whose match `keep` accepts, renumbered from 0 in order.
+    fn filter(self, keep: &dyn Fn(u32) -> bool) -> Rows {
+        let n = self.row_match.len();
+        let mut new_row = vec![u32::MAX; n];
+        let mut k = 0u32;
+        for (r, &m) in self.row_match.iter().enumerate() {
+            if keep(m) {
+                new_row[r] = k;
+                k += 1;
+            }
+        }
+        let kept = |r: usize| new_row[r] != u32::MAX;
+        let pick = |v: &[u32]| -> Vec<u32> {
+            v.iter()
+                .enumerate()
+                .filter(|(r, _)| kept(*r))
+                .map(|(_, x)| *x)
+                .collect()
+        };
+        let row_match = pick(&self.row_match);
+        let gathers = self.gathers.iter().map(|x| pick(x)).collect();
+        let csr = self
+            .csr
+            .iter()
+            .map(|(offs, slots)| {
+                if offs.len() != n + 1 {
+                    return (vec![0], Vec::new()); // a count: no slots
+                }
+                let mut o = Vec::with_capacity(k as usize + 1);
+                let mut sl = Vec::with_capacity(slots.len());
+                o.push(0);
+                for r in 0..n {
+                    if kept(r) {
+                        sl.extend_from_slice(&slots[offs[r] as usize..offs[r + 1] as usize]);
+                        o.push(sl.len() as u32);
+                    }
+                }
+                (o, sl)
+            })
+            .collect();
+        let counts = self
+            .counts
+            .iter()
+            .map(|c| {
+                c.iter()
+                    .enumerate()
+                    .filter(|(r, _)| kept(*r))
+                    .map(|(_, x)| *x)
+                    .collect()
+            })
+            .collect();
+        let writes = self
+            .writes
+            .iter()
+            .map(|w| {
+                w.iter()
+                    .filter(|(r, _)| kept(*r as usize))
+                    .map(|&(r, s)| (new_row[r as usize], s))
+                    .collect()
+            })
+            .collect();
+        Rows {
+            row_match,
+            gathers,
+            csr,
+            counts,
+            writes,
+        }
+    }
+
+    /// Appends `other` (whose rows are numbered after these already).
+    fn append(&mut self, other: Rows) {
+        let n = self.row_match.len() as u32;
+        self.row_match.extend(other.row_match);
+        for (a, b) in self.gathers.iter_mut().zip(other.gathers) {
+            a.extend(b);
+        }
+        for ((ao, asl), (bo, bsl)) in self.csr.iter_mut().zip(other.csr) {
+            if bo.len() <= 1 && ao.len() <= 1 {
+                continue; // a count
+            }
+            let base = asl.len() as u32;
+            ao.extend(bo[1..].iter().map(|&o| o + base));
+            asl.extend(bsl);
+        }
+        for (a, b) in self.counts.iter_mut().zip(other.counts) {
+            a.extend(b);
+        }
+        for (a, b) in self.writes.iter_mut().zip(other.writes) {
+            debug_assert!(b.iter().all(|&(r, _)| r >= n));
+            a.extend(b);
+        }
+    }
+}
+
+impl Plan {
+    /// Index arrays of `matches` on `g`, whose embeddings for the rule are `ids`. Match
+    /// `k` is numbered `k` (see [`Plan::patch`]).
+    pub(crate) fn build(
+        prog: Program,
+        rule: &Rule,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        matches: &[Match],
+        jit_on: bool,
+    ) -> Plan {
+        let numbers: Vec<u32> = (0..matches.len() as u32).collect();
+        let rows = Rows::of(&prog, rule, g, ids, matches, &numbers, 0);
+        Plan::assemble(
+            prog,
+            g,
+            ids,
+            rows,
+            matches.len(),
+            if jit_on {
+                NativeState::Untried
+            } else {
+                NativeState::Off
+            },
+        )
+    }
+
+    /// The plan of `rows`: scatter targets (each slot written once, later writes of a slot
+    /// compared), output layout.
+    fn assemble(
+        prog: Program,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        rows: Rows,
+        matches: usize,
+        native: NativeState,
+    ) -> Plan {
+        let mut targets = Vec::with_capacity(prog.writes.len());
         let mut dups = Vec::new();
         let mut owner: Vec<Vec<(u32, u32)>> = Vec::new();
         let mut owner_emb: Vec<usize> = Vec::new();
         let mut woff = 0;
+        let mut evaluations = 0;
         for (w, (_, emb, reg, _)) in prog.writes.iter().enumerate() {
             let e = g.embedding(ids[*emb]);
             let k = if let Some(k) = owner_emb.iter().position(|x| x == emb) {
@@ -1058,13 +1244,13 @@ impl Plan {
                 owner.push(vec![(u32::MAX, 0); e.n_slots()]);
                 owner.len() - 1
             };
-            let mut t = Vec::with_capacity(write_rows[w].len());
-            for &(row, d) in &write_rows[w] {
-                let s = e.slot(d);
-                let o = &mut owner[k][s];
+            let mut t = Vec::with_capacity(rows.writes[w].len());
+            evaluations += rows.writes[w].len();
+            for &(row, s) in &rows.writes[w] {
+                let o = &mut owner[k][s as usize];
                 if o.0 == u32::MAX {
                     *o = (w as u32, row);
-                    t.push((row, s as u32));
+                    t.push((row, s));
                 } else if !(o.0 as usize == w && o.1 == row) {
                     dups.push((o.0 as usize, o.1, w, row));
                 }
@@ -1076,25 +1262,77 @@ impl Plan {
         // rows per chunk: the chunk's scratch stays within a few hundred KiB; a power of two,
         // so that a row's chunk and place in it are a shift and a mask
         let chunk = prev_power_of_two(16_384 / prog.stride.max(1)).clamp(4, 256);
-        Plan {
+        let mut plan = Plan {
             prog,
-            matches: matches.len(),
-            rows: n,
+            matches,
+            rows: rows.row_match.len(),
             chunk,
-            gathers,
-            csr,
-            counts,
+            gathers: rows.gathers,
+            csr: rows.csr,
+            counts: rows.counts,
             targets,
             dups,
             out_width,
             out: Vec::new(),
             evaluations,
-            native: if jit_on {
-                NativeState::Untried
-            } else {
-                NativeState::Off
+            native: NativeState::Off,
+            row_match: rows.row_match,
+            writes: rows.writes,
+        };
+        // native code already generated stays (it depends on the program, the column kinds
+        // and the output layout, not on the rows), with `need` computed again from the new
+        // index arrays
+        plan.native = match native {
+            NativeState::Ready(nat, _) => match plan.need(&nat.kinds) {
+                Ok(need) => NativeState::Ready(nat, need),
+                Err(why) => NativeState::Failed(why),
             },
+            other => other,
+        };
+        plan
+    }
+
+    /// The plan with the rows of the matches `keep` rejects dropped, and the rows of `new`
+    /// (numbered `numbers`) appended: what [`Plan::build`] gives for the kept and the new
+    /// matches, up to the order of the rows. `g` must be the map the new matches were found
+    /// on, and every kept row's index arrays must still hold on it (the caller's proof).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn patch(
+        self,
+        rule: &Rule,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        keep: &dyn Fn(u32) -> bool,
+        kept_matches: usize,
+        new: &[Match],
+        numbers: &[u32],
+    ) -> Plan {
+        let Plan {
+            prog,
+            gathers,
+            csr,
+            counts,
+            native,
+            row_match,
+            writes,
+            ..
+        } = self;
+        let mut rows = Rows {
+            row_match,
+            gathers,
+            csr,
+            counts,
+            writes,
         }
+        .filter(keep);
+        let base = rows.row_match.len();
+        rows.append(Rows::of(&prog, rule, g, ids, new, numbers, base));
+        Plan::assemble(prog, g, ids, rows, kept_matches + new.len(), native)
+    }
+
+    /// The program's aggregated orbit types (see [`Program::agg_orbits`]).
+    pub(crate) fn agg_orbits(&self) -> Vec<OrbitType> {
+        self.prog.agg_orbits()
     }
 
     /// Whether the plan runs native code (after its first run).
@@ -1102,10 +1340,11 @@ impl Plan {
         matches!(self.native, NativeState::Ready(..))
     }
 
-    /// Compiles the program to native code for columns of `kinds`.
-    fn compile_native(&self, kinds: &[jit::ColKind]) -> NativeState {
-        // what the code will index: checked once here (the arrays never change after
-        // `build`), so that a run only compares column lengths with `need`
+    /// Per program column, the length it must have at least (in elements) for the index
+    /// arrays to stay in it: one more than the largest slot they hold, times the width read;
+    /// `Err` when the arrays are out of shape (rows, CSR offsets). Computed whenever the
+    /// arrays change (built or patched), so that a native run only compares lengths.
+    fn need(&self, kinds: &[jit::ColKind]) -> Result<Vec<usize>, String> {
         let rows = self.rows;
         let mut need = vec![0usize; kinds.len()];
         for op in &self.prog.ops {
@@ -1113,7 +1352,7 @@ impl Plan {
                 Op::Gather { dst, col, idx } => {
                     let g = &self.gathers[*idx];
                     if g.len() != rows {
-                        return NativeState::Failed("a gather of another length".into());
+                        return Err("a gather of another length".into());
                     }
                     let w = if kinds[*col] == jit::ColKind::Real {
                         self.prog.regs[*dst].width
@@ -1128,7 +1367,7 @@ impl Plan {
                     let (offs, slots) = &self.csr[*csr];
                     let monotone = offs.windows(2).all(|o| o[0] <= o[1]);
                     if offs.len() != rows + 1 || !monotone || offs[rows] as usize > slots.len() {
-                        return NativeState::Failed("an aggregate's offsets out of shape".into());
+                        return Err("an aggregate's offsets out of shape".into());
                     }
                     let w = self.prog.regs[*dst].width;
                     if let Some(&m) = slots.iter().max() {
@@ -1136,11 +1375,22 @@ impl Plan {
                     }
                 }
                 Op::RowData { data, .. } if self.counts[*data].len() != rows => {
-                    return NativeState::Failed("counts of another length".into());
+                    return Err("counts of another length".into());
                 }
                 _ => {}
             }
         }
+        Ok(need)
+    }
+
+    /// Compiles the program to native code for columns of `kinds`.
+    fn compile_native(&self, kinds: &[jit::ColKind]) -> NativeState {
+        // what the code will index: checked here and whenever the arrays change (`need`),
+        // so that a run only compares column lengths with `need`
+        let need = match self.need(kinds) {
+            Ok(need) => need,
+            Err(why) => return NativeState::Failed(why),
+        };
         let offsets: Vec<usize> = self.targets.iter().map(|t| t.1).collect();
         let layout = jit::OutLayout {
             chunk: self.chunk,
@@ -1163,7 +1413,8 @@ impl Plan {
             .sum::<usize>()
             + self.counts.iter().map(|x| x.capacity() * 8).sum::<usize>();
         let t: usize = self.targets.iter().map(|(t, _)| t.capacity() * 8).sum();
-        g + c + t + self.out.capacity() * 8
+        let w: usize = self.writes.iter().map(|x| x.capacity() * 8).sum();
+        g + c + t + w + self.row_match.capacity() * 4 + self.out.capacity() * 8
     }
 
     /// Where the value of the write whose output offset is `off` and width `width` lies in
@@ -1291,8 +1542,9 @@ impl Plan {
                         // SAFETY: `args` describes this plan's arrays, for which `nat` was
                         // compiled (checked above: the column kinds, each column at least as
                         // long as the largest slot its index arrays hold requires (`need`,
-                        // computed from these immutable arrays in `compile_native`, which
-                        // also checked their row lengths and CSR shape), fills at least as
+                        // computed from these arrays by `Plan::need` whenever they were set:
+                        // in `compile_native`, and in `assemble` after a patch; it also
+                        // checked their row lengths and CSR shape), fills at least as
                         // wide as their registers, the output buffer of `n_chunks` blocks);
                         // rows `first..first + n` are one chunk inside `0..rows`, and each
                         // chunk is run by one call only, so concurrent calls write disjoint

@@ -401,7 +401,9 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
 /// It keeps, per computation rule, the matches its last global application found (a *plan*):
 /// a cache derived from the map, keyed by the topology version and by the write counts of the
 /// embeddings the rule's guard reads, so it is rebuilt exactly when what it was computed from
-/// changed, and never a second source of truth.
+/// changed, and never a second source of truth. After a topology change a plan is patched
+/// instead where that gives what a rebuild gives (see `RuleSet::patch_plan`): the matches
+/// around the changed darts dropped and found again, the others kept.
 #[derive(Debug)]
 pub struct RuleSet {
     checked: Checked,
@@ -412,6 +414,9 @@ pub struct RuleSet {
     compile: bool,
     /// Whether compiled plans run native code (see [`crate::jit`]).
     jit: bool,
+    /// Plans patched after a topology change instead of rebuilt (see
+    /// [`RuleSet::plan_patches`]).
+    patches: std::sync::atomic::AtomicUsize,
 }
 
 /// The matches of the patterns planned on one map state, by [`pattern_key`].
@@ -455,6 +460,89 @@ struct Plan {
     /// Write counts of the embeddings the guard reads.
     reads: Vec<u64>,
     kind: PlanKind,
+    /// What patching the plan after a topology change needs (see [`RuleSet::patch_plan`]);
+    /// `None` for a plan that is rebuilt instead.
+    index: Option<Index>,
+}
+
+/// The matches of a plan by number, for patching it: match `k` is the `k`-th match the plan
+/// was built with or appended (compiled plans number their rows' matches the same way).
+#[derive(Debug)]
+struct Index {
+    /// The rule's embeddings on the map when the plan was built.
+    ids: Vec<EmbeddingId>,
+    /// Per match: whether it is still in the plan.
+    alive: Vec<bool>,
+    /// Matches still in the plan.
+    live: usize,
+    /// Per match, its hook orbit's darts: `hook_darts[hook_start[k]..hook_start[k + 1]]`.
+    hook_start: Vec<u32>,
+    hook_darts: Vec<u32>,
+    /// Per dart, the match whose hook orbit held it when that match was added (`u32::MAX`
+    /// for none). Hook orbits of the live matches are disjoint (as in [`find_all`], where a
+    /// match's hook darts are marked used), so an entry naming a live match is right; one
+    /// naming a dropped match is stale.
+    of_hook: Vec<u32>,
+}
+
+impl Index {
+    fn new(ids: Vec<EmbeddingId>, capacity: usize) -> Index {
+        Index {
+            ids,
+            alive: Vec::new(),
+            live: 0,
+            hook_start: vec![0],
+            hook_darts: Vec::new(),
+            of_hook: vec![u32::MAX; capacity],
+        }
+    }
+
+    /// Adds `m` (hooked at node `hook`) and returns its number.
+    fn push(&mut self, m: &Match, hook: usize) -> u32 {
+        let k = self.alive.len() as u32;
+        self.alive.push(true);
+        self.live += 1;
+        for &d in &m.darts[hook] {
+            self.hook_darts.push(d.0);
+            self.of_hook[d.index()] = k;
+        }
+        self.hook_start.push(self.hook_darts.len() as u32);
+        k
+    }
+
+    /// The live match whose hook orbit holds `d`, if any.
+    fn live_at(&self, d: Dart) -> Option<u32> {
+        let k = *self.of_hook.get(d.index())?;
+        (k != u32::MAX && self.alive[k as usize]).then_some(k)
+    }
+}
+
+/// Per left node of `rule` (single hook), the labels of the arcs through which
+/// [`match_at`] reaches its darts from the hook's, in order (the hook: none); `None` for a
+/// node it does not reach. The same fixed-point loop as [`match_at`]'s, so node `n`'s dart at
+/// row `r` is `alpha_{l_k}(... alpha_{l_1}(hook dart at row r))`.
+fn node_paths(rule: &Rule) -> Vec<Option<Vec<u8>>> {
+    let mut path: Vec<Option<Vec<u8>>> = vec![None; rule.nodes.len()];
+    path[rule.hooks[0]] = Some(Vec::new());
+    loop {
+        let mut progress = false;
+        let mut missing = false;
+        for &(a, i, b) in &rule.left_arcs {
+            for (p, q) in [(a, b), (b, a)] {
+                if path[p].is_some() && path[q].is_none() {
+                    let mut v = path[p].clone().expect("checked");
+                    v.push(i);
+                    path[q] = Some(v);
+                    progress = true;
+                }
+            }
+            missing |= path[a].is_none() || path[b].is_none();
+        }
+        if !progress || !missing {
+            break;
+        }
+    }
+    path
 }
 
 #[derive(Debug)]
@@ -481,6 +569,7 @@ impl RuleSet {
             shared: std::sync::Mutex::new(SharedMatches::default()),
             compile: true,
             jit: crate::jit::enabled_by_env(),
+            patches: std::sync::atomic::AtomicUsize::new(0),
         }
     }
 
@@ -771,8 +860,29 @@ impl RuleSet {
         let fresh = plans
             .get(&index)
             .is_some_and(|p| p.identity == g.identity() && p.reads == reads);
-        if !fresh {
+        let patched = if fresh {
+            None
+        } else {
+            plans
+                .remove(&index)
+                .and_then(|old| self.patch_plan(g, name, params, old, &reads))
+        };
+        if let Some(p) = patched {
+            self.patches
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            plans.insert(index, p);
+        } else if !fresh {
             let matches = self.matches_of(g, &b, poll)?;
+            let index_of = if patchable(b.rule, b.embs) && (self.compile || matches.is_empty()) {
+                let full = self.bind(g, name, params)?;
+                let mut ix = Index::new(full.ids, g.capacity());
+                for m in matches.iter() {
+                    ix.push(m, b.rule.hooks[0]);
+                }
+                Some(ix)
+            } else {
+                None
+            };
             let kind = if matches.is_empty() {
                 PlanKind::Matches(matches)
             } else {
@@ -784,12 +894,17 @@ impl RuleSet {
                     _ => PlanKind::Matches(matches),
                 }
             };
+            // an interpreter plan with matches is rebuilt, not patched
+            let index_of =
+                index_of.filter(|_| !matches!(&kind, PlanKind::Matches(ms) if !ms.is_empty()));
+            g.track_changes();
             plans.insert(
                 index,
                 Plan {
                     identity: g.identity(),
                     reads,
                     kind,
+                    index: index_of,
                 },
             );
         }
@@ -822,6 +937,208 @@ impl RuleSet {
             }
             PlanKind::Matches(ms) => apply_matches(g, &b, ms, poll),
         }
+    }
+
+    /// Patches the plan `old` of rule `name` for the map's new topology instead of
+    /// rebuilding it; `None` when it cannot (then the caller rebuilds it).
+    ///
+    /// Why the patched plan is the one a rebuild gives (up to the order of its rows and the
+    /// choice of each match's hook dart, which [`find_all`] makes by dart order): let `C` be
+    /// the darts changed since the plan was built ([`GMap::changed_since`]: links, slots,
+    /// created, removed) and `C*` the darts of `C` together with, for every orbit type the
+    /// program aggregates over, the orbits (on the new map) of the live darts of `C`.
+    /// - [`match_at`] reads only the links of the darts of the match it returns (its
+    ///   footprint), and a compiled row reads only the slots of those darts and, through its
+    ///   aggregates, the darts and slots of their orbits of the aggregated types. An orbit
+    ///   (on the new map) that holds no dart of `C` is the same orbit, with the same slots, on
+    ///   the old map: it is closed under the old links. So a match whose footprint misses
+    ///   `C*` is found again, the same, from the same hook dart, and its rows are unchanged:
+    ///   it is kept. Every other match is dropped.
+    /// - A match of the new map whose footprint misses `C*` was a match of the old map with
+    ///   the same footprint, which is kept: nothing to add. One whose footprint holds a dart
+    ///   `y` of `C*`, as node `n`'s dart of some row, is found from the hook dart of that row,
+    ///   which walking node `n`'s arc path ([`node_paths`]) back from `y` reaches. So every
+    ///   dart of `C*`, walked back along every node's path, gives the candidate hooks; those
+    ///   whose match holds a dart of `C*` are added, once per footprint.
+    /// - The matches to drop are found the same way: walking back from a dart of `C*` along
+    ///   node `n`'s path on the new map reaches the hook orbit of an old match holding it at
+    ///   node `n`, or else a dart of `C` nearer the hook on that path, from which walking
+    ///   back reaches it (every link before the first changed dart of the path is unchanged).
+    ///
+    /// Only rules without a guard (a guard may read what changed) and with one hook are
+    /// patched, compiled plans or plans without matches, on the map (same identity) and
+    /// embeddings they were built for, when the change record covers their version.
+    fn patch_plan(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        old: Plan,
+        reads: &[u64],
+    ) -> Option<Plan> {
+        let (id, version) = g.identity();
+        if old.identity.0 != id || old.reads != reads {
+            return None;
+        }
+        let Plan { kind, index, .. } = old;
+        let mut ix = index?;
+        let b = self.bind(g, name, params).ok()?;
+        let rule = b.rule;
+        if !patchable(rule, b.embs)
+            || rule_embeddings(rule)
+                .iter()
+                .any(|&k| ix.ids.get(k) != b.ids.get(k))
+        {
+            return None;
+        }
+        let changed = g.changed_since(old.identity.1)?;
+        let compiled = match kind {
+            PlanKind::Compiled(p) => Some(p),
+            PlanKind::Matches(ms) if ms.is_empty() && self.compile => None,
+            PlanKind::Matches(_) => return None,
+        };
+        let aggs = match &compiled {
+            Some(p) => p.agg_orbits(),
+            None => crate::compiled::compile(rule, b.embs).ok()?.agg_orbits(),
+        };
+        // C* is C expanded along each chain of orbit types in turn
+        let mut chains: Vec<Vec<OrbitType>> = aggs.into_iter().map(|o| vec![o]).collect();
+        // a guard's too: it is evaluated now, so the values it reads must be unchanged, not
+        // only their slots (see `expr_orbits`)
+        if let Some(guard) = &rule.guard {
+            expr_orbits(guard, b.embs, &mut chains);
+        }
+        let cap = g.capacity();
+        if ix.of_hook.len() < cap {
+            ix.of_hook.resize(cap, u32::MAX);
+        }
+        // C*: the changed darts and their aggregated orbits
+        let mut star = Marks::with_capacity(cap);
+        let mut cstar: Vec<Dart> = Vec::with_capacity(changed.len());
+        for &d in &changed {
+            if star.mark(d) {
+                cstar.push(d);
+            }
+        }
+        for chain in &chains {
+            let mut from: Vec<Dart> = changed.iter().copied().filter(|&d| g.is_alive(d)).collect();
+            for &o in chain {
+                let mut seen = Marks::with_capacity(cap);
+                let mut next = Vec::new();
+                for &d in &from {
+                    if !seen.is_marked(d) {
+                        g.visit_orbit(d, o, &mut seen, |x| next.push(x));
+                    }
+                }
+                from = next;
+            }
+            for x in from {
+                if star.mark(x) {
+                    cstar.push(x);
+                }
+            }
+        }
+        let paths: Vec<Vec<u8>> = node_paths(rule).into_iter().flatten().collect();
+        let back = |y: Dart, path: &[u8]| {
+            path.iter()
+                .rev()
+                .fold(y, |x, &l| g.alpha(usize::from(l), x))
+        };
+        // drop the matches holding a dart of C*
+        let mut candidates: Vec<Dart> = Vec::new();
+        for &y in &cstar {
+            for p in &paths {
+                let h = back(y, p);
+                if let Some(k) = ix.live_at(h) {
+                    ix.alive[k as usize] = false;
+                    ix.live -= 1;
+                }
+                if g.is_alive(h) {
+                    candidates.push(h);
+                }
+            }
+        }
+        // too much churn: a rebuild compacts
+        if ix.hook_darts.len() > 2 * cap.max(1024) {
+            return None;
+        }
+        // new matches, from the candidate hooks not in a kept match's hook orbit
+        let hook = rule.hooks[0];
+        let mut used = Marks::with_capacity(cap);
+        let mut prints: std::collections::HashSet<Vec<u32>, FastHash> =
+            std::collections::HashSet::default();
+        let mut new: Vec<Match> = Vec::new();
+        // a candidate tried once gives the same answer again (its match, the guard at it)
+        let mut tried = Marks::with_capacity(cap);
+        for h in candidates {
+            if !tried.mark(h) || used.is_marked(h) || ix.live_at(h).is_some() {
+                continue;
+            }
+            let Ok(m) = match_at(g, rule, &[h]) else {
+                continue;
+            };
+            if !m.all_darts().any(|x| star.is_marked(x)) {
+                continue; // a kept match's footprint (or one its guard rejects still)
+            }
+            if let Some(guard) = &rule.guard {
+                // an error is left to a rebuild, which reports it
+                match Eval::new(g, &b, &m).eval(guard, 0) {
+                    Ok(Val::B(true)) => {}
+                    Ok(_) => continue,
+                    Err(_) => return None,
+                }
+            }
+            for &x in &m.darts[hook] {
+                used.mark(x);
+            }
+            let mut key: Vec<u32> = m.all_darts().map(|x| x.0).collect();
+            key.sort_unstable();
+            if !prints.insert(key) {
+                continue;
+            }
+            new.push(m);
+        }
+        let kept = ix.live;
+        let numbers: Vec<u32> = new.iter().map(|m| ix.push(m, hook)).collect();
+        let kind = match compiled {
+            Some(p) => {
+                let alive = &ix.alive;
+                PlanKind::Compiled(Box::new(p.patch(
+                    rule,
+                    g,
+                    &b.ids,
+                    &|k| alive[k as usize],
+                    kept,
+                    &new,
+                    &numbers,
+                )))
+            }
+            None if new.is_empty() => PlanKind::Matches(Arc::new(Vec::new())),
+            None => {
+                // a plan without matches gains some: numbered from 0 again
+                let prog = crate::compiled::compile(rule, b.embs).ok()?;
+                let mut fresh = Index::new(ix.ids, cap);
+                for m in &new {
+                    fresh.push(m, hook);
+                }
+                ix = fresh;
+                PlanKind::Compiled(Box::new(crate::compiled::Plan::build(
+                    prog, rule, g, &b.ids, &new, self.jit,
+                )))
+            }
+        };
+        Some(Plan {
+            identity: (id, version),
+            reads: reads.to_vec(),
+            kind,
+            index: Some(ix),
+        })
+    }
+
+    /// How many times a plan was patched after a topology change instead of rebuilt (see
+    /// [`RuleSet::patch_plan`]), since this rule set was made.
+    pub fn plan_patches(&self) -> usize {
+        self.patches.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Drops every plan (they are rebuilt when needed): after rules that run once. The
@@ -1072,6 +1389,60 @@ impl RuleSet {
 }
 
 /// The embeddings a rule reads or writes (its program and guard), sorted.
+/// Whether plans of `rule` may be patched after a topology change (see
+/// [`RuleSet::patch_plan`]): a computation rule with one hook, and either no guard or one
+/// whose value does not depend on which dart of the hook orbit is row 0 (a hook orbit of one
+/// dart, or a guard [`row_invariant`] over the rows): then, as in [`find_all`], a footprint
+/// is planned exactly when some dart's match with that footprint passes the guard.
+fn patchable(rule: &Rule, embs: &[EmbDecl]) -> bool {
+    !rule.changes_topology
+        && rule.hooks.len() == 1
+        && rule.guard.as_ref().is_none_or(|e| {
+            rule.hook_orbit.is_empty() || row_invariant(e, &left_labels(rule), embs)
+        })
+}
+
+/// Adds to `out` the chains of orbit types through which `e` reads the map from a node's
+/// dart `x`: a read of embedding `e` depends on the darts of the `e`-orbit of `x` (its slot
+/// and value), an aggregate over orbit `o` of embedding `k` on the `o`-orbit of `x` and on
+/// the `k`-orbits of its darts. A dart `x` lies in such an orbit holding a dart `c` exactly
+/// when `x` is in the orbit of `c` along the chain walked back (orbits are symmetric): the
+/// `o`-orbit of `c` for `[o]`; the `o`-orbits of the `k`-orbit of `c` for `[k, o]`.
+fn expr_orbits(e: &TExpr, embs: &[EmbDecl], out: &mut Vec<Vec<OrbitType>>) {
+    let mut add = |c: Vec<OrbitType>| {
+        if !out.contains(&c) {
+            out.push(c);
+        }
+    };
+    match e {
+        TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
+        TExpr::Read { emb, .. } => add(vec![embs[*emb].orbit]),
+        TExpr::Agg { orbit, emb, .. } => {
+            add(vec![*orbit]);
+            if let Some(k) = emb {
+                add(vec![embs[*k].orbit, *orbit]);
+            }
+        }
+        TExpr::Bin(_, a, c) => {
+            expr_orbits(a, embs, out);
+            expr_orbits(c, embs, out);
+        }
+        TExpr::Un(_, a) | TExpr::ToReal(a) => expr_orbits(a, embs, out),
+        TExpr::Call(_, args) => args.iter().for_each(|a| expr_orbits(a, embs, out)),
+        TExpr::If(c, a, d) => {
+            expr_orbits(c, embs, out);
+            expr_orbits(a, embs, out);
+            expr_orbits(d, embs, out);
+        }
+        TExpr::Block(lets, r) => {
+            for (_, v) in lets {
+                expr_orbits(v, embs, out);
+            }
+            expr_orbits(r, embs, out);
+        }
+    }
+}
+
 fn rule_embeddings(rule: &Rule) -> Vec<usize> {
     let mut ids = Vec::new();
     for s in &rule.program {

@@ -1,0 +1,147 @@
+//! The change log ([`GMap::changed_since`]): after unsewing faces, every dart
+//! whose links or embedding slots changed is listed, and every dart not listed kept its links
+//! and its slot in every embedding (what a plan patched after a topology change relies on).
+
+use topomech_gmap::generators::{cuboid, BoxElement};
+use topomech_gmap::mesh::{build, BuildOptions};
+use topomech_gmap::{Dart, GMap, OrbitType};
+
+fn snapshot(g: &GMap) -> Vec<(Dart, [Dart; 4], Vec<usize>)> {
+    g.darts()
+        .map(|d| {
+            let links = [0, 1, 2, 3].map(|i| g.alpha(i, d));
+            let slots = g.embeddings().iter().map(|e| e.slot(d)).collect();
+            (d, links, slots)
+        })
+        .collect()
+}
+
+fn check(g: &GMap, before: &[(Dart, [Dart; 4], Vec<usize>)], changed: &[Dart]) {
+    let mut listed = vec![false; g.capacity()];
+    for d in changed {
+        listed[d.index()] = true;
+    }
+    for (d, links, slots) in before {
+        if listed[d.index()] {
+            continue;
+        }
+        assert!(g.is_alive(*d), "{d} removed but not listed");
+        assert_eq!(&[0, 1, 2, 3].map(|i| g.alpha(i, *d)), links, "{d}: links");
+        let now: Vec<usize> = g.embeddings().iter().map(|e| e.slot(*d)).collect();
+        assert_eq!(&now, slots, "{d}: slots");
+    }
+    for d in g.darts() {
+        assert!(
+            d.index() < before.len() && before.iter().any(|b| b.0 == d) || listed[d.index()],
+            "{d} created but not listed"
+        );
+    }
+}
+
+#[test]
+fn unsewn_faces_and_their_orbits_are_listed_and_nothing_else_changed() {
+    let (mut g, _) = build(
+        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    assert!(g.changed_since(g.version()).is_none(), "not tracked yet");
+    g.track_changes();
+    let v0 = g.version();
+    assert_eq!(g.changed_since(v0), Some(vec![]));
+    assert!(g.changed_since(v0 + 1).is_none(), "a future version");
+    let before = snapshot(&g);
+    // unsew a few interior faces
+    let faces: Vec<Dart> = g
+        .orbit_representatives(OrbitType::parse("<0,1>").unwrap())
+        .into_iter()
+        .filter(|&d| !g.is_free(3, d))
+        .take(3)
+        .collect();
+    assert_eq!(faces.len(), 3);
+    for d in faces {
+        if !g.is_free(3, d) {
+            g.unsew(3, d).unwrap();
+        }
+    }
+    assert!(g.is_valid());
+    let changed = g.changed_since(v0).unwrap();
+    assert!(!changed.is_empty());
+    check(&g, &before, &changed);
+    // later changes only: since the version after the first ones, one more face
+    let v1 = g.version();
+    let before1 = snapshot(&g);
+    let d = g.darts().find(|&d| !g.is_free(3, d)).unwrap();
+    let e = g.alpha(3, d);
+    g.unsew(3, d).unwrap();
+    let since1 = g.changed_since(v1).unwrap();
+    assert!(since1.contains(&d) && since1.contains(&e));
+    assert!(
+        !changed.iter().all(|x| since1.contains(x)),
+        "earlier changes left out"
+    );
+    check(&g, &before1, &since1);
+    // and since the start, both
+    let all = g.changed_since(v0).unwrap();
+    assert!(changed.iter().chain(&since1).all(|x| all.contains(x)));
+    check(&g, &before, &all);
+    // a clone has its own identity but keeps the record
+    let c = g.clone();
+    assert_eq!(c.changed_since(v0).unwrap(), all);
+}
+
+/// A derived embedding refreshed after a change recomputes only the orbits around the
+/// changed darts: it then equals one computed from scratch on the new map, for sums, means
+/// and counts, after every change of a sequence.
+#[test]
+fn a_local_refresh_of_derived_embeddings_equals_a_full_one() {
+    use topomech_gmap::{Aggregate, EmbeddingType, Policy, Value};
+    let (mut g, _) = build(
+        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let dim = g.dimension();
+    // a value per <2>-orbit (a pair of darts in a volume), aggregated per vertex and edge
+    let src_orbit = OrbitType::parse("<2>").unwrap();
+    let src = g
+        .add_embedding("w", EmbeddingType::F64, src_orbit, Policy::Sum)
+        .unwrap();
+    for (k, d) in g.orbit_representatives(src_orbit).into_iter().enumerate() {
+        g.set_value(src, d, &Value::Real(vec![1.0 + k as f64 * 0.37]))
+            .unwrap();
+    }
+    let aggs = [Aggregate::Sum, Aggregate::Mean, Aggregate::Count];
+    let orbits = [OrbitType::vertex(dim), OrbitType::edge(dim)];
+    let mut names = Vec::new();
+    for (i, agg) in aggs.into_iter().enumerate() {
+        for (j, o) in orbits.into_iter().enumerate() {
+            let name = format!("d{i}{j}");
+            g.add_derived(&name, "w", o, agg).unwrap();
+            names.push((name, o, agg));
+        }
+    }
+    g.track_changes();
+    for round in 0..3 {
+        let d = g
+            .darts()
+            .filter(|&d| !g.is_free(3, d))
+            .nth(7 * round)
+            .unwrap();
+        g.unsew(3, d).unwrap();
+        g.refresh_derived(); // local
+        let mut fresh = g.clone();
+        for (name, o, agg) in &names {
+            let full = format!("{name}_full");
+            let f = fresh.add_derived(&full, "w", *o, *agg).unwrap(); // from scratch
+            let l = fresh.require(name).unwrap();
+            for x in fresh.darts() {
+                assert_eq!(
+                    fresh.value(l, x).unwrap(),
+                    fresh.value(f, x).unwrap(),
+                    "round {round}: {name} at {x}"
+                );
+            }
+        }
+    }
+}
