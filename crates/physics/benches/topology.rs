@@ -187,7 +187,7 @@ fn main() {
         st * 1e3
     );
     println!("  one plane cut ({cut_faces} faces unsewn)                               {:8.1} ms  = {:.2} steps", ct * 1e3, ct / st);
-    println!("  the first step after it (plans rebuilt)                          {:8.1} ms  = {:.2} steps", at * 1e3, at / st);
+    println!("  the first step after it (plans patched)                          {:8.1} ms  = {:.2} steps", at * 1e3, at / st);
     println!("  one fracture burst ({burst_faces} faces opened)                        {:8.1} ms  = {:.2} steps", bt * 1e3, bt / st);
     println!("  {blade_steps} steps with a blade moving through the middle ({blade_faces} faces)  {:8.1} ms  = {:.1}x the same steps without it ({:.1} ms)", with * 1e3, with / without, without * 1e3);
     println!("  a step cutting {single_faces} face(s) (predicate event), then the next       {:8.1} ms + {:.1} ms  = {:.2} + {:.2} steps (a plain step of that run: {:.1} ms)", single_cut * 1e3, single_next * 1e3, single_cut / st, single_next / st, single_plain * 1e3);
