@@ -1,7 +1,7 @@
 //! Cost of topology changes against the cost of a step, on a box of ~100k tetrahedra:
 //! one plane cut through the middle, and a fracture burst opening the faces of a slab. A step
 //! is timed in the steady state (its rules' plans built); the first step after a change
-//! rebuilds them, and that is counted as part of the change.
+//! patches them around the changed darts, and that is counted as part of the change.
 //! Prints the median of repeated runs (`cargo bench -p topomech-physics`).
 
 use std::hint::black_box;
