@@ -306,3 +306,26 @@ fn a_fracture_patches_the_plans() {
         });
     }
 }
+
+/// A rule without matches adds nothing to the map, before and after a change: the
+/// co-rotational hexahedron rules (the shipped file declares them beside the tetrahedron
+/// rules) match no tetrahedron, so their embeddings (`k_hex00`, ...) are never created, not
+/// even by a plan patched after a cut. This test failed when a plan without matches bound
+/// (and so created) every embedding of its rule: 8 embeddings, 6 KB per tetrahedron.
+#[test]
+fn a_rule_without_matches_creates_no_embedding_when_its_plan_is_patched() {
+    let mut s = sim(&box3(), vec![]);
+    s.step().unwrap();
+    s.step().unwrap();
+    for name in ["k_hex00", "k_hex11", "g_hex0", "x_rest1"] {
+        assert!(s.gmap().embedding_id(name).is_none(), "{name} after set-up");
+    }
+    assert!(plane(&mut s, [1.0, 0.0, 0.0], 1.0) > 0);
+    let patches = s.rules().plan_patches();
+    s.step().unwrap();
+    s.step().unwrap();
+    assert!(s.rules().plan_patches() > patches, "the step after the cut patched plans");
+    for name in ["k_hex00", "k_hex11", "g_hex0", "x_rest1"] {
+        assert!(s.gmap().embedding_id(name).is_none(), "{name} after a cut");
+    }
+}

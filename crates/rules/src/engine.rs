@@ -874,8 +874,14 @@ impl RuleSet {
         } else if !fresh {
             let matches = self.matches_of(g, &b, poll)?;
             let index_of = if patchable(b.rule, b.embs) && (self.compile || matches.is_empty()) {
-                let full = self.bind(g, name, params)?;
-                let mut ix = Index::new(full.ids, g.capacity());
+                // a plan without matches keeps the guard's embeddings only: a rule without
+                // matches adds nothing to the map (see `bind_for`)
+                let ids = if matches.is_empty() {
+                    b.ids.clone()
+                } else {
+                    self.bind(g, name, params)?.ids
+                };
+                let mut ix = Index::new(ids, g.capacity());
                 for m in matches.iter() {
                     ix.push(m, b.rule.hooks[0]);
                 }
@@ -982,12 +988,16 @@ impl RuleSet {
         }
         let Plan { kind, index, .. } = old;
         let mut ix = index?;
-        let b = self.bind(g, name, params).ok()?;
+        // a plan without matches binds what its guard reads only (it must not create the
+        // rule's other embeddings); if it gains matches it is rebuilt, below
+        let empty = !matches!(kind, PlanKind::Compiled(_));
+        let b = self.bind_for(g, name, params, empty).ok()?;
         let rule = b.rule;
         if !patchable(rule, b.embs)
-            || rule_embeddings(rule)
-                .iter()
-                .any(|&k| ix.ids.get(k) != b.ids.get(k))
+            || (!empty
+                && rule_embeddings(rule)
+                    .iter()
+                    .any(|&k| ix.ids.get(k) != b.ids.get(k)))
         {
             return None;
         }
@@ -1114,18 +1124,9 @@ impl RuleSet {
                 )))
             }
             None if new.is_empty() => PlanKind::Matches(Arc::new(Vec::new())),
-            None => {
-                // a plan without matches gains some: numbered from 0 again
-                let prog = crate::compiled::compile(rule, b.embs).ok()?;
-                let mut fresh = Index::new(ix.ids, cap);
-                for m in &new {
-                    fresh.push(m, hook);
-                }
-                ix = fresh;
-                PlanKind::Compiled(Box::new(crate::compiled::Plan::build(
-                    prog, rule, g, &b.ids, &new, self.jit,
-                )))
-            }
+            // a plan without matches gains some: rebuilt (binding, and so creating, the
+            // rule's embeddings)
+            None => return None,
         };
         Some(Plan {
             identity: (id, version),
