@@ -324,7 +324,10 @@ fn a_rule_without_matches_creates_no_embedding_when_its_plan_is_patched() {
     let patches = s.rules().plan_patches();
     s.step().unwrap();
     s.step().unwrap();
-    assert!(s.rules().plan_patches() > patches, "the step after the cut patched plans");
+    assert!(
+        s.rules().plan_patches() > patches,
+        "the step after the cut patched plans"
+    );
     for name in ["k_hex00", "k_hex11", "g_hex0", "x_rest1"] {
         assert!(s.gmap().embedding_id(name).is_none(), "{name} after a cut");
     }
