@@ -10,6 +10,14 @@ from typing import Any
 import numpy as np
 import pytest
 
+# A shell starts a background job (`make test &`) with SIGINT ignored, Python then installs no
+# KeyboardInterrupt handler, and every process it starts inherits the ignored signal: the
+# tests that send SIGINT (tests/test_hardening_*.py) need the handler a terminal gives, so it
+# is restored here (in each pytest-xdist worker too; their children then start with SIGINT
+# at its default).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
 # Faces of each volume kind as local vertex lists, VTK order. Only the vertex sets matter for
 # counting, so these are written independently of the kernel's (oriented) tables.
 VOLUME_FACES: dict[str, list[tuple[int, ...]]] = {

@@ -266,15 +266,19 @@ def test_make_setup_steps_are_quiet_unless_they_fail(target: str, log: str) -> N
     recipe = _recipe(target)
     assert recipe, target
     assert all(line.startswith("@") for line in recipe), recipe  # no command echoed
-    commands = [x for x in recipe if "pip install" in x or "maturin develop" in x]
+    commands = [
+        x for x in recipe if "pip install" in x or "maturin develop" in x or "wheel.py" in x
+    ]
     assert commands, recipe
     for c in commands:
         # every tool's output goes to the log; the log is printed only when a step fails
-        for tool in re.split(r"&&|\|\|", c.split("|| {")[0]):
-            if "pip" in tool or "maturin" in tool or "-m venv" in tool:
+        # (`|| { cat LOG >&2; ...; exit 1; }`, or the exit status kept and tested)
+        on_failure = c.split("|| {")[0].split("if [ $$rc != 0 ]")[0]
+        for tool in re.split(r"&&|\|\||;" if "if [ $$rc" in c else r"&&|\|\|", on_failure):
+            if "pip" in tool or "maturin" in tool or "-m venv" in tool or "wheel.py" in tool:
                 assert re.search(rf">>? {re.escape(log)} 2>&1", tool), tool
-        assert f"|| {{ cat {log} >&2;" in c, c
-        assert c.rstrip().endswith("exit 1; }"), c
+        assert f"|| {{ cat {log} >&2;" in c or f"then cat {log} >&2;" in c, c
+        assert c.rstrip().endswith(("exit 1; }", "exit 1; fi")), c
     echoes = [x for x in recipe if x.startswith("@echo")]
     assert len(echoes) == 1  # one line saying what it does and where the log is
     assert log in echoes[0]
