@@ -56,6 +56,8 @@ def plot(res: dict[str, Any], path: Path) -> None:
         if s.get("status") != "ok":
             continue
         cuts = [c for c in s["cuts"] if c["faces"] > 0]
+        if not cuts:
+            continue  # nothing to draw on log axes (the table lists them)
         ax.plot(
             [c["faces"] for c in cuts],
             [c["steps"] for c in cuts],
@@ -80,9 +82,24 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--results", type=Path, default=HERE / "topology_scaling.json")
     ap.add_argument("--out", type=Path, default=HERE)
     args = ap.parse_args(argv)
-    res = json.loads(args.results.read_text(encoding="utf-8"))
+    try:
+        res = json.loads(args.results.read_text(encoding="utf-8"))
+        lines = table(res)
+    except (OSError, ValueError) as e:
+        print(f"topology_plot.py: {args.results}: {e}", file=sys.stderr)
+        return 2
+    except (KeyError, TypeError, AttributeError, IndexError) as e:
+        print(
+            f"topology_plot.py: {args.results}: not a cut_scaling result "
+            f"(crates/physics/benches/cut_scaling.rs): {type(e).__name__} {e}",
+            file=sys.stderr,
+        )
+        return 2
+    if not args.out.is_dir():
+        print(f"topology_plot.py: {args.out}: no such folder", file=sys.stderr)
+        return 2
     md = args.out / "topology_scaling.md"
-    md.write_text("\n".join(table(res)) + "\n", encoding="utf-8")
+    md.write_text("\n".join(lines) + "\n", encoding="utf-8")
     plot(res, args.out / "topology.png")
     print(f"wrote {md} and {args.out / 'topology.png'}")
     return 0

@@ -215,6 +215,9 @@ impl Simulation {
     /// how many, and the rows appended for the vertices that split (existing rows keep their
     /// meaning).
     pub fn fracture(&mut self, f: Fracture) -> Result<TopologyResult, PhysicsError> {
+        if let Some(why) = crate::schedule::threshold_problem(f.threshold) {
+            return Err(PhysicsError::Config(why));
+        }
         let none = Params::new();
         // the rule computing the measure, the embedding it writes, the rule opening faces
         let (measure, column, rule) = match f.criterion {

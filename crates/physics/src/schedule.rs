@@ -333,11 +333,8 @@ impl Simulation {
             ),
         ];
         if let Some(f) = cfg.fracture {
-            if !(f.threshold.is_finite()) {
-                return Err(PhysicsError::Config(format!(
-                    "fracture threshold must be finite, got {}",
-                    f.threshold
-                )));
+            if let Some(why) = threshold_problem(f.threshold) {
+                return Err(PhysicsError::Config(why));
             }
             if f.criterion == Criterion::Stress {
                 if dim != 3 {
@@ -625,4 +622,16 @@ fn mark_one_per_orbit(g: &mut GMap, name: &str, o: OrbitType) -> Result<(), Phys
         g.set_value(id, d, &Value::Bool(true)).map_err(err)?;
     }
     Ok(())
+}
+
+/// Why a fracture threshold is refused (as scenes refuse it): not finite, or not positive (a
+/// threshold at or below zero opens every face of an element at rest or stretched).
+pub(crate) fn threshold_problem(t: f64) -> Option<String> {
+    if !t.is_finite() {
+        Some(format!("fracture threshold must be finite, got {t}"))
+    } else if t <= 0.0 {
+        Some(format!("fracture threshold must be positive, got {t}"))
+    } else {
+        None
+    }
 }

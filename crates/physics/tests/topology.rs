@@ -554,3 +554,56 @@ fn fracture_skips_the_search_only_when_nothing_can_open() {
         }
     }
 }
+
+/// A fracture threshold at or below zero (or not finite) is refused, from the configuration
+/// and from `Simulation::fracture` alike (scenes refused it, Python broke every element apart).
+#[test]
+fn a_fracture_threshold_that_is_not_positive_is_refused() {
+    use topomech_physics::{Criterion, Fracture};
+    let mesh = topomech_gmap::generators::cuboid(
+        [2, 1, 1],
+        [2.0, 1.0, 1.0],
+        topomech_gmap::generators::BoxElement::Tetra,
+    );
+    let build = || {
+        topomech_gmap::mesh::build(&mesh, &topomech_gmap::mesh::BuildOptions::default())
+            .unwrap()
+            .0
+    };
+    let springs = || {
+        vec![topomech_physics::ModelSpec::with_reals(
+            "stretch_cumulated",
+            &[],
+        )]
+    };
+    for t in [0.0, -1.0, f64::NAN] {
+        let cfg = topomech_physics::Config {
+            models: springs(),
+            fracture: Some(Fracture {
+                criterion: Criterion::Strain,
+                threshold: t,
+            }),
+            ..topomech_physics::Config::default()
+        };
+        let e = topomech_physics::Simulation::new(build(), cfg)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("fracture threshold must be"), "{t}: {e}");
+        let cfg = topomech_physics::Config {
+            models: springs(),
+            ..topomech_physics::Config::default()
+        };
+        let mut s = topomech_physics::Simulation::new(build(), cfg).unwrap();
+        let e = s
+            .fracture(Fracture {
+                criterion: Criterion::Strain,
+                threshold: t,
+            })
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("fracture threshold must be"), "{t}: {e}");
+        assert!(s.topology_changes().is_empty());
+    }
+}
