@@ -578,3 +578,11 @@ def test_a_model_file_in_a_dict_says_how_to_give_it() -> None:
         TypeError, match=r"models\[0\]\['file'\]: a model from a rule file is given"
     ):
         topomech.Simulation(g, models=[{"file": "anchor.tmr"}])
+
+
+def test_a_model_file_that_is_not_utf8_is_named(tmp_path: Path) -> None:
+    """``Model.load`` on a file that is not UTF-8: the UnicodeDecodeError names the file."""
+    bad = tmp_path / "binary.tmr"
+    bad.write_bytes(b"\xff\xfe model m() {}\n")
+    with pytest.raises(UnicodeDecodeError, match=r"binary\.tmr: not UTF-8 text"):
+        topomech.Model.load(bad)

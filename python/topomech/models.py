@@ -133,7 +133,13 @@ class Model:
         """Every model the rule file ``path`` declares, in file order (errors as
         :meth:`load`; an empty list for a file without models)."""
         file = str(path)
-        text = Path(path).read_text(encoding="utf-8")
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except UnicodeDecodeError as e:
+            # the same exception, naming the file (the codec's message does not)
+            raise UnicodeDecodeError(
+                e.encoding, e.object, e.start, e.end, f"{file}: not UTF-8 text ({e.reason})"
+            ) from None
         # a file without a dimension line serves both dimensions, like `dimension 2 3`: its
         # declarations are read for 3-maps (they are the same for 2-maps; a rule that cannot
         # hold on a 2-map is refused when the model runs on one, as `topomech check` says)
