@@ -209,8 +209,10 @@ impl GMap {
         for &(i, _, _) in old {
             dims[i] = true;
         }
-        // plan every embedding first, so a refusal leaves everything as it was
+        // plan every embedding first, so a refusal leaves everything as it was; the new
+        // orbits around the seeds are walked once per orbit type, for all its embeddings
         let mut plans = Vec::new();
+        let mut walks: Vec<(OrbitType, Walk)> = Vec::new();
         for k in 0..self.embeddings.len() {
             let e = &self.embeddings[k];
             if e.is_direct()
@@ -219,7 +221,21 @@ impl GMap {
                 plans.push(None);
                 continue;
             }
-            match self.plan_reslot(k, &seeds, removed, is_fresh, poll) {
+            let o = e.orbit;
+            let w = match walks.iter().position(|(t, _)| *t == o) {
+                Some(w) => w,
+                None => match self.walk(o, &seeds, poll) {
+                    Ok(w) => {
+                        walks.push((o, w));
+                        walks.len() - 1
+                    }
+                    Err(err) => {
+                        self.undo_links(old);
+                        return Err(err);
+                    }
+                },
+            };
+            match self.plan_reslot(k, &walks[w].1, removed, is_fresh) {
                 Ok(p) => plans.push(Some(p)),
                 Err(err) => {
                     self.undo_links(old);
@@ -325,46 +341,43 @@ impl GMap {
         }
     }
 
-    /// The new orbits of embedding `k` around `seeds`, with the old slots each one covers.
-    /// Costs the size of those orbits (one hash lookup per old dart), not the map's.
-    fn plan_reslot(
-        &self,
-        k: usize,
-        seeds: &[Dart],
-        removed: &Marks,
-        fresh: &Marks,
-        poll: &mut Poll<'_>,
-    ) -> Result<Reslot, RewireError> {
+    /// The orbits of type `o` (on the new links) around `seeds`, each once. Costs their size,
+    /// not the map's.
+    fn walk(&self, o: OrbitType, seeds: &[Dart], poll: &mut Poll<'_>) -> Result<Walk, RewireError> {
         with_marks(self.capacity(), |m| {
-            self.plan_reslot_marked(k, seeds, removed, fresh, m, poll)
+            let mut w = Walk::default();
+            for &sd in seeds {
+                if m.is_marked(sd) {
+                    continue;
+                }
+                if poll.tick(1) {
+                    return Err(RewireError::Interrupted);
+                }
+                let first = w.darts.len();
+                self.visit_orbit(sd, o, m, |d| w.darts.push(d));
+                w.orbits.push(first..w.darts.len());
+            }
+            Ok(w)
         })
     }
 
-    fn plan_reslot_marked(
+    /// The new orbits of embedding `k` (those of `walk`, of its orbit type), with the old
+    /// slots each one covers: one hash lookup per old dart.
+    fn plan_reslot(
         &self,
         k: usize,
-        seeds: &[Dart],
+        walk: &Walk,
         removed: &Marks,
         fresh: &Marks,
-        m: &mut Marks,
-        poll: &mut Poll<'_>,
     ) -> Result<Reslot, RewireError> {
         let e = &self.embeddings[k];
         let mut plan = Reslot::default();
         // old slot -> its index in `plan.olds`
         let mut index: SlotMap = SlotMap::default();
-        let mut darts = Vec::new();
-        for &sd in seeds {
-            if m.is_marked(sd) {
-                continue;
-            }
-            if poll.tick(1) {
-                return Err(RewireError::Interrupted);
-            }
-            darts.clear();
-            self.visit_orbit(sd, e.orbit, m, |d| darts.push(d));
+        plan.darts.extend_from_slice(&walk.darts);
+        for range in &walk.orbits {
             let first_slot = plan.slots.len();
-            for &d in &darts {
+            for &d in &walk.darts[range.clone()] {
                 if removed.is_marked(d) || fresh.is_marked(d) {
                     continue;
                 }
@@ -379,10 +392,8 @@ impl GMap {
                     plan.parts[q] += 1;
                 }
             }
-            let first_dart = plan.darts.len();
-            plan.darts.extend_from_slice(&darts);
             plan.orbits.push(Orbit {
-                darts: first_dart..plan.darts.len(),
+                darts: range.clone(),
                 slots: first_slot..plan.slots.len(),
             });
         }
@@ -488,6 +499,14 @@ impl GMap {
 struct Orbit {
     darts: std::ops::Range<usize>,
     slots: std::ops::Range<usize>,
+}
+
+/// The orbits of one type around the changed darts (see [`GMap::walk`]): their darts one
+/// after the other, and each orbit's range.
+#[derive(Default)]
+struct Walk {
+    darts: Vec<Dart>,
+    orbits: Vec<std::ops::Range<usize>>,
 }
 
 /// The plan of one embedding's re-slotting, in flat arrays (no allocation per orbit).

@@ -578,6 +578,9 @@ impl Simulation {
             let fixed = sim.row_any("fixed")?;
             sim.set_vertex_bool("fixed", &fixed)?;
         }
+        // the cuts the configuration declares find their faces through compiled guards: built
+        // now, with the rest of the set-up, so that a cut only runs and patches them
+        sim.prepare_declared_cuts()?;
         // every free vertex needs a mass
         let masses = sim.vertex_scalar_sum("mass")?;
         let fixed = sim.vertex_bool("fixed")?;

@@ -1,6 +1,6 @@
 //! The simulation state read and written per vertex: rows (particles), embeddings per row.
 
-use topomech_gmap::{Dart, EmbeddingId, EmbeddingType, GMap, OrbitType, Policy, Value};
+use topomech_gmap::{Dart, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType, Policy, Value};
 use topomech_rules::RuleSet;
 
 use crate::*;
@@ -17,7 +17,7 @@ pub struct Element {
 }
 
 /// The simulation's vertex numbering: rows (particles) from the map's `particle` embedding.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct Rows {
     /// One dart per row: the smallest dart of the row's first vertex orbit.
     pub(crate) darts: Vec<Dart>,
@@ -151,6 +151,111 @@ impl Rows {
         }
     }
 
+    /// [`Rows::renumber`] from the darts `changed` since the numbering was made (links,
+    /// slots, created, removed: [`GMap::changed_since`]), walking only the vertex orbits
+    /// that hold one. The same numbering: a vertex orbit (on the new map) without a changed
+    /// dart is closed under the old links, so it is an old orbit, with the same smallest dart
+    /// and row; every other orbit holds a changed dart, and is numbered here as `renumber`
+    /// numbers it (the row of the old representatives it holds, or a new row, appended in
+    /// increasing order of its smallest dart: the new orbits are all among these). The old
+    /// representatives these orbits hold, and the changed ones that died, are replaced.
+    pub(crate) fn renumber_changed(
+        &mut self,
+        g: &mut GMap,
+        changed: &[Dart],
+    ) -> Result<Vec<usize>, PhysicsError> {
+        let vertex = OrbitType::vertex(g.dimension());
+        let n_rows = self.darts.len();
+        let rep = |x: Dart| self.orbits.binary_search(&x).ok();
+        // the old representatives replaced, and the orbits holding a changed dart: (smallest
+        // dart, row of the old representatives it holds or usize::MAX)
+        let mut replaced: Vec<usize> = Vec::new();
+        let mut walked: Vec<(Dart, usize)> = Vec::new();
+        let mut seen = Marks::with_capacity(g.capacity());
+        for &c in changed {
+            if !g.is_alive(c) {
+                replaced.extend(rep(c));
+                continue;
+            }
+            if seen.is_marked(c) {
+                continue;
+            }
+            let (mut min, mut row, mut merged) = (c, usize::MAX, None);
+            g.visit_orbit(c, vertex, &mut seen, |x| {
+                min = min.min(x);
+                if let Some(k) = rep(x) {
+                    replaced.push(k);
+                    let r = self.row_of[k];
+                    if row == usize::MAX {
+                        row = r;
+                    } else if row != r {
+                        merged = Some((row, r));
+                    }
+                }
+            });
+            if let Some((a, b)) = merged {
+                return Err(PhysicsError::Config(format!(
+                    "a topology change merged the vertices of rows {} and {}: only splits are supported",
+                    a.min(b),
+                    a.max(b)
+                )));
+            }
+            walked.push((min, row));
+        }
+        replaced.sort_unstable();
+        replaced.dedup();
+        // a row whose every representative was replaced, and that no walked orbit has, is lost
+        let mut has = vec![false; n_rows];
+        let mut is_replaced = vec![false; self.orbits.len()];
+        for &k in &replaced {
+            is_replaced[k] = true;
+        }
+        for (k, &r) in self.row_of.iter().enumerate() {
+            if !is_replaced[k] {
+                has[r] = true;
+            }
+        }
+        for &(_, r) in &walked {
+            if r != usize::MAX {
+                has[r] = true;
+            }
+        }
+        let lost: Vec<usize> = (0..n_rows).filter(|&r| !has[r]).collect();
+        if !lost.is_empty() {
+            return Err(PhysicsError::Config(format!(
+                "a topology change removed the vertices of rows {}: only splits are supported",
+                list_some(&lost, 20)
+            )));
+        }
+        let particle = g
+            .require("particle")
+            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        walked.sort_unstable_by_key(|w| w.0);
+        let mut added = Vec::new();
+        for w in &mut walked {
+            if w.1 == usize::MAX {
+                w.1 = n_rows + added.len();
+                added.push(w.1);
+                g.set_value(particle, w.0, &Value::Int(w.1 as i64))
+                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            }
+        }
+        let mut all: Vec<(Dart, usize)> = self
+            .orbits
+            .iter()
+            .zip(&self.row_of)
+            .enumerate()
+            .filter(|(k, _)| !is_replaced[*k])
+            .map(|(_, (&d, &r))| (d, r))
+            .chain(walked)
+            .collect();
+        all.sort_unstable_by_key(|w| w.0);
+        self.orbits = all.iter().map(|w| w.0).collect();
+        self.row_of = all.iter().map(|w| w.1).collect();
+        self.index(n_rows + added.len());
+        Ok(added)
+    }
+
     /// The numbering after a topology change of `g` (see [`Simulation::sync_rows`]); returns
     /// the rows added.
     pub(crate) fn renumber(&mut self, g: &mut GMap) -> Result<Vec<usize>, PhysicsError> {
@@ -236,7 +341,24 @@ impl Simulation {
         if self.vertex_darts_version == self.g.version() {
             return Ok(Vec::new());
         }
-        let added = self.rows.renumber(&mut self.g)?;
+        // from the change record when it covers the numbering's version (it does once
+        // recording started: plans start it, and so does this), else over the whole map
+        let added = match self.g.changed_since(self.vertex_darts_version) {
+            Some(changed) => {
+                // tests (debug builds, small maps) check it against the whole-map numbering
+                let check = (cfg!(debug_assertions) && self.g.capacity() < 200_000)
+                    .then(|| (self.rows.clone(), self.g.clone()));
+                let added = self.rows.renumber_changed(&mut self.g, &changed)?;
+                if let Some((mut rows, mut g)) = check {
+                    let want = rows.renumber(&mut g)?;
+                    assert_eq!(added, want, "rows added");
+                    assert_eq!(self.rows, rows, "the numbering from the changed darts");
+                }
+                added
+            }
+            None => self.rows.renumber(&mut self.g)?,
+        };
+        self.g.track_changes();
         self.vertex_darts_version = self.g.version();
         Ok(added)
     }

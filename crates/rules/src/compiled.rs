@@ -277,9 +277,17 @@ pub(crate) struct Program {
     aggs: Vec<AggKey>,
     /// Embeddings whose columns the program reads (rule embedding indices).
     cols: Vec<usize>,
-    /// Writes, in program order: (node, rule embedding, register, uniform positions).
+    /// Writes, in program order: (node, rule embedding, register, uniform positions). A
+    /// guard program ([`compile_guard`]) has one, whose embedding is [`GUARD_OUT`]: its
+    /// value stays in the plan's output, one per match (see [`Plan::run_guard`]).
     pub(crate) writes: Vec<(usize, usize, R, Vec<usize>)>,
+    /// Whether this is a guard program: one domain row per match (its row 0, where the
+    /// interpreter evaluates a guard), nothing scattered into the map.
+    guard: bool,
 }
+
+/// The embedding of a guard program's one write: no embedding (see [`Program::writes`]).
+pub(crate) const GUARD_OUT: usize = usize::MAX;
 
 impl Program {
     /// The orbit types the program aggregates over (the orbits its rows walk, besides the
@@ -852,6 +860,7 @@ pub(crate) fn compile(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Unsuppor
             aggs: Vec::new(),
             cols: Vec::new(),
             writes: Vec::new(),
+            guard: false,
         },
         locals: vec![None; rule.n_locals],
         read_regs: Vec::new(),
@@ -878,6 +887,47 @@ pub(crate) fn compile(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Unsuppor
             }
         }
     }
+    Ok(c.p)
+}
+
+/// The guard of `rule` (a rule that changes the topology or not) compiled alone: a program
+/// computing its value (1 or 0) at row 0 of each match, for [`Plan::run_guard`]. The same
+/// operations as a computation rule's, so the same values as the interpreter's, bit for bit;
+/// what the plan machinery does not cover is `Err`, and the interpreter evaluates the guard.
+/// (Where the interpreter's `&&` and `||` skip their right operand, the program evaluates it
+/// too: a failure there makes the run `Err`, and the interpreter decides.)
+pub(crate) fn compile_guard(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Unsupported> {
+    let Some(guard) = &rule.guard else {
+        return unsupported("a rule without a guard");
+    };
+    let hook = match rule.hooks.as_slice() {
+        [h] => *h,
+        _ => return unsupported("a rule without exactly one hook"),
+    };
+    let mut c = Compiler {
+        rule,
+        embs,
+        p: Program {
+            ops: Vec::new(),
+            regs: Vec::new(),
+            stride: 0,
+            fills: Vec::new(),
+            reads: Vec::new(),
+            aggs: Vec::new(),
+            cols: Vec::new(),
+            writes: Vec::new(),
+            guard: true,
+        },
+        locals: vec![None; rule.n_locals],
+        read_regs: Vec::new(),
+        param_regs: vec![None; rule.params.len()],
+        zeros: Vec::new(),
+    };
+    let (r, t) = c.expr(guard)?;
+    if t != Ty::Bool {
+        return unsupported("a guard that is not a boolean");
+    }
+    c.p.writes.push((hook, GUARD_OUT, r, Vec::new()));
     Ok(c.p)
 }
 
@@ -938,6 +988,40 @@ pub(crate) struct Plan {
     /// Per write, every (domain row, slot) it writes, owners and duplicates alike (what
     /// `targets` and `dups` are computed from again after a patch).
     writes: Vec<Vec<(u32, u32)>>,
+}
+
+/// A plan being built from batches of matches (see [`Plan::builder`]).
+pub(crate) struct PlanBuilder {
+    prog: Program,
+    rows: Rows,
+    matches: usize,
+}
+
+impl PlanBuilder {
+    /// Adds the rows of `ms`, numbered after the matches added before.
+    pub(crate) fn add(&mut self, rule: &Rule, g: &GMap, ids: &[EmbeddingId], ms: &[Match]) {
+        let numbers: Vec<u32> = (self.matches as u32..(self.matches + ms.len()) as u32).collect();
+        let base = self.rows.row_match.len();
+        self.rows
+            .append(Rows::of(&self.prog, rule, g, ids, ms, &numbers, base));
+        self.matches += ms.len();
+    }
+
+    /// The plan, with native code compiled at its first run when `jit_on`.
+    pub(crate) fn finish(self, g: &GMap, ids: &[EmbeddingId], jit_on: bool) -> Plan {
+        Plan::assemble(
+            self.prog,
+            g,
+            ids,
+            self.rows,
+            self.matches,
+            if jit_on {
+                NativeState::Untried
+            } else {
+                NativeState::Off
+            },
+        )
+    }
 }
 
 /// Whether and how a plan runs native code.
@@ -1011,6 +1095,14 @@ impl Rows {
         let mut reps: Vec<Vec<u32>> = vec![Vec::new(); nw];
         let mut row_match = Vec::new();
         for (mi, m) in matches.iter().enumerate() {
+            if prog.guard {
+                // one row per match: its row 0, where the guard is evaluated
+                let row = (base + domain.len()) as u32;
+                domain.push((mi as u32, 0));
+                row_match.push(ids[mi]);
+                write_rows[0].push((row, m.darts[prog.writes[0].0][0]));
+                continue;
+            }
             for (w, (_, _, _, uniform)) in prog.writes.iter().enumerate() {
                 class_reps(m, rule.arity, uniform, &mut rep);
                 reps[w].clear();
@@ -1082,6 +1174,10 @@ impl Rows {
             .iter()
             .zip(write_rows)
             .map(|((_, emb, _, _), rows)| {
+                if *emb == GUARD_OUT {
+                    // no slot: the row itself
+                    return rows.into_iter().map(|(row, _)| (row, row)).collect();
+                }
                 let e = g.embedding(emb_ids[*emb]);
                 rows.into_iter()
                     .map(|(row, d)| (row, e.slot(d) as u32))
@@ -1219,6 +1315,23 @@ impl Plan {
         )
     }
 
+    /// A plan to build from matches given in batches ([`PlanBuilder::add`]), so that they
+    /// need not all be held at once: the plan [`Plan::build`] gives for all of them, in
+    /// order.
+    pub(crate) fn builder(
+        prog: Program,
+        rule: &Rule,
+        g: &GMap,
+        ids: &[EmbeddingId],
+    ) -> PlanBuilder {
+        let rows = Rows::of(&prog, rule, g, ids, &[], &[], 0);
+        PlanBuilder {
+            prog,
+            rows,
+            matches: 0,
+        }
+    }
+
     /// The plan of `rows`: scatter targets (each slot written once, later writes of a slot
     /// compared), output layout.
     fn assemble(
@@ -1236,6 +1349,13 @@ impl Plan {
         let mut woff = 0;
         let mut evaluations = 0;
         for (w, (_, emb, reg, _)) in prog.writes.iter().enumerate() {
+            if *emb == GUARD_OUT {
+                // one value per row, read from the output (`Plan::run_guard`)
+                evaluations += rows.writes[w].len();
+                targets.push((rows.writes[w].iter().map(|&(r, _)| (r, r)).collect(), woff));
+                woff += prog.regs[*reg].width;
+                continue;
+            }
             let e = g.embedding(ids[*emb]);
             let k = if let Some(k) = owner_emb.iter().position(|x| x == emb) {
                 k
@@ -1438,11 +1558,43 @@ impl Plan {
 
     /// Evaluates every match and writes the results into `g`. `Err` leaves `g` unchanged
     /// and means: let the interpreter apply the rule (it reports the error precisely).
-    // the one `unsafe` block calls the plan's native code (see its SAFETY comment)
-    #[allow(unsafe_code)]
     pub(crate) fn run(
         &mut self,
         g: &mut GMap,
+        ids: &[EmbeddingId],
+        params: &[Val],
+    ) -> Result<(), Unsupported> {
+        self.evaluate(g, ids, params)?;
+        self.scatter(g, ids)
+    }
+
+    /// A guard plan's ([`compile_guard`]) run: the numbers of the matches (as
+    /// [`Plan::build`] and [`Plan::patch`] numbered them) whose guard holds, in row order.
+    /// `Err` means: let the interpreter evaluate the guard.
+    pub(crate) fn run_guard(
+        &mut self,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        params: &[Val],
+    ) -> Result<Vec<u32>, Unsupported> {
+        if !self.prog.guard {
+            return unsupported("not a guard program");
+        }
+        self.evaluate(g, ids, params)?;
+        let off = self.targets[0].1;
+        Ok((0..self.rows as u32)
+            .filter(|&r| self.out[self.out_index(r, off, 1)] != 0.0)
+            .map(|r| self.row_match[r as usize])
+            .collect())
+    }
+
+    /// Evaluates every row into the output buffer: nothing is written to the map. `Err`: an
+    /// evaluation failed, a value is not finite, two writes of one orbit differ.
+    // the one `unsafe` block calls the plan's native code (see its SAFETY comment)
+    #[allow(unsafe_code)]
+    fn evaluate(
+        &mut self,
+        g: &GMap,
         ids: &[EmbeddingId],
         params: &[Val],
     ) -> Result<(), Unsupported> {
@@ -1598,7 +1750,15 @@ impl Plan {
                 return unsupported("two writes of one orbit differ");
             }
         }
+        Ok(())
+    }
+
+    /// Writes the evaluated values ([`Plan::evaluate`]) into `g`.
+    fn scatter(&self, g: &mut GMap, ids: &[EmbeddingId]) -> Result<(), Unsupported> {
         for (w, (_, emb, reg, _)) in self.prog.writes.iter().enumerate() {
+            if *emb == GUARD_OUT {
+                continue;
+            }
             let width = self.prog.regs[*reg].width;
             let (t, off) = &self.targets[w];
             let (out, off) = (&self.out, *off);

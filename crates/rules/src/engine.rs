@@ -417,6 +417,28 @@ pub struct RuleSet {
     /// Plans patched after a topology change instead of rebuilt (see
     /// [`RuleSet::plan_patches`]).
     patches: std::sync::atomic::AtomicUsize,
+    /// The compiled guards of rules that change the topology, by rule index (see
+    /// [`RuleSet::guarded_matches`]).
+    guard_plans: std::sync::Mutex<HashMap<usize, GuardPlan>>,
+    /// Applications whose matches a compiled guard gave, and guard plans patched (see
+    /// [`RuleSet::compiled_guard_runs`]).
+    guard_runs: std::sync::atomic::AtomicUsize,
+    guard_patches: std::sync::atomic::AtomicUsize,
+}
+
+/// The guard of a rule that changes the topology, compiled over every hook orbit where the
+/// rule's left graph matches (see [`RuleSet::guarded_matches`]).
+#[derive(Debug)]
+struct GuardPlan {
+    /// The map's identity and topology version when it was built or patched.
+    identity: (u64, u64),
+    /// The map's embeddings the guard reads (by the rule's `guard_reads`), then.
+    reads: Vec<EmbeddingId>,
+    plan: crate::compiled::Plan,
+    /// The matches by number (row `k` of the plan is match `k`'s row 0).
+    index: Index,
+    /// Per match, the smallest dart of its hook orbit: where [`find_all`] finds it.
+    first: Vec<u32>,
 }
 
 /// The matches of the patterns planned on one map state, by [`pattern_key`].
@@ -570,6 +592,9 @@ impl RuleSet {
             compile: true,
             jit: crate::jit::enabled_by_env(),
             patches: std::sync::atomic::AtomicUsize::new(0),
+            guard_plans: std::sync::Mutex::new(HashMap::new()),
+            guard_runs: std::sync::atomic::AtomicUsize::new(0),
+            guard_patches: std::sync::atomic::AtomicUsize::new(0),
         }
     }
 
@@ -833,7 +858,10 @@ impl RuleSet {
         let poll = &mut Poll::new(interrupt);
         let b = self.bind_for(g, name, params, true)?;
         if b.rule.changes_topology {
-            let ms = find_all(g, &b, poll)?;
+            let ms = match self.guarded_matches(g, &b, poll)? {
+                Some(ms) => ms,
+                None => find_all(g, &b, poll)?,
+            };
             if ms.is_empty() {
                 return Ok(ApplyReport::default());
             }
@@ -1019,59 +1047,7 @@ impl RuleSet {
             expr_orbits(guard, b.embs, &mut chains);
         }
         let cap = g.capacity();
-        if ix.of_hook.len() < cap {
-            ix.of_hook.resize(cap, u32::MAX);
-        }
-        // C*: the changed darts and their aggregated orbits
-        let mut star = Marks::with_capacity(cap);
-        let mut cstar: Vec<Dart> = Vec::with_capacity(changed.len());
-        for &d in &changed {
-            if star.mark(d) {
-                cstar.push(d);
-            }
-        }
-        for chain in &chains {
-            let mut from: Vec<Dart> = changed.iter().copied().filter(|&d| g.is_alive(d)).collect();
-            for &o in chain {
-                let mut seen = Marks::with_capacity(cap);
-                let mut next = Vec::new();
-                for &d in &from {
-                    if !seen.is_marked(d) {
-                        g.visit_orbit(d, o, &mut seen, |x| next.push(x));
-                    }
-                }
-                from = next;
-            }
-            for x in from {
-                if star.mark(x) {
-                    cstar.push(x);
-                }
-            }
-        }
-        let paths: Vec<Vec<u8>> = node_paths(rule).into_iter().flatten().collect();
-        let back = |y: Dart, path: &[u8]| {
-            path.iter()
-                .rev()
-                .fold(y, |x, &l| g.alpha(usize::from(l), x))
-        };
-        // drop the matches holding a dart of C*
-        let mut candidates: Vec<Dart> = Vec::new();
-        for &y in &cstar {
-            for p in &paths {
-                let h = back(y, p);
-                if let Some(k) = ix.live_at(h) {
-                    ix.alive[k as usize] = false;
-                    ix.live -= 1;
-                }
-                if g.is_alive(h) {
-                    candidates.push(h);
-                }
-            }
-        }
-        // too much churn: a rebuild compacts
-        if ix.hook_darts.len() > 2 * cap.max(1024) {
-            return None;
-        }
+        let (star, candidates) = drop_changed(g, rule, &mut ix, &changed, &chains)?;
         // new matches, from the candidate hooks not in a kept match's hook orbit
         let hook = rule.hooks[0];
         let mut used = Marks::with_capacity(cap);
@@ -1134,6 +1110,175 @@ impl RuleSet {
             kind,
             index: Some(ix),
         })
+    }
+
+    /// The matches [`find_all`] gives for `b`'s rule, a rule that changes the topology and
+    /// has a guard, found through the guard compiled over every hook orbit (kept between
+    /// applications and patched after topology changes as computation plans are, see
+    /// [`RuleSet::patch_plan`]); `None` when that does not apply (compiled plans switched
+    /// off, a guard the plan machinery does not cover or that is not [`row_invariant`], an
+    /// evaluation the plan refuses), and the caller runs [`find_all`], which decides.
+    ///
+    /// Why the same matches: [`find_all`] tries the darts in increasing order. At a dart not
+    /// in a kept footprint nor in a hook orbit that failed, it matches the left graph (the
+    /// same footprint from every dart of the hook orbit, with the rows in another order),
+    /// skips the match if its footprint meets a kept one, and else evaluates the guard at
+    /// row 0, which gives one value on every row ([`row_invariant`]), so one for the whole
+    /// hook orbit. So it keeps, in increasing order of their smallest darts, the hook orbits
+    /// whose match passes the guard and misses the footprints kept before, each matched from
+    /// its smallest dart. The plan has one row per hook orbit where the left graph matches
+    /// (row 0 of its match): it gives the orbits that pass, and the loop below keeps them in
+    /// that order, matched from the same darts.
+    fn guarded_matches(
+        &self,
+        g: &mut GMap,
+        b: &Bound,
+        poll: &mut Poll,
+    ) -> Result<Option<Vec<Match>>, ApplyError> {
+        let rule = b.rule;
+        let Some(guard) = &rule.guard else {
+            return Ok(None);
+        };
+        if !self.compile
+            || rule.hooks.len() != 1
+            || !row_invariant(guard, &left_labels(rule), b.embs)
+        {
+            return Ok(None);
+        }
+        let index = self
+            .checked
+            .rules
+            .iter()
+            .position(|r| std::ptr::eq(r, rule))
+            .expect("bound rule is ours");
+        let mut plans = self
+            .guard_plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let Some(mut gp) = self.guard_plan(g, b, plans.remove(&index), poll)? else {
+            return Ok(None);
+        };
+        if (poll.check)() {
+            return Err(ApplyError::Interrupted {
+                rule: rule.name.clone(),
+                stage: "running its compiled guard",
+                found: 0,
+                applied: 0,
+            });
+        }
+        let Ok(pass) = gp.plan.run_guard(g, &b.ids, &b.params) else {
+            plans.insert(index, gp);
+            return Ok(None);
+        };
+        let mut first: Vec<u32> = pass.iter().map(|&k| gp.first[k as usize]).collect();
+        first.sort_unstable();
+        let mut used = Marks::with_capacity(g.capacity());
+        let mut out = Vec::new();
+        for d in first {
+            let Ok(m) = match_at(g, rule, &[Dart(d)]) else {
+                // (a hook orbit matched from one of its darts matches from all)
+                plans.insert(index, gp);
+                return Ok(None);
+            };
+            if m.all_darts().any(|x| used.is_marked(x)) {
+                continue;
+            }
+            for x in m.all_darts() {
+                used.mark(x);
+            }
+            out.push(m);
+        }
+        plans.insert(index, gp);
+        self.guard_runs
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Ok(Some(out))
+    }
+
+    /// The guard plan of `b`'s rule for the map as it is: `old` when it is current, `old`
+    /// patched, or a new one; `None` when the guard does not compile.
+    fn guard_plan(
+        &self,
+        g: &mut GMap,
+        b: &Bound,
+        old: Option<GuardPlan>,
+        poll: &mut Poll,
+    ) -> Result<Option<GuardPlan>, ApplyError> {
+        let reads: Vec<EmbeddingId> = b.rule.guard_reads.iter().map(|&k| b.ids[k]).collect();
+        let gp = match old {
+            Some(gp) if gp.identity == g.identity() && gp.reads == reads => Some(gp),
+            Some(gp) if gp.reads == reads => {
+                let p = patch_guard_plan(g, b, gp);
+                if p.is_some() {
+                    self.guard_patches
+                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                p
+            }
+            _ => None,
+        };
+        match gp {
+            Some(gp) => Ok(Some(gp)),
+            None => build_guard_plan(g, b, reads, self.jit, poll),
+        }
+    }
+
+    /// Builds now the compiled guard of `name`, a rule that changes the topology, for the
+    /// map as it is (see [`RuleSet::guarded_matches`]): its first application then only
+    /// patches and runs it, instead of building it. A simulation does this when it is set
+    /// up for the cuts its configuration declares. `params` are any values of the rule's
+    /// parameters (the plan does not depend on them). Returns whether the guard compiled
+    /// (when not, applications find their matches through the interpreter, as before).
+    ///
+    /// # Errors
+    /// An unknown rule or parameter, a map the rules do not fit ([`ApplyError`]).
+    pub fn prepare_guard(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+    ) -> Result<bool, ApplyError> {
+        let b = self.bind_for(g, name, params, true)?;
+        let rule = b.rule;
+        let Some(guard) = &rule.guard else {
+            return Ok(false);
+        };
+        if !self.compile
+            || !rule.changes_topology
+            || rule.hooks.len() != 1
+            || !row_invariant(guard, &left_labels(rule), b.embs)
+        {
+            return Ok(false);
+        }
+        let index = self
+            .checked
+            .rules
+            .iter()
+            .position(|r| std::ptr::eq(r, rule))
+            .expect("bound rule is ours");
+        let mut plans = self
+            .guard_plans
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let old = plans.remove(&index);
+        match self.guard_plan(g, &b, old, &mut Poll::new(&never))? {
+            Some(gp) => {
+                plans.insert(index, gp);
+                Ok(true)
+            }
+            None => Ok(false),
+        }
+    }
+
+    /// How many applications of rules that change the topology found their matches through
+    /// a compiled guard (see [`RuleSet::guarded_matches`]), and how many times such a guard's
+    /// plan was patched after a topology change instead of rebuilt, since this rule set was
+    /// made.
+    pub fn compiled_guard_runs(&self) -> (usize, usize) {
+        (
+            self.guard_runs.load(std::sync::atomic::Ordering::Relaxed),
+            self.guard_patches
+                .load(std::sync::atomic::Ordering::Relaxed),
+        )
     }
 
     /// How many times a plan was patched after a topology change instead of rebuilt (see
@@ -1211,11 +1356,16 @@ impl RuleSet {
         Ok(ms)
     }
 
-    /// Whether computation rules run through compiled plans (the default) or through the
-    /// interpreter only (for comparisons and tests: both give the same results).
+    /// Whether computation rules, and the guards of rules that change the topology, run
+    /// through compiled plans (the default) or through the interpreter only (for comparisons
+    /// and tests: both give the same results).
     pub fn set_compiled(&mut self, on: bool) {
         self.compile = on;
         self.plans
+            .get_mut()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clear();
+        self.guard_plans
             .get_mut()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clear();
@@ -1389,7 +1539,203 @@ impl RuleSet {
     }
 }
 
-/// The embeddings a rule reads or writes (its program and guard), sorted.
+/// The patching of a plan's matches after a topology change (see [`RuleSet::patch_plan`]):
+/// `C*`, the darts of `changed` with, for each chain of orbit types in `chains`, the orbits
+/// along it of the live darts of `changed`; every match of `ix` holding a dart of `C*` is
+/// dropped. Returns the marks of `C*` and the candidate hook darts of the new matches;
+/// `None` when the index has seen too much churn (a rebuild compacts it).
+fn drop_changed(
+    g: &GMap,
+    rule: &Rule,
+    ix: &mut Index,
+    changed: &[Dart],
+    chains: &[Vec<OrbitType>],
+) -> Option<(Marks, Vec<Dart>)> {
+    let cap = g.capacity();
+    if ix.of_hook.len() < cap {
+        ix.of_hook.resize(cap, u32::MAX);
+    }
+    // C*: the changed darts and their aggregated orbits
+    let mut star = Marks::with_capacity(cap);
+    let mut cstar: Vec<Dart> = Vec::with_capacity(changed.len());
+    for &d in changed {
+        if star.mark(d) {
+            cstar.push(d);
+        }
+    }
+    for chain in chains {
+        let mut from: Vec<Dart> = changed.iter().copied().filter(|&d| g.is_alive(d)).collect();
+        for &o in chain {
+            let mut seen = Marks::with_capacity(cap);
+            let mut next = Vec::new();
+            for &d in &from {
+                if !seen.is_marked(d) {
+                    g.visit_orbit(d, o, &mut seen, |x| next.push(x));
+                }
+            }
+            from = next;
+        }
+        for x in from {
+            if star.mark(x) {
+                cstar.push(x);
+            }
+        }
+    }
+    let paths: Vec<Vec<u8>> = node_paths(rule).into_iter().flatten().collect();
+    let back = |y: Dart, path: &[u8]| {
+        path.iter()
+            .rev()
+            .fold(y, |x, &l| g.alpha(usize::from(l), x))
+    };
+    // drop the matches holding a dart of C*
+    let mut candidates: Vec<Dart> = Vec::new();
+    for &y in &cstar {
+        for p in &paths {
+            let h = back(y, p);
+            if let Some(k) = ix.live_at(h) {
+                ix.alive[k as usize] = false;
+                ix.live -= 1;
+            }
+            if g.is_alive(h) {
+                candidates.push(h);
+            }
+        }
+    }
+    // too much churn: a rebuild compacts
+    if ix.hook_darts.len() > 2 * cap.max(1024) {
+        return None;
+    }
+    Some((star, candidates))
+}
+
+/// The guard plan of `b`'s rule (see [`RuleSet::guarded_matches`]): one row per hook orbit
+/// where the left graph matches, found from its smallest dart; `None` when the guard does
+/// not compile. Starts the map's change record, for the patches.
+fn build_guard_plan(
+    g: &mut GMap,
+    b: &Bound,
+    reads: Vec<EmbeddingId>,
+    jit_on: bool,
+    poll: &mut Poll,
+) -> Result<Option<GuardPlan>, ApplyError> {
+    let rule = b.rule;
+    let Ok(prog) = crate::compiled::compile_guard(rule, b.embs) else {
+        return Ok(None);
+    };
+    let hook = rule.hooks[0];
+    let mut builder = crate::compiled::Plan::builder(prog, rule, g, &b.ids);
+    let mut index = Index::new(b.ids.clone(), g.capacity());
+    let mut first = Vec::new();
+    let mut seen = Marks::with_capacity(g.capacity());
+    // the matches are held a batch at a time
+    let mut batch = Vec::with_capacity(GUARD_BATCH);
+    for d in g.darts() {
+        if poll.tick(1) {
+            return Err(ApplyError::Interrupted {
+                rule: rule.name.clone(),
+                stage: "compiling its guard",
+                found: 0,
+                applied: 0,
+            });
+        }
+        if seen.is_marked(d) {
+            continue;
+        }
+        let Ok(m) = match_at(g, rule, &[d]) else {
+            continue;
+        };
+        for &x in &m.darts[hook] {
+            seen.mark(x);
+        }
+        index.push(&m, hook);
+        first.push(d.0);
+        batch.push(m);
+        if batch.len() == GUARD_BATCH {
+            builder.add(rule, g, &b.ids, &batch);
+            batch.clear();
+        }
+    }
+    builder.add(rule, g, &b.ids, &batch);
+    let plan = builder.finish(g, &b.ids, jit_on);
+    g.track_changes();
+    Ok(Some(GuardPlan {
+        identity: g.identity(),
+        reads,
+        plan,
+        index,
+        first,
+    }))
+}
+
+/// Matches held at once while a guard plan is built.
+const GUARD_BATCH: usize = 4096;
+
+/// `gp` patched for the map's new topology, as [`RuleSet::patch_plan`] patches a compiled
+/// plan (the same proof, with one row per hook orbit instead of one per footprint, and no
+/// guard evaluated: the plan evaluates it when it runs); `None` when it cannot be (another
+/// map, a change record that does not cover its version, too much churn).
+fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
+    if gp.identity.0 != g.identity().0 {
+        return None;
+    }
+    let changed = g.changed_since(gp.identity.1)?;
+    let rule = b.rule;
+    let GuardPlan {
+        plan,
+        mut index,
+        mut first,
+        reads,
+        ..
+    } = gp;
+    let chains: Vec<Vec<OrbitType>> = plan.agg_orbits().into_iter().map(|o| vec![o]).collect();
+    let (star, candidates) = drop_changed(g, rule, &mut index, &changed, &chains)?;
+    let cap = g.capacity();
+    let hook = rule.hooks[0];
+    let mut used = Marks::with_capacity(cap);
+    let mut tried = Marks::with_capacity(cap);
+    let mut new: Vec<Match> = Vec::new();
+    for h in candidates {
+        if !tried.mark(h) || used.is_marked(h) || index.live_at(h).is_some() {
+            continue;
+        }
+        let Ok(m) = match_at(g, rule, &[h]) else {
+            continue;
+        };
+        if !m.all_darts().any(|x| star.is_marked(x)) {
+            continue; // a kept match's footprint
+        }
+        for &x in &m.darts[hook] {
+            used.mark(x);
+        }
+        new.push(m);
+    }
+    let kept = index.live;
+    let numbers: Vec<u32> = new
+        .iter()
+        .map(|m| {
+            first.push(m.darts[hook].iter().map(|d| d.0).min().expect("a row"));
+            index.push(m, hook)
+        })
+        .collect();
+    let alive = &index.alive;
+    let plan = plan.patch(
+        rule,
+        g,
+        &b.ids,
+        &|k| alive[k as usize],
+        kept,
+        &new,
+        &numbers,
+    );
+    Some(GuardPlan {
+        identity: g.identity(),
+        reads,
+        plan,
+        index,
+        first,
+    })
+}
+
 /// Whether plans of `rule` may be patched after a topology change (see
 /// [`RuleSet::patch_plan`]): a computation rule with one hook, and either no guard or one
 /// whose value does not depend on which dart of the hook orbit is row 0 (a hook orbit of one

@@ -1,0 +1,201 @@
+//! Compiled guards of topology rules: a rule that changes the topology finds its matches
+//! through its guard compiled over every hook orbit (kept between applications, patched after
+//! each change). These tests check it against the interpreter, which evaluates the guard dart
+//! by dart: two copies of one map, one cut through compiled guards and one through the
+//! interpreter, cut after cut (plane cuts at several offsets and normals, an asymmetric guard
+//! that holds from one side of a face only, a guard with local variables, the positions moved
+//! between cuts), must stay the same map dart for dart, with the same positions bit for bit,
+//! and valid; and the compiled path must really have run, patched after the first cut.
+
+use topomech_gmap::generators::{cuboid, BoxElement};
+use topomech_gmap::mesh::{build, BuildOptions};
+use topomech_gmap::{Dart, GMap};
+use topomech_rules::{load_sources, Params, RuleSet, Val};
+
+const RULES: &str = "dimension 3
+embedding position : vec3 on <1,2,3> policy mean
+
+rule cut_plane(normal: vec3, offset: f64) {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where (dot(mean<0,1,2>(a.position), normal) - offset) * (dot(mean<0,1,2>(b.position), normal) - offset) < 0.0
+}
+
+# holds from the side whose volume lies further along x only
+rule cut_from_the_far_side(at: f64) {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where {
+    let ca = mean<0,1,2>(a.position)
+    let cb = mean<0,1,2>(b.position)
+    x(ca) > x(cb) + 1e-9 && x(ca) > at && x(cb) < at
+  }
+}
+
+# a face (its own centroid) in a slab
+rule cut_slab(lo: f64, hi: f64) {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where y(mean<0,1>(a.position)) > lo && y(mean<0,1>(a.position)) < hi
+}
+";
+
+fn setup() -> (GMap, RuleSet, RuleSet) {
+    let (g, _) = build(
+        &cuboid([6, 4, 3], [3.0, 2.0, 1.5], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let (compiled, _) = load_sources(&[("guards.tmr".to_string(), RULES.to_string())]).unwrap();
+    let mut interpreted = compiled.clone();
+    interpreted.set_compiled(false);
+    (g, compiled, interpreted)
+}
+
+/// The two maps are the same: the same live darts, links and positions (bit for bit).
+fn same(a: &GMap, b: &GMap, what: &str) {
+    assert_eq!(a.capacity(), b.capacity(), "{what}: dart capacity");
+    let (pa, pb) = (
+        a.embedding_id("position").unwrap(),
+        b.embedding_id("position").unwrap(),
+    );
+    for k in 0..a.capacity() {
+        let d = Dart(k as u32);
+        assert_eq!(a.is_alive(d), b.is_alive(d), "{what}: dart {k} alive");
+        if !a.is_alive(d) {
+            continue;
+        }
+        for i in 0..=3 {
+            assert_eq!(a.alpha(i, d), b.alpha(i, d), "{what}: alpha{i} of dart {k}");
+        }
+        let (x, y) = (a.real(pa, d), b.real(pb, d));
+        assert!(
+            x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()),
+            "{what}: position of dart {k}: {x:?} and {y:?}"
+        );
+    }
+    assert!(a.validate().is_empty(), "{what}: the map is valid");
+}
+
+/// Moves every vertex a little (a different amount each call), the same on both maps.
+fn shake(g: &mut GMap, t: f64) {
+    let pos = g.embedding_id("position").unwrap();
+    let darts: Vec<Dart> = g.darts().collect();
+    let mut seen = topomech_gmap::Marks::with_capacity(g.capacity());
+    for d in darts {
+        if seen.is_marked(d) {
+            continue;
+        }
+        for x in g.orbit(d, topomech_gmap::OrbitType::vertex(3)) {
+            seen.mark(x);
+        }
+        let p = g.real(pos, d).to_vec();
+        let q = [
+            p[0] + 0.03 * (t + 2.0 * p[1]).sin(),
+            p[1] + 0.02 * (t + 3.0 * p[2]).cos(),
+            p[2] + 0.01 * (t * p[0]).sin(),
+        ];
+        g.set_real(pos, d, &q).unwrap();
+    }
+}
+
+fn plane(normal: [f64; 3], offset: f64) -> Params {
+    [
+        ("normal".to_string(), Val::V3(normal)),
+        ("offset".to_string(), Val::F(offset)),
+    ]
+    .into()
+}
+
+#[test]
+fn cuts_through_compiled_guards_give_the_interpreters_map_cut_after_cut() {
+    let (mut g, compiled, interpreted) = setup();
+    let mut h = g.clone();
+    let steps: Vec<(&str, Params)> = vec![
+        ("cut_plane", plane([1.0, 0.0, 0.0], 1.4)),
+        ("cut_plane", plane([0.3, 0.9, 0.1], 1.2)),
+        (
+            "cut_from_the_far_side",
+            [("at".to_string(), Val::F(2.1))].into(),
+        ),
+        (
+            "cut_slab",
+            [
+                ("lo".to_string(), Val::F(0.4)),
+                ("hi".to_string(), Val::F(0.6)),
+            ]
+            .into(),
+        ),
+        ("cut_plane", plane([0.0, 0.0, 1.0], 0.7)),
+        // nothing crosses this plane: no change, and the next cut runs the same plan
+        ("cut_plane", plane([1.0, 0.0, 0.0], 10.0)),
+        ("cut_plane", plane([0.0, 1.0, 0.0], 1.5)),
+        ("cut_plane", plane([1.0, 0.0, 0.0], 1.4)),
+    ];
+    let mut total = 0;
+    for (k, (rule, p)) in steps.iter().enumerate() {
+        shake(&mut g, k as f64);
+        shake(&mut h, k as f64);
+        let a = compiled.apply_everywhere(&mut g, rule, p).unwrap();
+        let b = interpreted.apply_everywhere(&mut h, rule, p).unwrap();
+        let what = format!("application {k} ({rule})");
+        assert_eq!(a.matches, b.matches, "{what}: faces unsewn");
+        total += a.matches;
+        same(&g, &h, &what);
+    }
+    assert!(total > 50, "the cuts opened faces ({total})");
+    let (runs, patches) = compiled.compiled_guard_runs();
+    assert_eq!(
+        runs,
+        steps.len(),
+        "every application ran its compiled guard"
+    );
+    // one plan per rule, built at its first application, patched at later ones that
+    // followed a change (or rebuilt, which compacts it, once its index has grown past
+    // twice the map: these cuts change much of a small map)
+    assert!(patches >= 1, "plans patched: {patches}");
+    assert_eq!(interpreted.compiled_guard_runs(), (0, 0));
+}
+
+#[test]
+fn a_guard_the_plans_do_not_cover_is_left_to_the_interpreter() {
+    // an integer embedding read by the guard: compiled plans do not read integer columns
+    let rules = "dimension 3
+embedding position : vec3 on <1,2,3> policy mean
+embedding label : i64 on <0,1,2>
+rule cut_labels {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where a.label != b.label
+}
+";
+    let (mut g, _) = build(
+        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let (rs, _) = load_sources(&[("labels.tmr".to_string(), rules.to_string())]).unwrap();
+    rs.prepare(&mut g).unwrap();
+    let label = g.embedding_id("label").unwrap();
+    // label each volume by the x of its first dart's vertex
+    let pos = g.embedding_id("position").unwrap();
+    let darts: Vec<Dart> = g.darts().collect();
+    let mut seen = topomech_gmap::Marks::with_capacity(g.capacity());
+    for d in darts {
+        if seen.is_marked(d) {
+            continue;
+        }
+        for x in g.orbit(d, topomech_gmap::OrbitType::volume()) {
+            seen.mark(x);
+        }
+        let v = i64::from(g.real(pos, d)[0] > 1.5);
+        g.set_value(label, d, &topomech_gmap::Value::Int(v))
+            .unwrap();
+    }
+    let rep = rs
+        .apply_everywhere(&mut g, "cut_labels", &Params::new())
+        .unwrap();
+    assert!(rep.matches > 0);
+    assert_eq!(rs.compiled_guard_runs().0, 0, "the interpreter decided");
+    assert!(g.validate().is_empty());
+}
