@@ -234,3 +234,27 @@ def test_a_blade_that_misses_stops_the_run_as_an_event(
     assert s["error"]["event"] == 1
     assert "event[1] (a blade moving from t = 0 to t = 0.002)" in s["error"]["message"]
     assert "misses the object" in err
+
+
+def test_prepare_cuts_changes_no_result() -> None:
+    """``Simulation.prepare_cuts`` builds the compiled guards the cuts search the faces with
+    before the first cut: the same cuts, with and without it, unsew the same faces and give
+    the same positions and rows, bit for bit (the guards are evaluated by the same
+    arithmetic either way)."""
+    runs = []
+    for prepare in (False, True):
+        sim = topomech.load_scene("blade_cut").build()
+        if prepare:
+            sim.prepare_cuts()
+        sim.step(2)
+        a = sim.cut([1.0, 0.0, 0.0], 0.5)
+        sim.step(1)
+        b = sim.cut_swept(
+            [[0.25, 1.2, -0.1], [0.25, 1.2, 1.1]], [[0.25, -0.2, -0.1], [0.25, -0.2, 1.1]]
+        )
+        sim.step(1)
+        runs.append((a.unsewn, b.unsewn, a.added_rows, b.added_rows, sim.positions()))
+    (a0, b0, ra0, rb0, x0), (a1, b1, ra1, rb1, x1) = runs
+    assert a0 == a1 > 0 and b0 == b1
+    assert np.array_equal(ra0, ra1) and np.array_equal(rb0, rb1)
+    assert np.array_equal(x0, x1)

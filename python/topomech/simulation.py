@@ -344,6 +344,15 @@ class Simulation:
         unsewn, added = self._core.cut_swept(start, end)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 
+    def prepare_cuts(self) -> None:
+        """Builds now what cuts search the faces (3D) or edges (2D) with: the compiled
+        guards of :meth:`cut`, :meth:`cut_swept` and :meth:`fracture` (one row per face side,
+        about the cost of setting up one step rule). Cuts then only run and patch them; the
+        first cut builds them otherwise. A simulation builds those of the cuts, blades and
+        fracture its configuration declares when it is set up. Call it before an interactive
+        session's first cut; cuts give the same results either way."""
+        self._core.prepare_cuts()
+
     def fracture(self, criterion: str, threshold: float) -> TopologyResult:
         """Opens now every face (3D) or edge (2D) where ``criterion`` (``"stress"`` or
         ``"strain"``, see the ``fracture`` setting) exceeds ``threshold``; returns a

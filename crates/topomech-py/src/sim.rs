@@ -951,6 +951,14 @@ impl PySimulation {
         Ok((r.unsewn, rows_i64(&r.added_rows).into_pyarray(py)))
     }
 
+    /// Builds now what cuts search the faces (3D) or edges (2D) with: the compiled guards of
+    /// the plane cut, the blade and fracture, which cuts then only run and patch. Cuts give
+    /// the same results either way.
+    fn prepare_cuts(slf: &Bound<'_, Self>, py: Python<'_>) -> PyResult<()> {
+        let mut this = exclusive(slf)?;
+        this.run(py, move |sim| Ok(sim.prepare_cuts()?))
+    }
+
     /// Opens now every face (3D) or edge (2D) where the criterion exceeds the threshold:
     /// `stress` (the mean largest principal stress of the two tetrahedra, Pa; 3D, and only
     /// when the simulation was built with a stress `fracture`) or `strain` (spring strain
