@@ -255,6 +255,8 @@ def test_prepare_cuts_changes_no_result() -> None:
         sim.step(1)
         runs.append((a.unsewn, b.unsewn, a.added_rows, b.added_rows, sim.positions()))
     (a0, b0, ra0, rb0, x0), (a1, b1, ra1, rb1, x1) = runs
-    assert a0 == a1 > 0 and b0 == b1
-    assert np.array_equal(ra0, ra1) and np.array_equal(rb0, rb1)
+    assert a0 == a1 > 0
+    assert b0 == b1
+    assert np.array_equal(ra0, ra1)
+    assert np.array_equal(rb0, rb1)
     assert np.array_equal(x0, x1)
