@@ -2160,6 +2160,17 @@ impl Ctx<'_> {
                 } => {
                     let (bd, w) = at(*dst);
                     let (lo, d) = split(s, bd, n * w);
+                    if name == "segment_hits_triangle" && args.len() == 5 {
+                        let mut x = [0.0; 15];
+                        for i in 0..n {
+                            for (j, &(r, _)) in args.iter().enumerate() {
+                                let (b, wr) = at(r);
+                                x[3 * j..3 * j + 3].copy_from_slice(&lo[b + i * wr..][..3]);
+                            }
+                            segment_hits_triangle_flat(&x, &mut d[i * w..][..w]);
+                        }
+                        continue;
+                    }
                     let mut vals = Vec::with_capacity(args.len());
                     let mut buf = Vec::with_capacity(w);
                     for i in 0..n {
@@ -2182,6 +2193,16 @@ impl Ctx<'_> {
         }
         Ok(())
     }
+}
+
+/// `segment_hits_triangle` on its five vec3 arguments laid flat in `x` (15 floats), the
+/// boolean written to `z[0]` as a register holds it (1 or 0): the built-in's own function
+/// ([`builtins::segment_hits_triangle`]), without building values for [`builtins::call`]
+/// (a blade's guard calls it twice per face side, every step).
+pub(crate) fn segment_hits_triangle_flat(x: &[f64; 15], z: &mut [f64]) {
+    let v = |j: usize| [x[3 * j], x[3 * j + 1], x[3 * j + 2]];
+    let hit = builtins::segment_hits_triangle(&v(0), &v(1), &v(2), &v(3), &v(4));
+    z[0] = if hit { 1.0 } else { 0.0 };
 }
 
 /// Copies `w` floats from the start of `s` to the start of `d`. The widths of the common

@@ -3,8 +3,8 @@
 //! each change). These tests check it against the interpreter, which evaluates the guard dart
 //! by dart: two copies of one map, one cut through compiled guards and one through the
 //! interpreter, cut after cut (plane cuts at several offsets and normals, an asymmetric guard
-//! that holds from one side of a face only, a guard with local variables, the positions moved
-//! between cuts), must stay the same map dart for dart, with the same positions bit for bit,
+//! that holds from one side of a face only, a guard with local variables, a blade's sweep
+//! through a built-in, the positions moved between cuts), must stay the same map dart for dart, with the same positions bit for bit,
 //! and valid; and the compiled path must really have run, patched after the first cut.
 
 use topomech_gmap::generators::{cuboid, BoxElement};
@@ -29,6 +29,17 @@ rule cut_from_the_far_side(at: f64) {
     let ca = mean<0,1,2>(a.position)
     let cb = mean<0,1,2>(b.position)
     x(ca) > x(cb) + 1e-9 && x(ca) > at && x(cb) < at
+  }
+}
+
+# a blade's sweep (as topology3d.tmr's cut_swept): a built-in the plans call per row
+rule cut_swept(a0: vec3, b0: vec3, a1: vec3, b1: vec3) {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+  where {
+    let ca = mean<0,1,2>(a.position)
+    let cb = mean<0,1,2>(b.position)
+    segment_hits_triangle(ca, cb, a0, b0, b1) || segment_hits_triangle(ca, cb, a0, b1, a1)
   }
 }
 
@@ -107,6 +118,16 @@ fn plane(normal: [f64; 3], offset: f64) -> Params {
     .into()
 }
 
+fn swept(a0: [f64; 3], b0: [f64; 3], a1: [f64; 3], b1: [f64; 3]) -> Params {
+    [
+        ("a0".to_string(), Val::V3(a0)),
+        ("b0".to_string(), Val::V3(b0)),
+        ("a1".to_string(), Val::V3(a1)),
+        ("b1".to_string(), Val::V3(b1)),
+    ]
+    .into()
+}
+
 #[test]
 fn cuts_through_compiled_guards_give_the_interpreters_map_cut_after_cut() {
     let (mut g, compiled, interpreted) = setup();
@@ -126,7 +147,25 @@ fn cuts_through_compiled_guards_give_the_interpreters_map_cut_after_cut() {
             ]
             .into(),
         ),
+        (
+            "cut_swept",
+            swept(
+                [2.3, 1.9, -0.1],
+                [2.3, 1.9, 1.6],
+                [2.3, 0.1, -0.1],
+                [2.3, 0.1, 1.6],
+            ),
+        ),
         ("cut_plane", plane([0.0, 0.0, 1.0], 0.7)),
+        (
+            "cut_swept",
+            swept(
+                [0.2, 1.0, -0.1],
+                [2.8, 1.0, -0.1],
+                [0.2, 1.0, 1.6],
+                [2.8, 1.0, 1.6],
+            ),
+        ),
         // nothing crosses this plane: no change, and the next cut runs the same plan
         ("cut_plane", plane([1.0, 0.0, 0.0], 10.0)),
         ("cut_plane", plane([0.0, 1.0, 0.0], 1.5)),
@@ -139,6 +178,9 @@ fn cuts_through_compiled_guards_give_the_interpreters_map_cut_after_cut() {
         let a = compiled.apply_everywhere(&mut g, rule, p).unwrap();
         let b = interpreted.apply_everywhere(&mut h, rule, p).unwrap();
         let what = format!("application {k} ({rule})");
+        if rule.starts_with("cut_swept") {
+            assert!(a.matches > 0, "{what}: the blade crosses faces");
+        }
         assert_eq!(a.matches, b.matches, "{what}: faces unsewn");
         total += a.matches;
         same(&g, &h, &what);
