@@ -33,7 +33,7 @@ use std::cell::RefCell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use rayon::prelude::*;
-use topomech_gmap::{ColumnMut, ColumnRef, Dart, EmbeddingId, GMap, OrbitType};
+use topomech_gmap::{ColumnMut, ColumnRef, Dart, EmbeddingId, GMap, Marks, OrbitType};
 
 use crate::ast::AggKind;
 use crate::builtins;
@@ -1143,19 +1143,25 @@ impl Rows {
             .collect();
         let mut csr = Vec::new();
         let mut counts = Vec::new();
+        // one orbit walk at a time, into `darts`, with `marks` cleared after each (it costs
+        // the darts marked): no allocation per row
+        let mut marks = Marks::with_capacity(g.capacity());
+        let mut darts: Vec<Dart> = Vec::new();
         for ak in &prog.aggs {
             let mut offs = Vec::with_capacity(n + 1);
             let mut slots: Vec<u32> = Vec::new();
-            let mut cnt = Vec::new();
+            let mut cnt = Vec::with_capacity(n);
             offs.push(0);
             for row in 0..n {
-                let darts = g.orbit(dart(ak.node, row), ak.orbit);
+                darts.clear();
+                g.visit_orbit(dart(ak.node, row), ak.orbit, &mut marks, |x| darts.push(x));
+                marks.clear();
                 match ak.emb {
                     None => cnt.push(darts.len() as f64),
                     Some(emb) => {
                         let e = g.embedding(emb_ids[emb]);
                         let start = slots.len();
-                        for x in darts {
+                        for &x in &darts {
                             let s = e.slot(x) as u32;
                             if !slots[start..].contains(&s) {
                                 slots.push(s);
