@@ -371,23 +371,38 @@ impl Simulation {
         self.rules
             .prepare_guard(&mut self.g, "cut_swept", &swept_params())?;
         for criterion in [Criterion::Strain, Criterion::Stress] {
-            self.prepare_fracture(criterion)?;
+            let declared = self.cfg.fracture.is_some_and(|f| f.criterion == criterion);
+            self.prepare_fracture(criterion, declared)?;
         }
         self.prepare_declared_cuts()
     }
 
-    /// The compiled guard of the fracture rule of `criterion`, when the rules have it (the
-    /// stress criterion's comes with the fracture configured; see [`Simulation::fracture`]).
-    fn prepare_fracture(&mut self, criterion: Criterion) -> Result<(), PhysicsError> {
-        // the rule opening faces, and the measure its guard reads (it must exist first)
+    /// The compiled guard of the fracture rule of `criterion`, and the plan of the rule
+    /// computing its measure, when the rules have them (the stress criterion's come with the
+    /// fracture configured; see [`Simulation::fracture`]).
+    fn prepare_fracture(
+        &mut self,
+        criterion: Criterion,
+        declared: bool,
+    ) -> Result<(), PhysicsError> {
+        // the rule opening faces, and the rule computing the measure its guard reads: run
+        // once, so that the measure exists and its plan is built (a fracture runs it first)
         let (rule, measure) = match criterion {
-            Criterion::Stress => ("fracture_stress", "max_stress"),
-            Criterion::Strain => ("fracture_strain", "spring_strain"),
+            Criterion::Stress => ("fracture_stress", "element_stress"),
+            Criterion::Strain => ("fracture_strain", "spring_strains"),
         };
-        if self.rules.rule(rule).is_err() {
+        if self.rules.rule(rule).is_err() || self.rules.rule(measure).is_err() {
             return Ok(());
         }
-        self.rules.prepare_named(&mut self.g, &[measure])?;
+        if let Err(e) = self
+            .rules
+            .apply_everywhere(&mut self.g, measure, &Params::new())
+        {
+            // a measure that cannot be computed here (say, a spring of zero rest length) is
+            // an error where the configuration asks for this fracture; for `prepare_cuts`
+            // it is left to a call of `fracture`, which reports it
+            return if declared { Err(e.into()) } else { Ok(()) };
+        }
         let p: Params = [("threshold".to_string(), Val::F(1.0))].into();
         self.rules.prepare_guard(&mut self.g, rule, &p)?;
         Ok(())
@@ -419,7 +434,7 @@ impl Simulation {
                 .prepare_guard(&mut self.g, "cut_swept", &swept_params())?;
         }
         if let Some(f) = self.cfg.fracture {
-            self.prepare_fracture(f.criterion)?;
+            self.prepare_fracture(f.criterion, true)?;
         }
         Ok(())
     }
