@@ -237,8 +237,8 @@ def test_a_blade_that_misses_stops_the_run_as_an_event(
 
 
 def test_prepare_cuts_changes_no_result() -> None:
-    """``Simulation.prepare_cuts`` builds the compiled guards the cuts search the faces with
-    before the first cut: the same cuts, with and without it, unsew the same faces and give
+    """``Simulation.prepare_cuts`` builds the compiled guards the plane cut and the blade
+    search the faces with before the first cut: the same cuts, with and without it, unsew the same faces and give
     the same positions and rows, bit for bit (the guards are evaluated by the same
     arithmetic either way)."""
     runs = []

@@ -346,19 +346,23 @@ class Simulation:
 
     def prepare_cuts(self) -> None:
         """Builds now what cuts search the faces (3D) or edges (2D) with: the compiled
-        guards of :meth:`cut`, :meth:`cut_swept` and :meth:`fracture` (one row per face side,
-        about the cost of setting up one step rule). Cuts then only run and patch them; the
-        first cut builds them otherwise. A simulation builds those of the cuts, blades and
-        fracture its configuration declares when it is set up. Call it before an interactive
-        session's first cut; cuts give the same results either way."""
+        guards of :meth:`cut` and :meth:`cut_swept` (one row per face side, about the cost of
+        setting up one step rule each). Cuts then only run and patch them; the first cut
+        builds them otherwise. A simulation builds those of the cuts, blades and fracture its
+        configuration declares when it is set up. Call it before an interactive session's
+        first cut; cuts give the same results either way, bit for bit."""
         self._core.prepare_cuts()
 
     def fracture(self, criterion: str, threshold: float) -> TopologyResult:
         """Opens now every face (3D) or edge (2D) where ``criterion`` (``"stress"`` or
         ``"strain"``, see the ``fracture`` setting) exceeds ``threshold``; returns a
         :class:`TopologyResult` (how many were opened, the rows appended). The stress
-        criterion needs the simulation built with a stress ``fracture``
-        (:class:`SimulationError` otherwise)."""
+        criterion (the mean of the two tetrahedra's largest principal stresses, Pa) needs
+        tetrahedra and the FEM rules: a simulation built with a stress ``fracture`` or with
+        an FEM model (``corotational``, ``linear_fem``, ...) has them; a surface, or a 3D
+        simulation with springs only, raises :class:`SimulationError` saying which. Elements
+        that are not tetrahedra never open by stress (a configured stress ``fracture`` on a
+        mesh with such volumes is refused when the simulation is built)."""
         unsewn, added = self._core.fracture(criterion, threshold)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 

@@ -195,7 +195,7 @@ fn main() {
         "  one step, steady state (forces, accumulation, symplectic Euler)  {:8.1} ms",
         st * 1e3
     );
-    println!("  building the cuts' compiled guards (once: plane, blade, fracture) {:8.1} ms  = {:.2} steps", pt * 1e3, pt / st);
+    println!("  building the cuts' compiled guards (once: plane cut, blade)      {:8.1} ms  = {:.2} steps", pt * 1e3, pt / st);
     println!("  one plane cut ({cut_faces} faces unsewn)                               {:8.1} ms  = {:.2} steps", ct * 1e3, ct / st);
     println!("  the first step after it (plans patched)                          {:8.1} ms  = {:.2} steps", at * 1e3, at / st);
     println!("  one fracture burst ({burst_faces} faces opened)                        {:8.1} ms  = {:.2} steps", bt * 1e3, bt / st);

@@ -136,6 +136,41 @@ pub struct TopologyResult {
     pub added_rows: Vec<usize>,
 }
 
+/// The plane `normal . x = offset` with both scaled by one power of two, so that the largest
+/// component of the normal lies in [1, 2): the same plane, and, the scaling being exact, the
+/// same side for every centroid as the plane given, except that a normal of tiny (or huge)
+/// components no longer underflows (overflows) in the cut's guard, which multiplies two
+/// signed distances. A zero or non-finite normal is returned as it is (refused before).
+fn scaled_plane(normal: [f64; 3], offset: f64) -> ([f64; 3], f64) {
+    let m = normal.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if !(m > 0.0 && m.is_finite()) {
+        return (normal, offset);
+    }
+    // 2^-e with e the exponent of m, applied in steps that stay normal numbers
+    let mut e = m.log2().floor() as i32;
+    let (mut n, mut o) = (normal, offset);
+    while e != 0 {
+        let step = e.clamp(-1000, 1000);
+        let f = 2f64.powi(-step);
+        n = n.map(|x| x * f);
+        o *= f;
+        e -= step;
+    }
+    (n, o)
+}
+
+/// How a timed cut is named in messages: `the timed cut (the plane [a, b, c] . x = o) at t =
+/// ...` or `the timed cut (where "...") at t = ...` (the caller's tools read the `at t = `).
+fn describe(e: &TimedEvent) -> String {
+    match &e.cut {
+        Cut::Plane { normal, offset } => format!(
+            "the timed cut (the plane [{}, {}, {}] . x = {offset}) at t = {}",
+            normal[0], normal[1], normal[2], e.time
+        ),
+        Cut::Where(p) => format!("the timed cut (where \"{p}\") at t = {}", e.time),
+    }
+}
+
 /// Parameters for the blade's rule `cut_swept` (any values: its plan does not depend on them).
 fn swept_params() -> Params {
     ["a0", "b0", "a1", "b1"]
@@ -154,8 +189,8 @@ impl Simulation {
                 let n = self.apply_cut(&cut, Some(k))?.unsewn;
                 if n == 0 {
                     return Err(PhysicsError::Config(format!(
-                        "the cut {cut:?} at t = {} separates nothing: it misses the object",
-                        self.cfg.events[k].time
+                        "{} separates nothing: it misses the object",
+                        describe(&self.cfg.events[k])
                     )));
                 }
             }
@@ -233,10 +268,13 @@ impl Simulation {
             Criterion::Strain => ("spring_strains", "spring_strain", "fracture_strain"),
         };
         if self.rules.rule(measure).is_err() {
-            return Err(PhysicsError::Config(
-                "the stress criterion needs the fracture configured when the simulation is built"
-                    .into(),
-            ));
+            return Err(PhysicsError::Config(if self.g.dimension() == 3 {
+                "the stress criterion needs the FEM rules: give the simulation a stress fracture (or an FEM model such as corotational) when it is built"
+                    .into()
+            } else {
+                "the stress criterion of fracture needs tetrahedra (3D); surfaces tear by strain"
+                    .into()
+            }));
         }
         self.rules.apply_everywhere(&mut self.g, measure, &none)?;
         // The guards of the shipped criteria compare a mean of the measure with the threshold
@@ -278,9 +316,10 @@ impl Simulation {
     ) -> Result<TopologyResult, PhysicsError> {
         let n = match cut {
             Cut::Plane { normal, offset } => {
+                let (normal, offset) = scaled_plane(*normal, *offset);
                 let p: Params = [
-                    ("normal".to_string(), Val::V3(*normal)),
-                    ("offset".to_string(), Val::F(*offset)),
+                    ("normal".to_string(), Val::V3(normal)),
+                    ("offset".to_string(), Val::F(offset)),
                 ]
                 .into();
                 self.rules
@@ -355,11 +394,13 @@ impl Simulation {
     }
 
     /// Builds now what a cut searches the faces (3D) or edges (2D) with: the compiled guards
-    /// of the plane cut ([`Simulation::cut`]), the blade ([`Simulation::cut_swept`]) and the
-    /// configured fracture, which cuts then only patch and run. A simulation builds those of
-    /// the events, blades and fracture its configuration declares when it is set up; call
-    /// this before the first interactive cut to move that cost (about one set-up of a step
-    /// rule per guard) out of it. Cuts give the same results either way.
+    /// of the plane cut ([`Simulation::cut`]) and the blade ([`Simulation::cut_swept`]),
+    /// which cuts then only patch and run (and those of the events, blades and fracture the
+    /// configuration declares, which a simulation builds when it is set up). Call this before
+    /// the first interactive cut to move that cost (about one set-up of a step rule per
+    /// guard) out of it. Cuts give the same results either way, bit for bit. (A fracture the
+    /// configuration does not declare is not prepared: its measure's embedding, created
+    /// then, would change which plans a later change patches, and so the rounding.)
     pub fn prepare_cuts(&mut self) -> Result<(), PhysicsError> {
         let zero = Val::V3([0.0; 3]);
         let plane: Params = [
@@ -370,23 +411,14 @@ impl Simulation {
         self.rules.prepare_guard(&mut self.g, "cut_plane", &plane)?;
         self.rules
             .prepare_guard(&mut self.g, "cut_swept", &swept_params())?;
-        for criterion in [Criterion::Strain, Criterion::Stress] {
-            let declared = self.cfg.fracture.is_some_and(|f| f.criterion == criterion);
-            self.prepare_fracture(criterion, declared)?;
-        }
         self.prepare_declared_cuts()
     }
 
-    /// The compiled guard of the fracture rule of `criterion`, and the plan of the rule
-    /// computing its measure, when the rules have them (the stress criterion's come with the
-    /// fracture configured; see [`Simulation::fracture`]).
-    fn prepare_fracture(
-        &mut self,
-        criterion: Criterion,
-        declared: bool,
-    ) -> Result<(), PhysicsError> {
-        // the rule opening faces, and the rule computing the measure its guard reads: run
-        // once, so that the measure exists and its plan is built (a fracture runs it first)
+    /// For the fracture the configuration declares: the compiled guard of its rule, and the
+    /// plan of the rule computing its measure (run once, so that the measure exists first).
+    /// Refuses a stress criterion on a mesh with volumes that are not tetrahedra: the stress
+    /// is computed per tetrahedron, and another element would never break.
+    fn prepare_fracture(&mut self, criterion: Criterion) -> Result<(), PhysicsError> {
         let (rule, measure) = match criterion {
             Criterion::Stress => ("fracture_stress", "element_stress"),
             Criterion::Strain => ("fracture_strain", "spring_strains"),
@@ -394,14 +426,17 @@ impl Simulation {
         if self.rules.rule(rule).is_err() || self.rules.rule(measure).is_err() {
             return Ok(());
         }
-        if let Err(e) = self
+        let rep = self
             .rules
-            .apply_everywhere(&mut self.g, measure, &Params::new())
-        {
-            // a measure that cannot be computed here (say, a spring of zero rest length) is
-            // an error where the configuration asks for this fracture; for `prepare_cuts`
-            // it is left to a call of `fracture`, which reports it
-            return if declared { Err(e.into()) } else { Ok(()) };
+            .apply_everywhere(&mut self.g, measure, &Params::new())?;
+        if criterion == Criterion::Stress {
+            let volumes = self.g.count_orbits(topomech_gmap::OrbitType::volume());
+            if rep.matches < volumes {
+                return Err(PhysicsError::Config(format!(
+                    "the stress criterion of fracture needs tetrahedra: {} of the mesh's {volumes} volumes are not, and would never break (the strain criterion works with springs on any element)",
+                    volumes - rep.matches
+                )));
+            }
         }
         let p: Params = [("threshold".to_string(), Val::F(1.0))].into();
         self.rules.prepare_guard(&mut self.g, rule, &p)?;
@@ -434,7 +469,7 @@ impl Simulation {
                 .prepare_guard(&mut self.g, "cut_swept", &swept_params())?;
         }
         if let Some(f) = self.cfg.fracture {
-            self.prepare_fracture(f.criterion, true)?;
+            self.prepare_fracture(f.criterion)?;
         }
         Ok(())
     }

@@ -380,6 +380,11 @@ fn bad_events_are_reported() {
     s.step().unwrap();
     let e = s.step().unwrap_err().to_string();
     assert!(e.contains("misses the object"), "{e}");
+    // the cut is named as given, readably
+    assert!(
+        e.contains("the timed cut (the plane [1, 0, 0] . x = 100) at t = 0.002"),
+        "{e}"
+    );
     let s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
         c.events = vec![TimedEvent {
             time: 5.0,
@@ -607,4 +612,49 @@ fn a_fracture_threshold_that_is_not_positive_is_refused() {
         assert!(e.contains("fracture threshold must be"), "{t}: {e}");
         assert!(s.topology_changes().is_empty());
     }
+}
+
+/// A plane given by a tiny (or huge) normal and offset is the same plane: it opens the same
+/// faces as the unit normal (the guard multiplies two signed distances, which a normal of
+/// 1e-200 would underflow to zero: the plane is scaled by a power of two first, exactly).
+#[test]
+fn a_plane_cut_does_not_depend_on_the_scale_of_its_normal() {
+    let mesh = cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let opened = |k: f64| {
+        let mut s = sim(&mesh, vec![model("stretch_elementary", &[])], |_| {});
+        s.cut(&Cut::Plane {
+            normal: [k, k, 0.0],
+            offset: 0.93 * k,
+        })
+        .unwrap()
+        .unsewn
+    };
+    let want = opened(1.0);
+    assert!(want > 0);
+    for k in [1e-300, 1e-200, 1e-160, 3.0, 1e200, 1e300] {
+        assert_eq!(opened(k), want, "normal scaled by {k:e}");
+    }
+}
+
+/// A stress fracture on a mesh whose volumes are not all tetrahedra is refused when the
+/// simulation is built (the stress is computed per tetrahedron: a hexahedron would never
+/// break, silently).
+#[test]
+fn a_stress_fracture_on_hexahedra_is_refused() {
+    let mesh = cuboid([2, 1, 1], [2.0, 1.0, 1.0], BoxElement::Hexa);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("corotational", &[])],
+        fixed: vec!["x < 1e-9".into()],
+        fracture: Some(Fracture {
+            criterion: Criterion::Stress,
+            threshold: 1e3,
+        }),
+        ..Config::default()
+    };
+    let e = Simulation::new(g, cfg).unwrap_err().to_string();
+    assert!(
+        e.contains("needs tetrahedra: 2 of the mesh's 2 volumes"),
+        "{e}"
+    );
 }

@@ -213,25 +213,17 @@ fn never() -> bool {
 fn rows_of(g: &GMap, d: Dart, labels: &[u8]) -> (Vec<Dart>, Vec<u32>) {
     let k = labels.len();
     let mut darts = vec![d];
-    // small orbits (the usual case) are searched linearly; large ones through a map
-    let mut row_of: Option<HashMap<Dart, u32, FastHash>> = None;
     let mut next = Vec::new();
     let mut r = 0;
+    // small orbits (the usual case) are searched linearly
     while r < darts.len() {
+        if darts.len() > 32 {
+            return ROW_OF.with(|t| rows_of_large(g, labels, darts, next, r, &mut t.borrow_mut()));
+        }
         let x = darts[r];
         for &l in labels {
             let y = g.alpha(l as usize, x);
-            if row_of.is_none() && darts.len() > 32 {
-                let mut map = HashMap::with_capacity_and_hasher(64, FastHash);
-                map.extend(darts.iter().enumerate().map(|(i, &z)| (z, i as u32)));
-                row_of = Some(map);
-            }
-            let s = if let Some(map) = &mut row_of {
-                *map.entry(y).or_insert_with(|| {
-                    darts.push(y);
-                    (darts.len() - 1) as u32
-                })
-            } else if let Some(i) = darts.iter().position(|&z| z == y) {
+            let s = if let Some(i) = darts.iter().position(|&z| z == y) {
                 i as u32
             } else {
                 darts.push(y);
@@ -242,6 +234,49 @@ fn rows_of(g: &GMap, d: Dart, labels: &[u8]) -> (Vec<Dart>, Vec<u32>) {
         r += 1;
     }
     debug_assert_eq!(next.len(), darts.len() * k);
+    (darts, next)
+}
+
+thread_local! {
+    /// Per dart, its row plus one in the orbit [`rows_of`] is walking (0: not in it): a
+    /// table the size of the map, per thread, reset after each walk (for the darts it set).
+    static ROW_OF: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// [`rows_of`] for an orbit of more than 32 darts, from row `r` on: rows looked up in the
+/// dense table `row_of` instead of by a linear search (a vertex of a tetrahedral mesh has
+/// about a hundred darts).
+fn rows_of_large(
+    g: &GMap,
+    labels: &[u8],
+    mut darts: Vec<Dart>,
+    mut next: Vec<u32>,
+    mut r: usize,
+    row_of: &mut Vec<u32>,
+) -> (Vec<Dart>, Vec<u32>) {
+    if row_of.len() < g.capacity() {
+        row_of.resize(g.capacity(), 0);
+    }
+    for (i, z) in darts.iter().enumerate() {
+        row_of[z.index()] = i as u32 + 1;
+    }
+    while r < darts.len() {
+        let x = darts[r];
+        for &l in labels {
+            let y = g.alpha(l as usize, x);
+            let e = &mut row_of[y.index()];
+            if *e == 0 {
+                darts.push(y);
+                *e = darts.len() as u32;
+            }
+            next.push(*e - 1);
+        }
+        r += 1;
+    }
+    for z in &darts {
+        row_of[z.index()] = 0;
+    }
+    debug_assert_eq!(next.len(), darts.len() * labels.len());
     (darts, next)
 }
 

@@ -140,9 +140,16 @@ fn real_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<f64> {
             type_name(obj)
         )));
     }
-    let x: f64 = obj
-        .extract()
-        .map_err(|_| type_error(format!("{what} must be a number, got {}", type_name(obj))))?;
+    let x: f64 = obj.extract().map_err(|_| {
+        // an int too large for a float is a number all the same: say so
+        if obj.is_instance_of::<pyo3::types::PyInt>() {
+            value_error(format!(
+                "{what} is too large for a float (beyond about 1.8e308)"
+            ))
+        } else {
+            type_error(format!("{what} must be a number, got {}", type_name(obj)))
+        }
+    })?;
     if x.is_finite() {
         Ok(x)
     } else {
@@ -952,16 +959,16 @@ impl PySimulation {
     }
 
     /// Builds now what cuts search the faces (3D) or edges (2D) with: the compiled guards of
-    /// the plane cut, the blade and fracture, which cuts then only run and patch. Cuts give
-    /// the same results either way.
+    /// the plane cut and the blade, which cuts then only run and patch. Cuts give the same
+    /// results either way, bit for bit.
     fn prepare_cuts(slf: &Bound<'_, Self>, py: Python<'_>) -> PyResult<()> {
         let mut this = exclusive(slf)?;
         this.run(py, move |sim| Ok(sim.prepare_cuts()?))
     }
 
     /// Opens now every face (3D) or edge (2D) where the criterion exceeds the threshold:
-    /// `stress` (the mean largest principal stress of the two tetrahedra, Pa; 3D, and only
-    /// when the simulation was built with a stress `fracture`) or `strain` (spring strain
+    /// `stress` (the mean largest principal stress of the two tetrahedra, Pa; 3D, with the
+    /// FEM rules: a stress `fracture` or an FEM model) or `strain` (spring strain
     /// l / l0 - 1). Returns how many faces or edges were opened and the rows appended, int64
     /// (k,).
     fn fracture<'py>(
