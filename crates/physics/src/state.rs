@@ -220,16 +220,7 @@ impl Rows {
                 has[r] = true;
             }
         }
-        let lost: Vec<usize> = (0..n_rows).filter(|&r| !has[r]).collect();
-        if !lost.is_empty() {
-            return Err(PhysicsError::Config(format!(
-                "a topology change removed the vertices of rows {}: only splits are supported",
-                list_some(&lost, 20)
-            )));
-        }
-        let particle = g
-            .require("particle")
-            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        let particle = kept_rows_particle(g, &has)?;
         walked.sort_unstable_by_key(|w| w.0);
         let mut added = Vec::new();
         for w in &mut walked {
@@ -279,16 +270,7 @@ impl Rows {
             row_of[l] = r;
             kept[r] = true;
         }
-        let lost: Vec<usize> = (0..n_rows).filter(|&r| !kept[r]).collect();
-        if !lost.is_empty() {
-            return Err(PhysicsError::Config(format!(
-                "a topology change removed the vertices of rows {}: only splits are supported",
-                list_some(&lost, 20)
-            )));
-        }
-        let particle = g
-            .require("particle")
-            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        let particle = kept_rows_particle(g, &kept)?;
         let mut added = Vec::new();
         for (l, &d) in orbits.iter().enumerate() {
             if row_of[l] == usize::MAX {
@@ -304,6 +286,21 @@ impl Rows {
         self.index(n_rows + added.len());
         Ok(added)
     }
+}
+
+/// After a renumbering found which old rows still have a vertex orbit (`kept`): an error
+/// naming the rows a topology change removed (only splits are supported), else the map's
+/// `particle` embedding, which the new rows are written to.
+fn kept_rows_particle(g: &GMap, kept: &[bool]) -> Result<EmbeddingId, PhysicsError> {
+    let lost: Vec<usize> = (0..kept.len()).filter(|&r| !kept[r]).collect();
+    if !lost.is_empty() {
+        return Err(PhysicsError::Config(format!(
+            "a topology change removed the vertices of rows {}: only splits are supported",
+            list_some(&lost, 20)
+        )));
+    }
+    g.require("particle")
+        .map_err(|e| PhysicsError::Config(e.to_string()))
 }
 
 impl Simulation {

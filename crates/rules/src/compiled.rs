@@ -324,7 +324,30 @@ fn unsupported<T>(why: impl Into<String>) -> Result<T, Unsupported> {
     Err(Unsupported(why.into()))
 }
 
-impl Compiler<'_> {
+impl<'a> Compiler<'a> {
+    /// A compiler of `rule`'s program (`guard`: of its guard alone) with nothing emitted.
+    fn new(rule: &'a Rule, embs: &'a [EmbDecl], guard: bool) -> Self {
+        Compiler {
+            rule,
+            embs,
+            p: Program {
+                ops: Vec::new(),
+                regs: Vec::new(),
+                stride: 0,
+                fills: Vec::new(),
+                reads: Vec::new(),
+                aggs: Vec::new(),
+                cols: Vec::new(),
+                writes: Vec::new(),
+                guard,
+            },
+            locals: vec![None; rule.n_locals],
+            read_regs: Vec::new(),
+            param_regs: vec![None; rule.params.len()],
+            zeros: Vec::new(),
+        }
+    }
+
     fn reg(&mut self, width: usize) -> R {
         let off = self.p.stride;
         self.p.stride += width;
@@ -848,25 +871,7 @@ pub(crate) fn compile(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Unsuppor
     if rule.changes_topology {
         return unsupported("a rule that changes the topology");
     }
-    let mut c = Compiler {
-        rule,
-        embs,
-        p: Program {
-            ops: Vec::new(),
-            regs: Vec::new(),
-            stride: 0,
-            fills: Vec::new(),
-            reads: Vec::new(),
-            aggs: Vec::new(),
-            cols: Vec::new(),
-            writes: Vec::new(),
-            guard: false,
-        },
-        locals: vec![None; rule.n_locals],
-        read_regs: Vec::new(),
-        param_regs: vec![None; rule.params.len()],
-        zeros: Vec::new(),
-    };
+    let mut c = Compiler::new(rule, embs, false);
     for s in &rule.program {
         match s {
             TStmt::Let(k, e) => {
@@ -904,25 +909,7 @@ pub(crate) fn compile_guard(rule: &Rule, embs: &[EmbDecl]) -> Result<Program, Un
         [h] => *h,
         _ => return unsupported("a rule without exactly one hook"),
     };
-    let mut c = Compiler {
-        rule,
-        embs,
-        p: Program {
-            ops: Vec::new(),
-            regs: Vec::new(),
-            stride: 0,
-            fills: Vec::new(),
-            reads: Vec::new(),
-            aggs: Vec::new(),
-            cols: Vec::new(),
-            writes: Vec::new(),
-            guard: true,
-        },
-        locals: vec![None; rule.n_locals],
-        read_regs: Vec::new(),
-        param_regs: vec![None; rule.params.len()],
-        zeros: Vec::new(),
-    };
+    let mut c = Compiler::new(rule, embs, true);
     let (r, t) = c.expr(guard)?;
     if t != Ty::Bool {
         return unsupported("a guard that is not a boolean");

@@ -1171,21 +1171,9 @@ impl RuleSet {
         poll: &mut Poll,
     ) -> Result<Option<Vec<Match>>, ApplyError> {
         let rule = b.rule;
-        let Some(guard) = &rule.guard else {
+        let Some(index) = self.guard_plan_index(b) else {
             return Ok(None);
         };
-        if !self.compile
-            || rule.hooks.len() != 1
-            || !row_invariant(guard, &left_labels(rule), b.embs)
-        {
-            return Ok(None);
-        }
-        let index = self
-            .checked
-            .rules
-            .iter()
-            .position(|r| std::ptr::eq(r, rule))
-            .expect("bound rule is ours");
         let mut plans = self
             .guard_plans
             .lock()
@@ -1227,6 +1215,25 @@ impl RuleSet {
         self.guard_runs
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         Ok(Some(out))
+    }
+
+    /// The index of `b`'s rule when its matches can be found through a compiled guard (see
+    /// [`RuleSet::guarded_matches`]): compiled plans on, a rule that changes the topology,
+    /// with one hook and a [`row_invariant`] guard.
+    fn guard_plan_index(&self, b: &Bound) -> Option<usize> {
+        let rule = b.rule;
+        let guard = rule.guard.as_ref()?;
+        if !self.compile
+            || !rule.changes_topology
+            || rule.hooks.len() != 1
+            || !row_invariant(guard, &left_labels(rule), b.embs)
+        {
+            return None;
+        }
+        self.checked
+            .rules
+            .iter()
+            .position(|r| std::ptr::eq(r, rule))
     }
 
     /// The guard plan of `b`'s rule for the map as it is: `old` when it is current, `old`
@@ -1273,23 +1280,9 @@ impl RuleSet {
         params: &Params,
     ) -> Result<bool, ApplyError> {
         let b = self.bind_for(g, name, params, true)?;
-        let rule = b.rule;
-        let Some(guard) = &rule.guard else {
+        let Some(index) = self.guard_plan_index(&b) else {
             return Ok(false);
         };
-        if !self.compile
-            || !rule.changes_topology
-            || rule.hooks.len() != 1
-            || !row_invariant(guard, &left_labels(rule), b.embs)
-        {
-            return Ok(false);
-        }
-        let index = self
-            .checked
-            .rules
-            .iter()
-            .position(|r| std::ptr::eq(r, rule))
-            .expect("bound rule is ours");
         let mut plans = self
             .guard_plans
             .lock()

@@ -91,15 +91,7 @@ fn same(a: &GMap, b: &GMap, what: &str) {
 /// Moves every vertex a little (a different amount each call), the same on both maps.
 fn shake(g: &mut GMap, t: f64) {
     let pos = g.embedding_id("position").unwrap();
-    let darts: Vec<Dart> = g.darts().collect();
-    let mut seen = topomech_gmap::Marks::with_capacity(g.capacity());
-    for d in darts {
-        if seen.is_marked(d) {
-            continue;
-        }
-        for x in g.orbit(d, topomech_gmap::OrbitType::vertex(3)) {
-            seen.mark(x);
-        }
+    for d in g.orbit_representatives(topomech_gmap::OrbitType::vertex(3)) {
         let p = g.real(pos, d).to_vec();
         let q = [
             p[0] + 0.03 * (t + 2.0 * p[1]).sin(),
@@ -221,15 +213,7 @@ rule cut_labels {
     let label = g.embedding_id("label").unwrap();
     // label each volume by the x of its first dart's vertex
     let pos = g.embedding_id("position").unwrap();
-    let darts: Vec<Dart> = g.darts().collect();
-    let mut seen = topomech_gmap::Marks::with_capacity(g.capacity());
-    for d in darts {
-        if seen.is_marked(d) {
-            continue;
-        }
-        for x in g.orbit(d, topomech_gmap::OrbitType::volume()) {
-            seen.mark(x);
-        }
+    for d in g.orbit_representatives(topomech_gmap::OrbitType::volume()) {
         let v = i64::from(g.real(pos, d)[0] > 1.5);
         g.set_value(label, d, &topomech_gmap::Value::Int(v))
             .unwrap();
