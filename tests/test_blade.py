@@ -260,3 +260,21 @@ def test_prepare_cuts_changes_no_result() -> None:
     assert np.array_equal(ra0, ra1)
     assert np.array_equal(rb0, rb1)
     assert np.array_equal(x0, x1)
+
+
+def test_cut_arguments_are_refused_by_name() -> None:
+    """A plane cut's bad arguments raise the exception of their kind, naming the argument:
+    something that is not 3 numbers a TypeError (a wrong count a ValueError), a number too
+    large for a float a ValueError saying so."""
+    sim = topomech.load_scene("blade_cut").build()
+    with pytest.raises(TypeError, match="normal must be 3 numbers, got NoneType"):
+        sim.cut(None, 0.5)
+    with pytest.raises(TypeError, match="normal must be 3 numbers, got str"):
+        sim.cut("abc", 0.5)
+    with pytest.raises(TypeError, match=r"normal\[0\] must be a number, got complex"):
+        sim.cut([1j, 0, 0], 0.5)
+    with pytest.raises(ValueError, match="normal must be 3 numbers, got 2"):
+        sim.cut([1, 0], 0.5)
+    with pytest.raises(ValueError, match="offset is too large for a float"):
+        sim.cut([1, 0, 0], 10**400)
+    assert sim.cut(np.array([1, 0, 0], dtype=np.int32), 0.5).unsewn > 0

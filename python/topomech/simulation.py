@@ -327,7 +327,7 @@ class Simulation:
         Returns a :class:`TopologyResult`: how many faces or edges were unsewn (0 when the
         plane misses the object; nothing changes then) and the rows appended for the split
         vertices. Raises :class:`TypeError` / :class:`ValueError` for a bad argument."""
-        unsewn, added = self._core.cut(np.ascontiguousarray(normal, dtype=np.float64), offset)
+        unsewn, added = self._core.cut(normal, offset)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 
     def cut_swept(self, start: Any, end: Any) -> TopologyResult:
