@@ -1182,6 +1182,8 @@ impl RuleSet {
             return Ok(None);
         };
         if (poll.check)() {
+            // the plan stays (it is the map's), for the next application
+            plans.insert(index, gp);
             return Err(ApplyError::Interrupted {
                 rule: rule.name.clone(),
                 stage: "running its compiled guard",
