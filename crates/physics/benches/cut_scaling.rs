@@ -11,7 +11,8 @@
 //! Writes `bench/topology_scaling.json` (or `$TOPOMECH_BENCH_OUT/topology_scaling.json`);
 //! `bench/topology_plot.py` draws `bench/topology.png` and the table in
 //! `bench/topology_scaling.md` from it. A size whose set-up would not fit in the memory
-//! available (about 7 KB per tetrahedron: the simulation, and the two cut guards at about 0.6 KB each, estimated) is skipped and recorded as such.
+//! available (about 7 KB per tetrahedron: the simulation, and the two cut guards at about
+//! 0.6 KB each, estimated) is skipped and recorded as such.
 
 use std::fmt::Write as _;
 use std::hint::black_box;
