@@ -1081,44 +1081,32 @@ impl RuleSet {
         if let Some(guard) = &rule.guard {
             expr_orbits(guard, b.embs, &mut chains);
         }
-        let cap = g.capacity();
         let (star, candidates) = drop_changed(g, rule, &mut ix, &changed, &chains)?;
         // new matches, from the candidate hooks not in a kept match's hook orbit
         let hook = rule.hooks[0];
-        let mut used = Marks::with_capacity(cap);
         let mut prints: std::collections::HashSet<Vec<u32>, FastHash> =
             std::collections::HashSet::default();
-        let mut new: Vec<Match> = Vec::new();
-        // a candidate tried once gives the same answer again (its match, the guard at it)
-        let mut tried = Marks::with_capacity(cap);
-        for h in candidates {
-            if !tried.mark(h) || used.is_marked(h) || ix.live_at(h).is_some() {
-                continue;
-            }
-            let Ok(m) = match_at(g, rule, &[h]) else {
-                continue;
-            };
-            if !m.all_darts().any(|x| star.is_marked(x)) {
-                continue; // a kept match's footprint (or one its guard rejects still)
-            }
-            if let Some(guard) = &rule.guard {
+        let new = rematch(
+            g,
+            rule,
+            &ix,
+            &star,
+            candidates,
+            |m| match &rule.guard {
+                None => Some(true),
                 // an error is left to a rebuild, which reports it
-                match Eval::new(g, &b, &m).eval(guard, 0) {
-                    Ok(Val::B(true)) => {}
-                    Ok(_) => continue,
-                    Err(_) => return None,
-                }
-            }
-            for &x in &m.darts[hook] {
-                used.mark(x);
-            }
-            let mut key: Vec<u32> = m.all_darts().map(|x| x.0).collect();
-            key.sort_unstable();
-            if !prints.insert(key) {
-                continue;
-            }
-            new.push(m);
-        }
+                Some(guard) => match Eval::new(g, &b, m).eval(guard, 0) {
+                    Ok(Val::B(true)) => Some(true),
+                    Ok(_) => Some(false),
+                    Err(_) => None,
+                },
+            },
+            |m| {
+                let mut key: Vec<u32> = m.all_darts().map(|x| x.0).collect();
+                key.sort_unstable();
+                prints.insert(key)
+            },
+        )?;
         let kept = ix.live;
         let numbers: Vec<u32> = new.iter().map(|m| ix.push(m, hook)).collect();
         let kind = match compiled {
@@ -1719,26 +1707,9 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
     } = gp;
     let chains: Vec<Vec<OrbitType>> = plan.agg_orbits().into_iter().map(|o| vec![o]).collect();
     let (star, candidates) = drop_changed(g, rule, &mut index, &changed, &chains)?;
-    let cap = g.capacity();
     let hook = rule.hooks[0];
-    let mut used = Marks::with_capacity(cap);
-    let mut tried = Marks::with_capacity(cap);
-    let mut new: Vec<Match> = Vec::new();
-    for h in candidates {
-        if !tried.mark(h) || used.is_marked(h) || index.live_at(h).is_some() {
-            continue;
-        }
-        let Ok(m) = match_at(g, rule, &[h]) else {
-            continue;
-        };
-        if !m.all_darts().any(|x| star.is_marked(x)) {
-            continue; // a kept match's footprint
-        }
-        for &x in &m.darts[hook] {
-            used.mark(x);
-        }
-        new.push(m);
-    }
+    // one row per hook orbit: no guard evaluated (the plan does), no footprint merged
+    let new = rematch(g, rule, &index, &star, candidates, |_| Some(true), |_| true)?;
     let kept = index.live;
     let numbers: Vec<u32> = new
         .iter()
@@ -1764,6 +1735,49 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
         index,
         first,
     })
+}
+
+/// The new matches of a patch (see [`RuleSet::patch_plan`]): from each candidate hook dart
+/// not tried yet, not in the hook orbit of a match found here or of a live match of `ix`,
+/// the match there when it holds a dart of `C*` (`star`; else it is a kept match's) and
+/// `pass` accepts it (`None`: give up, the plan is rebuilt); its hook orbit is then taken,
+/// and the match kept when `fresh` says it is not one found already.
+fn rematch(
+    g: &GMap,
+    rule: &Rule,
+    ix: &Index,
+    star: &Marks,
+    candidates: Vec<Dart>,
+    mut pass: impl FnMut(&Match) -> Option<bool>,
+    mut fresh: impl FnMut(&Match) -> bool,
+) -> Option<Vec<Match>> {
+    let cap = g.capacity();
+    let hook = rule.hooks[0];
+    let mut used = Marks::with_capacity(cap);
+    // a candidate tried once gives the same answer again (its match, the guard at it)
+    let mut tried = Marks::with_capacity(cap);
+    let mut new = Vec::new();
+    for h in candidates {
+        if !tried.mark(h) || used.is_marked(h) || ix.live_at(h).is_some() {
+            continue;
+        }
+        let Ok(m) = match_at(g, rule, &[h]) else {
+            continue;
+        };
+        if !m.all_darts().any(|x| star.is_marked(x)) {
+            continue; // a kept match's footprint (or one its guard rejects still)
+        }
+        if !pass(&m)? {
+            continue;
+        }
+        for &x in &m.darts[hook] {
+            used.mark(x);
+        }
+        if fresh(&m) {
+            new.push(m);
+        }
+    }
+    Some(new)
 }
 
 /// Whether plans of `rule` may be patched after a topology change (see
