@@ -171,12 +171,33 @@ fn describe(e: &TimedEvent) -> String {
     }
 }
 
-/// Parameters for the blade's rule `cut_swept` (any values: its plan does not depend on them).
-fn swept_params() -> Params {
-    ["a0", "b0", "a1", "b1"]
-        .into_iter()
-        .map(|k| (k.to_string(), Val::V3([0.0; 3])))
-        .collect()
+/// The rule computing a fracture criterion's measure, the embedding it writes, and the rule
+/// opening the faces where the measure passes the threshold.
+fn criterion_rules(c: Criterion) -> (&'static str, &'static str, &'static str) {
+    match c {
+        Criterion::Stress => ("element_stress", "max_stress", "fracture_stress"),
+        Criterion::Strain => ("spring_strains", "spring_strain", "fracture_strain"),
+    }
+}
+
+/// The parameters of the plane cut's rule `cut_plane`.
+fn plane_params(normal: [f64; 3], offset: f64) -> Params {
+    [
+        ("normal".to_string(), Val::V3(normal)),
+        ("offset".to_string(), Val::F(offset)),
+    ]
+    .into()
+}
+
+/// The parameters of the blade's rule `cut_swept`: the segment `from` moving to `to`.
+fn swept_params(from: [[f64; 3]; 2], to: [[f64; 3]; 2]) -> Params {
+    [
+        ("a0".to_string(), Val::V3(from[0])),
+        ("b0".to_string(), Val::V3(from[1])),
+        ("a1".to_string(), Val::V3(to[0])),
+        ("b1".to_string(), Val::V3(to[1])),
+    ]
+    .into()
 }
 
 impl Simulation {
@@ -240,16 +261,9 @@ impl Simulation {
         from: [[f64; 3]; 2],
         to: [[f64; 3]; 2],
     ) -> Result<TopologyResult, PhysicsError> {
-        let p: Params = [
-            ("a0".to_string(), Val::V3(from[0])),
-            ("b0".to_string(), Val::V3(from[1])),
-            ("a1".to_string(), Val::V3(to[0])),
-            ("b1".to_string(), Val::V3(to[1])),
-        ]
-        .into();
         let n = self
             .rules
-            .apply_everywhere(&mut self.g, "cut_swept", &p)?
+            .apply_everywhere(&mut self.g, "cut_swept", &swept_params(from, to))?
             .matches;
         self.record_change("blade", n)
     }
@@ -262,11 +276,7 @@ impl Simulation {
             return Err(PhysicsError::Config(why));
         }
         let none = Params::new();
-        // the rule computing the measure, the embedding it writes, the rule opening faces
-        let (measure, column, rule) = match f.criterion {
-            Criterion::Stress => ("element_stress", "max_stress", "fracture_stress"),
-            Criterion::Strain => ("spring_strains", "spring_strain", "fracture_strain"),
-        };
+        let (measure, column, rule) = criterion_rules(f.criterion);
         if self.rules.rule(measure).is_err() {
             return Err(PhysicsError::Config(if self.g.dimension() == 3 {
                 "the stress criterion needs the FEM rules: give the simulation a stress fracture (or an FEM model such as corotational) when it is built"
@@ -317,13 +327,8 @@ impl Simulation {
         let n = match cut {
             Cut::Plane { normal, offset } => {
                 let (normal, offset) = scaled_plane(*normal, *offset);
-                let p: Params = [
-                    ("normal".to_string(), Val::V3(normal)),
-                    ("offset".to_string(), Val::F(offset)),
-                ]
-                .into();
                 self.rules
-                    .apply_everywhere(&mut self.g, "cut_plane", &p)?
+                    .apply_everywhere(&mut self.g, "cut_plane", &plane_params(normal, offset))?
                     .matches
             }
             Cut::Where(_) => {
@@ -402,15 +407,12 @@ impl Simulation {
     /// configuration does not declare is not prepared: its measure's embedding, created
     /// then, would change which plans a later change patches, and so the rounding.)
     pub fn prepare_cuts(&mut self) -> Result<(), PhysicsError> {
-        let zero = Val::V3([0.0; 3]);
-        let plane: Params = [
-            ("normal".to_string(), zero.clone()),
-            ("offset".to_string(), Val::F(0.0)),
-        ]
-        .into();
-        self.rules.prepare_guard(&mut self.g, "cut_plane", &plane)?;
+        // any parameter values: a guard's plan does not depend on them
+        let zero = [[0.0; 3]; 2];
         self.rules
-            .prepare_guard(&mut self.g, "cut_swept", &swept_params())?;
+            .prepare_guard(&mut self.g, "cut_plane", &plane_params(zero[0], 0.0))?;
+        self.rules
+            .prepare_guard(&mut self.g, "cut_swept", &swept_params(zero, zero))?;
         self.prepare_declared_cuts()
     }
 
@@ -419,10 +421,7 @@ impl Simulation {
     /// Refuses a stress criterion on a mesh with volumes that are not tetrahedra: the stress
     /// is computed per tetrahedron, and another element would never break.
     fn prepare_fracture(&mut self, criterion: Criterion) -> Result<(), PhysicsError> {
-        let (rule, measure) = match criterion {
-            Criterion::Stress => ("fracture_stress", "element_stress"),
-            Criterion::Strain => ("fracture_strain", "spring_strains"),
-        };
+        let (measure, _, rule) = criterion_rules(criterion);
         if self.rules.rule(rule).is_err() || self.rules.rule(measure).is_err() {
             return Ok(());
         }
@@ -455,18 +454,14 @@ impl Simulation {
                     )?;
                 }
                 Cut::Plane { normal, offset } => {
-                    let p: Params = [
-                        ("normal".to_string(), Val::V3(*normal)),
-                        ("offset".to_string(), Val::F(*offset)),
-                    ]
-                    .into();
+                    let p = plane_params(*normal, *offset);
                     self.rules.prepare_guard(&mut self.g, "cut_plane", &p)?;
                 }
             }
         }
-        if !self.cfg.blades.is_empty() {
+        if let Some(b) = self.cfg.blades.first() {
             self.rules
-                .prepare_guard(&mut self.g, "cut_swept", &swept_params())?;
+                .prepare_guard(&mut self.g, "cut_swept", &swept_params(b.from, b.to))?;
         }
         if let Some(f) = self.cfg.fracture {
             self.prepare_fracture(f.criterion)?;
