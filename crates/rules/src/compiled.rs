@@ -2153,25 +2153,25 @@ impl Ctx<'_> {
                 } => {
                     let (bd, w) = at(*dst);
                     let (lo, d) = split(s, bd, n * w);
-                    if name == "segment_hits_triangle" && args.len() == 5 {
-                        let mut x = [0.0; 15];
-                        for i in 0..n {
-                            for (j, &(r, _)) in args.iter().enumerate() {
-                                let (b, wr) = at(r);
-                                x[3 * j..3 * j + 3].copy_from_slice(&lo[b + i * wr..][..3]);
-                            }
-                            segment_hits_triangle_flat(&x, &mut d[i * w..][..w]);
-                        }
-                        continue;
-                    }
+                    // each row's arguments laid flat, for a built-in with a flat form
+                    let mut xs: Vec<f64> = Vec::new();
                     let mut vals = Vec::with_capacity(args.len());
                     let mut buf = Vec::with_capacity(w);
                     for i in 0..n {
-                        vals.clear();
-                        for &(r, t) in args {
+                        xs.clear();
+                        for &(r, _) in args {
                             let (b, wr) = at(r);
-                            let x = &lo[b + i * wr..][..wr];
-                            vals.push(register_val(t, x));
+                            xs.extend_from_slice(&lo[b + i * wr..][..wr]);
+                        }
+                        if generic_flat(name, &xs, &mut d[i * w..][..w]) {
+                            continue;
+                        }
+                        vals.clear();
+                        let mut from = 0;
+                        for &(r, t) in args {
+                            let wr = at(r).1;
+                            vals.push(register_val(t, &xs[from..from + wr]));
+                            from += wr;
                         }
                         let v = builtins::call(name, &vals).map_err(|_| ())?;
                         if v.ty() != *ty {
@@ -2188,14 +2188,20 @@ impl Ctx<'_> {
     }
 }
 
-/// `segment_hits_triangle` on its five vec3 arguments laid flat in `x` (15 floats), the
-/// boolean written to `z[0]` as a register holds it (1 or 0): the built-in's own function
-/// ([`builtins::segment_hits_triangle`]), without building values for [`builtins::call`]
-/// (a blade's guard calls it twice per face side, every step).
-pub(crate) fn segment_hits_triangle_flat(x: &[f64; 15], z: &mut [f64]) {
+/// A built-in evaluated on its arguments laid flat in `x` (as registers hold them), its
+/// value written to `z` as a register holds it; false when `name` has no flat form here (the
+/// caller then goes through [`builtins::call`]). `segment_hits_triangle` (five vec3, a
+/// boolean: 1 or 0) has one, the built-in's own function without values built per call: a
+/// blade's guard calls it twice per face side, every step. Used by the evaluator and by the
+/// native code's helper alike.
+pub(crate) fn generic_flat(name: &str, x: &[f64], z: &mut [f64]) -> bool {
+    if name != "segment_hits_triangle" || x.len() != 15 || z.len() != 1 {
+        return false;
+    }
     let v = |j: usize| [x[3 * j], x[3 * j + 1], x[3 * j + 2]];
     let hit = builtins::segment_hits_triangle(&v(0), &v(1), &v(2), &v(3), &v(4));
     z[0] = if hit { 1.0 } else { 0.0 };
+    true
 }
 
 /// Copies `w` floats from the start of `s` to the start of `d`. The widths of the common

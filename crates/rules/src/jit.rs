@@ -266,16 +266,10 @@ fn helper(c: &Call, x: &[f64], z: &mut [f64]) -> Result<(), ()> {
             let (a, b) = x.split_at(*wa);
             crate::compiled::fast(*f, a, two.then_some(b), z)?;
         }
-        Call::Generic { name, args, .. }
-            if name == "segment_hits_triangle"
-                && args.len() == 5
-                && x.len() == 15
-                && z.len() == 1 =>
-        {
-            let x: &[f64; 15] = x.try_into().map_err(|_| ())?;
-            crate::compiled::segment_hits_triangle_flat(x, z);
-        }
         Call::Generic { name, args, ty } => {
+            if crate::compiled::generic_flat(name, x, z) {
+                return Ok(());
+            }
             let mut vals = Vec::with_capacity(args.len());
             let mut at = 0;
             for &(w, t) in args {
