@@ -117,6 +117,7 @@ fn every_model_and_integrator_matches_the_evaluator_bit_for_bit() {
 #[test]
 fn native_code_runs_for_the_cloth_springs_and_the_mass_tensor() {
     let before = topomech_rules::jit::compiled_count();
+    let chunked = topomech_rules::jit::chunked_runs();
     for (kind, dim, rules) in [
         ("stretch_cumulated", 2, &["stretch_cumulated"][..]),
         ("mass_tensor", 3, &["mass_tensor"][..]),
@@ -133,4 +134,7 @@ fn native_code_runs_for_the_cloth_springs_and_the_mass_tensor() {
         assert!(native.iter().all(|k| k.1), "{kind}: {native:?}");
     }
     assert!(topomech_rules::jit::compiled_count() > before);
+    // the step's plans check and scatter their values chunk by chunk (`Plan::run_chunked`),
+    // the path the bit-for-bit test above compares with the evaluator
+    assert!(topomech_rules::jit::chunked_runs() > chunked);
 }

@@ -975,6 +975,10 @@ pub(crate) struct Plan {
     /// Per write, every (domain row, slot) it writes, owners and duplicates alike (what
     /// `targets` and `dups` are computed from again after a patch).
     writes: Vec<Vec<(u32, u32)>>,
+    /// Where the plan may scatter its values chunk by chunk in parallel (see
+    /// [`Plan::run_chunked`]): per write, where the targets of chunk `c` start in its
+    /// targets (sorted by row), `c = 0..=chunks`. `None` where it may not.
+    chunk_starts: Option<Vec<Vec<u32>>>,
 }
 
 /// A plan being built from batches of matches (see [`Plan::builder`]).
@@ -1391,7 +1395,9 @@ impl Plan {
             native: NativeState::Off,
             row_match: rows.row_match,
             writes: rows.writes,
+            chunk_starts: None,
         };
+        plan.chunk_starts = plan.chunk_starts();
         // native code already generated stays (it depends on the program, the column kinds
         // and the output layout, not on the rows), with `need` computed again from the new
         // index arrays
@@ -1557,8 +1563,213 @@ impl Plan {
         ids: &[EmbeddingId],
         params: &[Val],
     ) -> Result<(), Unsupported> {
+        if let Some(done) = self.run_chunked(g, ids, params) {
+            return done;
+        }
         self.evaluate(g, ids, params)?;
         self.scatter(g, ids)
+    }
+
+    /// Whether the chunks' values may be scattered chunk by chunk in parallel, and where each
+    /// write's targets of each chunk start (see [`Plan::chunk_starts`]): where every slot is
+    /// written once (no duplicate writes to compare), so that no two chunks write one value.
+    fn chunk_starts(&mut self) -> Option<Vec<Vec<u32>>> {
+        if self.prog.guard || !self.dups.is_empty() || self.rows == 0 {
+            return None;
+        }
+        for (t, _) in &mut self.targets {
+            if !t.is_sorted_by_key(|x| x.0) {
+                t.sort_unstable_by_key(|x| x.0);
+            }
+        }
+        let chunks = self.rows.div_ceil(self.chunk);
+        Some(
+            self.targets
+                .iter()
+                .map(|(t, _)| {
+                    (0..=chunks)
+                        .map(|c| t.partition_point(|&(r, _)| (r as usize) < c * self.chunk) as u32)
+                        .collect()
+                })
+                .collect(),
+        )
+    }
+
+    /// A run of the native code that checks each chunk's values finite as soon as the chunk
+    /// is evaluated, while they are in cache, on the chunk's own thread (no second pass over
+    /// the output buffer), then, once every chunk passed, scatters them chunk by chunk, in
+    /// parallel where [`Plan::evaluate`] runs in parallel (its scatter runs on one thread).
+    /// The values are those of [`Plan::run`]'s other path, bit for bit: every row is
+    /// evaluated before anything is written. `Err` (nothing written): a chunk failed, as in
+    /// [`Plan::run`]. `None` where this run cannot go this way (no native code, no
+    /// [`Plan::chunk_starts`], columns of other kinds or lengths): [`Plan::run`] then
+    /// takes the other path.
+    // the `unsafe` blocks call the plan's native code and write the map's columns through
+    // pointers, each with its SAFETY comment
+    #[allow(unsafe_code)]
+    fn run_chunked(
+        &mut self,
+        g: &mut GMap,
+        ids: &[EmbeddingId],
+        params: &[Val],
+    ) -> Option<Result<(), Unsupported>> {
+        self.chunk_starts.as_ref()?;
+        let pvals = param_values(params)?;
+        let kinds: Vec<jit::ColKind> = self
+            .prog
+            .cols
+            .iter()
+            .map(|&e| col_kind(&g.embedding(ids[e]).column()))
+            .collect();
+        if matches!(self.native, NativeState::Untried) {
+            self.native = self.compile_native(&kinds);
+        }
+        let NativeState::Ready(nat, need) = &self.native else {
+            return None;
+        };
+        let fills = self.prog.fill_values(&pvals);
+        if nat.kinds != kinds || !self.prog.fills_fit(&fills) {
+            return None;
+        }
+        // the written embeddings: distinct columns of reals or booleans
+        let mut written: Vec<usize> = Vec::new();
+        for (_, emb, _, _) in &self.prog.writes {
+            if !written.contains(emb) {
+                written.push(*emb);
+            }
+        }
+        for (k, &e) in written.iter().enumerate() {
+            let kind = col_kind(&g.embedding(ids[e]).column());
+            if kind == jit::ColKind::Int
+                || written[..k].iter().any(|&f| ids[f] == ids[e])
+                || g.embedding(ids[e]).derived().is_some()
+            {
+                return None;
+            }
+        }
+        let (ch, ow) = (self.chunk, self.out_width);
+        let (rows, n_chunks) = (self.rows, self.rows.div_ceil(ch));
+        let block = ch * ow.max(1);
+        if self.out.len() != n_chunks * block {
+            self.out = vec![0.0; n_chunks * block];
+        }
+        // the written columns' addresses, each taken once per write as `scatter` does (one
+        // write counted per write); the program reads a written column through the same one
+        let mut wcols: Vec<(usize, Col)> = Vec::new();
+        for (_, emb, _, _) in &self.prog.writes {
+            let col = match g.column_mut(ids[*emb]) {
+                Ok(ColumnMut::Real(v)) => Col::Real(v.as_mut_ptr(), v.len()),
+                Ok(ColumnMut::Bool(v)) => Col::Bool(v.as_mut_ptr(), v.len()),
+                _ => return None,
+            };
+            if !wcols.iter().any(|(e, _)| e == emb) {
+                wcols.push((*emb, col));
+            }
+        }
+        let mut col_p: Vec<*const u8> = Vec::with_capacity(self.prog.cols.len());
+        for (k, &e) in self.prog.cols.iter().enumerate() {
+            let (p, len) = match wcols.iter().find(|(w, _)| *w == e) {
+                Some((_, Col::Real(p, n))) => (p.cast_const().cast::<u8>(), *n),
+                Some((_, Col::Bool(p, n))) => (p.cast_const().cast::<u8>(), *n),
+                None => col_ptr(&g.embedding(ids[e]).column()),
+            };
+            if len < need[k] {
+                return None;
+            }
+            col_p.push(p);
+        }
+        let write_col: Vec<Col> = self
+            .prog
+            .writes
+            .iter()
+            .map(|(_, emb, _, _)| {
+                wcols
+                    .iter()
+                    .find(|(e, _)| e == emb)
+                    .map(|(_, c)| *c)
+                    .expect("taken above")
+            })
+            .collect();
+        // every target slot lies inside its column (the map may have changed since the
+        // plan was built without the plan noticing: then the slow path reports it)
+        for (w, (t, _)) in self.targets.iter().enumerate() {
+            let width = self.prog.regs[self.prog.writes[w].2].width;
+            let len = write_col[w].len();
+            if t.iter().any(|&(_, s)| (s as usize + 1) * width > len) {
+                return None;
+            }
+        }
+        let out = SyncPtr(self.out.as_mut_ptr());
+        let tables = ArgTables::new(&self.gathers, &self.csr, &self.counts, nat, col_p, &fills);
+        let args = tables.args(out.0);
+        let starts = self.chunk_starts.as_ref().expect("checked above");
+        let store_chunk = |c: usize| {
+            // SAFETY: block `c` of the output buffer (inside it: `n_chunks` blocks) is
+            // touched by the one call handling chunk `c` only.
+            let blk = unsafe { std::slice::from_raw_parts(out.at(c * block), block) };
+            for (w, (t, off)) in self.targets.iter().enumerate() {
+                let width = self.prog.regs[self.prog.writes[w].2].width;
+                let mine = &t[starts[w][c] as usize..starts[w][c + 1] as usize];
+                let vals = &blk[off * ch..][..ch * width];
+                // SAFETY: every slot lies inside its column (checked above); every slot of a
+                // column is a target of one row only (`assemble`: no duplicate writes, and
+                // the written embeddings are distinct columns), and these rows are chunk
+                // `c`'s, so no other thread touches these values; every row was evaluated
+                // before (nothing reads the columns meanwhile), and nothing else holds a
+                // reference into the columns during the run.
+                unsafe {
+                    match (write_col[w], width) {
+                        (Col::Real(p, _), 1) => store_slots::<1>(p, vals, mine, ch),
+                        (Col::Real(p, _), 3) => store_slots::<3>(p, vals, mine, ch),
+                        (Col::Real(p, _), 9) => store_slots::<9>(p, vals, mine, ch),
+                        (Col::Real(p, _), _) => {
+                            for &(row, slot) in mine {
+                                let i = row as usize & (ch - 1);
+                                let v = std::slice::from_raw_parts_mut(
+                                    p.add(slot as usize * width),
+                                    width,
+                                );
+                                v.copy_from_slice(&vals[i * width..][..width]);
+                            }
+                        }
+                        (Col::Bool(p, _), _) => {
+                            for &(row, slot) in mine {
+                                *p.add(slot as usize) = vals[row as usize & (ch - 1)] != 0.0;
+                            }
+                        }
+                    }
+                }
+            }
+        };
+        let one = |c: usize| -> bool {
+            let (first, n) = (c * ch, (rows - c * ch).min(ch));
+            // SAFETY: as in `Plan::evaluate`: `args` describes this plan's arrays, for which
+            // `nat` was compiled (kinds, lengths against `need`, fills checked above); rows
+            // `first..first + n` are chunk `c`, run by this call only, writing block `c`.
+            if unsafe { nat.call(&args, first, n) } != 0 {
+                return false;
+            }
+            // SAFETY: block `c`, now written, is this call's alone (see `store_chunk`).
+            let blk = unsafe { std::slice::from_raw_parts(out.at(c * block), block) };
+            // no early exit, so that it vectorizes
+            !blk.iter().fold(false, |bad, x| bad | !x.is_finite())
+        };
+        jit::CHUNKED.fetch_add(1, Ordering::Relaxed);
+        let parallel = n_chunks >= 4 && rayon::current_num_threads() > 1;
+        let ok = if parallel {
+            (0..n_chunks).into_par_iter().all(one)
+        } else {
+            (0..n_chunks).all(one)
+        };
+        if !ok {
+            return Some(unsupported("an evaluation failed or a value is not finite"));
+        }
+        if parallel {
+            (0..n_chunks).into_par_iter().for_each(store_chunk);
+        } else {
+            (0..n_chunks).for_each(store_chunk);
+        }
+        Some(Ok(()))
     }
 
     /// A guard plan's ([`compile_guard`]) run: the numbers of the matches (as
@@ -1594,15 +1805,7 @@ impl Plan {
         let Some(pvals) = param_values(params) else {
             return unsupported("an integer parameter beyond 2^53");
         };
-        let fills: Vec<&[f64]> = self
-            .prog
-            .fills
-            .iter()
-            .map(|f| match f {
-                FillSrc::Const(x) => x.as_slice(),
-                FillSrc::Param(k) => pvals[*k].as_slice(),
-            })
-            .collect();
+        let fills = self.prog.fill_values(&pvals);
         let ow = self.out_width;
         let ch = self.chunk;
         let n_chunks = self.rows.div_ceil(ch);
@@ -1631,57 +1834,20 @@ impl Plan {
                 out_offsets: &self.targets,
             };
             let rows = self.rows;
-            let kinds: Vec<jit::ColKind> = cols
-                .iter()
-                .map(|c| match c {
-                    ColumnRef::Real(_) => jit::ColKind::Real,
-                    ColumnRef::Bool(_) => jit::ColKind::Bool,
-                    ColumnRef::Int(_) => jit::ColKind::Int,
-                })
-                .collect();
+            let kinds: Vec<jit::ColKind> = cols.iter().map(col_kind).collect();
             if matches!(self.native, NativeState::Untried) {
                 self.native = self.compile_native(&kinds);
             }
             if let NativeState::Ready(nat, need) = &self.native {
-                let len = |c: &ColumnRef| match c {
-                    ColumnRef::Real(x) => x.len(),
-                    ColumnRef::Bool(x) => x.len(),
-                    ColumnRef::Int(x) => x.len(),
-                };
-                let fills_fit = self.prog.ops.iter().all(|op| match op {
-                    Op::Fill { dst, at } => fills[*at].len() >= self.prog.regs[*dst].width,
-                    _ => true,
-                });
                 let fits = nat.kinds == kinds
-                    && fills_fit
-                    && cols.iter().zip(need).all(|(c, &m)| len(c) >= m)
+                    && self.prog.fills_fit(&fills)
+                    && cols.iter().zip(need).all(|(c, &m)| col_ptr(c).1 >= m)
                     && self.out.len() == need_out;
                 if fits {
-                    let ptr = |c: &ColumnRef| match c {
-                        ColumnRef::Real(x) => x.as_ptr().cast::<u8>(),
-                        ColumnRef::Bool(x) => x.as_ptr().cast::<u8>(),
-                        ColumnRef::Int(x) => x.as_ptr().cast::<u8>(),
-                    };
-                    let col_p: Vec<*const u8> = cols.iter().map(ptr).collect();
-                    let gat_p: Vec<*const u32> = self.gathers.iter().map(Vec::as_ptr).collect();
-                    let offs_p: Vec<*const u32> = self.csr.iter().map(|x| x.0.as_ptr()).collect();
-                    let slots_p: Vec<*const u32> = self.csr.iter().map(|x| x.1.as_ptr()).collect();
-                    let counts_p: Vec<*const f64> = self.counts.iter().map(Vec::as_ptr).collect();
-                    let fills_p: Vec<*const f64> = fills.iter().map(|x| x.as_ptr()).collect();
-                    let calls_p: Vec<*const jit::Call> =
-                        nat.calls.iter().map(|c| &raw const *c).collect();
-                    let helpers = jit::helper_table();
-                    let args = jit::JitArgs {
-                        cols: col_p.as_ptr(),
-                        gathers: gat_p.as_ptr(),
-                        offs: offs_p.as_ptr(),
-                        slots: slots_p.as_ptr(),
-                        counts: counts_p.as_ptr(),
-                        fills: fills_p.as_ptr(),
-                        out: self.out.as_mut_ptr(),
-                        calls: calls_p.as_ptr(),
-                        helpers: helpers.as_ptr(),
-                    };
+                    let col_p: Vec<*const u8> = cols.iter().map(|c| col_ptr(c).0).collect();
+                    let tables =
+                        ArgTables::new(&self.gathers, &self.csr, &self.counts, nat, col_p, &fills);
+                    let args = tables.args(self.out.as_mut_ptr());
                     let one = |c: usize| {
                         let (first, n) = (c * ch, (rows - c * ch).min(ch));
                         // SAFETY: `args` describes this plan's arrays, for which `nat` was
@@ -1784,6 +1950,160 @@ impl Plan {
             }
         }
         Ok(())
+    }
+}
+
+impl Program {
+    /// The fill values of a run: constants, and parameters from `pvals`.
+    fn fill_values<'a>(&'a self, pvals: &'a [Vec<f64>]) -> Vec<&'a [f64]> {
+        self.fills
+            .iter()
+            .map(|f| match f {
+                FillSrc::Const(x) => x.as_slice(),
+                FillSrc::Param(k) => pvals[*k].as_slice(),
+            })
+            .collect()
+    }
+
+    /// Whether every fill is as wide as the registers it fills (what native code reads).
+    fn fills_fit(&self, fills: &[&[f64]]) -> bool {
+        self.ops.iter().all(|op| match op {
+            Op::Fill { dst, at } => fills[*at].len() >= self.regs[*dst].width,
+            _ => true,
+        })
+    }
+}
+
+/// The element type of a column.
+fn col_kind(c: &ColumnRef) -> jit::ColKind {
+    match c {
+        ColumnRef::Real(_) => jit::ColKind::Real,
+        ColumnRef::Bool(_) => jit::ColKind::Bool,
+        ColumnRef::Int(_) => jit::ColKind::Int,
+    }
+}
+
+/// The address of a column's first element and its length in elements.
+fn col_ptr(c: &ColumnRef) -> (*const u8, usize) {
+    match c {
+        ColumnRef::Real(x) => (x.as_ptr().cast::<u8>(), x.len()),
+        ColumnRef::Bool(x) => (x.as_ptr().cast::<u8>(), x.len()),
+        ColumnRef::Int(x) => (x.as_ptr().cast::<u8>(), x.len()),
+    }
+}
+
+/// Copies the `N` floats of each target's row in `vals` (a write's values of one chunk, rows
+/// of `N` floats, row `r` at `r mod chunk`) to its slot of the column at `col`.
+///
+/// # Safety
+/// Every slot's `N` floats lie inside the column, and no other thread reads or writes them
+/// meanwhile.
+#[allow(unsafe_code)]
+#[inline]
+unsafe fn store_slots<const N: usize>(
+    col: *mut f64,
+    vals: &[f64],
+    targets: &[(u32, u32)],
+    chunk: usize,
+) {
+    for &(row, slot) in targets {
+        let o: &[f64; N] = vals[(row as usize & (chunk - 1)) * N..][..N]
+            .try_into()
+            .expect("N floats");
+        // SAFETY: the caller's contract: the slot's floats are inside the column and ours.
+        unsafe { col.add(slot as usize * N).cast::<[f64; N]>().write(*o) };
+    }
+}
+
+/// A written column, by address and length in elements (see [`Plan::run_chunked`]).
+#[derive(Clone, Copy)]
+enum Col {
+    Real(*mut f64, usize),
+    Bool(*mut bool, usize),
+}
+
+impl Col {
+    fn len(&self) -> usize {
+        match self {
+            Col::Real(_, n) | Col::Bool(_, n) => *n,
+        }
+    }
+}
+
+// SAFETY: a `Col` is only an address; `Plan::run_chunked` shares it between the threads of
+// one run, each writing the slots of its own chunk's rows only (see its SAFETY comments).
+#[allow(unsafe_code)]
+unsafe impl Send for Col {}
+// SAFETY: as above.
+#[allow(unsafe_code)]
+unsafe impl Sync for Col {}
+
+/// The output buffer's address, shared between the threads of one run, each touching its
+/// own chunk's block only (see [`Plan::run_chunked`]).
+#[derive(Clone, Copy)]
+struct SyncPtr(*mut f64);
+
+impl SyncPtr {
+    /// The address of element `k`, without reading anything.
+    fn at(self, k: usize) -> *mut f64 {
+        self.0.wrapping_add(k)
+    }
+}
+
+// SAFETY: an address only; see above.
+#[allow(unsafe_code)]
+unsafe impl Send for SyncPtr {}
+// SAFETY: as above.
+#[allow(unsafe_code)]
+unsafe impl Sync for SyncPtr {}
+
+/// The arrays of addresses a native call's table ([`jit::JitArgs`]) points into, kept alive
+/// for the calls of one run.
+struct ArgTables {
+    cols: Vec<*const u8>,
+    gathers: Vec<*const u32>,
+    offs: Vec<*const u32>,
+    slots: Vec<*const u32>,
+    counts: Vec<*const f64>,
+    fills: Vec<*const f64>,
+    calls: Vec<*const jit::Call>,
+    helpers: [*const u8; 2],
+}
+
+impl ArgTables {
+    fn new(
+        gathers: &[Vec<u32>],
+        csr: &[(Vec<u32>, Vec<u32>)],
+        counts: &[Vec<f64>],
+        nat: &jit::Native,
+        cols: Vec<*const u8>,
+        fills: &[&[f64]],
+    ) -> Self {
+        ArgTables {
+            cols,
+            gathers: gathers.iter().map(Vec::as_ptr).collect(),
+            offs: csr.iter().map(|x| x.0.as_ptr()).collect(),
+            slots: csr.iter().map(|x| x.1.as_ptr()).collect(),
+            counts: counts.iter().map(Vec::as_ptr).collect(),
+            fills: fills.iter().map(|x| x.as_ptr()).collect(),
+            calls: nat.calls.iter().map(|c| &raw const *c).collect(),
+            helpers: jit::helper_table(),
+        }
+    }
+
+    /// The table of a run writing its outputs at `out`.
+    fn args(&self, out: *mut f64) -> jit::JitArgs {
+        jit::JitArgs {
+            cols: self.cols.as_ptr(),
+            gathers: self.gathers.as_ptr(),
+            offs: self.offs.as_ptr(),
+            slots: self.slots.as_ptr(),
+            counts: self.counts.as_ptr(),
+            fills: self.fills.as_ptr(),
+            out,
+            calls: self.calls.as_ptr(),
+            helpers: self.helpers.as_ptr(),
+        }
     }
 }
 

@@ -174,6 +174,18 @@ pub fn compiled_count() -> u64 {
     COMPILED.load(Ordering::Relaxed)
 }
 
+/// Runs of native code that checked and scattered their values chunk by chunk (see
+/// `Plan::run_chunked` in `compiled.rs`), failed ones included, in this process.
+pub(crate) static CHUNKED: AtomicU64 = AtomicU64::new(0);
+
+/// The number of plan runs so far in this process whose native code checked each chunk's
+/// values as soon as the chunk was evaluated and then scattered them chunk by chunk (in
+/// parallel where the plan runs in parallel), failed ones included: what tests check to
+/// know that path ran.
+pub fn chunked_runs() -> u64 {
+    CHUNKED.load(Ordering::Relaxed)
+}
+
 /// Whether compiled plans run native code by default: the environment variable
 /// `TOPOMECH_JIT` (`0`, `false`, `off`, `no`, in any case: off; unset or anything else: on), read once per process.
 ///
