@@ -650,11 +650,28 @@ impl GMap {
         Ok(id)
     }
 
-    /// Fills the slot tables of a new embedding: one slot per orbit.
+    /// Fills the slot tables of a new embedding: one slot per orbit. Where an embedding on
+    /// the same orbit type exists, its slot tables are copied (every embedding holds one slot
+    /// per orbit of its type, so they are the new one's too) instead of walking every orbit:
+    /// embeddings of one orbit type then share their slot numbers, and a map with many
+    /// vertex embeddings builds each after the first at the cost of a copy.
     fn build_embedding(&self, mut e: Embedding) -> Embedding {
         let w = e.ty.width();
         if e.is_direct() {
             for _ in 0..self.capacity() {
+                e.values.push_default(w);
+            }
+            return e;
+        }
+        if let Some(t) = self
+            .embeddings
+            .iter()
+            .find(|t| t.orbit == e.orbit && t.slot_of.len() == self.capacity())
+        {
+            e.slot_of.clone_from(&t.slot_of);
+            e.slot_use.clone_from(&t.slot_use);
+            e.free_slots.clone_from(&t.free_slots);
+            for _ in 0..e.slot_use.len() {
                 e.values.push_default(w);
             }
             return e;

@@ -145,3 +145,69 @@ fn a_local_refresh_of_derived_embeddings_equals_a_full_one() {
         }
     }
 }
+
+/// A new embedding on an orbit type that another embedding already has copies its slot
+/// tables instead of walking every orbit (`GMap::build_embedding`): after faces were unsewn
+/// (vertices split, slots allocated) and a volume's darts were removed (slots freed), the
+/// map is valid, every live dart holds the same slot in both, every value of the new one is
+/// its type's zero, and writing it leaves the first one alone.
+#[test]
+fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid() {
+    use topomech_gmap::{EmbeddingType, Policy, Value};
+    let (mut g, _) = build(
+        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let vertex = OrbitType::vertex(g.dimension());
+    let first = g
+        .add_embedding("first", EmbeddingType::Vec3, vertex, Policy::Mean)
+        .unwrap();
+    for (k, d) in g.orbit_representatives(vertex).into_iter().enumerate() {
+        g.set_value(first, d, &Value::Real(vec![k as f64, 1.0, 2.0]))
+            .unwrap();
+    }
+    // split vertices: unsew a few interior faces
+    for _ in 0..4 {
+        let d = g.darts().find(|&d| !g.is_free(3, d)).unwrap();
+        g.unsew(3, d).unwrap();
+    }
+    // free slots: detach one tetrahedron (each of its darts then is a vertex orbit of its
+    // own, with its own slot) and remove its darts, which frees those slots
+    let vol = OrbitType::parse("<0,1,2>").unwrap();
+    let d0 = g.orbit_representatives(vol)[0];
+    let darts = g.orbit(d0, vol);
+    for &d in &darts {
+        if !g.is_free(3, d) {
+            g.unsew(3, d).unwrap();
+        }
+    }
+    let before = g.embedding(first).n_slots();
+    for &d in &darts {
+        for i in 0..3 {
+            if !g.is_free(i, d) {
+                g.unsew(i, d).unwrap();
+            }
+        }
+    }
+    for &d in &darts {
+        g.remove_dart(d).unwrap();
+    }
+    assert!(g.is_valid(), "{:?}", g.validate());
+    let second = g
+        .add_embedding("second", EmbeddingType::F64, vertex, Policy::Copy)
+        .unwrap();
+    assert!(g.is_valid(), "{:?}", g.validate());
+    let (a, b) = (g.embedding(first), g.embedding(second));
+    assert!(before > 0 && a.n_slots() == b.n_slots());
+    for d in g.darts() {
+        assert_eq!(a.slot(d), b.slot(d), "{d}");
+        assert_eq!(g.real(second, d), &[0.0]);
+    }
+    let snapshot: Vec<f64> = g.embedding(first).real_column().unwrap().to_vec();
+    for d in g.orbit_representatives(vertex) {
+        g.set_value(second, d, &Value::Real(vec![5.0])).unwrap();
+    }
+    assert_eq!(g.embedding(first).real_column().unwrap(), &snapshot[..]);
+    assert!(g.is_valid());
+}
