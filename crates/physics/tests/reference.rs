@@ -546,6 +546,53 @@ fn linear_fem_and_mass_tensor_match_the_flat_reference() {
     }
 }
 
+/// The mass-tensor step reads one tensor per edge, the hook end's, and takes the other end's as
+/// its transpose (`mass_tensor_edges` in fem3d.tmr): that holds because the element stiffness
+/// is symmetric, so the cumulated tensor at the end j of an edge is K_ji = K_ij^T. Checked on
+/// every edge of the beam, relative to the largest entry: the two ends are summed over the
+/// same tetrahedra, maybe in another order, so they agree to rounding (a few ulps), far below
+/// the 1e-12 asked (the flat reference above then checks the forces themselves). On a box of
+/// 4 x 3 x 2 cells (144 tetrahedra, interior edges shared by up to 6 of them).
+#[test]
+fn mass_tensor_edge_tensors_are_transposes_of_each_other() {
+    use topomech_gmap::OrbitType;
+    let mesh = cuboid([4, 3, 2], [2.0, 1.5, 1.0], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![ModelSpec {
+            kind: "mass_tensor".into(),
+            params: HashMap::default(),
+        }],
+        young: 1e6,
+        poisson: 0.3,
+        ..Config::default()
+    };
+    let sim = Simulation::new(g, cfg).unwrap();
+    let g = sim.gmap();
+    let id = g.require("t_edge_cum").unwrap();
+    let m = |d| -> M3 {
+        let v = g.real(id, d);
+        [[v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]]
+    };
+    let reps = g.orbit_representatives(OrbitType::edge(3));
+    assert!(reps.len() > 50);
+    let scale = reps
+        .iter()
+        .flat_map(|&d| g.real(id, d).to_vec())
+        .fold(0.0f64, |a, x| a.max(x.abs()));
+    assert!(scale > 0.0);
+    for d in reps {
+        let (kij, kji) = (m(d), m(g.alpha(0, d)));
+        let t = m_t(&kij);
+        for r in 0..3 {
+            for c in 0..3 {
+                let e = (kji[r][c] - t[r][c]).abs() / scale;
+                assert!(e < 1e-12, "edge at {d}: K_ji - K_ij^T = {e:e} relative");
+            }
+        }
+    }
+}
+
 #[test]
 fn corotational_matches_the_flat_reference() {
     let mesh = beam();

@@ -207,6 +207,12 @@ fn mv(m: &M3, v: V3) -> V3 {
     [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
 }
 
+/// `m^T v`.
+fn mtv(m: &M3, v: V3) -> V3 {
+    let col = |c: usize| [m[0][c], m[1][c], m[2][c]];
+    [dot(col(0), v), dot(col(1), v), dot(col(2), v)]
+}
+
 // ------------------------------------------------------------------------------------ cloth
 
 /// Cumulated stretch springs: one spring per edge.
@@ -422,8 +428,8 @@ pub struct MassTensor {
     t_vertex: Vec<M3>,
     /// Edges `(i, j)`.
     edges: Vec<[u32; 2]>,
-    /// Cumulated edge tensors `(K_ij, K_ji)`.
-    t_edge: Vec<[M3; 2]>,
+    /// Cumulated edge tensors `K_ij` (`K_ji = K_ij^T`: the element stiffness is symmetric).
+    t_edge: Vec<M3>,
 }
 
 impl MassTensor {
@@ -443,7 +449,7 @@ impl MassTensor {
             // the edge-end at i stores K_ij: the force on i from the displacement of j
             let e = g.alpha(0, d);
             edges.push([label[d.index()], label[e.index()]]);
-            t_edge.push([m3(read(g, "t_edge_cum", d)), m3(read(g, "t_edge_cum", e))]);
+            t_edge.push(m3(read(g, "t_edge_cum", d)));
         }
         let s = State::from_sim(sim);
         MassTensor {
@@ -469,10 +475,10 @@ impl MassTensor {
             *f = [-k[0], -k[1], -k[2]];
         }
         let (u, f) = (&self.u, &mut s.f);
-        for (&[i, j], [kij, kji]) in self.edges.iter().zip(&self.t_edge) {
+        for (&[i, j], kij) in self.edges.iter().zip(&self.t_edge) {
             let (i, j) = (i as usize, j as usize);
             let fi = mv(kij, u[j]);
-            let fj = mv(kji, u[i]);
+            let fj = mtv(kij, u[i]);
             for r in 0..3 {
                 f[i][r] -= fi[r];
                 f[j][r] -= fj[r];
@@ -490,15 +496,15 @@ impl Baseline for MassTensor {
         &self.s.x
     }
     fn memory_bytes(&self) -> usize {
-        self.s.memory_bytes() + self.u.len() * (24 + 72) + self.edges.len() * (8 + 144)
+        self.s.memory_bytes() + self.u.len() * (24 + 72) + self.edges.len() * (8 + 72)
     }
     /// Per vertex: the rest position and the vertex tensor read, u written and read (144 B);
-    /// u (3), K_ii u (15), its negation (3). Per edge: its vertex numbers and two tensors
-    /// (152 B); two products (30) and the two updates (6).
+    /// u (3), K_ii u (15), its negation (3). Per edge: its vertex numbers and one tensor
+    /// (80 B); two products (30) and the two updates (6).
     fn work(&self) -> Work {
         let (n, e) = (self.u.len() as f64, self.edges.len() as f64);
         self.s.work().add(Work {
-            bytes: n * 144.0 + e * 152.0,
+            bytes: n * 144.0 + e * 80.0,
             flops: n * 21.0 + e * 36.0,
             sqrt_div: 0.0,
         })
