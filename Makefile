@@ -109,7 +109,7 @@ demo: $(DEVELOP_STAMP)
 # timed yet); the engine bench skips, and records as skipped, a size that the
 # previous one predicts over its budget (TOPOMECH_BENCH_* variables: crates/physics/benches/engine.rs).
 bench:
-	set -o pipefail; $(CARGO) bench -p topomech-gmap | tee bench/kernel.txt
+	set -o pipefail; $(CARGO) bench -p topomech-gmap --bench kernel | tee bench/kernel.txt
 	set -o pipefail; $(CARGO) bench -p topomech-physics --bench topology | tee bench/topology.txt
 	$(CARGO) bench -p topomech-physics --bench cut_scaling
 	@$(MAKE) --no-print-directory $(VENV_STAMP)

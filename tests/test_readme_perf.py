@@ -75,7 +75,9 @@ def test_a_bench_output_replaces_its_section_once_written(tmp_path: Path) -> Non
     new = perf.rewrite(readme, _results(), tmp_path)
     kernel = new.split("<!-- perf-kernel:begin -->\n")[1].split("<!-- perf-kernel:end -->")[0]
     assert kernel == perf.raw_section(
-        "kernel benchmark: box of 8 tetrahedra\n", "kernel.txt", "cargo bench -p topomech-gmap"
+        "kernel benchmark: box of 8 tetrahedra\n",
+        "kernel.txt",
+        "cargo bench -p topomech-gmap --bench kernel",
     )
     assert "```text\nkernel benchmark: box of 8 tetrahedra\n```" in kernel
     begin, end = "<!-- perf-topology:begin -->", "<!-- perf-topology:end -->"

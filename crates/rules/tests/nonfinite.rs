@@ -61,8 +61,13 @@ fn snapshot(g: &GMap) -> (usize, Vec<Vec<u64>>) {
 }
 
 fn setup(compiled: bool) -> (GMap, RuleSet) {
+    setup_on([4, 2], [1.0, 0.5], compiled)
+}
+
+/// A quad grid of `cells` over `size`, with the rules loaded and their embeddings created.
+fn setup_on(cells: [usize; 2], size: [f64; 2], compiled: bool) -> (GMap, RuleSet) {
     let (mut g, _) = build(
-        &grid([4, 2], [1.0, 0.5], GridElement::Quad),
+        &grid(cells, size, GridElement::Quad),
         &BuildOptions::default(),
     )
     .unwrap();
@@ -143,15 +148,8 @@ fn apply_everywhere_refuses_a_non_finite_write_and_writes_nothing() {
 /// finite application goes through the same path and writes every vertex.
 #[test]
 fn a_failure_in_any_chunk_writes_nothing() {
-    let (mut g, _) = build(
-        &grid([120, 60], [12.0, 6.0], GridElement::Quad),
-        &BuildOptions::default(),
-    )
-    .unwrap();
-    let (mut rules, _) =
-        load_sources(&[("nonfinite.tmr".to_string(), SOURCE.to_string())]).unwrap();
+    let (mut g, mut rules) = setup_on([120, 60], [12.0, 6.0], true);
     rules.set_jit(true);
-    rules.prepare_named(&mut g, &["velocity"]).unwrap();
     for threads in [1, 3] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
