@@ -282,9 +282,10 @@ def engine_sections(res: dict[str, Any]) -> list[str]:
     )
     out.append("")
     out.append(
-        "Engine: the G-map's `memory_bytes()` (alpha links and liveness; for every embedding a "
-        "4-byte slot index per dart unless it lives on `<>`, its value column, and slot use "
-        "counts, free lists and spare vector capacity as `other`). Baseline: its flat arrays "
+        "Engine: the G-map's `memory_bytes()` (alpha links and liveness; the dart-to-slot "
+        "tables, 4 bytes per dart, one per orbit type while its embeddings share it (none for "
+        "`<>`); every embedding's value column, and slot use counts, free lists and spare "
+        "vector capacity as `other`). Baseline: its flat arrays "
         "(positions, velocities, forces, rest positions, 1/mass, fixed flags, element or edge "
         "data)."
     )

@@ -11,6 +11,7 @@
 //! [`GMap::refresh_derived`](crate::GMap::refresh_derived), never written.
 
 use std::fmt;
+use std::sync::Arc;
 
 use crate::{Dart, OrbitType};
 
@@ -348,8 +349,11 @@ pub struct Embedding {
     pub(crate) orbit: OrbitType,
     pub(crate) policy: Policy,
     pub(crate) derived: Option<Derived>,
-    /// dart -> slot, for orbits other than `<>` (empty for `<>`).
-    pub(crate) slot_of: Vec<u32>,
+    /// dart -> slot, for orbits other than `<>` (empty for `<>`). Shared, copy on write,
+    /// between the embeddings of one orbit type that hold the same table (an embedding
+    /// declared on an orbit type another one has starts with that one's table:
+    /// `GMap::build_embedding`); the first change to one of them gives it its own.
+    pub(crate) slot_of: Arc<Vec<u32>>,
     /// slot -> number of darts using it (empty for `<>`).
     pub(crate) slot_use: Vec<u32>,
     pub(crate) free_slots: Vec<u32>,
@@ -374,7 +378,7 @@ impl Embedding {
             orbit,
             policy,
             derived,
-            slot_of: Vec::new(),
+            slot_of: Arc::default(),
             slot_use: Vec::new(),
             free_slots: Vec::new(),
             values: Column::new(ty),
@@ -456,14 +460,29 @@ impl Embedding {
         }
     }
 
-    /// Bytes of storage this embedding uses.
+    /// Bytes of storage this embedding uses, its dart-to-slot table included whole, even
+    /// where it shares that table with other embeddings of its orbit type
+    /// ([`Embedding::slot_table_bytes`]; [`crate::GMap::memory_bytes`] counts a shared table
+    /// once).
     pub fn memory_bytes(&self) -> usize {
         let col = match &self.values {
             Column::Real(v) => v.capacity() * 8,
             Column::Int(v) => v.capacity() * 8,
             Column::Bool(v) => v.capacity(),
         };
-        col + (self.slot_of.capacity() + self.slot_use.capacity() + self.free_slots.capacity()) * 4
+        col + self.slot_table_bytes() + (self.slot_use.capacity() + self.free_slots.capacity()) * 4
+    }
+
+    /// Bytes of the dart-to-slot table (4 per dart; none for `<>`), which embeddings of one
+    /// orbit type share while their slots stay the same.
+    pub fn slot_table_bytes(&self) -> usize {
+        self.slot_of.capacity() * 4
+    }
+
+    /// Whether this embedding and `other` share one dart-to-slot table (then both hold the
+    /// same slot for every dart).
+    pub fn shares_slot_table(&self, other: &Embedding) -> bool {
+        !self.is_direct() && Arc::ptr_eq(&self.slot_of, &other.slot_of)
     }
 
     /// A new slot with a default value and the given use count.

@@ -5,6 +5,7 @@ use crate::embedding::{
 };
 use crate::marks::{with_marks, Marks};
 use crate::{Aggregate, Dart, EmbeddingError, GMapError, LinkError, OrbitType};
+use std::sync::Arc;
 
 /// Largest number of darts a map holds (indices are `u32`).
 pub const MAX_DARTS: usize = u32::MAX as usize - 1;
@@ -278,7 +279,7 @@ impl GMap {
                     }
                 } else {
                     let s = e.alloc_slot(1);
-                    e.slot_of[iu] = s;
+                    Arc::make_mut(&mut e.slot_of)[iu] = s;
                 }
             }
             Dart(i)
@@ -309,11 +310,13 @@ impl GMap {
                     e.values.push_default(w);
                 }
             } else {
-                e.slot_of.reserve(k);
+                let mut table = std::mem::take(&mut e.slot_of);
+                let t = Arc::make_mut(&mut table);
+                t.reserve(k);
                 for _ in 0..k {
-                    let s = e.alloc_slot(1);
-                    e.slot_of.push(s);
+                    t.push(e.alloc_slot(1));
                 }
+                e.slot_of = table;
             }
         }
         Dart(first as u32)
@@ -535,14 +538,31 @@ impl GMap {
             + self.free_darts.capacity() * 4
     }
 
-    /// Bytes used by the topology and every embedding.
+    /// Bytes used by the topology and every embedding, a dart-to-slot table shared by
+    /// several embeddings counted once.
     pub fn memory_bytes(&self) -> usize {
         self.topology_bytes()
             + self
                 .embeddings
                 .iter()
-                .map(Embedding::memory_bytes)
+                .map(|e| e.memory_bytes() - e.slot_table_bytes())
                 .sum::<usize>()
+            + self.slot_table_bytes()
+    }
+
+    /// Bytes of the embeddings' dart-to-slot tables (4 per dart and table), each table
+    /// shared by several embeddings of one orbit type counted once.
+    pub fn slot_table_bytes(&self) -> usize {
+        let mut seen: Vec<*const Vec<u32>> = Vec::new();
+        let mut bytes = 0;
+        for e in &self.embeddings {
+            let p = Arc::as_ptr(&e.slot_of);
+            if !seen.contains(&p) {
+                seen.push(p);
+                bytes += e.slot_table_bytes();
+            }
+        }
+        bytes
     }
 
     // ---------------------------------------------------------------- embeddings
@@ -651,10 +671,10 @@ impl GMap {
     }
 
     /// Fills the slot tables of a new embedding: one slot per orbit. Where an embedding on
-    /// the same orbit type exists, its slot tables are copied (every embedding holds one slot
-    /// per orbit of its type, so they are the new one's too) instead of walking every orbit:
-    /// embeddings of one orbit type then share their slot numbers, and a map with many
-    /// vertex embeddings builds each after the first at the cost of a copy.
+    /// the same orbit type exists, the new one shares its dart-to-slot table (copy on write)
+    /// and copies its use counts and free list (every embedding holds one slot per orbit of
+    /// its type, so they are the new one's too) instead of walking every orbit: the
+    /// embeddings of one orbit type then hold one table until a change gives one its own.
     fn build_embedding(&self, mut e: Embedding) -> Embedding {
         let w = e.ty.width();
         if e.is_direct() {
@@ -668,7 +688,7 @@ impl GMap {
             .iter()
             .find(|t| t.orbit == e.orbit && t.slot_of.len() == self.capacity())
         {
-            e.slot_of.clone_from(&t.slot_of);
+            e.slot_of = Arc::clone(&t.slot_of);
             e.slot_use.clone_from(&t.slot_use);
             e.free_slots.clone_from(&t.free_slots);
             for _ in 0..e.slot_use.len() {
@@ -676,25 +696,26 @@ impl GMap {
             }
             return e;
         }
-        e.slot_of = vec![u32::MAX; self.capacity()];
+        let mut slot_of = vec![u32::MAX; self.capacity()];
         let mut m = Marks::with_capacity(self.capacity());
         for d in self.darts() {
             if !m.is_marked(d) {
                 let s = e.alloc_slot(0);
                 let mut k = 0;
                 self.visit_orbit(d, e.orbit, &mut m, |x| {
-                    e.slot_of[x.index()] = s;
+                    slot_of[x.index()] = s;
                     k += 1;
                 });
                 e.slot_use[s as usize] = k;
             }
         }
         // Removed darts point at slot 0 (never read); keep the table dense.
-        for s in &mut e.slot_of {
+        for s in &mut slot_of {
             if *s == u32::MAX {
                 *s = 0;
             }
         }
+        e.slot_of = Arc::new(slot_of);
         e
     }
 

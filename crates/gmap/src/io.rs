@@ -115,7 +115,7 @@ pub fn to_bytes(g: &GMap) -> Vec<u8> {
         }
         put_u32(&mut w, e.n_slots() as u32);
         if !e.is_direct() {
-            for &s in &e.slot_of {
+            for &s in e.slot_of.iter() {
                 put_u32(&mut w, s);
             }
         }
@@ -323,7 +323,7 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
                 )));
             }
         } else {
-            e.slot_of.reserve(cap);
+            let mut table = Vec::with_capacity(cap);
             e.slot_use = vec![0; n_slots];
             for d in 0..cap {
                 let s = r.u32()?;
@@ -335,8 +335,18 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
                 if g.alive[d] {
                     e.slot_use[s as usize] += 1;
                 }
-                e.slot_of.push(s);
+                table.push(s);
             }
+            // one table for the embeddings of an orbit type that hold the same slots, as
+            // when they were declared (`GMap::build_embedding`)
+            e.slot_of = g
+                .embeddings
+                .iter()
+                .find(|t| t.orbit == e.orbit && *t.slot_of == table)
+                .map_or_else(
+                    || std::sync::Arc::new(table),
+                    |t| std::sync::Arc::clone(&t.slot_of),
+                );
             e.free_slots = (0..n_slots as u32)
                 .rev()
                 .filter(|&s| e.slot_use[s as usize] == 0)

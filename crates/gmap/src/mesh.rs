@@ -1061,7 +1061,7 @@ pub fn build(mesh: &Mesh, opts: &BuildOptions) -> Result<(GMap, BuildReport), Me
     }
     // the vertex orbits are the slots of `position` (numbered by smallest dart): the other
     // vertex embeddings share that table instead of walking the orbits again
-    let labels = e.slot_of.clone();
+    let labels = std::sync::Arc::clone(&e.slot_of);
     let n_orbits = e.slot_use.len();
     let particle_of_slot = particles(
         &labels,
@@ -1091,18 +1091,30 @@ pub fn build(mesh: &Mesh, opts: &BuildOptions) -> Result<(GMap, BuildReport), Me
         cell_slot[a..b].fill(k as u32);
     }
     let cell_of_slot = ids.iter().map(|&c| c as i64).collect();
-    push_int(&mut g, "cell_id", element, cell_slot, cell_of_slot);
+    push_int(
+        &mut g,
+        "cell_id",
+        element,
+        std::sync::Arc::new(cell_slot),
+        cell_of_slot,
+    );
     Ok((g, report))
 }
 
 /// Declares an i64 embedding (policy copy) on `orbit` whose orbits are already numbered:
 /// dart `d` is on orbit `slot_of[d]`, whose value is `values[slot_of[d]]`.
-fn push_int(g: &mut GMap, name: &str, orbit: OrbitType, slot_of: Vec<u32>, values: Vec<i64>) {
+fn push_int(
+    g: &mut GMap,
+    name: &str,
+    orbit: OrbitType,
+    slot_of: std::sync::Arc<Vec<u32>>,
+    values: Vec<i64>,
+) {
     debug_assert!(g.embedding_id(name).is_none());
     let mut e =
         crate::embedding::Embedding::new(name, EmbeddingType::I64, orbit, Policy::Copy, None);
     let mut slot_use = vec![0u32; values.len()];
-    for &s in &slot_of {
+    for &s in slot_of.iter() {
         slot_use[s as usize] += 1;
     }
     e.slot_of = slot_of;

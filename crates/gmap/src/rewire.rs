@@ -10,6 +10,8 @@
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
+use std::sync::Arc;
+
 use crate::embedding::{Column, ColumnRef, EmbeddingType, Policy, Value};
 use crate::marks::{with_marks, Marks};
 use crate::{Dart, GMap, LinkError, OrbitType};
@@ -483,7 +485,7 @@ impl GMap {
                         emptied.push(s);
                     }
                     e.slot_use[target] += 1;
-                    e.slot_of[d.index()] = target as u32;
+                    Arc::make_mut(&mut e.slot_of)[d.index()] = target as u32;
                 }
             }
         }

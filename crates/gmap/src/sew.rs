@@ -18,6 +18,8 @@
 //! policy would merge two different values, or split, the operation is refused and the map
 //! is left as it was.
 
+use std::sync::Arc;
+
 use crate::embedding::Policy;
 use crate::marks::Marks;
 use crate::{Dart, GMap, OrbitType, SewError};
@@ -221,7 +223,9 @@ impl GMap {
                     if e.slot_of[d.index()] != target as u32 {
                         crate::gmap::note(&mut self.log, self.version, d.0, cap);
                     }
-                    e.slot_of[d.index()] = target as u32;
+                    if e.slot_of[d.index()] != target as u32 {
+                        Arc::make_mut(&mut e.slot_of)[d.index()] = target as u32;
+                    }
                 }
             }
         }
@@ -275,7 +279,7 @@ impl GMap {
                     let ns = e.alloc_slot(part.len() as u32) as usize;
                     e.values.copy_slot(w, s, ns);
                     for d in part {
-                        e.slot_of[d.index()] = ns as u32;
+                        Arc::make_mut(&mut e.slot_of)[d.index()] = ns as u32;
                         crate::gmap::note(&mut self.log, self.version, d.0, cap);
                     }
                     new_slots.push(ns);

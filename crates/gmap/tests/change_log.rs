@@ -146,13 +146,15 @@ fn a_local_refresh_of_derived_embeddings_equals_a_full_one() {
     }
 }
 
-/// A new embedding on an orbit type that another embedding already has copies its slot
-/// tables instead of walking every orbit (`GMap::build_embedding`): after faces were unsewn
-/// (vertices split, slots allocated) and a volume's darts were removed (slots freed), the
-/// map is valid, every live dart holds the same slot in both, every value of the new one is
-/// its type's zero, and writing it leaves the first one alone.
+/// A new embedding on an orbit type that another embedding already has shares its
+/// dart-to-slot table (copy on write, `GMap::build_embedding`) and counts it once in
+/// `memory_bytes`; after faces were unsewn (vertices split, slots allocated) and a volume's
+/// darts were removed (slots freed), the map is valid, every live dart holds the same slot in
+/// every embedding of the orbit type, a new one declared then is zero everywhere, and writing
+/// it leaves the others alone; a map written and read back shares its equal tables again.
 #[test]
 fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid() {
+    use topomech_gmap::io::{from_bytes, to_bytes};
     use topomech_gmap::{EmbeddingType, Policy, Value};
     let (mut g, _) = build(
         &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
@@ -160,9 +162,21 @@ fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid
     )
     .unwrap();
     let vertex = OrbitType::vertex(g.dimension());
+    let pos = g.require("position").unwrap();
     let first = g
         .add_embedding("first", EmbeddingType::Vec3, vertex, Policy::Mean)
         .unwrap();
+    assert!(g.embedding(first).shares_slot_table(g.embedding(pos)));
+    // a third vertex embedding costs its values and use counts, not another table
+    let before = g.memory_bytes();
+    let third = g
+        .add_embedding("third", EmbeddingType::F64, vertex, Policy::Sum)
+        .unwrap();
+    let grew = g.memory_bytes() - before;
+    assert!(
+        grew < g.embedding(third).memory_bytes() - g.embedding(third).slot_table_bytes() + 64,
+        "grew by {grew}: the shared table was counted again"
+    );
     for (k, d) in g.orbit_representatives(vertex).into_iter().enumerate() {
         g.set_value(first, d, &Value::Real(vec![k as f64, 1.0, 2.0]))
             .unwrap();
@@ -172,19 +186,19 @@ fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid
         let d = g.darts().find(|&d| !g.is_free(3, d)).unwrap();
         g.unsew(3, d).unwrap();
     }
+    assert!(g.is_valid(), "{:?}", g.validate());
+    let same = |g: &GMap, a, b| {
+        g.darts()
+            .all(|d| g.embedding(a).slot(d) == g.embedding(b).slot(d))
+    };
+    assert!(same(&g, first, pos) && same(&g, third, pos));
     // free slots: detach one tetrahedron (each of its darts then is a vertex orbit of its
     // own, with its own slot) and remove its darts, which frees those slots
     let vol = OrbitType::parse("<0,1,2>").unwrap();
     let d0 = g.orbit_representatives(vol)[0];
     let darts = g.orbit(d0, vol);
     for &d in &darts {
-        if !g.is_free(3, d) {
-            g.unsew(3, d).unwrap();
-        }
-    }
-    let before = g.embedding(first).n_slots();
-    for &d in &darts {
-        for i in 0..3 {
+        for i in 0..4 {
             if !g.is_free(i, d) {
                 g.unsew(i, d).unwrap();
             }
@@ -198,10 +212,9 @@ fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid
         .add_embedding("second", EmbeddingType::F64, vertex, Policy::Copy)
         .unwrap();
     assert!(g.is_valid(), "{:?}", g.validate());
-    let (a, b) = (g.embedding(first), g.embedding(second));
-    assert!(before > 0 && a.n_slots() == b.n_slots());
+    assert!(same(&g, second, first) && same(&g, first, pos));
+    assert_eq!(g.embedding(second).n_slots(), g.embedding(first).n_slots());
     for d in g.darts() {
-        assert_eq!(a.slot(d), b.slot(d), "{d}");
         assert_eq!(g.real(second, d), &[0.0]);
     }
     let snapshot: Vec<f64> = g.embedding(first).real_column().unwrap().to_vec();
@@ -210,4 +223,15 @@ fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid
     }
     assert_eq!(g.embedding(first).real_column().unwrap(), &snapshot[..]);
     assert!(g.is_valid());
+    // written and read back: the equal tables are one again
+    let h = from_bytes(&to_bytes(&g)).unwrap();
+    let (p2, f2, s2) = (
+        h.require("position").unwrap(),
+        h.require("first").unwrap(),
+        h.require("second").unwrap(),
+    );
+    assert!(h.embedding(f2).shares_slot_table(h.embedding(p2)));
+    assert!(h.embedding(s2).shares_slot_table(h.embedding(p2)));
+    assert!(h.is_valid());
+    assert!(h.memory_bytes() < g.memory_bytes());
 }

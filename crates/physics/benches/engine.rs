@@ -359,30 +359,27 @@ fn batch_for(step_s: f64, cap: usize) -> usize {
 // ------------------------------------------------------------------------------ memory
 
 /// The map's memory per element, split into topology (alpha links, liveness), embedding slot
-/// indices (4 bytes per dart and embedding not on `<>`), embedding values, and the rest (slot
-/// use counts, free lists, spare vector capacity); the largest embeddings; the baseline's.
+/// indices (the dart-to-slot tables, 4 bytes per dart, each table shared by the embeddings of
+/// one orbit type counted once), embedding values, and the rest (slot use counts, free lists,
+/// spare vector capacity); the largest embeddings (their own storage, without the shared
+/// tables); the baseline's.
 fn memory(sim: &Simulation, base: &dyn Baseline, elements: usize) -> J {
     let g = sim.gmap();
     let topo = g.topology_bytes();
     let total = g.memory_bytes();
-    let (mut index, mut values, mut other) = (0usize, 0usize, 0usize);
+    let index = g.slot_table_bytes();
+    let (mut values, mut other) = (0usize, 0usize);
     let mut per: Vec<(String, String, usize, usize)> = Vec::new();
     for e in g.embeddings() {
-        let bytes = e.memory_bytes();
+        let bytes = e.memory_bytes() - e.slot_table_bytes();
         let v = match e.ty() {
             EmbeddingType::Bool => e.n_slots(),
             EmbeddingType::I64 => e.n_slots() * 8,
             t => e.n_slots() * t.width() * 8,
         }
         .min(bytes);
-        let i = if e.orbit().is_empty() {
-            0
-        } else {
-            (g.capacity() * 4).min(bytes - v)
-        };
-        index += i;
         values += v;
-        other += bytes - v - i;
+        other += bytes - v;
         per.push((e.name().to_string(), e.orbit().to_string(), bytes, v));
     }
     per.sort_by_key(|p| std::cmp::Reverse(p.2));
