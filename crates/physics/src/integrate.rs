@@ -39,6 +39,11 @@ impl Simulation {
                 Some(self.vertex_of(*dart, pos)),
                 format!("rule '{rule}' computed a non-finite value {value} for '{embedding}' (dart {dart})"),
             )),
+            // a built-in refusing its argument (a non-finite matrix for `polar`, ...): its
+            // dart names the vertex too
+            Err(PhysicsError::Apply(e @ ApplyError::Eval { dart, .. })) => {
+                Some((Some(self.vertex_of(*dart, pos)), e.to_string()))
+            }
             Err(e) => Some((None, e.to_string())),
             // every slot scanned in order first (dead slots included: they hold old, finite
             // values), the vertices searched one by one only to name the one that fails
@@ -48,8 +53,9 @@ impl Simulation {
                 if p.iter().chain(u).any(|x| !x.is_finite()) {
                     return Some((Some(v), "non-finite position or velocity".to_string()));
                 }
-                // runaway: a vertex crossing more than the whole object in one step
-                let step = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt() * self.cfg.dt;
+                // runaway: a vertex crossing more than the whole object in one step (the
+                // speed scaled first, so that its square does not overflow)
+                let step = speed(u) * self.cfg.dt;
                 (step > self.size).then(|| {
                     (Some(v), format!("runaway motion: the vertex moved {step:.3e} in one step, more than the object's size {:.3e}", self.size))
                 })
@@ -249,4 +255,15 @@ impl Simulation {
     pub fn set_jit(&mut self, on: bool) {
         self.rules.set_jit(on);
     }
+}
+
+/// `|u|` of a vec3, scaled by its largest component first so that no square overflows or
+/// underflows (`sqrt(u . u)` is infinite for components above about 1.3e154).
+pub(crate) fn speed(u: &[f64]) -> f64 {
+    let m = u[0].abs().max(u[1].abs()).max(u[2].abs());
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    let (a, b, c) = (u[0] / m, u[1] / m, u[2] / m);
+    m * (a * a + b * b + c * c).sqrt()
 }

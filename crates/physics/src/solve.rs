@@ -273,7 +273,8 @@ impl Simulation {
     /// first still takes the step with the solution it found; the report says
     /// `converged: false`. Errors: [`PhysicsError::Diverged`] (no vertex: the solve is global)
     /// when the matrix is not positive definite for conjugate gradients, or singular for
-    /// the direct solver; a rule's failure.
+    /// the direct solver; (naming the vertex of the largest right-hand side) when the solve
+    /// has no finite residual or solution (a norm that overflows f64); a rule's failure.
     pub(crate) fn implicit_euler(&mut self) -> Result<(), PhysicsError> {
         let h = self.cfg.dt;
         let c = self.cfg.damping;
@@ -357,6 +358,22 @@ impl Simulation {
             }
             out
         };
+        // a norm that overflows (a load or a velocity whose square is beyond f64) leaves the
+        // solve without a finite residual: no step is taken with it
+        if !solve.relative.is_finite() || solve.x.iter().flatten().any(|x| !x.is_finite()) {
+            let vertex = (0..rhs.len()).max_by(|&a, &b| {
+                let size = |k: usize| crate::integrate::speed(&rhs[k]);
+                size(a).total_cmp(&size(b))
+            });
+            return Err(PhysicsError::Diverged {
+                step: self.steps + 1,
+                vertex,
+                why: format!(
+                    "the implicit step's linear solve has no finite result (relative residual {:e}): the forces or velocities are beyond what f64 arithmetic can solve for (the largest at this vertex); scale the problem (units) or the load down, or take a smaller dt",
+                    solve.relative
+                ),
+            });
+        }
         let converged = solve.relative <= tol;
         let (linear_solver, preconditioner) = self.solver_names(choice);
         self.record(SolverReport {
