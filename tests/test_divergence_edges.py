@@ -1,7 +1,7 @@
 """Edges of the divergence test of a step (found by QA): a load whose square overflows is a
 divergence for implicit Euler's iterative solvers too (not a step taken with a NaN residual);
 a fast vertex over a tiny time step is no runaway when its motion is small (the speed is
-scaled before it is squared); a built-in refusing a non-finite argument (``polar``) names a
+computed without overflow); a built-in refusing a non-finite argument (``polar``) names a
 vertex like a non-finite value does."""
 
 from __future__ import annotations

@@ -9,7 +9,6 @@
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
-
 use std::sync::Arc;
 
 use crate::embedding::{Column, ColumnRef, EmbeddingType, Policy, Value};

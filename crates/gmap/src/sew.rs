@@ -222,8 +222,6 @@ impl GMap {
                 for d in darts {
                     if e.slot_of[d.index()] != target as u32 {
                         crate::gmap::note(&mut self.log, self.version, d.0, cap);
-                    }
-                    if e.slot_of[d.index()] != target as u32 {
                         Arc::make_mut(&mut e.slot_of)[d.index()] = target as u32;
                     }
                 }

@@ -3,7 +3,7 @@
 use topomech_gmap::{ColumnMut, Dart, EmbeddingId, GMap};
 use topomech_rules::{ApplyError, Params, Val};
 
-use crate::{Integrator, PhysicsError, Simulation};
+use crate::{norm3, Integrator, PhysicsError, Simulation};
 
 impl Simulation {
     /// One time step: forces, accumulation, integration. On divergence (a non-finite
@@ -54,8 +54,8 @@ impl Simulation {
                     return Some((Some(v), "non-finite position or velocity".to_string()));
                 }
                 // runaway: a vertex crossing more than the whole object in one step (the
-                // speed scaled first, so that its square does not overflow)
-                let step = speed(u) * self.cfg.dt;
+                // speed without overflow: `norm3`)
+                let step = norm3([u[0], u[1], u[2]]) * self.cfg.dt;
                 (step > self.size).then(|| {
                     (Some(v), format!("runaway motion: the vertex moved {step:.3e} in one step, more than the object's size {:.3e}", self.size))
                 })
@@ -255,15 +255,4 @@ impl Simulation {
     pub fn set_jit(&mut self, on: bool) {
         self.rules.set_jit(on);
     }
-}
-
-/// `|u|` of a vec3, scaled by its largest component first so that no square overflows or
-/// underflows (`sqrt(u . u)` is infinite for components above about 1.3e154).
-pub(crate) fn speed(u: &[f64]) -> f64 {
-    let m = u[0].abs().max(u[1].abs()).max(u[2].abs());
-    if m == 0.0 || !m.is_finite() {
-        return m;
-    }
-    let (a, b, c) = (u[0] / m, u[1] / m, u[2] / m);
-    m * (a * a + b * b + c * c).sqrt()
 }

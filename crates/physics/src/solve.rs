@@ -361,10 +361,7 @@ impl Simulation {
         // a norm that overflows (a load or a velocity whose square is beyond f64) leaves the
         // solve without a finite residual: no step is taken with it
         if !solve.relative.is_finite() || solve.x.iter().flatten().any(|x| !x.is_finite()) {
-            let vertex = (0..rhs.len()).max_by(|&a, &b| {
-                let size = |k: usize| crate::integrate::speed(&rhs[k]);
-                size(a).total_cmp(&size(b))
-            });
+            let vertex = (0..rhs.len()).max_by(|&a, &b| norm3(rhs[a]).total_cmp(&norm3(rhs[b])));
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
                 vertex,

@@ -977,8 +977,9 @@ pub(crate) struct Plan {
     writes: Vec<Vec<(u32, u32)>>,
     /// Where the plan may scatter its values chunk by chunk in parallel (see
     /// [`Plan::run_chunked`]): per write, where the targets of chunk `c` start in its
-    /// targets (sorted by row), `c = 0..=chunks`. `None` where it may not.
-    chunk_starts: Option<Vec<Vec<u32>>>,
+    /// targets (sorted by row), `c = 0..=chunks`, and the slots its column must hold (one
+    /// past its largest target). `None` where it may not.
+    chunk_starts: Option<(Vec<Vec<u32>>, Vec<usize>)>,
 }
 
 /// A plan being built from batches of matches (see [`Plan::builder`]).
@@ -1573,7 +1574,7 @@ impl Plan {
     /// Whether the chunks' values may be scattered chunk by chunk in parallel, and where each
     /// write's targets of each chunk start (see [`Plan::chunk_starts`]): where every slot is
     /// written once (no duplicate writes to compare), so that no two chunks write one value.
-    fn chunk_starts(&mut self) -> Option<Vec<Vec<u32>>> {
+    fn chunk_starts(&mut self) -> Option<(Vec<Vec<u32>>, Vec<usize>)> {
         if self.prog.guard || !self.dups.is_empty() || self.rows == 0 {
             return None;
         }
@@ -1583,16 +1584,22 @@ impl Plan {
             }
         }
         let chunks = self.rows.div_ceil(self.chunk);
-        Some(
-            self.targets
-                .iter()
-                .map(|(t, _)| {
-                    (0..=chunks)
-                        .map(|c| t.partition_point(|&(r, _)| (r as usize) < c * self.chunk) as u32)
-                        .collect()
-                })
-                .collect(),
-        )
+        let starts = self
+            .targets
+            .iter()
+            .map(|(t, _)| {
+                (0..=chunks)
+                    .map(|c| t.partition_point(|&(r, _)| (r as usize) < c * self.chunk) as u32)
+                    .collect()
+            })
+            .collect();
+        // per write, the slots its column must hold: one past its largest target
+        let slots = self
+            .targets
+            .iter()
+            .map(|(t, _)| t.iter().map(|&(_, s)| s as usize + 1).max().unwrap_or(0))
+            .collect();
+        Some((starts, slots))
     }
 
     /// A run of the native code that checks each chunk's values finite as soon as the chunk
@@ -1692,17 +1699,16 @@ impl Plan {
             .collect();
         // every target slot lies inside its column (the map may have changed since the
         // plan was built without the plan noticing: then the slow path reports it)
-        for (w, (t, _)) in self.targets.iter().enumerate() {
+        let (starts, slots) = self.chunk_starts.as_ref().expect("checked above");
+        for (w, &n) in slots.iter().enumerate() {
             let width = self.prog.regs[self.prog.writes[w].2].width;
-            let len = write_col[w].len();
-            if t.iter().any(|&(_, s)| (s as usize + 1) * width > len) {
+            if n * width > write_col[w].len() {
                 return None;
             }
         }
         let out = SyncPtr(self.out.as_mut_ptr());
         let tables = ArgTables::new(&self.gathers, &self.csr, &self.counts, nat, col_p, &fills);
         let args = tables.args(out.0);
-        let starts = self.chunk_starts.as_ref().expect("checked above");
         let store_chunk = |c: usize| {
             // SAFETY: block `c` of the output buffer (inside it: `n_chunks` blocks) is
             // touched by the one call handling chunk `c` only.
