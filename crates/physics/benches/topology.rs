@@ -1,5 +1,6 @@
 //! Cost of topology changes against the cost of a step, on a box of ~100k tetrahedra:
-//! one plane cut through the middle, and a fracture burst opening the faces of a slab. A step
+//! one plane cut through the middle, a fracture burst opening the faces of a slab, a blade
+//! crossing the box during 100 steps, a single-face cut, a step with fracture enabled. A step
 //! is timed in the steady state (its rules' plans built); the first step after a change
 //! patches them around the changed darts, and that is counted as part of the change. The
 //! compiled guards through which cuts find their faces are built once beforehand (as a
@@ -32,6 +33,17 @@ fn simulation_events(
     blades: Vec<Blade>,
     events: Vec<TimedEvent>,
 ) -> Simulation {
+    simulation_dt(n, fracture, blades, events, Config::default().dt)
+}
+
+/// [`simulation_events`], with the time step `dt`.
+fn simulation_dt(
+    n: [usize; 3],
+    fracture: Option<Fracture>,
+    blades: Vec<Blade>,
+    events: Vec<TimedEvent>,
+    dt: f64,
+) -> Simulation {
     let (g, _) = build(
         &cuboid(n, [2.0, 1.0, 1.0], BoxElement::Tetra),
         &BuildOptions::default(),
@@ -46,6 +58,7 @@ fn simulation_events(
         fracture,
         blades,
         events,
+        dt,
         ..Config::default()
     };
     Simulation::new(g, cfg).expect("builds")
@@ -57,8 +70,90 @@ fn seconds(f: impl FnOnce()) -> f64 {
     t.elapsed().as_secs_f64()
 }
 
+/// `TOPOMECH_TOPOLOGY_PROFILE=fracture|single|blade`: runs only that case, repeatedly, and
+/// prints the time of its steps after the first (`TOPOMECH_TOPOLOGY_STEPS` of them, 100 by
+/// default; for a profiler, see `TOPOMECH_PERF_CTL` below).
+fn profile(case: &str, n: [usize; 3]) {
+    // a time step the undamped box stays stable with for hundreds of steps
+    let dt = 1e-4;
+    let steps: u32 = std::env::var("TOPOMECH_TOPOLOGY_STEPS")
+        .ok()
+        .and_then(|x| x.parse().ok())
+        .unwrap_or(100);
+    let (fracture, blades, events) = match case {
+        "fracture" => (
+            Some(Fracture {
+                criterion: Criterion::Strain,
+                threshold: 0.5,
+            }),
+            vec![],
+            vec![],
+        ),
+        // a cut of a face or two every 10 steps (20 at most)
+        "single" => (
+            None,
+            vec![],
+            (0..(steps / 10).min(20))
+                .map(|k| TimedEvent {
+                    time: f64::from(10 * k + 5) * dt,
+                    cut: Cut::Where(format!(
+                        "x > 0.99 && x < 1.01 && y > {} && y < {} && z < 0.03",
+                        0.045 * f64::from(k),
+                        0.045 * f64::from(k) + 0.04
+                    )),
+                })
+                .collect(),
+        ),
+        "blade" | "plain" => (
+            None,
+            if case == "blade" {
+                vec![Blade {
+                    start: dt,
+                    end: f64::from(steps) * dt,
+                    from: [[1.0, 1.2, -0.1], [1.0, 1.2, 1.1]],
+                    to: [[1.0, -0.2, -0.1], [1.0, -0.2, 1.1]],
+                }]
+            } else {
+                vec![]
+            },
+            vec![],
+        ),
+        other => {
+            panic!("TOPOMECH_TOPOLOGY_PROFILE: fracture, single, blade or plain, not {other:?}")
+        }
+    };
+    let set_up = Instant::now();
+    let mut s = simulation_dt(n, fracture, blades, events, dt);
+    s.step().expect("steps");
+    eprintln!(
+        "set-up and first step: {:.1} s",
+        set_up.elapsed().as_secs_f64()
+    );
+    // `perf record -D -1 --control fifo:FIFO` with TOPOMECH_PERF_CTL=FIFO: the profile starts
+    // here, after the set-up
+    if let Ok(fifo) = std::env::var("TOPOMECH_PERF_CTL") {
+        std::fs::write(fifo, "enable\n").expect("writes to perf's control fifo");
+    }
+    let t = seconds(|| {
+        for _ in 1..steps {
+            black_box(s.step()).expect("steps");
+        }
+    });
+    let faces: usize = s.topology_changes().iter().map(|c| c.unsewn).sum();
+    println!(
+        "{case}: {} steps in {:.1} ms ({:.2} ms per step), {faces} faces opened",
+        steps - 1,
+        t * 1e3,
+        t * 1e3 / f64::from(steps - 1)
+    );
+}
+
 fn main() {
     let n = [26, 26, 25];
+    if let Ok(case) = std::env::var("TOPOMECH_TOPOLOGY_PROFILE") {
+        profile(&case, n);
+        return;
+    }
     let tets = 6 * n[0] * n[1] * n[2];
     let mut steps = Vec::new();
     let mut cuts = Vec::new();
@@ -133,21 +228,26 @@ fn main() {
         brittle.topology_changes().is_empty(),
         "nothing breaks in the fracture-enabled run"
     );
-    // a blade moving down through the middle of the box (x = 1) during 5 steps, against 5
-    // steps without it: each of its steps searches the faces and, when it cut, plans again
-    let blade_steps = 5; // (the undamped box goes unstable after ~8 steps of 1 ms: few steps)
-    let dt = plain.config().dt;
-    let mut blade_run = simulation(n);
+    // a blade crossing the box (down through its middle, x = 1) during 100 steps, against
+    // the same 100 steps without it (issue 16's measure): each of its steps tests the faces
+    // near the quad it sweeps and, when it cut, patches the plans. At 0.1 ms, a time step the
+    // undamped box stays stable with for hundreds of steps (at the default 1 ms it goes
+    // unstable after about 8).
+    let blade_steps = 100;
+    let bdt = 1e-4;
+    let mut blade_run = simulation_dt(n, None, vec![], vec![], bdt);
     blade_run.step().expect("steps");
-    let mut bladed = simulation_with(
+    let mut bladed = simulation_dt(
         n,
         None,
         vec![Blade {
-            start: dt,
-            end: f64::from(1 + blade_steps) * dt,
+            start: bdt,
+            end: f64::from(1 + blade_steps) * bdt,
             from: [[1.0, 1.2, -0.1], [1.0, 1.2, 1.1]],
             to: [[1.0, -0.2, -0.1], [1.0, -0.2, 1.1]],
         }],
+        vec![],
+        bdt,
     );
     bladed.step().expect("steps");
     let without = seconds(|| {
@@ -161,6 +261,8 @@ fn main() {
         }
     });
     let blade_faces: usize = bladed.topology_changes().iter().map(|c| c.unsewn).sum();
+    let blade_cutting = bladed.topology_changes().len();
+    let dt = plain.config().dt;
     // one face cut (a predicate cut, a timed event at the end of the third step): that step
     // and the next, against plain steps
     let mut single = simulation_events(
@@ -199,7 +301,7 @@ fn main() {
     println!("  one plane cut ({cut_faces} faces unsewn)                               {:8.1} ms  = {:.2} steps", ct * 1e3, ct / st);
     println!("  the first step after it (plans patched)                          {:8.1} ms  = {:.2} steps", at * 1e3, at / st);
     println!("  one fracture burst ({burst_faces} faces opened)                        {:8.1} ms  = {:.2} steps", bt * 1e3, bt / st);
-    println!("  {blade_steps} steps with a blade moving through the middle ({blade_faces} faces)  {:8.1} ms  = {:.1}x the same steps without it ({:.1} ms)", with * 1e3, with / without, without * 1e3);
+    println!("  {blade_steps} steps with a blade crossing the middle ({blade_faces} faces, {blade_cutting} steps cutting) {:8.1} ms  = {:.2}x the same steps without it ({:.1} ms)", with * 1e3, with / without, without * 1e3);
     println!("  a step cutting {single_faces} face(s) (predicate event), then the next       {:8.1} ms + {:.1} ms  = {:.2} + {:.2} steps (a plain step of that run: {:.1} ms)", single_cut * 1e3, single_next * 1e3, single_cut / st, single_next / st, single_plain * 1e3);
     let (ps, bs) = (median(&mut plain_steps), median(&mut brittle_steps));
     println!("  a step with fracture enabled, nothing breaking (median of 5)    {:8.1} ms  = {:.2} steps without ({:.1} ms)", bs * 1e3, bs / ps, ps * 1e3);

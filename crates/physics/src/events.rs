@@ -261,9 +261,26 @@ impl Simulation {
         from: [[f64; 3]; 2],
         to: [[f64; 3]; 2],
     ) -> Result<TopologyResult, PhysicsError> {
+        // the guard of `cut_swept` is false where the segment between the two centroids
+        // misses the swept quad, so where the box of the positions it reads (whose hull
+        // holds both centroids, and so the segment) misses the quad's box: only the faces
+        // near the quad are tested
+        let mut lo = from[0];
+        let mut hi = from[0];
+        for p in [from[1], to[0], to[1]] {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let region = topomech_rules::Region {
+            embedding: "position".into(),
+            lo,
+            hi,
+        };
         let n = self
             .rules
-            .apply_everywhere(&mut self.g, "cut_swept", &swept_params(from, to))?
+            .apply_everywhere_within(&mut self.g, "cut_swept", &swept_params(from, to), &region)?
             .matches;
         self.record_change("blade", n)
     }

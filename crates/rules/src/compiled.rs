@@ -1012,6 +1012,7 @@ impl PlanBuilder {
             } else {
                 NativeState::Off
             },
+            None,
         )
     }
 }
@@ -1027,7 +1028,7 @@ enum NativeState {
     Failed(#[allow(dead_code)] String),
     /// Compiled, with per program column the length it must have at least (in elements):
     /// one more than the largest slot the index arrays hold, times the width read.
-    Ready(Box<jit::Native>, Vec<usize>),
+    Ready(std::sync::Arc<jit::Native>, Vec<usize>),
 }
 
 /// Partition of the rows: rows joined through the orbit positions `uniform` share a class.
@@ -1192,7 +1193,16 @@ impl Rows {
     }
 
     /// The rows whose match `keep` accepts, renumbered from 0 in order.
-    fn filter(self, keep: &dyn Fn(u32) -> bool) -> Rows {
+    fn filter(mut self, keep: &dyn Fn(u32) -> bool) -> Rows {
+        fn retain_rows<T>(v: &mut Vec<T>, kept: &dyn Fn(usize) -> bool) {
+            let mut r = 0;
+            v.retain(|_| {
+                r += 1;
+                kept(r - 1)
+            });
+        }
+        // in place: every array compacted over its own storage (no allocation, no copy of
+        // what stays where it is)
         let n = self.row_match.len();
         let mut new_row = vec![u32::MAX; n];
         let mut k = 0u32;
@@ -1203,62 +1213,43 @@ impl Rows {
             }
         }
         let kept = |r: usize| new_row[r] != u32::MAX;
-        let pick = |v: &[u32]| -> Vec<u32> {
-            v.iter()
-                .enumerate()
-                .filter(|(r, _)| kept(*r))
-                .map(|(_, x)| *x)
-                .collect()
-        };
-        let row_match = pick(&self.row_match);
-        let gathers = self.gathers.iter().map(|x| pick(x)).collect();
-        let csr = self
-            .csr
-            .iter()
-            .map(|(offs, slots)| {
-                if offs.len() != n + 1 {
-                    return (vec![0], Vec::new()); // a count: no slots
-                }
-                let mut o = Vec::with_capacity(k as usize + 1);
-                let mut sl = Vec::with_capacity(slots.len());
-                o.push(0);
-                for r in 0..n {
-                    if kept(r) {
-                        sl.extend_from_slice(&slots[offs[r] as usize..offs[r + 1] as usize]);
-                        o.push(sl.len() as u32);
-                    }
-                }
-                (o, sl)
-            })
-            .collect();
-        let counts = self
-            .counts
-            .iter()
-            .map(|c| {
-                c.iter()
-                    .enumerate()
-                    .filter(|(r, _)| kept(*r))
-                    .map(|(_, x)| *x)
-                    .collect()
-            })
-            .collect();
-        let writes = self
-            .writes
-            .iter()
-            .map(|w| {
-                w.iter()
-                    .filter(|(r, _)| kept(*r as usize))
-                    .map(|&(r, s)| (new_row[r as usize], s))
-                    .collect()
-            })
-            .collect();
-        Rows {
-            row_match,
-            gathers,
-            csr,
-            counts,
-            writes,
+        retain_rows(&mut self.row_match, &kept);
+        for x in &mut self.gathers {
+            retain_rows(x, &kept);
         }
+        for (offs, slots) in &mut self.csr {
+            if offs.len() != n + 1 {
+                *offs = vec![0]; // a count: no slots
+                slots.clear();
+                continue;
+            }
+            // row r's slots move down to `at` (never past where they were)
+            let mut at = 0usize;
+            let mut o = 1usize;
+            for r in 0..n {
+                let (a, b) = (offs[r] as usize, offs[r + 1] as usize);
+                if kept(r) {
+                    slots.copy_within(a..b, at);
+                    at += b - a;
+                    // offs[o] is read no more once row o - 1 <= r is done
+                    offs[o] = at as u32;
+                    o += 1;
+                }
+            }
+            offs.truncate(o);
+            offs[0] = 0;
+            slots.truncate(at);
+        }
+        for c in &mut self.counts {
+            retain_rows(c, &kept);
+        }
+        for w in &mut self.writes {
+            w.retain(|&(r, _)| kept(r as usize));
+            for x in w.iter_mut() {
+                x.0 = new_row[x.0 as usize];
+            }
+        }
+        self
     }
 
     /// Appends `other` (whose rows are numbered after these already).
@@ -1310,6 +1301,7 @@ impl Plan {
             } else {
                 NativeState::Off
             },
+            None,
         )
     }
 
@@ -1339,6 +1331,7 @@ impl Plan {
         rows: Rows,
         matches: usize,
         native: NativeState,
+        appended_from: Option<usize>,
     ) -> Plan {
         let mut targets = Vec::with_capacity(prog.writes.len());
         let mut dups = Vec::new();
@@ -1403,10 +1396,16 @@ impl Plan {
         // and the output layout, not on the rows), with `need` computed again from the new
         // index arrays
         plan.native = match native {
-            NativeState::Ready(nat, _) => match plan.need(&nat.kinds) {
-                Ok(need) => NativeState::Ready(nat, need),
-                Err(why) => NativeState::Failed(why),
-            },
+            NativeState::Ready(nat, old) => {
+                let need = match appended_from {
+                    Some(from) => plan.need_grown(&nat.kinds, &old, from),
+                    None => plan.need(&nat.kinds),
+                };
+                match need {
+                    Ok(need) => NativeState::Ready(nat, need),
+                    Err(why) => NativeState::Failed(why),
+                }
+            }
             other => other,
         };
         plan
@@ -1447,7 +1446,176 @@ impl Plan {
         .filter(keep);
         let base = rows.row_match.len();
         rows.append(Rows::of(&prog, rule, g, ids, new, numbers, base));
-        Plan::assemble(prog, g, ids, rows, kept_matches + new.len(), native)
+        Plan::assemble(
+            prog,
+            g,
+            ids,
+            rows,
+            kept_matches + new.len(),
+            native,
+            Some(base),
+        )
+    }
+
+    /// A guard plan ([`compile_guard`]) with the rows of `new` (numbered `numbers`)
+    /// appended in place, its other rows kept as they are, the dropped ones included: a
+    /// guard writes nothing to the map, so a dropped row costs an evaluation whose value the
+    /// caller ignores (its slots stay inside their columns, which never shrink). What the
+    /// arrays' update costs grows with the new rows only, not with the plan. `None` for a
+    /// plan that is not a guard's.
+    pub(crate) fn append_guard_rows(
+        &mut self,
+        rule: &Rule,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        new: &[Match],
+        numbers: &[u32],
+    ) -> Option<()> {
+        if !self.prog.guard || self.targets.len() != 1 {
+            return None;
+        }
+        let base = self.rows;
+        let added = Rows::of(&self.prog, rule, g, ids, new, numbers, base);
+        let n_new = added.row_match.len();
+        self.targets[0]
+            .0
+            .extend(added.writes[0].iter().map(|&(r, _)| (r, r)));
+        self.evaluations += added.writes[0].len();
+        let mut rows = Rows {
+            row_match: std::mem::take(&mut self.row_match),
+            gathers: std::mem::take(&mut self.gathers),
+            csr: std::mem::take(&mut self.csr),
+            counts: std::mem::take(&mut self.counts),
+            writes: std::mem::take(&mut self.writes),
+        };
+        rows.append(added);
+        self.row_match = rows.row_match;
+        self.gathers = rows.gathers;
+        self.csr = rows.csr;
+        self.counts = rows.counts;
+        self.writes = rows.writes;
+        self.rows = base + n_new;
+        self.matches += new.len();
+        // `need` only grows: the kept rows' entries are unchanged
+        if let NativeState::Ready(nat, old) = &self.native {
+            self.native = match self.need_grown(&nat.kinds, old, base) {
+                Ok(need) => NativeState::Ready(std::sync::Arc::clone(nat), need),
+                Err(why) => NativeState::Failed(why),
+            };
+        }
+        Some(())
+    }
+
+    /// The program columns that read embedding `target` (`ids` are the rule's embeddings).
+    pub(crate) fn cols_reading(&self, ids: &[EmbeddingId], target: EmbeddingId) -> Vec<usize> {
+        (0..self.prog.cols.len())
+            .filter(|&c| ids[self.prog.cols[c]] == target)
+            .collect()
+    }
+
+    /// Number of rows.
+    pub(crate) fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// Appends to `out` the slots row `row` reads from the program columns `cols` (its
+    /// gathers and aggregates of them).
+    pub(crate) fn row_slots(&self, cols: &[usize], row: usize, out: &mut Vec<u32>) {
+        for op in &self.prog.ops {
+            match op {
+                Op::Gather { col, idx, .. } if cols.contains(col) => {
+                    out.push(self.gathers[*idx][row]);
+                }
+                Op::Agg { col, csr, .. } if cols.contains(col) => {
+                    let (offs, slots) = &self.csr[*csr];
+                    if offs.len() > row + 1 {
+                        out.extend_from_slice(&slots[offs[row] as usize..offs[row + 1] as usize]);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// A guard plan ([`compile_guard`]) of the rows `rows` of this one only, in that order,
+    /// each keeping its match's number (so [`Plan::run_guard`] on it gives the numbers of
+    /// the matches among `rows` that pass, as on this plan), sharing this plan's native code
+    /// (compiled now if it was to be; `g` and `ids` give the column kinds). `None` for a plan
+    /// that is not a guard's, or a row out of range.
+    pub(crate) fn guard_rows(
+        &mut self,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        rows: &[u32],
+    ) -> Option<Plan> {
+        if !self.prog.guard
+            || self.targets.len() != 1
+            || rows.iter().any(|&r| r as usize >= self.rows)
+        {
+            return None;
+        }
+        if matches!(self.native, NativeState::Untried) {
+            let kinds: Vec<jit::ColKind> = self
+                .prog
+                .cols
+                .iter()
+                .map(|&e| col_kind(&g.embedding(ids[e]).column()))
+                .collect();
+            self.native = self.compile_native(&kinds);
+        }
+        let pick = |v: &[u32]| -> Vec<u32> { rows.iter().map(|&r| v[r as usize]).collect() };
+        let n = self.rows;
+        let csr = self
+            .csr
+            .iter()
+            .map(|(offs, slots)| {
+                if offs.len() != n + 1 {
+                    return (vec![0], Vec::new()); // a count: no slots
+                }
+                let mut o = Vec::with_capacity(rows.len() + 1);
+                let mut sl = Vec::new();
+                o.push(0);
+                for &r in rows {
+                    let r = r as usize;
+                    sl.extend_from_slice(&slots[offs[r] as usize..offs[r + 1] as usize]);
+                    o.push(sl.len() as u32);
+                }
+                (o, sl)
+            })
+            .collect();
+        let counts = self
+            .counts
+            .iter()
+            .map(|c| rows.iter().map(|&r| c[r as usize]).collect())
+            .collect();
+        let k = rows.len() as u32;
+        let native = match &self.native {
+            // the sub-plan's index entries are some of this plan's: what this plan's columns
+            // must hold (`need`) bounds what the sub-plan's need
+            NativeState::Ready(nat, need) => {
+                NativeState::Ready(std::sync::Arc::clone(nat), need.clone())
+            }
+            NativeState::Off => NativeState::Off,
+            _ => NativeState::Failed("not compiled".into()),
+        };
+        Some(Plan {
+            prog: self.prog.clone(),
+            matches: rows.len(),
+            rows: rows.len(),
+            chunk: self.chunk,
+            gathers: self.gathers.iter().map(|x| pick(x)).collect(),
+            csr,
+            counts,
+            targets: vec![((0..k).map(|r| (r, r)).collect(), self.targets[0].1)],
+            dups: Vec::new(),
+            out_width: self.out_width,
+            out: Vec::new(),
+            evaluations: rows.len(),
+            native,
+            row_match: pick(&self.row_match),
+            writes: vec![(0..k).map(|r| (r, r)).collect()],
+            chunk_starts: None,
+        })
     }
 
     /// The program's aggregated orbit types (see [`Program::agg_orbits`]).
@@ -1503,6 +1671,58 @@ impl Plan {
         Ok(need)
     }
 
+    /// [`Plan::need`] for a plan whose rows from `from` on were appended to rows kept from
+    /// a plan whose need was `old` (a patch: the kept rows' entries are some of that plan's,
+    /// copied unchanged by [`Rows::filter`], so `old` bounds them): the shapes checked as
+    /// there, the largest slots taken over the appended rows only.
+    fn need_grown(
+        &self,
+        kinds: &[jit::ColKind],
+        old: &[usize],
+        from: usize,
+    ) -> Result<Vec<usize>, String> {
+        let rows = self.rows;
+        if old.len() != kinds.len() || from > rows {
+            return self.need(kinds);
+        }
+        let mut need = old.to_vec();
+        for op in &self.prog.ops {
+            match op {
+                Op::Gather { dst, col, idx } => {
+                    let g = &self.gathers[*idx];
+                    if g.len() != rows {
+                        return Err("a gather of another length".into());
+                    }
+                    let w = if kinds[*col] == jit::ColKind::Real {
+                        self.prog.regs[*dst].width
+                    } else {
+                        1
+                    };
+                    if let Some(&m) = g[from..].iter().max() {
+                        need[*col] = need[*col].max((m as usize + 1) * w);
+                    }
+                }
+                Op::Agg { dst, col, csr, .. } => {
+                    let (offs, slots) = &self.csr[*csr];
+                    let monotone = offs.windows(2).all(|o| o[0] <= o[1]);
+                    if offs.len() != rows + 1 || !monotone || offs[rows] as usize > slots.len() {
+                        return Err("an aggregate's offsets out of shape".into());
+                    }
+                    let w = self.prog.regs[*dst].width;
+                    let start = offs[from] as usize;
+                    if let Some(&m) = slots[start..offs[rows] as usize].iter().max() {
+                        need[*col] = need[*col].max((m as usize + 1) * w);
+                    }
+                }
+                Op::RowData { data, .. } if self.counts[*data].len() != rows => {
+                    return Err("counts of another length".into());
+                }
+                _ => {}
+            }
+        }
+        Ok(need)
+    }
+
     /// Compiles the program to native code for columns of `kinds`.
     fn compile_native(&self, kinds: &[jit::ColKind]) -> NativeState {
         // what the code will index: checked here and whenever the arrays change (`need`),
@@ -1518,7 +1738,7 @@ impl Plan {
             offsets: &offsets,
         };
         match jit::compile(&self.prog, kinds, self.csr.len(), &layout) {
-            Ok(n) => NativeState::Ready(Box::new(n), need),
+            Ok(n) => NativeState::Ready(std::sync::Arc::new(n), need),
             Err(e) => NativeState::Failed(e),
         }
     }

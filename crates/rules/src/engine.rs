@@ -459,6 +459,9 @@ pub struct RuleSet {
     /// [`RuleSet::compiled_guard_runs`]).
     guard_runs: std::sync::atomic::AtomicUsize,
     guard_patches: std::sync::atomic::AtomicUsize,
+    /// Applications whose compiled guard ran over the hook orbits near a region only (see
+    /// [`RuleSet::apply_everywhere_within`]).
+    culled_runs: std::sync::atomic::AtomicUsize,
 }
 
 /// The guard of a rule that changes the topology, compiled over every hook orbit where the
@@ -474,6 +477,48 @@ struct GuardPlan {
     index: Index,
     /// Per match, the smallest dart of its hook orbit: where [`find_all`] finds it.
     first: Vec<u32>,
+    /// The rows by where they read a `vec3` embedding, for runs near a region (built at the
+    /// first such run, see [`GuardPlan::candidates`]).
+    cull: Option<Cull>,
+}
+
+/// A box in the space of a `vec3` embedding's values (positions, say), for
+/// [`RuleSet::apply_everywhere_within`]: `lo` and `hi` are its opposite corners (each
+/// coordinate of `lo` at most that of `hi`), in the embedding's units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Region {
+    /// The `vec3` embedding.
+    pub embedding: String,
+    /// The corner of the smallest coordinates.
+    pub lo: [f64; 3],
+    /// The corner of the largest coordinates.
+    pub hi: [f64; 3],
+}
+
+/// A guard plan's rows by the values they read of one `vec3` embedding (see
+/// [`GuardPlan::candidates`]).
+#[derive(Debug)]
+struct Cull {
+    /// The embedding.
+    emb: EmbeddingId,
+    /// The plan's rows indexed (those built, then those patches appended).
+    rows: usize,
+    /// The embedding's values when the rows were indexed, 3 per slot; a slot created later
+    /// joins with its value when the rows are next looked up.
+    values: Vec<f64>,
+    /// Per coordinate, a bound on the distance, at the values of `values`, between a row's
+    /// first slot's value and any other value the row reads of the embedding (for a row
+    /// appended later: its distance when it joined, plus twice how far the values had moved
+    /// from `values` then).
+    extent: [f64; 3],
+    /// The rows indexed first, by first slot: those of slot `s` are
+    /// `by_slot[start[s]..start[s + 1]]`.
+    start: Vec<u32>,
+    by_slot: Vec<u32>,
+    /// The rows appended since, with their first slots: (slot, row).
+    tail: Vec<(u32, u32)>,
+    /// Rows that read no value of the embedding.
+    always: Vec<u32>,
 }
 
 /// The matches of the patterns planned on one map state, by [`pattern_key`].
@@ -630,6 +675,7 @@ impl RuleSet {
             guard_plans: std::sync::Mutex::new(HashMap::new()),
             guard_runs: std::sync::atomic::AtomicUsize::new(0),
             guard_patches: std::sync::atomic::AtomicUsize::new(0),
+            culled_runs: std::sync::atomic::AtomicUsize::new(0),
         }
     }
 
@@ -878,6 +924,36 @@ impl RuleSet {
         self.apply_everywhere_interruptible(g, name, params, &never)
     }
 
+    /// [`RuleSet::apply_everywhere`] for a rule that changes the topology and whose guard the
+    /// caller knows to be false wherever the box bounding the values the guard reads of the
+    /// `vec3` embedding `region.embedding` (in one hook orbit's row) misses the box
+    /// `region.lo..=region.hi`: the same matches, found by evaluating the compiled guard only
+    /// at the hook orbits that may meet the box (see [`Region`]), so that its cost grows
+    /// with them, not with the map. Where the guard is not compiled, or does not read that
+    /// embedding, every hook orbit is tried, as by [`RuleSet::apply_everywhere`].
+    ///
+    /// # Errors
+    /// Those of [`RuleSet::apply_everywhere`]; an embedding `region` names that the map
+    /// lacks or that is not `vec3`.
+    pub fn apply_everywhere_within(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        region: &Region,
+    ) -> Result<ApplyReport, ApplyError> {
+        let ok = g
+            .embedding_id(&region.embedding)
+            .is_some_and(|id| g.embedding(id).ty() == EmbeddingType::Vec3);
+        if !ok {
+            return Err(ApplyError::Map(format!(
+                "rule '{name}': the region's embedding {:?} is not a vec3 embedding of the map",
+                region.embedding
+            )));
+        }
+        self.apply_with(g, name, params, &never, Some(region))
+    }
+
     /// [`RuleSet::apply_everywhere`], calling `interrupt` once per [`INTERRUPT_EVERY`] darts
     /// tried or rows evaluated (and before a compiled plan runs): when it returns true the
     /// application stops with [`ApplyError::Interrupted`] before changing the topology or
@@ -890,10 +966,21 @@ impl RuleSet {
         params: &Params,
         interrupt: &dyn Fn() -> bool,
     ) -> Result<ApplyReport, ApplyError> {
+        self.apply_with(g, name, params, interrupt, None)
+    }
+
+    fn apply_with(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        interrupt: &dyn Fn() -> bool,
+        region: Option<&Region>,
+    ) -> Result<ApplyReport, ApplyError> {
         let poll = &mut Poll::new(interrupt);
         let b = self.bind_for(g, name, params, true)?;
         if b.rule.changes_topology {
-            let ms = match self.guarded_matches(g, &b, poll)? {
+            let ms = match self.guarded_matches(g, &b, poll, region)? {
                 Some(ms) => ms,
                 None => find_all(g, &b, poll)?,
             };
@@ -1157,6 +1244,7 @@ impl RuleSet {
         g: &mut GMap,
         b: &Bound,
         poll: &mut Poll,
+        region: Option<&Region>,
     ) -> Result<Option<Vec<Match>>, ApplyError> {
         let rule = b.rule;
         let Some(index) = self.guard_plan_index(b) else {
@@ -1179,11 +1267,29 @@ impl RuleSet {
                 applied: 0,
             });
         }
-        let Ok(pass) = gp.plan.run_guard(g, &b.ids, &b.params) else {
+        let culled = region.and_then(|r| {
+            let id = g.embedding_id(&r.embedding)?;
+            let rows = gp.candidates(g, &b.ids, id, r)?;
+            gp.plan.guard_rows(g, &b.ids, &rows)
+        });
+        let run = match culled {
+            Some(mut sub) => {
+                self.culled_runs
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                sub.run_guard(g, &b.ids, &b.params)
+            }
+            None => gp.plan.run_guard(g, &b.ids, &b.params),
+        };
+        let Ok(pass) = run else {
             plans.insert(index, gp);
             return Ok(None);
         };
-        let mut first: Vec<u32> = pass.iter().map(|&k| gp.first[k as usize]).collect();
+        // the rows of dropped matches stay in a patched plan (see `patch_guard_plan`)
+        let mut first: Vec<u32> = pass
+            .iter()
+            .filter(|&&k| gp.index.alive[k as usize])
+            .map(|&k| gp.first[k as usize])
+            .collect();
         first.sort_unstable();
         let mut used = Marks::with_capacity(g.capacity());
         let mut out = Vec::new();
@@ -1297,6 +1403,12 @@ impl RuleSet {
             self.guard_patches
                 .load(std::sync::atomic::Ordering::Relaxed),
         )
+    }
+
+    /// How many applications of [`RuleSet::apply_everywhere_within`] ran their compiled
+    /// guard over the hook orbits near the region only, since this rule set was made.
+    pub fn culled_guard_runs(&self) -> usize {
+        self.culled_runs.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// How many times a plan was patched after a topology change instead of rebuilt (see
@@ -1626,6 +1738,175 @@ fn drop_changed(
     Some((star, candidates))
 }
 
+impl GuardPlan {
+    /// The rows whose match may pass a guard that is false wherever the box bounding the
+    /// values the row reads of embedding `emb` misses `region` (the caller's knowledge, see
+    /// [`RuleSet::apply_everywhere_within`]), in increasing order; `None` where this plan
+    /// cannot tell (the guard reads no value of `emb`, or `emb` is not a real column).
+    ///
+    /// Why no row that may pass is left out (coordinate by coordinate): let `x` be the
+    /// values now and `X` those when the rows were indexed ([`Cull`]), `d` the largest change
+    /// `|x_s - X_s|` of the coordinate over the slots then, and `E` the largest distance then
+    /// between that coordinate of a row's first slot's value and of another value it read. A
+    /// row's slots are the same now (a patch keeps a row's slots or drops the row), so every
+    /// value it reads is within `E + 2d` of its first slot's value now. If the box of those
+    /// values meets the region at a point `q`, each coordinate of `q` lies between two of
+    /// them, so the first slot's value is within `E + 2d` of `q`: inside the region grown
+    /// by `E + 2d`. The rows whose first slot's value is
+    /// there are taken (the growth has a margin for rounding), and so are the rows appended
+    /// since the index was built and those reading no value of `emb`.
+    fn candidates(
+        &mut self,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        emb: EmbeddingId,
+        region: &Region,
+    ) -> Option<Vec<u32>> {
+        let cols = self.plan.cols_reading(ids, emb);
+        if cols.is_empty() {
+            return None;
+        }
+        let x = g.embedding(emb).real_column()?;
+        // a value that is not finite: every row (the guard decides)
+        if x.len() % 3 != 0 || x.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let rows = self.plan.rows();
+        let stale = self.cull.as_ref().is_none_or(|c| {
+            c.emb != emb || c.tail.len() * 4 > rows.max(1024) || c.values.len() > x.len()
+        });
+        if stale {
+            self.cull = Some(self.index_rows(&cols, emb, x)?);
+        }
+        let mut c = self.cull.take()?;
+        // the slots created since: their values now join the snapshot
+        let old = c.values.len();
+        c.values.extend_from_slice(&x[old..]);
+        // per coordinate, the largest change of a value since it joined the snapshot
+        let mut moved = [0.0_f64; 3];
+        for (k, (a, b)) in c.values.iter().zip(x).enumerate() {
+            moved[k % 3] = moved[k % 3].max((a - b).abs());
+        }
+        let spans = c.extent.iter().fold(0.0_f64, |m, &e| m.max(e));
+        if moved.iter().any(|&m| m > spans.max(f64::MIN_POSITIVE)) {
+            // the values moved more than a row spans: index again, so that the grown region
+            // stays about the size of the region
+            self.cull = Some(self.index_rows(&cols, emb, x)?);
+            return self.candidates(g, ids, emb, region);
+        }
+        // the rows appended since: their first slots, and their extents now, grown by what
+        // the values moved since they joined the snapshot (see above)
+        let mut buf = Vec::new();
+        for r in c.rows..rows {
+            buf.clear();
+            self.plan.row_slots(&cols, r, &mut buf);
+            let Some(&s0) = buf.first() else {
+                c.always.push(r as u32);
+                continue;
+            };
+            if buf.iter().any(|&s| 3 * s as usize + 3 > x.len()) {
+                return None;
+            }
+            let p0 = &x[3 * s0 as usize..3 * s0 as usize + 3];
+            for &s in &buf[1..] {
+                let p = &x[3 * s as usize..3 * s as usize + 3];
+                for k in 0..3 {
+                    c.extent[k] = c.extent[k].max((p[k] - p0[k]).abs() + 2.0 * moved[k]);
+                }
+            }
+            c.tail.push((s0, r as u32));
+        }
+        c.rows = rows;
+        let grow: [f64; 3] = std::array::from_fn(|k| c.extent[k] + 2.0 * moved[k]);
+        let scale = region
+            .lo
+            .iter()
+            .chain(&region.hi)
+            .chain(&grow)
+            .fold(0.0_f64, |m, v| m.max(v.abs()));
+        let lo: [f64; 3] = std::array::from_fn(|k| region.lo[k] - grow[k] - 1e-9 * (1.0 + scale));
+        let hi: [f64; 3] = std::array::from_fn(|k| region.hi[k] + grow[k] + 1e-9 * (1.0 + scale));
+        let inside = |s: u32| {
+            let p = &x[3 * s as usize..3 * s as usize + 3];
+            (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k])
+        };
+        let mut out: Vec<u32> = c.always.clone();
+        for s in 0..c.start.len() - 1 {
+            if inside(s as u32) {
+                out.extend_from_slice(&c.by_slot[c.start[s] as usize..c.start[s + 1] as usize]);
+            }
+        }
+        out.extend(c.tail.iter().filter(|t| inside(t.0)).map(|t| t.1));
+        out.sort_unstable();
+        self.cull = Some(c);
+        Some(out)
+    }
+
+    /// The rows of the plan by the first slot each reads of embedding `emb` (program
+    /// columns `cols`), with `x` the embedding's values now (see [`GuardPlan::candidates`]).
+    fn index_rows(&self, cols: &[usize], emb: EmbeddingId, x: &[f64]) -> Option<Cull> {
+        if x.len() % 3 != 0 || x.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let slots = x.len() / 3;
+        let rows = self.plan.rows();
+        let mut first = vec![u32::MAX; rows];
+        let mut extent = [0.0_f64; 3];
+        let mut always = Vec::new();
+        let mut buf = Vec::new();
+        for (r, f) in first.iter_mut().enumerate() {
+            buf.clear();
+            self.plan.row_slots(cols, r, &mut buf);
+            let Some(&s0) = buf.first() else {
+                always.push(r as u32);
+                continue;
+            };
+            if buf.iter().any(|&s| s as usize >= slots) {
+                return None;
+            }
+            let p0 = &x[3 * s0 as usize..3 * s0 as usize + 3];
+            for &s in &buf[1..] {
+                let p = &x[3 * s as usize..3 * s as usize + 3];
+                for k in 0..3 {
+                    extent[k] = extent[k].max((p[k] - p0[k]).abs());
+                }
+            }
+            *f = s0;
+        }
+        if extent.iter().any(|e| !e.is_finite()) {
+            return None;
+        }
+        // rows by first slot (a counting sort)
+        let mut start = vec![0u32; slots + 1];
+        for &f in &first {
+            if f != u32::MAX {
+                start[f as usize + 1] += 1;
+            }
+        }
+        for s in 0..slots {
+            start[s + 1] += start[s];
+        }
+        let mut at = start.clone();
+        let mut by_slot = vec![0u32; start[slots] as usize];
+        for (r, &f) in first.iter().enumerate() {
+            if f != u32::MAX {
+                by_slot[at[f as usize] as usize] = r as u32;
+                at[f as usize] += 1;
+            }
+        }
+        Some(Cull {
+            emb,
+            rows,
+            values: x.to_vec(),
+            extent,
+            start,
+            by_slot,
+            tail: Vec::new(),
+            always,
+        })
+    }
+}
+
 /// The guard plan of `b`'s rule (see [`RuleSet::guarded_matches`]): one row per hook orbit
 /// where the left graph matches, found from its smallest dart; `None` when the guard does
 /// not compile. Starts the map's change record, for the patches.
@@ -1682,6 +1963,7 @@ fn build_guard_plan(
         plan,
         index,
         first,
+        cull: None,
     }))
 }
 
@@ -1703,6 +1985,7 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
         mut index,
         mut first,
         reads,
+        cull,
         ..
     } = gp;
     let chains: Vec<Vec<OrbitType>> = plan.agg_orbits().into_iter().map(|o| vec![o]).collect();
@@ -1710,7 +1993,6 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
     let hook = rule.hooks[0];
     // one row per hook orbit: no guard evaluated (the plan does), no footprint merged
     let new = rematch(g, rule, &index, &star, candidates, |_| Some(true), |_| true)?;
-    let kept = index.live;
     let numbers: Vec<u32> = new
         .iter()
         .map(|m| {
@@ -1718,22 +2000,19 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
             index.push(m, hook)
         })
         .collect();
-    let alive = &index.alive;
-    let plan = plan.patch(
-        rule,
-        g,
-        &b.ids,
-        &|k| alive[k as usize],
-        kept,
-        &new,
-        &numbers,
-    );
+    // rows stay numbered by match (row k is match k's row 0): the dropped matches' rows
+    // stay in the plan, their values ignored (`RuleSet::guarded_matches` keeps the live
+    // matches only), and the new ones are appended; a rebuild compacts (`drop_changed`)
+    let mut plan = plan;
+    plan.append_guard_rows(rule, g, &b.ids, &new, &numbers)?;
     Some(GuardPlan {
         identity: g.identity(),
         reads,
         plan,
         index,
         first,
+        // its rows keep their slots (the patch's proof); the appended ones are candidates
+        cull,
     })
 }
 

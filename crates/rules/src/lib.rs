@@ -39,7 +39,7 @@ pub mod value;
 use std::path::Path;
 
 pub use check::{Diagnostic, Severity};
-pub use engine::{ApplyError, ApplyReport, Params, RuleSet};
+pub use engine::{ApplyError, ApplyReport, Params, Region, RuleSet};
 pub use model::Model;
 pub use value::{Ty, Val};
 

@@ -10,7 +10,7 @@
 use topomech_gmap::generators::{cuboid, BoxElement};
 use topomech_gmap::mesh::{build, BuildOptions};
 use topomech_gmap::{Dart, GMap};
-use topomech_rules::{load_sources, Params, RuleSet, Val};
+use topomech_rules::{load_sources, Params, Region, RuleSet, Val};
 
 const RULES: &str = "dimension 3
 embedding position : vec3 on <1,2,3> policy mean
@@ -224,4 +224,84 @@ rule cut_labels {
     assert!(rep.matches > 0);
     assert_eq!(rs.compiled_guard_runs().0, 0, "the interpreter decided");
     assert!(g.validate().is_empty());
+}
+
+/// The box of a blade's sweep from the segment `a0 b0` to `a1 b1`.
+fn sweep_box(p: &[[f64; 3]; 4]) -> Region {
+    let mut lo = p[0];
+    let mut hi = p[0];
+    for q in &p[1..] {
+        for k in 0..3 {
+            lo[k] = lo[k].min(q[k]);
+            hi[k] = hi[k].max(q[k]);
+        }
+    }
+    Region {
+        embedding: "position".into(),
+        lo,
+        hi,
+    }
+}
+
+/// A progressive cut: a blade moving a little per application, its compiled guard run only
+/// near the quad it sweeps (`apply_everywhere_within`), gives the map the interpreter gives
+/// trying every face, dart for dart, application after application: with the map moving
+/// a little between them, and once a lot (more than a row's extent: the rows are indexed
+/// again), with patched plans whose appended rows must be tried too.
+#[test]
+fn a_blade_tested_near_its_sweep_only_cuts_what_testing_every_face_cuts() {
+    let (mut g, compiled, interpreted) = setup();
+    let mut h = g.clone();
+    let mut total = 0;
+    let n = 12;
+    for k in 0..n {
+        let t = k as f64;
+        // a large move once: every vertex shifted by 0.5 along y (the blade follows)
+        let shift = if k == 6 { 0.5 } else { 0.0 };
+        let offset = if k >= 6 { 0.5 } else { 0.0 };
+        for m in [&mut g, &mut h] {
+            shake(m, t);
+            let pos = m.embedding_id("position").unwrap();
+            for d in m.orbit_representatives(topomech_gmap::OrbitType::vertex(3)) {
+                let mut p = m.real(pos, d).to_vec();
+                p[1] += shift;
+                m.set_real(pos, d, &p).unwrap();
+            }
+        }
+        // the blade across x = 1.1, moving down in y by 0.2 per application
+        let x = 1.1;
+        let (y0, y1) = (2.1 - 0.2 * t + offset, 1.9 - 0.2 * t + offset);
+        let q = [[x, y0, -0.1], [x, y0, 1.6], [x, y1, -0.1], [x, y1, 1.6]];
+        let p = swept(q[0], q[1], q[2], q[3]);
+        let a = compiled
+            .apply_everywhere_within(&mut g, "cut_swept", &p, &sweep_box(&q))
+            .unwrap();
+        let b = interpreted
+            .apply_everywhere(&mut h, "cut_swept", &p)
+            .unwrap();
+        let what = format!("sweep {k}");
+        assert_eq!(a.matches, b.matches, "{what}: faces unsewn");
+        total += a.matches;
+        same(&g, &h, &what);
+    }
+    assert!(total > 10, "the sweeps opened faces ({total})");
+    assert_eq!(
+        compiled.culled_guard_runs(),
+        n,
+        "every sweep ran near its quad only"
+    );
+    // a region naming what is not a vec3 embedding is refused, naming it
+    let q = [
+        [1.0, 1.0, -0.1],
+        [1.0, 1.0, 1.6],
+        [1.0, 0.9, -0.1],
+        [1.0, 0.9, 1.6],
+    ];
+    let mut r = sweep_box(&q);
+    r.embedding = "no_such".into();
+    let e = compiled
+        .apply_everywhere_within(&mut g, "cut_swept", &swept(q[0], q[1], q[2], q[3]), &r)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no_such") && e.contains("vec3"), "{e}");
 }
