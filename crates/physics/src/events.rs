@@ -428,8 +428,12 @@ impl Simulation {
         let zero = [[0.0; 3]; 2];
         self.rules
             .prepare_guard(&mut self.g, "cut_plane", &plane_params(zero[0], 0.0))?;
-        self.rules
-            .prepare_guard(&mut self.g, "cut_swept", &swept_params(zero, zero))?;
+        self.rules.prepare_guard_within(
+            &mut self.g,
+            "cut_swept",
+            &swept_params(zero, zero),
+            "position",
+        )?;
         self.prepare_declared_cuts()
     }
 
@@ -477,8 +481,12 @@ impl Simulation {
             }
         }
         if let Some(b) = self.cfg.blades.first() {
-            self.rules
-                .prepare_guard(&mut self.g, "cut_swept", &swept_params(b.from, b.to))?;
+            self.rules.prepare_guard_within(
+                &mut self.g,
+                "cut_swept",
+                &swept_params(b.from, b.to),
+                "position",
+            )?;
         }
         if let Some(f) = self.cfg.fracture {
             self.prepare_fracture(f.criterion)?;

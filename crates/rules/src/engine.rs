@@ -1375,6 +1375,42 @@ impl RuleSet {
         name: &str,
         params: &Params,
     ) -> Result<bool, ApplyError> {
+        self.prepare_guard_with(g, name, params, None)
+    }
+
+    /// [`RuleSet::prepare_guard`] for applications through
+    /// [`RuleSet::apply_everywhere_within`] with regions of the `vec3` embedding
+    /// `embedding`: the guard's rows indexed by where they read it too, so that the first
+    /// such application only looks them up.
+    ///
+    /// # Errors
+    /// Those of [`RuleSet::prepare_guard`]; an `embedding` the map lacks or that is not
+    /// `vec3`.
+    pub fn prepare_guard_within(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        embedding: &str,
+    ) -> Result<bool, ApplyError> {
+        let Some(id) = g
+            .embedding_id(embedding)
+            .filter(|&id| g.embedding(id).ty() == EmbeddingType::Vec3)
+        else {
+            return Err(ApplyError::Map(format!(
+                "rule '{name}': the region's embedding {embedding:?} is not a vec3 embedding of the map"
+            )));
+        };
+        self.prepare_guard_with(g, name, params, Some(id))
+    }
+
+    fn prepare_guard_with(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        within: Option<EmbeddingId>,
+    ) -> Result<bool, ApplyError> {
         let b = self.bind_for(g, name, params, true)?;
         let Some(index) = self.guard_plan_index(&b) else {
             return Ok(false);
@@ -1385,7 +1421,13 @@ impl RuleSet {
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         let old = plans.remove(&index);
         match self.guard_plan(g, &b, old, &mut Poll::new(&never))? {
-            Some(gp) => {
+            Some(mut gp) => {
+                if let Some(id) = within {
+                    let cols = gp.plan.cols_reading(&b.ids, id);
+                    if let Some(x) = g.embedding(id).real_column().filter(|_| !cols.is_empty()) {
+                        gp.cull = gp.index_rows(&cols, id, x);
+                    }
+                }
                 plans.insert(index, gp);
                 Ok(true)
             }

@@ -252,6 +252,17 @@ fn sweep_box(p: &[[f64; 3]; 4]) -> Region {
 fn a_blade_tested_near_its_sweep_only_cuts_what_testing_every_face_cuts() {
     let (mut g, compiled, interpreted) = setup();
     let mut h = g.clone();
+    // the guard built and its rows indexed beforehand (as a simulation does for the blades
+    // it declares); a region of what is not a vec3 embedding is refused, naming it
+    let zero = swept([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
+    assert!(compiled
+        .prepare_guard_within(&mut g, "cut_swept", &zero, "position")
+        .unwrap());
+    let e = compiled
+        .prepare_guard_within(&mut g, "cut_swept", &zero, "nowhere")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("nowhere") && e.contains("vec3"), "{e}");
     let mut total = 0;
     let n = 12;
     for k in 0..n {
