@@ -1537,6 +1537,20 @@ impl Plan {
         }
     }
 
+    /// Generates the plan's native code now, for the column kinds of `g` (`ids` are the
+    /// rule's embeddings), when it was to be generated at the first run.
+    pub(crate) fn compile_now(&mut self, g: &GMap, ids: &[EmbeddingId]) {
+        if matches!(self.native, NativeState::Untried) {
+            let kinds: Vec<jit::ColKind> = self
+                .prog
+                .cols
+                .iter()
+                .map(|&e| col_kind(&g.embedding(ids[e]).column()))
+                .collect();
+            self.native = self.compile_native(&kinds);
+        }
+    }
+
     /// A guard plan ([`compile_guard`]) of the rows `rows` of this one only, in that order,
     /// each keeping its match's number (so [`Plan::run_guard`] on it gives the numbers of
     /// the matches among `rows` that pass, as on this plan), sharing this plan's native code
@@ -1554,15 +1568,7 @@ impl Plan {
         {
             return None;
         }
-        if matches!(self.native, NativeState::Untried) {
-            let kinds: Vec<jit::ColKind> = self
-                .prog
-                .cols
-                .iter()
-                .map(|&e| col_kind(&g.embedding(ids[e]).column()))
-                .collect();
-            self.native = self.compile_native(&kinds);
-        }
+        self.compile_now(g, ids);
         let pick = |v: &[u32]| -> Vec<u32> { rows.iter().map(|&r| v[r as usize]).collect() };
         let n = self.rows;
         let csr = self

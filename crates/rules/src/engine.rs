@@ -1422,6 +1422,8 @@ impl RuleSet {
         let old = plans.remove(&index);
         match self.guard_plan(g, &b, old, &mut Poll::new(&never))? {
             Some(mut gp) => {
+                // the native code too, so that the first application only runs it
+                gp.plan.compile_now(g, &b.ids);
                 if let Some(id) = within {
                     let cols = gp.plan.cols_reading(&b.ids, id);
                     if let Some(x) = g.embedding(id).real_column().filter(|_| !cols.is_empty()) {
