@@ -1639,42 +1639,7 @@ impl Plan {
     /// `Err` when the arrays are out of shape (rows, CSR offsets). Computed whenever the
     /// arrays change (built or patched), so that a native run only compares lengths.
     fn need(&self, kinds: &[jit::ColKind]) -> Result<Vec<usize>, String> {
-        let rows = self.rows;
-        let mut need = vec![0usize; kinds.len()];
-        for op in &self.prog.ops {
-            match op {
-                Op::Gather { dst, col, idx } => {
-                    let g = &self.gathers[*idx];
-                    if g.len() != rows {
-                        return Err("a gather of another length".into());
-                    }
-                    let w = if kinds[*col] == jit::ColKind::Real {
-                        self.prog.regs[*dst].width
-                    } else {
-                        1
-                    };
-                    if let Some(&m) = g.iter().max() {
-                        need[*col] = need[*col].max((m as usize + 1) * w);
-                    }
-                }
-                Op::Agg { dst, col, csr, .. } => {
-                    let (offs, slots) = &self.csr[*csr];
-                    let monotone = offs.windows(2).all(|o| o[0] <= o[1]);
-                    if offs.len() != rows + 1 || !monotone || offs[rows] as usize > slots.len() {
-                        return Err("an aggregate's offsets out of shape".into());
-                    }
-                    let w = self.prog.regs[*dst].width;
-                    if let Some(&m) = slots.iter().max() {
-                        need[*col] = need[*col].max((m as usize + 1) * w);
-                    }
-                }
-                Op::RowData { data, .. } if self.counts[*data].len() != rows => {
-                    return Err("counts of another length".into());
-                }
-                _ => {}
-            }
-        }
-        Ok(need)
+        self.need_grown(kinds, &vec![0; kinds.len()], 0)
     }
 
     /// [`Plan::need`] for a plan whose rows from `from` on were appended to rows kept from
@@ -1688,10 +1653,11 @@ impl Plan {
         from: usize,
     ) -> Result<Vec<usize>, String> {
         let rows = self.rows;
-        if old.len() != kinds.len() || from > rows {
-            return self.need(kinds);
-        }
-        let mut need = old.to_vec();
+        let (mut need, from) = if old.len() == kinds.len() && from <= rows {
+            (old.to_vec(), from)
+        } else {
+            (vec![0; kinds.len()], 0)
+        };
         for op in &self.prog.ops {
             match op {
                 Op::Gather { dst, col, idx } => {
