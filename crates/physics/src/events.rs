@@ -86,12 +86,26 @@ fn segments_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String> 
     if !from.iter().chain(to).flatten().all(|x| x.is_finite()) {
         return Some("its points must be finite".to_string());
     }
+    // the crossing test takes differences and products of three of them: beyond this the
+    // products overflow, and a crossing would be missed silently
+    if from.iter().chain(to).flatten().any(|x| x.abs() > 1e100) {
+        return Some(
+            "its coordinates must be at most 1e100 in magnitude (the crossing test would overflow)"
+                .to_string(),
+        );
+    }
     let zero_length = |s: &[[f64; 3]; 2]| {
         let d = [0, 1, 2].map(|i| s[1][i] - s[0][i]);
         d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= 0.0
     };
-    (zero_length(from) || zero_length(to))
-        .then(|| "its two end points must differ (at its start and at its end)".to_string())
+    match (zero_length(from), zero_length(to)) {
+        (false, false) => None,
+        (true, true) => Some(
+            "its two end points must differ (they coincide at its start and at its end)".into(),
+        ),
+        (true, false) => Some("its two end points must differ (they coincide at its start)".into()),
+        (false, true) => Some("its two end points must differ (they coincide at its end)".into()),
+    }
 }
 
 /// What opens a face (3D) or an edge (2D) during the run.

@@ -259,5 +259,17 @@ fn a_blade_that_misses_or_cannot_finish_is_an_error() {
         )
         .unwrap_err()
         .to_string();
-    assert!(err.contains("must differ"), "{err}");
+    assert!(
+        err.contains("must differ") && err.contains("at its start)"),
+        "{err}"
+    );
+    // coordinates whose differences' products would overflow: refused, not a silent miss
+    let err = sim(&mesh, vec![])
+        .cut_swept(
+            [[0.5, 1.7e308, 0.0], [0.5, 1.7e308, 1.0]],
+            [[0.5, -1.7e308, 0.0], [0.5, -1.7e308, 1.0]],
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("1e100"), "{err}");
 }
