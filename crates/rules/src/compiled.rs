@@ -1231,7 +1231,8 @@ impl Rows {
                 if kept(r) {
                     slots.copy_within(a..b, at);
                     at += b - a;
-                    // offs[o] is read no more once row o - 1 <= r is done
+                    // o <= r + 1: an offs[o] with o <= r is read no more, and at o = r + 1
+                    // every row so far was kept, so `at` is offs[r + 1] already
                     offs[o] = at as u32;
                     o += 1;
                 }

@@ -934,7 +934,7 @@ impl RuleSet {
     ///
     /// # Errors
     /// Those of [`RuleSet::apply_everywhere`]; an embedding `region` names that the map
-    /// lacks or that is not `vec3`.
+    /// lacks or that is not `vec3`; corners that are not finite, or a `lo` above `hi`.
     pub fn apply_everywhere_within(
         &self,
         g: &mut GMap,
@@ -949,6 +949,13 @@ impl RuleSet {
             return Err(ApplyError::Map(format!(
                 "rule '{name}': the region's embedding {:?} is not a vec3 embedding of the map",
                 region.embedding
+            )));
+        }
+        let corners = region.lo.iter().chain(&region.hi);
+        if !corners.clone().all(|v| v.is_finite()) || (0..3).any(|k| region.lo[k] > region.hi[k]) {
+            return Err(ApplyError::Map(format!(
+                "rule '{name}': the region's corners must be finite with lo <= hi in each coordinate, got lo {:?} and hi {:?}",
+                region.lo, region.hi
             )));
         }
         self.apply_with(g, name, params, &never, Some(region))

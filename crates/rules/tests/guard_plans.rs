@@ -315,4 +315,20 @@ fn a_blade_tested_near_its_sweep_only_cuts_what_testing_every_face_cuts() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("no_such") && e.contains("vec3"), "{e}");
+    // corners swapped or not finite: refused, not an empty search
+    for (lo, hi) in [
+        ([1.0, 1.0, 1.0], [0.0, 2.0, 2.0]),
+        ([f64::NAN, 0.0, 0.0], [1.0; 3]),
+    ] {
+        let r = Region {
+            embedding: "position".into(),
+            lo,
+            hi,
+        };
+        let e = compiled
+            .apply_everywhere_within(&mut g, "cut_swept", &swept(q[0], q[1], q[2], q[3]), &r)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("lo <= hi"), "{e}");
+    }
 }
