@@ -1542,14 +1542,17 @@ impl Plan {
     /// rule's embeddings), when it was to be generated at the first run.
     pub(crate) fn compile_now(&mut self, g: &GMap, ids: &[EmbeddingId]) {
         if matches!(self.native, NativeState::Untried) {
-            let kinds: Vec<jit::ColKind> = self
-                .prog
-                .cols
-                .iter()
-                .map(|&e| col_kind(&g.embedding(ids[e]).column()))
-                .collect();
-            self.native = self.compile_native(&kinds);
+            self.native = self.compile_native(&self.col_kinds(g, ids));
         }
+    }
+
+    /// The kinds of the program's columns on `g` (`ids` are the rule's embeddings).
+    fn col_kinds(&self, g: &GMap, ids: &[EmbeddingId]) -> Vec<jit::ColKind> {
+        self.prog
+            .cols
+            .iter()
+            .map(|&e| col_kind(&g.embedding(ids[e]).column()))
+            .collect()
     }
 
     /// A guard plan ([`compile_guard`]) of the rows `rows` of this one only, in that order,
@@ -1815,12 +1818,7 @@ impl Plan {
     ) -> Option<Result<(), Unsupported>> {
         self.chunk_starts.as_ref()?;
         let pvals = param_values(params)?;
-        let kinds: Vec<jit::ColKind> = self
-            .prog
-            .cols
-            .iter()
-            .map(|&e| col_kind(&g.embedding(ids[e]).column()))
-            .collect();
+        let kinds = self.col_kinds(g, ids);
         if matches!(self.native, NativeState::Untried) {
             self.native = self.compile_native(&kinds);
         }

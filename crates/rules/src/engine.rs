@@ -477,8 +477,9 @@ struct GuardPlan {
     index: Index,
     /// Per match, the smallest dart of its hook orbit: where [`find_all`] finds it.
     first: Vec<u32>,
-    /// The rows by where they read a `vec3` embedding, for runs near a region (built at the
-    /// first such run, see [`GuardPlan::candidates`]).
+    /// The rows by where they read a `vec3` embedding, for runs near a region (built when
+    /// the guard is prepared for them or at the first such run, see
+    /// [`GuardPlan::candidates`]).
     cull: Option<Cull>,
 }
 
@@ -942,15 +943,7 @@ impl RuleSet {
         params: &Params,
         region: &Region,
     ) -> Result<ApplyReport, ApplyError> {
-        let ok = g
-            .embedding_id(&region.embedding)
-            .is_some_and(|id| g.embedding(id).ty() == EmbeddingType::Vec3);
-        if !ok {
-            return Err(ApplyError::Map(format!(
-                "rule '{name}': the region's embedding {:?} is not a vec3 embedding of the map",
-                region.embedding
-            )));
-        }
+        vec3_embedding(g, name, &region.embedding)?;
         let corners = region.lo.iter().chain(&region.hi);
         if !corners.clone().all(|v| v.is_finite()) || (0..3).any(|k| region.lo[k] > region.hi[k]) {
             return Err(ApplyError::Map(format!(
@@ -1400,14 +1393,7 @@ impl RuleSet {
         params: &Params,
         embedding: &str,
     ) -> Result<bool, ApplyError> {
-        let Some(id) = g
-            .embedding_id(embedding)
-            .filter(|&id| g.embedding(id).ty() == EmbeddingType::Vec3)
-        else {
-            return Err(ApplyError::Map(format!(
-                "rule '{name}': the region's embedding {embedding:?} is not a vec3 embedding of the map"
-            )));
-        };
+        let id = vec3_embedding(g, name, embedding)?;
         self.prepare_guard_with(g, name, params, Some(id))
     }
 
@@ -1789,6 +1775,17 @@ fn drop_changed(
     Some((star, candidates))
 }
 
+/// The `vec3` embedding named `embedding` of `g`, for a region of rule `name`'s guard.
+fn vec3_embedding(g: &GMap, name: &str, embedding: &str) -> Result<EmbeddingId, ApplyError> {
+    g.embedding_id(embedding)
+        .filter(|&id| g.embedding(id).ty() == EmbeddingType::Vec3)
+        .ok_or_else(|| {
+            ApplyError::Map(format!(
+                "rule '{name}': the region's embedding {embedding:?} is not a vec3 embedding of the map"
+            ))
+        })
+}
+
 impl GuardPlan {
     /// The rows whose match may pass a guard that is false wherever the box bounding the
     /// values the row reads of embedding `emb` misses `region` (the caller's knowledge, see
@@ -2032,7 +2029,7 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
     let changed = g.changed_since(gp.identity.1)?;
     let rule = b.rule;
     let GuardPlan {
-        plan,
+        mut plan,
         mut index,
         mut first,
         reads,
@@ -2054,7 +2051,6 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
     // rows stay numbered by match (row k is match k's row 0): the dropped matches' rows
     // stay in the plan, their values ignored (`RuleSet::guarded_matches` keeps the live
     // matches only), and the new ones are appended; a rebuild compacts (`drop_changed`)
-    let mut plan = plan;
     plan.append_guard_rows(rule, g, &b.ids, &new, &numbers)?;
     Some(GuardPlan {
         identity: g.identity(),
