@@ -1299,13 +1299,15 @@ fn compact<T: Copy>(v: &mut Vec<T>, runs: impl Iterator<Item = (usize, usize)>) 
     v.truncate(at);
 }
 
-/// A plan's output buffer sized to `len` values. A patched plan keeps its buffer (see
-/// [`Plan::patch`]): it is resized in place, new values zero, with some room to grow so
-/// that the next patches appending a few rows allocate nothing. Kept values are those
-/// of earlier runs, as in a run of an unchanged plan: every row's values are written
-/// before they are read, and the finiteness test over whole blocks sees either zeros
-/// or values an earlier run computed.
-fn size_out(out: &mut Vec<f64>, len: usize) {
+/// A plan's output buffer sized to `len` values, in blocks of `block` values (one per chunk
+/// of rows). A patched plan keeps its buffer (see [`Plan::patch`]): it is resized in place,
+/// with some room to grow so that the next patches appending a few rows allocate nothing.
+/// Every run evaluates every row, so it rewrites every block but the last one's entries past
+/// the last row, which no run writes: after a resize the last block is zeroed, so that no
+/// value left there by the plan's former rows (a non-finite one from a run that failed,
+/// found by QA) stays in it and fails the finiteness test of every later run, sending them
+/// all to the slow path. Every other kept value is one a later run overwrites before reading.
+fn size_out(out: &mut Vec<f64>, len: usize, block: usize) {
     if out.len() == len {
         return;
     }
@@ -1313,6 +1315,8 @@ fn size_out(out: &mut Vec<f64>, len: usize) {
         out.reserve_exact(len + len / 64 - out.len());
     }
     out.resize(len, 0.0);
+    let last = len.saturating_sub(block);
+    out[last..].fill(0.0);
 }
 
 impl Plan {
@@ -1890,7 +1894,7 @@ impl Plan {
         let (ch, ow) = (self.chunk, self.out_width);
         let (rows, n_chunks) = (self.rows, self.rows.div_ceil(ch));
         let block = ch * ow.max(1);
-        size_out(&mut self.out, n_chunks * block);
+        size_out(&mut self.out, n_chunks * block, block);
         // the written columns' addresses, each taken once per write as `scatter` does (one
         // write counted per write); the program reads a written column through the same one
         let mut wcols: Vec<(usize, Col)> = Vec::new();
@@ -2048,7 +2052,7 @@ impl Plan {
         let n_chunks = self.rows.div_ceil(ch);
         let block = ch * ow.max(1);
         let need_out = n_chunks * block;
-        size_out(&mut self.out, need_out);
+        size_out(&mut self.out, need_out, block);
         let mut native_done = false;
         {
             let cols: Vec<ColumnRef> = self
@@ -2953,7 +2957,21 @@ pub(crate) fn register_val(t: Ty, x: &[f64]) -> Val {
 
 #[cfg(test)]
 mod tests {
-    use super::Rows;
+    use super::{size_out, Rows};
+
+    /// After a resize no stale value stays where no run writes (the last block's tail): a
+    /// buffer full of NaN (a failed run's), shrunk or grown, holds zeros in its last block.
+    #[test]
+    fn a_resized_output_buffer_has_a_clean_last_block() {
+        for (from, to) in [(40, 24), (24, 40), (40, 8), (8, 8)] {
+            let mut out = vec![f64::NAN; from];
+            size_out(&mut out, to, 8);
+            assert_eq!(out.len(), to);
+            if from != to {
+                assert!(out[to - 8..].iter().all(|&x| x == 0.0), "{from} -> {to}");
+            }
+        }
+    }
 
     /// The rows `filter` keeps, built the plain way: each array rebuilt from the kept rows.
     fn reference(r: &Rows, keep: &dyn Fn(u32) -> bool) -> Rows {
