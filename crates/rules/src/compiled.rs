@@ -1303,10 +1303,11 @@ fn compact<T: Copy>(v: &mut Vec<T>, runs: impl Iterator<Item = (usize, usize)>) 
 /// of rows). A patched plan keeps its buffer (see [`Plan::patch`]): it is resized in place,
 /// with some room to grow so that the next patches appending a few rows allocate nothing.
 /// Every run evaluates every row, so it rewrites every block but the last one's entries past
-/// the last row, which no run writes: after a resize the last block is zeroed, so that no
-/// value left there by the plan's former rows (a non-finite one from a run that failed,
-/// found by QA) stays in it and fails the finiteness test of every later run, sending them
-/// all to the slow path. Every other kept value is one a later run overwrites before reading.
+/// the last row, which no run writes: after a resize the last block is zeroed (and a patch
+/// zeroes it where the length stays), so that no value left there by the plan's former rows
+/// (a non-finite one from a run that failed, found by QA) stays in it and fails the
+/// finiteness test of every later run, sending them all to the slow path. Every other kept
+/// value is one a later run overwrites before reading.
 fn size_out(out: &mut Vec<f64>, len: usize, block: usize) {
     if out.len() == len {
         return;
@@ -1499,8 +1500,15 @@ impl Plan {
             Some(base),
         );
         // the output buffer stays (resized by the next run, without a new allocation when
-        // the rows change little)
+        // the rows change little), its last block zeroed: the rows changed, so entries past
+        // the new last row may hold values of former rows that no run rewrites (see
+        // `size_out`), even where the buffer keeps its length
         plan.out = out;
+        let last = plan
+            .out
+            .len()
+            .saturating_sub(plan.chunk * plan.out_width.max(1));
+        plan.out[last..].fill(0.0);
         plan
     }
 
