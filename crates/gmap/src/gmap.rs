@@ -666,7 +666,7 @@ impl GMap {
         let e = self.build_embedding(Embedding::new(name, ty, orbit, Policy::Copy, Some(derived)));
         self.embeddings.push(e);
         let id = EmbeddingId(self.embeddings.len() as u32 - 1);
-        self.recompute(id);
+        self.recompute(&[id]);
         Ok(id)
     }
 
@@ -937,47 +937,89 @@ impl GMap {
         }
     }
 
-    /// Recomputes every stale derived embedding from its source.
+    /// Recomputes every stale derived embedding from its source. Stale embeddings on one
+    /// orbit type whose sources share an orbit type and which were refreshed last at one
+    /// version are recomputed together: their orbits are found and walked once for all of
+    /// them (the three edge sums of a spring model), each then aggregating its own source
+    /// over the same darts in the same order, so each gets the values it would get alone.
     pub fn refresh_derived(&mut self) {
+        let mut done = vec![false; self.embeddings.len()];
         for k in 0..self.embeddings.len() {
             let id = EmbeddingId(k as u32);
-            if self.is_stale(id) {
-                self.recompute(id);
+            if done[k] || !self.is_stale(id) {
+                continue;
             }
+            let key = self.refresh_key(id);
+            // (one whose source is derived too stays alone, refreshed in its turn as before)
+            let stored_source = |j: EmbeddingId| {
+                self.embedding(j)
+                    .derived
+                    .is_some_and(|der| self.embedding(der.source).derived.is_none())
+            };
+            let group: Vec<EmbeddingId> = if stored_source(id) {
+                (k..self.embeddings.len())
+                    .map(|j| EmbeddingId(j as u32))
+                    .filter(|&j| {
+                        !done[j.0 as usize]
+                            && self.is_stale(j)
+                            && stored_source(j)
+                            && self.refresh_key(j) == key
+                    })
+                    .collect()
+            } else {
+                vec![id]
+            };
+            for j in &group {
+                done[j.0 as usize] = true;
+            }
+            self.recompute(&group);
         }
     }
 
-    /// Recomputes derived embedding `id`.
-    fn recompute(&mut self, id: EmbeddingId) {
-        let Some(der) = self.embedding(id).derived else {
+    /// What decides how derived embedding `id` is refreshed (see [`GMap::refresh_derived`]):
+    /// its orbit type, its source's, and the version it was refreshed at when its source was
+    /// not written since (else `None`: a refresh over the whole map).
+    fn refresh_key(&self, id: EmbeddingId) -> Option<(OrbitType, OrbitType, Option<u64>)> {
+        let e = self.embedding(id);
+        let der = e.derived?;
+        let src = self.embedding(der.source);
+        let at = match e.refreshed_at {
+            Some((v, writes)) if writes == src.writes => Some(v),
+            _ => None,
+        };
+        Some((e.orbit, src.orbit, at))
+    }
+
+    /// Recomputes the derived embeddings `ids`, which share a [`GMap::refresh_key`].
+    fn recompute(&mut self, ids: &[EmbeddingId]) {
+        let Some(Some((orbit, src_orbit, at))) = ids.first().map(|&id| self.refresh_key(id)) else {
             return;
         };
-        let mut e = std::mem::replace(
-            &mut self.embeddings[id.0 as usize],
-            Embedding::new("", EmbeddingType::F64, OrbitType::EMPTY, Policy::Copy, None),
-        );
-        let src = self.embedding(der.source);
-        let w = src.ty.width();
+        let mut es: Vec<Embedding> = ids
+            .iter()
+            .map(|id| {
+                std::mem::replace(
+                    &mut self.embeddings[id.0 as usize],
+                    Embedding::new("", EmbeddingType::F64, OrbitType::EMPTY, Policy::Copy, None),
+                )
+            })
+            .collect();
         let mut m = Marks::with_capacity(self.capacity());
-        let mut seen: Vec<usize> = Vec::new();
-        // Only the orbits around what changed since the last refresh, when the source was not
-        // written since and the change log covers that version: an orbit of `e` holding no
+        // Only the orbits around what changed since the last refresh, when the sources were
+        // not written since and the change log covers that version: an orbit of `e` holding no
         // dart of the source orbits of the changed darts is the same orbit, on the same slot,
         // over the same source slots holding the same values (a topology change re-slots and
         // recombines only orbits holding a changed dart), so its value stands.
-        let local: Option<Vec<Dart>> = match e.refreshed_at {
-            Some((v, writes)) if writes == src.writes => self.changed_since(v).map(|changed| {
-                let mut near = Marks::with_capacity(self.capacity());
-                let mut out = Vec::new();
-                for &c in &changed {
-                    if self.is_alive(c) && !near.is_marked(c) {
-                        self.visit_orbit(c, src.orbit, &mut near, |x| out.push(x));
-                    }
+        let local: Option<Vec<Dart>> = at.and_then(|v| self.changed_since(v)).map(|changed| {
+            let mut near = Marks::with_capacity(self.capacity());
+            let mut out = Vec::new();
+            for &c in &changed {
+                if self.is_alive(c) && !near.is_marked(c) {
+                    self.visit_orbit(c, src_orbit, &mut near, |x| out.push(x));
                 }
-                out
-            }),
-            _ => None,
-        };
+            }
+            out
+        });
         let all: Vec<Dart>;
         let starts: &[Dart] = if let Some(l) = &local {
             l
@@ -986,49 +1028,68 @@ impl GMap {
             &all
         };
         // a local refresh walks each orbit from its smallest dart, as the full one (which
-        // meets it there first): the same order of the source slots, the same sums bit for bit
+        // meets it there first): the same order of the source slots, the same sums bit for
+        // bit. The orbits are walked once for all of `ids`: each one's darts in `darts`,
+        // from its first dart on
         let mut walk = Marks::with_capacity(if local.is_some() { self.capacity() } else { 0 });
+        let mut darts: Vec<Dart> = Vec::new();
+        let mut seen: Vec<usize> = Vec::new();
         for &d in starts {
             if m.is_marked(d) {
                 continue;
             }
             let (d, marks) = if local.is_some() {
                 let mut lo = d;
-                self.visit_orbit(d, e.orbit, &mut m, |x| lo = lo.min(x));
+                self.visit_orbit(d, orbit, &mut m, |x| lo = lo.min(x));
                 (lo, &mut walk)
             } else {
                 (d, &mut m)
             };
-            seen.clear();
-            self.visit_orbit(d, e.orbit, marks, |x| {
-                let s = src.slot(x);
-                if !seen.contains(&s) {
-                    seen.push(s);
+            darts.clear();
+            self.visit_orbit(d, orbit, marks, |x| darts.push(x));
+            for (e, id) in es.iter_mut().zip(ids) {
+                let der = e.derived.expect("a derived embedding");
+                debug_assert!(
+                    der.source != *id,
+                    "a derived embedding is not its own source"
+                );
+                let src = self.embedding(der.source);
+                let w = src.ty.width();
+                seen.clear();
+                for &x in &darts {
+                    let s = src.slot(x);
+                    if !seen.contains(&s) {
+                        seen.push(s);
+                    }
                 }
-            });
-            let target = e.slot(d);
-            match der.aggregate {
-                Aggregate::Count => {
-                    e.values.set(1, target, &Value::Int(seen.len() as i64));
-                }
-                agg => {
-                    let policy = if agg == Aggregate::Sum {
-                        Policy::Sum
-                    } else {
-                        Policy::Mean
-                    };
-                    // merge src slots into a scratch value, then copy into the target column
-                    let mut scratch = src.values.clone_slots(w, &seen);
-                    let idx: Vec<usize> = (0..seen.len()).collect();
-                    scratch.merge(w, policy, &idx, 0);
-                    let v = scratch.get(w, 0);
-                    e.values.set(w, target, &v);
+                let target = e.slot(d);
+                match der.aggregate {
+                    Aggregate::Count => {
+                        e.values.set(1, target, &Value::Int(seen.len() as i64));
+                    }
+                    agg => {
+                        let policy = if agg == Aggregate::Sum {
+                            Policy::Sum
+                        } else {
+                            Policy::Mean
+                        };
+                        // merge src slots into a scratch value, then copy into the target
+                        // column
+                        let mut scratch = src.values.clone_slots(w, &seen);
+                        let idx: Vec<usize> = (0..seen.len()).collect();
+                        scratch.merge(w, policy, &idx, 0);
+                        let v = scratch.get(w, 0);
+                        e.values.set(w, target, &v);
+                    }
                 }
             }
         }
-        e.refreshed_at = Some((self.version, src.writes));
-        e.writes += 1;
-        self.embeddings[id.0 as usize] = e;
+        for (mut e, id) in es.into_iter().zip(ids) {
+            let src = self.embedding(e.derived.expect("a derived embedding").source);
+            e.refreshed_at = Some((self.version, src.writes));
+            e.writes += 1;
+            self.embeddings[id.0 as usize] = e;
+        }
     }
 }
 

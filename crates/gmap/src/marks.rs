@@ -17,12 +17,17 @@ pub struct Marks {
 }
 
 impl Marks {
-    /// Empty marks able to hold darts `0..capacity`.
+    /// Empty marks able to hold darts `0..capacity`: from this thread's pool when it has
+    /// some (marks dropped go back to it, cleared), so that a traversal repeated once per
+    /// change of a large map neither allocates nor zeroes a set the size of the map.
     pub fn with_capacity(capacity: usize) -> Self {
-        Marks {
-            bits: vec![0; capacity.div_ceil(64)],
-            set: Vec::new(),
-        }
+        let mut m = POOL
+            .try_with(|p| p.try_borrow_mut().ok().and_then(|mut p| p.pop()))
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        m.reserve_darts(capacity);
+        m
     }
 
     /// Grows the set to hold darts `0..capacity` (marks are kept).
@@ -82,6 +87,35 @@ impl Marks {
     }
 }
 
+impl Drop for Marks {
+    /// Gives the set back to this thread's pool, cleared, while the pool holds fewer than
+    /// [`POOL_MAX`] (else, or while the thread ends, it is freed).
+    fn drop(&mut self) {
+        if self.bits.is_empty() {
+            return;
+        }
+        let _ = POOL.try_with(|p| {
+            if let Ok(mut p) = p.try_borrow_mut() {
+                if p.len() < POOL_MAX {
+                    self.clear();
+                    // what a walk over a whole map listed is not kept
+                    self.set.shrink_to(SET_KEPT);
+                    p.push(Marks {
+                        bits: std::mem::take(&mut self.bits),
+                        set: std::mem::take(&mut self.set),
+                    });
+                }
+            }
+        });
+    }
+}
+
+/// Marks kept per thread at most.
+const POOL_MAX: usize = 16;
+
+/// Entries of a pooled set's list of marked darts kept allocated at most.
+const SET_KEPT: usize = 1 << 16;
+
 thread_local! {
     static POOL: RefCell<Vec<Marks>> = const { RefCell::new(Vec::new()) };
 }
@@ -110,6 +144,29 @@ mod tests {
         assert!(!m.is_marked(Dart(4)));
         m.clear();
         assert!(!m.is_marked(Dart(3)) && !m.is_marked(Dart(200)) && m.is_empty());
+    }
+
+    #[test]
+    fn dropped_marks_come_back_clear_and_big_enough() {
+        let mut big = Marks::with_capacity(1 << 20);
+        for i in (0..1 << 20).step_by(3) {
+            big.mark(Dart(i));
+        }
+        drop(big);
+        let mut small = Vec::new();
+        for _ in 0..2 * POOL_MAX {
+            let mut m = Marks::with_capacity(100);
+            assert!(m.is_empty());
+            assert!((0..1 << 20).step_by(3).all(|i| !m.is_marked(Dart(i))));
+            assert!(m.mark(Dart(99)) && m.mark(Dart(5000)), "grows on demand");
+            small.push(m);
+        }
+        drop(small); // POOL_MAX go back, the others are freed
+        let pooled = POOL.with(|p| p.borrow().len());
+        assert!(pooled <= POOL_MAX, "{pooled}");
+        with_marks(10, |m| {
+            assert!(!m.is_marked(Dart(99)) && !m.is_marked(Dart(5000)));
+        });
     }
 
     #[test]

@@ -130,11 +130,18 @@ impl GMap {
         }
         // apply the links in order (a later change of the same link wins), remembering each
         // overwritten value: undone in reverse order, they give back the map as it was
+        // (a change that sets a link to what it is already is no change: left out, so that it
+        // neither re-slots the embeddings of its dimension nor counts as changed)
         let mut old: Vec<(usize, u32, u32)> = Vec::with_capacity(changes.len());
         for &(i, a, b) in changes {
             let slot = &mut self.alpha[i][a.index()];
-            old.push((i, a.0, *slot));
-            *slot = b.0;
+            if *slot != b.0 {
+                old.push((i, a.0, *slot));
+                *slot = b.0;
+            }
+        }
+        if old.is_empty() && fresh.is_empty() && remove.is_empty() {
+            return Ok(()); // no link changes: the version stays
         }
         // every dart whose link changed, and each of its earlier partners, must be in an
         // involution now: that covers every dart whose link or whose partner's link changed
@@ -212,14 +219,36 @@ impl GMap {
         }
         // plan every embedding first, so a refusal leaves everything as it was; the new
         // orbits around the seeds are walked once per orbit type, for all its embeddings
-        let mut plans = Vec::new();
+        let mut plans: Vec<Option<std::rc::Rc<Reslot>>> = Vec::new();
         let mut walks: Vec<(OrbitType, Walk)> = Vec::new();
+        // Per embedding, the earlier one it re-slots with (its *leader*): embeddings that
+        // share one dart-to-slot table and have the same slot bookkeeping (use counts, free
+        // list) get the same plan and the same new table, so the plan is made once and the
+        // table stays shared (see `apply_group`)
+        let mut leader: Vec<Option<usize>> = vec![None; self.embeddings.len()];
         for k in 0..self.embeddings.len() {
             let e = &self.embeddings[k];
             if e.is_direct()
                 || (!(0..4).any(|i| dims[i] && e.orbit.contains(i)) && fresh.is_empty())
             {
                 plans.push(None);
+                continue;
+            }
+            let same = (0..k).find(|&j| {
+                leader[j].is_none()
+                    && plans[j].is_some()
+                    && self.embeddings[j].shares_slot_table(e)
+                    && self.embeddings[j].slot_use == e.slot_use
+                    && self.embeddings[j].free_slots == e.free_slots
+            });
+            if let Some(j) = same {
+                let p = std::rc::Rc::clone(plans[j].as_ref().expect("a leader has a plan"));
+                if let Err(err) = self.check_policy(k, &p) {
+                    self.undo_links(old);
+                    return Err(err);
+                }
+                leader[k] = Some(j);
+                plans.push(Some(p));
                 continue;
             }
             let o = e.orbit;
@@ -237,7 +266,7 @@ impl GMap {
                 },
             };
             match self.plan_reslot(k, &walks[w].1, removed, is_fresh) {
-                Ok(p) => plans.push(Some(p)),
+                Ok(p) => plans.push(Some(std::rc::Rc::new(p))),
                 Err(err) => {
                     self.undo_links(old);
                     return Err(err);
@@ -254,10 +283,15 @@ impl GMap {
             crate::gmap::note(&mut self.log, self.version, d.0, cap);
         }
         self.version += 1;
-        for (k, plan) in plans.into_iter().enumerate() {
-            if let Some(p) = plan {
-                self.apply_reslot(k, &p);
+        for k in 0..plans.len() {
+            let Some(p) = &plans[k] else { continue };
+            if leader[k].is_some() {
+                continue; // re-slotted with its leader
             }
+            let group: Vec<usize> = (k + 1..plans.len())
+                .filter(|&f| leader[f] == Some(k))
+                .collect();
+            self.apply_group(k, &group, p);
         }
         self.number_fresh_vertices(fresh, removed, is_fresh);
         for &d in remove {
@@ -398,6 +432,14 @@ impl GMap {
                 slots: first_slot..plan.slots.len(),
             });
         }
+        self.check_policy(k, &plan)?;
+        Ok(plan)
+    }
+
+    /// Refuses a plan that would merge different values or split an orbit of embedding
+    /// `k` when its policy is [`Policy::Error`] (a stored embedding).
+    fn check_policy(&self, k: usize, plan: &Reslot) -> Result<(), RewireError> {
+        let e = &self.embeddings[k];
         if e.policy == Policy::Error && e.derived.is_none() {
             let w = e.ty.width();
             for o in &plan.orbits {
@@ -423,10 +465,55 @@ impl GMap {
                 }
             }
         }
-        Ok(plan)
+        Ok(())
     }
 
-    fn apply_reslot(&mut self, k: usize, plan: &Reslot) {
+    /// Applies `plan` to embedding `k` and to the embeddings of `followers`, which share
+    /// its dart-to-slot table and its slot bookkeeping (see `reslot_all`): `k` first, which
+    /// writes the table (copying it only when something outside these embeddings holds it,
+    /// a clone of the map), then each follower's values at the slots `k` chose, after which
+    /// it takes `k`'s table and a copy of its bookkeeping. Each one ends as
+    /// [`GMap::apply_reslot`] alone would leave it: the same state before and the same plan
+    /// give the same slots (tested against unshared tables in `tests/change_log.rs`).
+    fn apply_group(&mut self, k: usize, followers: &[usize], plan: &Reslot) {
+        // the followers let go of the table, so that the leader's writes need no copy
+        for &f in followers {
+            self.embeddings[f].slot_of = Arc::default();
+        }
+        let mut targets = Vec::with_capacity(plan.orbits.len());
+        self.apply_reslot(k, plan, None, &mut targets);
+        for &f in followers {
+            let (table, uses, free) = {
+                let e = &self.embeddings[k];
+                (
+                    Arc::clone(&e.slot_of),
+                    e.slot_use.clone(),
+                    e.free_slots.clone(),
+                )
+            };
+            let e = &mut self.embeddings[f];
+            e.slot_of = table;
+            e.slot_use = uses;
+            e.free_slots = free;
+            let w = e.ty.width();
+            while e.n_slots() < e.slot_use.len() {
+                e.values.push_default(w);
+            }
+            self.apply_reslot(f, plan, Some(&targets), &mut Vec::new());
+        }
+    }
+
+    /// `given`: the slot of each new orbit, chosen already (for a follower of
+    /// [`GMap::apply_group`], whose table and bookkeeping its leader updated): then only the
+    /// values are written. Otherwise the slot chosen for each new orbit is appended to
+    /// `targets`.
+    fn apply_reslot(
+        &mut self,
+        k: usize,
+        plan: &Reslot,
+        given: Option<&[usize]>,
+        targets: &mut Vec<usize>,
+    ) {
         let cap = self.capacity();
         let e = &mut self.embeddings[k];
         let w = e.ty.width();
@@ -441,14 +528,17 @@ impl GMap {
         let mut reused = vec![false; plan.olds.len()];
         let mut emptied: Vec<usize> = Vec::new();
         let mut rows: Vec<usize> = Vec::new();
-        for o in &plan.orbits {
+        for (oi, o) in plan.orbits.iter().enumerate() {
             let slots = &plan.slots[o.slots.clone()];
-            let target = if let Some(&q) = slots.iter().find(|&&q| !reused[q]) {
+            let target = if let Some(t) = given {
+                t[oi]
+            } else if let Some(&q) = slots.iter().find(|&&q| !reused[q]) {
                 reused[q] = true;
                 plan.olds[q]
             } else {
                 e.alloc_slot(0) as usize
             };
+            targets.push(target);
             if slots.is_empty() {
                 let zero = match &e.values {
                     Column::Real(_) => crate::Value::Real(vec![0.0; w]),
@@ -474,6 +564,9 @@ impl GMap {
                 let idx: Vec<usize> = (0..slots.len()).collect();
                 scratch.merge(w, policy, &idx, 0);
                 e.values.set(w, target, &scratch.get(w, 0));
+            }
+            if given.is_some() {
+                continue;
             }
             for &d in &plan.darts[o.darts.clone()] {
                 let s = e.slot_of[d.index()] as usize;

@@ -235,3 +235,95 @@ fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid
     assert!(h.is_valid());
     assert!(h.memory_bytes() < g.memory_bytes());
 }
+
+/// Re-slotting after a batch rewrite (`GMap::rewire`, what every rule that changes the
+/// topology goes through) keeps a table shared: embeddings of one orbit type that shared their
+/// dart-to-slot table before the rewrite still share one after it (made once, not copied per
+/// embedding), and every embedding ends exactly as on a copy of the map whose embeddings each
+/// hold their own table (unshared by adding and removing a dart): the same slot per dart, the
+/// same values, the same slot bookkeeping (checked through a second rewrite and new slots).
+#[test]
+fn a_rewrite_keeps_shared_slot_tables_shared_and_gives_the_unshared_result() {
+    use topomech_gmap::{EmbeddingType, Policy, Value};
+    let (mut g, _) = build(
+        &cuboid([4, 3, 3], [4.0, 3.0, 3.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let vertex = OrbitType::vertex(g.dimension());
+    let pos = g.require("position").unwrap();
+    let sum = g
+        .add_embedding("sum", EmbeddingType::F64, vertex, Policy::Sum)
+        .unwrap();
+    let mean = g
+        .add_embedding("mean", EmbeddingType::Vec3, vertex, Policy::Mean)
+        .unwrap();
+    for (k, d) in g.orbit_representatives(vertex).into_iter().enumerate() {
+        g.set_value(sum, d, &Value::Real(vec![1.0 + k as f64]))
+            .unwrap();
+        g.set_value(mean, d, &Value::Real(vec![k as f64, 0.5, -1.0]))
+            .unwrap();
+    }
+    assert!(g.embedding(sum).shares_slot_table(g.embedding(pos)));
+    // the reference: the same map with one table per embedding
+    let mut h = g.clone();
+    let extra = h.add_darts(1);
+    h.remove_dart(extra).unwrap();
+    assert!(!h.embedding(sum).shares_slot_table(h.embedding(pos)));
+    // unsew alpha3 along the faces of a few interior darts: vertices split
+    let unsew = |g: &GMap, count: usize| {
+        let mut changes = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for d in g.darts().filter(|&d| !g.is_free(3, d)).step_by(37) {
+            if seen.len() >= count * 6 {
+                break;
+            }
+            for x in g.orbit(d, OrbitType::parse("<0,1>").unwrap()) {
+                for y in [x, g.alpha(3, x)] {
+                    if seen.insert(y) {
+                        changes.push((3, y, y));
+                    }
+                }
+            }
+        }
+        changes
+    };
+    // a batch that sets links to what they are already changes nothing, not even the version
+    let v = g.identity();
+    let same: Vec<_> = g.darts().take(50).map(|d| (0, d, g.alpha(0, d))).collect();
+    g.rewire(&same, &[], &[]).unwrap();
+    assert_eq!(g.identity(), v, "no link changed");
+    for round in 0..2 {
+        let changes = unsew(&g, 5 + 10 * round);
+        assert_eq!(
+            changes,
+            unsew(&h, 5 + 10 * round),
+            "the same map, the same batch"
+        );
+        g.rewire(&changes, &[], &[]).unwrap();
+        h.rewire(&changes, &[], &[]).unwrap();
+        assert!(g.is_valid(), "{:?}", g.validate());
+        assert!(h.is_valid(), "{:?}", h.validate());
+        for id in [sum, mean] {
+            assert!(
+                g.embedding(id).shares_slot_table(g.embedding(pos)),
+                "round {round}: the table stays shared"
+            );
+            assert_eq!(g.embedding(id).n_slots(), h.embedding(id).n_slots());
+        }
+        for d in g.darts() {
+            for id in [pos, sum, mean] {
+                assert_eq!(g.embedding(id).slot(d), h.embedding(id).slot(d), "dart {d}");
+                assert_eq!(g.real(id, d), h.real(id, d), "dart {d}");
+            }
+        }
+    }
+    // one table for the three, not three
+    assert!(g.memory_bytes() + 2 * 4 * g.capacity() <= h.memory_bytes() + 64);
+    // the bookkeeping agrees too: writing one embedding leaves the others alone
+    let d = g.darts().next().unwrap();
+    g.set_value(sum, d, &Value::Real(vec![42.0])).unwrap();
+    assert_eq!(g.real(sum, d), &[42.0]);
+    assert_eq!(g.real(mean, d), h.real(mean, d));
+    assert!(g.is_valid());
+}

@@ -70,9 +70,10 @@ fn seconds(f: impl FnOnce()) -> f64 {
     t.elapsed().as_secs_f64()
 }
 
-/// `TOPOMECH_TOPOLOGY_PROFILE=fracture|single|blade`: runs only that case, repeatedly, and
+/// `TOPOMECH_TOPOLOGY_PROFILE=fracture|single|plane|blade|plain`: runs only that case, repeatedly, and
 /// prints the time of its steps after the first (`TOPOMECH_TOPOLOGY_STEPS` of them, 100 by
-/// default; for a profiler, see `TOPOMECH_PERF_CTL` below).
+/// default; for a profiler, see `TOPOMECH_PERF_CTL` below; `TOPOMECH_STEPTIMES=1` also
+/// prints each step's time, in ms).
 fn profile(case: &str, n: [usize; 3]) {
     // a time step the undamped box stays stable with for hundreds of steps
     let dt = 1e-4;
@@ -104,6 +105,20 @@ fn profile(case: &str, n: [usize; 3]) {
                 })
                 .collect(),
         ),
+        // a plane cut (about 1,300 faces) every 10 steps, at x = 0.3, 0.4, ... (15 at most)
+        "plane" => (
+            None,
+            vec![],
+            (0..(steps / 10).min(15))
+                .map(|k| TimedEvent {
+                    time: f64::from(10 * k + 5) * dt,
+                    cut: Cut::Plane {
+                        normal: [1.0, 0.0, 0.0],
+                        offset: 0.3 + 0.1 * f64::from(k),
+                    },
+                })
+                .collect(),
+        ),
         "blade" | "plain" => (
             None,
             if case == "blade" {
@@ -119,7 +134,9 @@ fn profile(case: &str, n: [usize; 3]) {
             vec![],
         ),
         other => {
-            panic!("TOPOMECH_TOPOLOGY_PROFILE: fracture, single, blade or plain, not {other:?}")
+            panic!(
+                "TOPOMECH_TOPOLOGY_PROFILE: fracture, single, plane, blade or plain, not {other:?}"
+            )
         }
     };
     let set_up = Instant::now();
@@ -134,11 +151,24 @@ fn profile(case: &str, n: [usize; 3]) {
     if let Ok(fifo) = std::env::var("TOPOMECH_PERF_CTL") {
         std::fs::write(fifo, "enable\n").expect("writes to perf's control fifo");
     }
+    let mut times = Vec::new();
     let t = seconds(|| {
         for _ in 1..steps {
+            let t0 = Instant::now();
             black_box(s.step()).expect("steps");
+            times.push(t0.elapsed().as_secs_f64() * 1e3);
         }
     });
+    if std::env::var_os("TOPOMECH_STEPTIMES").is_some() {
+        eprintln!(
+            "{}",
+            times
+                .iter()
+                .map(|t| format!("{t:.1}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+    }
     let faces: usize = s.topology_changes().iter().map(|c| c.unsewn).sum();
     println!(
         "{case}: {} steps in {:.1} ms ({:.2} ms per step), {faces} faces opened",

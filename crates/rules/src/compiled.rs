@@ -1288,6 +1288,11 @@ impl Rows {
     }
 }
 
+thread_local! {
+    /// The owner tables of [`Plan::assemble`], kept between calls (all `(u32::MAX, 0)`).
+    static OWNERS: std::cell::RefCell<Vec<Vec<(u32, u32)>>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// Moves the runs `lo..hi` of `v` down, in order, over what lies before them, and
 /// truncates `v` after the last (see [`Rows::filter`]).
 fn compact<T: Copy>(v: &mut Vec<T>, runs: impl Iterator<Item = (usize, usize)>) {
@@ -1378,7 +1383,11 @@ impl Plan {
     ) -> Plan {
         let mut targets = Vec::with_capacity(prog.writes.len());
         let mut dups = Vec::new();
-        let mut owner: Vec<Vec<(u32, u32)>> = Vec::new();
+        // per written embedding, the first (write, row) writing each slot: tables the size
+        // of the embedding, kept per thread between plans (a patch assembles often) and
+        // given back as they were, `(u32::MAX, 0)` everywhere: only the entries this call
+        // set are reset, so a small patch of a large plan allocates and clears nothing
+        let mut owner: Vec<Vec<(u32, u32)>> = OWNERS.with(|o| std::mem::take(&mut *o.borrow_mut()));
         let mut owner_emb: Vec<usize> = Vec::new();
         let mut woff = 0;
         let mut evaluations = 0;
@@ -1395,8 +1404,14 @@ impl Plan {
                 k
             } else {
                 owner_emb.push(*emb);
-                owner.push(vec![(u32::MAX, 0); e.n_slots()]);
-                owner.len() - 1
+                if owner.len() < owner_emb.len() {
+                    owner.push(Vec::new());
+                }
+                let t = &mut owner[owner_emb.len() - 1];
+                if t.len() < e.n_slots() {
+                    t.resize(e.n_slots(), (u32::MAX, 0));
+                }
+                owner_emb.len() - 1
             };
             let mut t = Vec::with_capacity(rows.writes[w].len());
             evaluations += rows.writes[w].len();
@@ -1412,6 +1427,16 @@ impl Plan {
             targets.push((t, woff));
             woff += prog.regs[*reg].width;
         }
+        // the tables back, clean: every entry set above is a target's slot
+        for (w, (_, emb, _, _)) in prog.writes.iter().enumerate() {
+            if let Some(k) = owner_emb.iter().position(|x| x == emb) {
+                for &(_, s) in &targets[w].0 {
+                    owner[k][s as usize] = (u32::MAX, 0);
+                }
+            }
+        }
+        debug_assert!(owner.iter().all(|t| t.iter().all(|&o| o == (u32::MAX, 0))));
+        OWNERS.with(|o| *o.borrow_mut() = owner);
         let out_width = woff;
         // rows per chunk: the chunk's scratch stays within a few hundred KiB; a power of two,
         // so that a row's chunk and place in it are a shift and a mask
@@ -1734,7 +1759,14 @@ impl Plan {
                 }
                 Op::Agg { dst, col, csr, .. } => {
                     let (offs, slots) = &self.csr[*csr];
-                    let monotone = offs.windows(2).all(|o| o[0] <= o[1]);
+                    // the kept rows' offsets were checked when `old` was computed, and a
+                    // patch keeps them increasing (`Rows::filter` shifts each run of them
+                    // by one amount; appending adds after the last): only the appended
+                    // rows' are checked again (all of them in debug builds)
+                    debug_assert!(offs.windows(2).all(|o| o[0] <= o[1]));
+                    let monotone = offs
+                        .get(from.saturating_sub(1)..)
+                        .is_some_and(|o| o.windows(2).all(|o| o[0] <= o[1]));
                     if offs.len() != rows + 1 || !monotone || offs[rows] as usize > slots.len() {
                         return Err("an aggregate's offsets out of shape".into());
                     }
