@@ -379,3 +379,62 @@ fn prepare_cuts_changes_no_result() {
         assert_eq!(bits(&a.3), bits(&b.3), "velocities after a step");
     }
 }
+
+/// Plans patched in place (the rows of dropped matches left dead where they are, the new
+/// ones appended: a plan without aggregates, such as the springs' and the integrator's) give
+/// the forces of plans built from scratch after each of a series of cuts (a simulation
+/// never rebuilding its plans, against one rebuilding them before each comparison), and keep
+/// doing so once the dead rows are many and a patch compacts the plan instead (the other
+/// path), with the map valid and mass and momentum kept after each cut.
+#[test]
+fn plans_patched_in_place_and_then_compacted_give_fresh_forces() {
+    let mesh = cuboid([10, 4, 4], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let (mut a, mut b) = (sim(&mesh, vec![]), sim(&mesh, vec![]));
+    shake(&mut a);
+    shake(&mut b);
+    a.forces().unwrap();
+    let mass = a.total_mass().unwrap();
+    let (mut in_place, mut other) = (0, 0);
+    for k in 1..10 {
+        let what = format!("cut {k}");
+        let before = (
+            a.rules().plan_patches_in_place(),
+            a.rules().plan_patches() - a.rules().plan_patches_in_place(),
+        );
+        let x = 0.2 * f64::from(k);
+        assert!(
+            plane(&mut a, [1.0, 0.0, 0.0], x) > 0,
+            "{what}: nothing opened"
+        );
+        assert!(
+            plane(&mut b, [1.0, 0.0, 0.0], x) > 0,
+            "{what}: nothing opened"
+        );
+        assert!(a.gmap().is_valid(), "{what}: {:?}", a.gmap().validate());
+        let m = a.total_mass().unwrap();
+        assert!(
+            (m - mass).abs() <= 1e-12 * mass,
+            "{what}: mass {m} vs {mass}"
+        );
+        a.forces().unwrap();
+        b.set_compiled(true); // drops every plan
+        b.forces().unwrap();
+        close(
+            &a.vertex_vec3("force").unwrap(),
+            &b.vertex_vec3("force").unwrap(),
+            &what,
+        );
+        in_place += a.rules().plan_patches_in_place() - before.0;
+        other += a.rules().plan_patches() - a.rules().plan_patches_in_place() - before.1;
+        a.step().unwrap();
+        b.step().unwrap();
+        close(
+            &a.vertex_vec3("position").unwrap(),
+            &b.vertex_vec3("position").unwrap(),
+            &format!("{what}, a step later"),
+        );
+    }
+    assert!(in_place >= 9, "{in_place} patches in place");
+    // the plans with aggregates, and the compactions, take the other path
+    assert!(other >= 9, "{other} patches by filtering");
+}

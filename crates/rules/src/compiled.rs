@@ -980,7 +980,17 @@ pub(crate) struct Plan {
     /// targets (sorted by row), `c = 0..=chunks`, and the slots its column must hold (one
     /// past its largest target). `None` where it may not.
     chunk_starts: Option<(Vec<Vec<u32>>, Vec<usize>)>,
+    /// Rows of dropped matches left in place by [`Plan::patch_in_place`] (evaluated, never
+    /// written), since the plan was last assembled.
+    dead: usize,
+    /// Per embedding the plan writes (in the order of the writes), the target writing each
+    /// slot, `(write, row)`, or `(u32::MAX, 0)`: built at the first in-place patch, kept
+    /// up to date by the next ones.
+    owner: Option<Owners>,
 }
+
+/// Per written embedding, which target writes each slot (see `Plan::owner`).
+type Owners = Vec<(usize, Vec<(u32, u32)>)>;
 
 /// A plan being built from batches of matches (see [`Plan::builder`]).
 pub(crate) struct PlanBuilder {
@@ -1458,6 +1468,8 @@ impl Plan {
             row_match: rows.row_match,
             writes: rows.writes,
             chunk_starts: None,
+            dead: 0,
+            owner: None,
         };
         plan.chunk_starts = plan.chunk_starts();
         // native code already generated stays (it depends on the program, the column kinds
@@ -1483,17 +1495,26 @@ impl Plan {
     /// (numbered `numbers`) appended: what [`Plan::build`] gives for the kept and the new
     /// matches, up to the order of the rows. `g` must be the map the new matches were found
     /// on, and every kept row's index arrays must still hold on it (the caller's proof).
+    ///
+    /// `dropped`: the matches dropped since the plan was last patched or built (those `keep`
+    /// rejects and did not reject then). Where it can, the plan is patched in place
+    /// ([`Plan::patch_in_place`]), at a cost that grows with the rows dropped and added;
+    /// otherwise, and now and then to compact it, its arrays are filtered and assembled again.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn patch(
-        self,
+        mut self,
         rule: &Rule,
         g: &GMap,
         ids: &[EmbeddingId],
         keep: &dyn Fn(u32) -> bool,
+        dropped: &[u32],
         kept_matches: usize,
         new: &[Match],
         numbers: &[u32],
-    ) -> Plan {
+    ) -> (Plan, bool) {
+        if self.patch_in_place(rule, g, ids, keep, dropped, kept_matches, new, numbers) {
+            return (self, true);
+        }
         let Plan {
             prog,
             gathers,
@@ -1534,7 +1555,205 @@ impl Plan {
             .len()
             .saturating_sub(plan.chunk * plan.out_width.max(1));
         plan.out[last..].fill(0.0);
-        plan
+        (plan, false)
+    }
+
+    /// [`Plan::patch`] without moving or renumbering the kept rows, for a plan without
+    /// aggregate slot lists or duplicate writes: the rows of the dropped matches stay where
+    /// they are, *dead*: their index arrays become those of a live row (so that they still
+    /// evaluate to finite values, which nothing writes), their write targets go (an ordered
+    /// pass over the targets), and the new matches' rows are appended, each target checked
+    /// against the table of which row writes each slot (`owner`, kept in the plan). What it
+    /// costs grows with the rows dropped and added, and one pass over the targets; it gives
+    /// the same values on the map as [`Plan::patch`]'s other path (every live row is the
+    /// same row, with the same index arrays; only the order of the rows differs).
+    ///
+    /// `false`, with the plan unchanged, where it does not apply: aggregates, duplicate
+    /// writes, no chunked scatter, a new target on a slot a live row writes (a duplicate:
+    /// the full path decides), or more dead rows than an eighth of the plan (at least 1024),
+    /// when the full path compacts it.
+    #[allow(clippy::too_many_arguments)]
+    fn patch_in_place(
+        &mut self,
+        rule: &Rule,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        keep: &dyn Fn(u32) -> bool,
+        dropped: &[u32],
+        kept_matches: usize,
+        new: &[Match],
+        numbers: &[u32],
+    ) -> bool {
+        if self.prog.guard
+            || !self.dups.is_empty()
+            || self.chunk_starts.is_none()
+            || self.csr.iter().any(|(offs, _)| offs.len() > 1)
+            || self.rows == 0
+        {
+            return false;
+        }
+        debug_assert!(self.row_match.is_sorted(), "rows are in match order");
+        // the rows of the dropped matches: row_match is sorted (rows are built and
+        // appended in match order, and their numbers grow)
+        let mut dead_now: Vec<u32> = Vec::new();
+        for &k in dropped {
+            let lo = self.row_match.partition_point(|&m| m < k);
+            let hi = self.row_match.partition_point(|&m| m <= k);
+            dead_now.extend(lo as u32..hi as u32);
+        }
+        dead_now.sort_unstable();
+        dead_now.dedup();
+        if self.dead + dead_now.len() > (self.rows / 8).max(1024) {
+            return false;
+        }
+        // a live row, whose index arrays the dead rows take
+        let Some(live) = (0..self.rows).find(|&r| keep(self.row_match[r])) else {
+            return false;
+        };
+        let base = self.rows;
+        let added = Rows::of(&self.prog, rule, g, ids, new, numbers, base);
+        // the written embeddings, in the order of the writes
+        let mut embs: Vec<usize> = Vec::new();
+        for (_, emb, _, _) in &self.prog.writes {
+            if !embs.contains(emb) {
+                embs.push(*emb);
+            }
+        }
+        let emb_of = |w: usize| {
+            embs.iter()
+                .position(|e| *e == self.prog.writes[w].1)
+                .expect("a written embedding")
+        };
+        if self.owner.is_none() {
+            let mut owner: Owners = embs
+                .iter()
+                .map(|&e| (e, vec![(u32::MAX, 0); g.embedding(ids[e]).n_slots()]))
+                .collect();
+            for (w, (t, _)) in self.targets.iter().enumerate() {
+                let table = &mut owner[emb_of(w)].1;
+                for &(row, s) in t {
+                    table[s as usize] = (w as u32, row);
+                }
+            }
+            self.owner = Some(owner);
+        }
+        let owner = self.owner.as_mut().expect("built above");
+        for (k, &e) in embs.iter().enumerate() {
+            let n = g.embedding(ids[e]).n_slots();
+            if owner[k].1.len() < n {
+                owner[k].1.resize(n, (u32::MAX, 0));
+            }
+        }
+        let is_dead_now = |r: u32| dead_now.binary_search(&r).is_ok();
+        // every new target on a slot that no live row writes, none twice (a row's own
+        // second write of a slot through the same write is no target, as in `assemble`)
+        let mut taken: std::collections::HashMap<(usize, u32), (u32, u32)> =
+            std::collections::HashMap::new();
+        for (w, pairs) in added.writes.iter().enumerate() {
+            let k = emb_of(w);
+            for &(row, s) in pairs {
+                let Some(&o) = owner[k].1.get(s as usize) else {
+                    return false;
+                };
+                if o.0 != u32::MAX && !is_dead_now(o.1) {
+                    return false;
+                }
+                match taken.insert((k, s), (w as u32, row)) {
+                    Some(prev) if prev != (w as u32, row) => return false,
+                    _ => {}
+                }
+            }
+        }
+        // from here on the plan changes: the dead rows compute the live row's values
+        for &r in &dead_now {
+            let r = r as usize;
+            for x in &mut self.gathers {
+                x[r] = x[live];
+            }
+            for c in &mut self.counts {
+                if c.len() == self.rows {
+                    c[r] = c[live];
+                }
+            }
+        }
+        // their targets and writes go (the pairs are in row order, as `dead_now`): each dead
+        // row's pairs found by bisection, the runs between them moved down
+        let drop_rows = |v: &mut Vec<(u32, u32)>, mut gone: Option<&mut Vec<(u32, u32)>>| {
+            let mut cut: Vec<(usize, usize)> = Vec::with_capacity(dead_now.len());
+            let mut from = 0;
+            for &r in &dead_now {
+                let lo = from + v[from..].partition_point(|p| p.0 < r);
+                let hi = lo + v[lo..].partition_point(|p| p.0 <= r);
+                if hi > lo {
+                    if let Some(g) = gone.as_mut() {
+                        g.extend_from_slice(&v[lo..hi]);
+                    }
+                    cut.push((lo, hi));
+                }
+                from = hi;
+            }
+            let n = v.len();
+            let runs = std::iter::once(0)
+                .chain(cut.iter().map(|c| c.1))
+                .zip(cut.iter().map(|c| c.0).chain(std::iter::once(n)))
+                .filter(|(lo, hi)| lo < hi);
+            compact(v, runs);
+        };
+        let mut gone = Vec::new();
+        for (w, (t, _)) in self.targets.iter_mut().enumerate() {
+            gone.clear();
+            drop_rows(t, Some(&mut gone));
+            let table = &mut owner[emb_of(w)].1;
+            for &(_, s) in &gone {
+                table[s as usize] = (u32::MAX, 0);
+            }
+        }
+        for wl in &mut self.writes {
+            drop_rows(wl, None);
+        }
+        // the new rows, appended
+        for (w, pairs) in added.writes.iter().enumerate() {
+            let table = &mut owner[emb_of(w)].1;
+            for &(row, s) in pairs {
+                let o = &mut table[s as usize];
+                if o.0 == u32::MAX {
+                    *o = (w as u32, row);
+                    self.targets[w].0.push((row, s));
+                }
+            }
+        }
+        let n_new = added.row_match.len();
+        let mut rows = Rows {
+            row_match: std::mem::take(&mut self.row_match),
+            gathers: std::mem::take(&mut self.gathers),
+            csr: std::mem::take(&mut self.csr),
+            counts: std::mem::take(&mut self.counts),
+            writes: std::mem::take(&mut self.writes),
+        };
+        rows.append(added);
+        self.row_match = rows.row_match;
+        self.gathers = rows.gathers;
+        self.csr = rows.csr;
+        self.counts = rows.counts;
+        self.writes = rows.writes;
+        self.rows = base + n_new;
+        self.matches = kept_matches + new.len();
+        self.dead += dead_now.len();
+        self.evaluations = self.writes.iter().map(Vec::len).sum();
+        self.chunk_starts = self.chunk_starts();
+        if let NativeState::Ready(nat, old) = &self.native {
+            self.native = match self.need_grown(&nat.kinds, old, base) {
+                Ok(need) => NativeState::Ready(std::sync::Arc::clone(nat), need),
+                Err(why) => NativeState::Failed(why),
+            };
+        }
+        // entries past the last row may hold a former run's values (see `Plan::patch`)
+        let last = self
+            .out
+            .len()
+            .saturating_sub(self.chunk * self.out_width.max(1));
+        self.out[last..].fill(0.0);
+        true
     }
 
     /// A guard plan ([`compile_guard`]) with the rows of `new` (numbered `numbers`)
@@ -1704,6 +1923,8 @@ impl Plan {
             row_match: pick(&self.row_match),
             writes: vec![(0..k).map(|r| (r, r)).collect()],
             chunk_starts: None,
+            dead: 0,
+            owner: None,
         })
     }
 
@@ -1816,7 +2037,13 @@ impl Plan {
             + self.counts.iter().map(|x| x.capacity() * 8).sum::<usize>();
         let t: usize = self.targets.iter().map(|(t, _)| t.capacity() * 8).sum();
         let w: usize = self.writes.iter().map(|x| x.capacity() * 8).sum();
-        g + c + t + w + self.row_match.capacity() * 4 + self.out.capacity() * 8
+        let o: usize = self
+            .owner
+            .iter()
+            .flatten()
+            .map(|(_, t)| t.capacity() * 8)
+            .sum();
+        g + c + t + w + o + self.row_match.capacity() * 4 + self.out.capacity() * 8
     }
 
     /// Where the value of the write whose output offset is `off` and width `width` lies in

@@ -452,6 +452,8 @@ pub struct RuleSet {
     /// Plans patched after a topology change instead of rebuilt (see
     /// [`RuleSet::plan_patches`]).
     patches: std::sync::atomic::AtomicUsize,
+    /// Those of `patches` made in place ([`RuleSet::plan_patches_in_place`]).
+    in_place_patches: std::sync::atomic::AtomicUsize,
     /// The compiled guards of rules that change the topology, by rule index (see
     /// [`RuleSet::guarded_matches`]).
     guard_plans: std::sync::Mutex<HashMap<usize, GuardPlan>>,
@@ -673,6 +675,7 @@ impl RuleSet {
             compile: true,
             jit: crate::jit::enabled_by_env(),
             patches: std::sync::atomic::AtomicUsize::new(0),
+            in_place_patches: std::sync::atomic::AtomicUsize::new(0),
             guard_plans: std::sync::Mutex::new(HashMap::new()),
             guard_runs: std::sync::atomic::AtomicUsize::new(0),
             guard_patches: std::sync::atomic::AtomicUsize::new(0),
@@ -1168,7 +1171,7 @@ impl RuleSet {
         if let Some(guard) = &rule.guard {
             expr_orbits(guard, b.embs, &mut chains);
         }
-        let (star, candidates) = drop_changed(g, rule, &mut ix, &changed, &chains)?;
+        let (star, candidates, dropped) = drop_changed(g, rule, &mut ix, &changed, &chains)?;
         // new matches, from the candidate hooks not in a kept match's hook orbit
         let hook = rule.hooks[0];
         let mut prints: std::collections::HashSet<Vec<u32>, FastHash> =
@@ -1199,15 +1202,21 @@ impl RuleSet {
         let kind = match compiled {
             Some(p) => {
                 let alive = &ix.alive;
-                PlanKind::Compiled(Box::new(p.patch(
+                let (p, in_place) = p.patch(
                     rule,
                     g,
                     &b.ids,
                     &|k| alive[k as usize],
+                    &dropped,
                     kept,
                     &new,
                     &numbers,
-                )))
+                );
+                if in_place {
+                    self.in_place_patches
+                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                PlanKind::Compiled(Box::new(p))
             }
             None if new.is_empty() => PlanKind::Matches(Arc::new(Vec::new())),
             // a plan without matches gains some: rebuilt (binding, and so creating, the
@@ -1452,6 +1461,14 @@ impl RuleSet {
     /// [`RuleSet::patch_plan`]), since this rule set was made.
     pub fn plan_patches(&self) -> usize {
         self.patches.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// How many of [`RuleSet::plan_patches`] left the kept rows in place (a plan without
+    /// aggregates or duplicate writes: the dropped matches' rows stay, dead, until a patch
+    /// compacts the plan; see "Topology changes during a run" in the README).
+    pub fn plan_patches_in_place(&self) -> usize {
+        self.in_place_patches
+            .load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Drops every plan (they are rebuilt when needed): after rules that run once. The
@@ -1717,7 +1734,7 @@ fn drop_changed(
     ix: &mut Index,
     changed: &[Dart],
     chains: &[Vec<OrbitType>],
-) -> Option<(Marks, Vec<Dart>)> {
+) -> Option<(Marks, Vec<Dart>, Vec<u32>)> {
     let cap = g.capacity();
     if ix.of_hook.len() < cap {
         ix.of_hook.resize(cap, u32::MAX);
@@ -1756,12 +1773,14 @@ fn drop_changed(
     };
     // drop the matches holding a dart of C*
     let mut candidates: Vec<Dart> = Vec::new();
+    let mut dropped: Vec<u32> = Vec::new();
     for &y in &cstar {
         for p in &paths {
             let h = back(y, p);
             if let Some(k) = ix.live_at(h) {
                 ix.alive[k as usize] = false;
                 ix.live -= 1;
+                dropped.push(k);
             }
             if g.is_alive(h) {
                 candidates.push(h);
@@ -1772,7 +1791,7 @@ fn drop_changed(
     if ix.hook_darts.len() > 2 * cap.max(1024) {
         return None;
     }
-    Some((star, candidates))
+    Some((star, candidates, dropped))
 }
 
 /// The `vec3` embedding named `embedding` of `g`, for a region of rule `name`'s guard.
@@ -2037,7 +2056,7 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
         ..
     } = gp;
     let chains: Vec<Vec<OrbitType>> = plan.agg_orbits().into_iter().map(|o| vec![o]).collect();
-    let (star, candidates) = drop_changed(g, rule, &mut index, &changed, &chains)?;
+    let (star, candidates, _) = drop_changed(g, rule, &mut index, &changed, &chains)?;
     let hook = rule.hooks[0];
     // one row per hook orbit: no guard evaluated (the plan does), no footprint merged
     let new = rematch(g, rule, &index, &star, candidates, |_| Some(true), |_| true)?;
