@@ -194,6 +194,103 @@ fn criterion_rules(c: Criterion) -> (&'static str, &'static str, &'static str) {
     }
 }
 
+/// The box that the conjunction `text` (a predicate cut's, on the side's centroid `x`, `y`,
+/// `z`) confines the centroid to, from its conjuncts that compare a coordinate with a number
+/// (`x > 0.99`, `0.2 >= y`, `z == 0`; others, and a predicate that is not a conjunction of
+/// such, leave coordinates unbounded: infinite sides). A necessary condition only: a
+/// centroid outside the box fails the predicate, one inside may pass or fail. `None` when the
+/// text does not parse or binds names of its own (a `let` could rename `x`).
+pub(crate) fn predicate_box(text: &str) -> Option<([f64; 3], [f64; 3])> {
+    use topomech_rules::ast::{Expr, ExprKind};
+    use topomech_rules::value::{BinOp, UnOp};
+    fn number(e: &Expr) -> Option<f64> {
+        match &e.kind {
+            ExprKind::Real(x) => Some(*x),
+            ExprKind::Int(i) => Some(*i as f64),
+            ExprKind::Unary(UnOp::Neg, a) => number(a).map(|x| -x),
+            _ => None,
+        }
+    }
+    fn axis(e: &Expr) -> Option<usize> {
+        match &e.kind {
+            ExprKind::Name(n) => ["x", "y", "z"].iter().position(|c| c == n),
+            _ => None,
+        }
+    }
+    fn walk(e: &Expr, lo: &mut [f64; 3], hi: &mut [f64; 3]) {
+        let ExprKind::Binary(op, a, b) = &e.kind else {
+            return;
+        };
+        if *op == BinOp::And {
+            walk(a, lo, hi);
+            walk(b, lo, hi);
+            return;
+        }
+        // `coordinate op number`, or `number op coordinate` with the comparison turned
+        let (k, c, op) = match (axis(a), number(b), axis(b), number(a)) {
+            (Some(k), Some(c), _, _) => (k, c, *op),
+            (_, _, Some(k), Some(c)) => {
+                let turned = match op {
+                    BinOp::Lt => BinOp::Gt,
+                    BinOp::Le => BinOp::Ge,
+                    BinOp::Gt => BinOp::Lt,
+                    BinOp::Ge => BinOp::Le,
+                    other => *other,
+                };
+                (k, c, turned)
+            }
+            _ => return,
+        };
+        if !c.is_finite() {
+            return;
+        }
+        match op {
+            BinOp::Lt | BinOp::Le => hi[k] = hi[k].min(c),
+            BinOp::Gt | BinOp::Ge => lo[k] = lo[k].max(c),
+            BinOp::Eq => {
+                lo[k] = lo[k].max(c);
+                hi[k] = hi[k].min(c);
+            }
+            _ => {}
+        }
+    }
+    let e = topomech_rules::build::parse_expression("predicate", text).ok()?;
+    if matches!(e.kind, ExprKind::Block(..)) {
+        return None;
+    }
+    let (mut lo, mut hi) = ([f64::NEG_INFINITY; 3], [f64::INFINITY; 3]);
+    walk(&e, &mut lo, &mut hi);
+    Some((lo, hi))
+}
+
+/// The box bounding the points of the plane `normal . p = offset` inside the box `lo..hi`
+/// (interval arithmetic per coordinate, so a little larger than the section for a tilted
+/// plane); `None` when the plane misses the box or the normal is zero.
+pub(crate) fn plane_box(
+    normal: [f64; 3],
+    offset: f64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+) -> Option<([f64; 3], [f64; 3])> {
+    let (mut a, mut b) = (lo, hi);
+    for k in 0..3 {
+        if normal[k] == 0.0 {
+            continue;
+        }
+        // p_k = (offset - sum_{j != k} n_j p_j) / n_k over the box
+        let (mut s_lo, mut s_hi) = (offset, offset);
+        for j in (0..3).filter(|&j| j != k) {
+            let (u, v) = (normal[j] * lo[j], normal[j] * hi[j]);
+            s_lo -= u.max(v);
+            s_hi -= u.min(v);
+        }
+        let (u, v) = (s_lo / normal[k], s_hi / normal[k]);
+        a[k] = a[k].max(u.min(v));
+        b[k] = b[k].min(u.max(v));
+    }
+    (normal.iter().any(|&n| n != 0.0) && (0..3).all(|k| a[k] <= b[k])).then_some((a, b))
+}
+
 /// The parameters of the plane cut's rule `cut_plane`.
 fn plane_params(normal: [f64; 3], offset: f64) -> Params {
     [
@@ -355,21 +452,72 @@ impl Simulation {
         cut: &Cut,
         event: Option<usize>,
     ) -> Result<TopologyResult, PhysicsError> {
-        let n = match cut {
+        // Only the faces near the region the cut can open are tested (the same faces open,
+        // see `RuleSet::apply_everywhere_within`): the plane's section of the box of the
+        // positions now, or the box a predicate's comparisons confine the centroid to. The
+        // guard reads the positions of the side (a predicate) or of both volumes (the
+        // plane): their box holds the centroids, so where it misses the region the guard is
+        // false (a centroid outside the predicate's box fails it; two centroids on opposite
+        // sides of the plane have a box meeting the plane inside the positions' box).
+        let bounds = self.positions_box();
+        let (name, params, region) = match cut {
             Cut::Plane { normal, offset } => {
                 let (normal, offset) = scaled_plane(*normal, *offset);
+                let region = bounds.and_then(|(lo, hi)| plane_box(normal, offset, lo, hi));
+                (
+                    "cut_plane".to_string(),
+                    plane_params(normal, offset),
+                    region,
+                )
+            }
+            Cut::Where(text) => {
+                let k = event.expect("predicate cuts are events");
+                let region = bounds.zip(predicate_box(text)).map(|((lo, hi), (a, b))| {
+                    let a: [f64; 3] = std::array::from_fn(|i| a[i].max(lo[i]));
+                    let b: [f64; 3] = std::array::from_fn(|i| b[i].min(hi[i]));
+                    (a, b)
+                });
+                (format!("cut_where_{k}"), Params::new(), region)
+            }
+        };
+        let n = match region {
+            // nothing can pass where the box is empty, but the search decides (and reports)
+            Some((lo, hi)) if (0..3).all(|i| lo[i] <= hi[i]) => {
+                let region = topomech_rules::Region {
+                    embedding: "position".into(),
+                    lo,
+                    hi,
+                };
                 self.rules
-                    .apply_everywhere(&mut self.g, "cut_plane", &plane_params(normal, offset))?
+                    .apply_everywhere_within(&mut self.g, &name, &params, &region)?
                     .matches
             }
-            Cut::Where(_) => {
-                let k = event.expect("predicate cuts are events");
+            _ => {
                 self.rules
-                    .apply_everywhere(&mut self.g, &format!("cut_where_{k}"), &Params::new())?
+                    .apply_everywhere(&mut self.g, &name, &params)?
                     .matches
             }
         };
         self.record_change("cut", n)
+    }
+
+    /// The box of the vertex positions now (every slot of the embedding, so a little
+    /// larger where slots are free); `None` for a map without them or with a value that is
+    /// not finite.
+    fn positions_box(&self) -> Option<([f64; 3], [f64; 3])> {
+        let id = self.g.embedding_id("position")?;
+        let x = self.g.embedding(id).real_column()?;
+        if x.is_empty() || x.len() % 3 != 0 {
+            return None;
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for p in x.chunks_exact(3) {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        (lo.iter().chain(&hi).all(|v| v.is_finite())).then_some((lo, hi))
     }
 
     /// Records a change that opened `n` faces (3D) or edges (2D), when it opened some, and
@@ -440,8 +588,12 @@ impl Simulation {
     pub fn prepare_cuts(&mut self) -> Result<(), PhysicsError> {
         // any parameter values: a guard's plan does not depend on them
         let zero = [[0.0; 3]; 2];
-        self.rules
-            .prepare_guard(&mut self.g, "cut_plane", &plane_params(zero[0], 0.0))?;
+        self.rules.prepare_guard_within(
+            &mut self.g,
+            "cut_plane",
+            &plane_params(zero[0], 0.0),
+            "position",
+        )?;
         self.rules.prepare_guard_within(
             &mut self.g,
             "cut_swept",
@@ -482,15 +634,17 @@ impl Simulation {
         for k in 0..self.cfg.events.len() {
             match &self.cfg.events[k].cut {
                 Cut::Where(_) => {
-                    self.rules.prepare_guard(
+                    self.rules.prepare_guard_within(
                         &mut self.g,
                         &format!("cut_where_{k}"),
                         &Params::new(),
+                        "position",
                     )?;
                 }
                 Cut::Plane { normal, offset } => {
                     let p = plane_params(*normal, *offset);
-                    self.rules.prepare_guard(&mut self.g, "cut_plane", &p)?;
+                    self.rules
+                        .prepare_guard_within(&mut self.g, "cut_plane", &p, "position")?;
                 }
             }
         }
@@ -506,5 +660,73 @@ impl Simulation {
             self.prepare_fracture(f.criterion)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{plane_box, predicate_box};
+
+    const INF: f64 = f64::INFINITY;
+
+    #[test]
+    fn a_predicates_comparisons_bound_its_box_and_nothing_else_does() {
+        let b = |t: &str| predicate_box(t);
+        assert_eq!(
+            b("x > 0.99 && x < 1.01 && y < 0.02 && z < 0.03"),
+            Some(([0.99, -INF, -INF], [1.01, 0.02, 0.03]))
+        );
+        // turned comparisons, integers, negative numbers, equality, nesting
+        assert_eq!(
+            b("0.5 <= x && (-2 < y && z == 3)"),
+            Some(([0.5, -2.0, 3.0], [INF, INF, 3.0]))
+        );
+        // what is not a comparison of a coordinate with a number bounds nothing
+        for t in [
+            "x > 0.5 || y > 0.5",
+            "x * 2.0 > 1.0",
+            "x > y",
+            "x != 1.0",
+            "!(x < 1.0)",
+        ] {
+            assert_eq!(b(t), Some(([-INF; 3], [INF; 3])), "{t}");
+        }
+        // a conjunct not understood leaves the others' bounds (a necessary condition)
+        assert_eq!(
+            b("x > 1.0 && y * y < 4.0"),
+            Some(([1.0, -INF, -INF], [INF; 3]))
+        );
+        // names of its own: no box (a `let` may rename a coordinate); no parse: no box
+        assert_eq!(b("{ let x = y  x > 1.0 }"), None);
+        assert_eq!(b("x >"), None);
+    }
+
+    #[test]
+    fn a_planes_box_holds_its_section_of_the_box() {
+        let (lo, hi) = ([0.0; 3], [2.0, 1.0, 1.0]);
+        // axis-aligned: a flat box
+        assert_eq!(
+            plane_box([1.0, 0.0, 0.0], 0.5, lo, hi),
+            Some(([0.5, 0.0, 0.0], [0.5, 1.0, 1.0]))
+        );
+        // tilted: every point of the section inside, checked on a grid of the plane
+        let n = [0.6, 0.8, 0.0];
+        let (a, b) = plane_box(n, 1.0, lo, hi).expect("meets the box");
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let x = 2.0 * f64::from(i) / 20.0;
+                let z = f64::from(j) / 20.0;
+                let y = (1.0 - 0.6 * x) / 0.8;
+                if (0.0..=1.0).contains(&y) {
+                    let p = [x, y, z];
+                    assert!((0..3).all(|k| p[k] >= a[k] - 1e-12 && p[k] <= b[k] + 1e-12));
+                }
+            }
+        }
+        // and no larger than the section's extent along x (1/3 to 5/3)
+        assert!((a[0] - 1.0 / 3.0).abs() < 1e-12 && (b[0] - 5.0 / 3.0).abs() < 1e-12);
+        // beside the box, or no normal: none
+        assert_eq!(plane_box([1.0, 0.0, 0.0], 3.0, lo, hi), None);
+        assert_eq!(plane_box([0.0; 3], 0.0, lo, hi), None);
     }
 }

@@ -658,3 +658,70 @@ fn a_stress_fracture_on_hexahedra_is_refused() {
         "{e}"
     );
 }
+
+/// Plane and predicate cuts test only the faces near the region they can open (the plane's
+/// section of the positions' box, the box a predicate's comparisons bound): on a deformed box,
+/// for axis-aligned and tilted planes and for predicates with and without such bounds, the
+/// map after the cut is the one the interpreter's cut (every face tried) gives, link for link.
+#[test]
+fn cuts_tested_near_their_region_open_what_every_face_tried_opens() {
+    let mesh = cuboid([6, 3, 3], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let wavy = |s: &mut Simulation| {
+        let rest = s.vertex_vec3("rest").unwrap();
+        let x: Vec<[f64; 3]> = rest
+            .iter()
+            .map(|p| [p[0] + 0.03 * (5.0 * p[1]).sin(), p[1], p[2] + 0.02 * p[0]])
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+    };
+    let preds = [
+        "x > 0.99 && x < 1.01 && y < 0.4",
+        "0.75 < x && x < 0.8 && 0.5 >= z",
+        "x * x + y * y < 0.5",
+        "y > 0.3 || z > 0.9",
+    ];
+    let mut opened = 0;
+    for (k, pred) in preds.iter().enumerate() {
+        let events = vec![TimedEvent {
+            time: Config::default().dt,
+            cut: Cut::Where((*pred).into()),
+        }];
+        let model = || vec![model("stretch_cumulated", &[("stiffness", 1e3)])];
+        let mut a = sim(&mesh, model(), |c| c.events = events.clone());
+        let mut b = sim(&mesh, model(), |c| c.events = events.clone());
+        b.set_compiled(false);
+        for s in [&mut a, &mut b] {
+            wavy(s);
+            s.step().unwrap();
+        }
+        let n = |s: &Simulation| -> usize { s.topology_changes().iter().map(|c| c.unsewn).sum() };
+        assert_eq!(n(&a), n(&b), "predicate {k}: {pred}");
+        assert!(
+            a.rules().culled_guard_runs() > 0,
+            "{pred}: the guard ran near its box"
+        );
+        opened += n(&a);
+        assert_same_links(a.gmap(), b.gmap(), pred);
+        // and a plane, axis-aligned then tilted, on the maps as cut
+        for (normal, offset) in [([1.0, 0.0, 0.0], 1.33), ([0.6, 0.8, 0.0], 0.9)] {
+            let (ra, rb) = (
+                a.cut(&Cut::Plane { normal, offset }).unwrap(),
+                b.cut(&Cut::Plane { normal, offset }).unwrap(),
+            );
+            assert_eq!(ra.unsewn, rb.unsewn, "plane {normal:?} after {pred}");
+            assert!(ra.unsewn > 0, "plane {normal:?} after {pred}");
+            assert_same_links(a.gmap(), b.gmap(), pred);
+        }
+    }
+    assert!(opened > 4, "{opened}");
+}
+
+fn assert_same_links(a: &GMap, b: &GMap, what: &str) {
+    assert!(a.is_valid() && b.is_valid(), "{what}");
+    assert_eq!(a.capacity(), b.capacity(), "{what}");
+    for d in a.darts() {
+        for i in 0..=a.dimension() {
+            assert_eq!(a.alpha(i, d), b.alpha(i, d), "{what}: alpha{i}({d})");
+        }
+    }
+}
