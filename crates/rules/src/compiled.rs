@@ -1712,6 +1712,7 @@ impl Plan {
             drop_rows(wl, None);
         }
         // the new rows, appended
+        let new_from: Vec<usize> = self.targets.iter().map(|(t, _)| t.len()).collect();
         for (w, pairs) in added.writes.iter().enumerate() {
             let table = &mut owner[emb_of(w)].1;
             for &(row, s) in pairs {
@@ -1740,7 +1741,11 @@ impl Plan {
         self.matches = kept_matches + new.len();
         self.dead += dead_now.len();
         self.evaluations = self.writes.iter().map(Vec::len).sum();
-        self.chunk_starts = self.chunk_starts();
+        // where each chunk's targets start, found again by bisection (the targets stay in
+        // row order: kept ones in place, new ones after), and the slots each column must
+        // hold: at least as many as before (columns never shrink), and past the new targets
+        let before = self.chunk_starts.take().map(|(_, slots)| slots);
+        self.chunk_starts = self.chunk_starts_sorted(before.as_deref(), &new_from);
         if let NativeState::Ready(nat, old) = &self.native {
             self.native = match self.need_grown(&nat.kinds, old, base) {
                 Ok(need) => NativeState::Ready(std::sync::Arc::clone(nat), need),
@@ -1803,6 +1808,32 @@ impl Plan {
             };
         }
         Some(())
+    }
+
+    /// Room for `extra` more rows in every per-row array (the aggregates' slot lists grown
+    /// by as many slots per row as they hold on average), so that the rows the next patches
+    /// append ([`Plan::append_guard_rows`]) do not move arrays the size of the plan.
+    pub(crate) fn reserve_rows(&mut self, extra: usize) {
+        let rows = self.rows.max(1);
+        self.row_match.reserve(extra);
+        for x in &mut self.gathers {
+            x.reserve(extra);
+        }
+        for c in &mut self.counts {
+            c.reserve(extra);
+        }
+        for (offs, slots) in &mut self.csr {
+            if offs.len() > 1 {
+                offs.reserve(extra);
+                slots.reserve(slots.len() / rows * extra + extra);
+            }
+        }
+        for w in &mut self.writes {
+            w.reserve(w.len() / rows * extra + extra);
+        }
+        for (t, _) in &mut self.targets {
+            t.reserve(t.len() / rows * extra + extra);
+        }
     }
 
     /// The program columns that read embedding `target` (`ids` are the rule's embeddings).
@@ -2092,6 +2123,24 @@ impl Plan {
                 t.sort_unstable_by_key(|x| x.0);
             }
         }
+        self.chunk_starts_sorted(None, &vec![0; self.targets.len()])
+    }
+
+    /// [`Plan::chunk_starts`] for targets known to be in row order, with `slots` a bound
+    /// already known for the targets of each write before `from[w]` (those after are looked
+    /// at): what a patch in place needs, at a cost of a bisection per chunk.
+    fn chunk_starts_sorted(
+        &self,
+        slots: Option<&[usize]>,
+        from: &[usize],
+    ) -> Option<(Vec<Vec<u32>>, Vec<usize>)> {
+        if self.prog.guard || !self.dups.is_empty() || self.rows == 0 {
+            return None;
+        }
+        debug_assert!(self
+            .targets
+            .iter()
+            .all(|(t, _)| t.is_sorted_by_key(|x| x.0)));
         let chunks = self.rows.div_ceil(self.chunk);
         let starts = self
             .targets
@@ -2106,7 +2155,17 @@ impl Plan {
         let slots = self
             .targets
             .iter()
-            .map(|(t, _)| t.iter().map(|&(_, s)| s as usize + 1).max().unwrap_or(0))
+            .enumerate()
+            .map(|(w, (t, _))| {
+                let (known, from) = match slots {
+                    Some(s) if s.len() == self.targets.len() => (s[w], from[w].min(t.len())),
+                    _ => (0, 0),
+                };
+                t[from..]
+                    .iter()
+                    .map(|&(_, s)| s as usize + 1)
+                    .fold(known, usize::max)
+            })
             .collect();
         Some((starts, slots))
     }

@@ -212,8 +212,9 @@ fn never() -> bool {
 /// Rows of the orbit of `d` with the given labels, breadth-first; `next` as in [`Match`].
 fn rows_of(g: &GMap, d: Dart, labels: &[u8]) -> (Vec<Dart>, Vec<u32>) {
     let k = labels.len();
-    let mut darts = vec![d];
-    let mut next = Vec::new();
+    let mut darts = Vec::with_capacity(8);
+    darts.push(d);
+    let mut next = Vec::with_capacity(8 * k);
     let mut r = 0;
     // small orbits (the usual case) are searched linearly
     while r < darts.len() {
@@ -257,6 +258,9 @@ fn rows_of_large(
     if row_of.len() < g.capacity() {
         row_of.resize(g.capacity(), 0);
     }
+    // a large orbit: a vertex of a tetrahedral mesh has a few hundred darts
+    darts.reserve(256);
+    next.reserve(256 * labels.len());
     for (i, z) in darts.iter().enumerate() {
         row_of[z.index()] = i as u32 + 1;
     }
@@ -280,8 +284,26 @@ fn rows_of_large(
     (darts, next)
 }
 
-/// Tries to match `rule` with its hooks at `hooks` (one dart per hook, in order).
+/// Tries to match `rule` with its hooks at `hooks` (one dart per hook, in order); the error
+/// says why it does not match.
 pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> {
+    match_explained(g, rule, hooks, true)
+}
+
+/// [`match_at`] where only whether it matches matters: a failure is not described (the
+/// searches try many darts that do not match, and the message would cost more than the try).
+fn try_match(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Option<Match> {
+    match_explained(g, rule, hooks, false).ok()
+}
+
+/// [`match_at`], the error message written only when `explain`.
+fn match_explained(g: &GMap, rule: &Rule, hooks: &[Dart], explain: bool) -> Result<Match, String> {
+    // the reason, when asked for
+    macro_rules! why {
+        ($($t:tt)*) => {
+            if explain { format!($($t)*) } else { String::new() }
+        };
+    }
     let arity = rule.arity;
     let (first, next) = rows_of(g, hooks[0], &rule.hook_orbit);
     let rows = first.len();
@@ -295,9 +317,10 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
             col[0] = Some(hooks[j]);
             for r in 0..rows {
                 let x = col[r].ok_or_else(|| {
-                    format!(
+                    why!(
                         "hook '{}': its orbit differs in shape from hook '{}'",
-                        rule.nodes[h].name, rule.nodes[rule.hooks[0]].name
+                        rule.nodes[h].name,
+                        rule.nodes[rule.hooks[0]].name
                     )
                 })?;
                 for (t, &l) in rule.hook_orbit.iter().enumerate() {
@@ -307,9 +330,10 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
                         None => col[s] = Some(y),
                         Some(z) if z == y => {}
                         Some(_) => {
-                            return Err(format!(
+                            return Err(why!(
                                 "hook '{}': its orbit differs in shape from hook '{}'",
-                                rule.nodes[h].name, rule.nodes[rule.hooks[0]].name
+                                rule.nodes[h].name,
+                                rule.nodes[rule.hooks[0]].name
                             ))
                         }
                     }
@@ -338,7 +362,7 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
     }
     for (k, nd) in rule.nodes.iter().enumerate() {
         if nd.left.is_some() && darts[k].is_empty() {
-            return Err(format!("node '{}' is not reached from a hook", nd.name));
+            return Err(why!("node '{}' is not reached from a hook", nd.name));
         }
     }
     // arcs and loops
@@ -346,21 +370,25 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
         for (r, &x) in darts[a].iter().enumerate() {
             let y = g.alpha(i as usize, x);
             if a != b && y == x {
-                return Err(format!(
+                return Err(why!(
                     "arc {} -{i}- {}: dart {x} is {i}-free",
-                    rule.nodes[a].name, rule.nodes[b].name
+                    rule.nodes[a].name,
+                    rule.nodes[b].name
                 ));
             }
             if y != darts[b][r] {
                 let what = if a == b {
-                    format!(
+                    why!(
                         "loop {} -{i}- {}: dart {x} is not {i}-free (alpha{i}({x}) = {y})",
-                        rule.nodes[a].name, rule.nodes[a].name
+                        rule.nodes[a].name,
+                        rule.nodes[a].name
                     )
                 } else {
-                    format!(
+                    why!(
                         "arc {} -{i}- {}: alpha{i}({x}) = {y}, expected {}",
-                        rule.nodes[a].name, rule.nodes[b].name, darts[b][r]
+                        rule.nodes[a].name,
+                        rule.nodes[b].name,
+                        darts[b][r]
                     )
                 };
                 return Err(what);
@@ -377,7 +405,7 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
                 let want = darts[k][next[r * arity + t] as usize];
                 let y = g.alpha(*i as usize, x);
                 if y != want {
-                    return Err(format!("node '{}': orbit label {i} at position {t}: alpha{i}({x}) = {y}, but the orbit needs {want}", nd.name));
+                    return Err(why!("node '{}': orbit label {i} at position {t}: alpha{i}({x}) = {y}, but the orbit needs {want}", nd.name));
                 }
             }
         }
@@ -390,7 +418,7 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
         for i in 0..=g.dimension() {
             if nd.left_src[i] == Source::None && nd.right_src[i] != Source::None {
                 if let Some(&x) = darts[k].iter().find(|&&x| !g.is_free(i, x)) {
-                    return Err(format!(
+                    return Err(why!(
                         "node '{}' gains label {i} but dart {x} is already {i}-linked to {}",
                         nd.name,
                         g.alpha(i, x)
@@ -410,9 +438,16 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
         };
         for (i, (x, k)) in flat().enumerate() {
             if let Some((_, k2)) = flat().skip(i + 1).find(|(y, _)| *y == x) {
-                return Err(format!("dart {x} would be matched twice (node '{}'): the pattern folds onto itself here", rule.nodes[k.max(k2)].name));
+                return Err(why!("dart {x} would be matched twice (node '{}'): the pattern folds onto itself here", rule.nodes[k.max(k2)].name));
             }
         }
+        return Ok(Match { rows, next, darts });
+    }
+    // marks find whether a dart repeats (the usual answer: none); the sort below says which
+    let repeats = topomech_gmap::marks::with_marks(g.capacity(), |m| {
+        darts.iter().flatten().any(|&x| !m.mark(x))
+    });
+    if !repeats {
         return Ok(Match { rows, next, darts });
     }
     let mut all: Vec<(Dart, usize)> = darts
@@ -423,7 +458,7 @@ pub fn match_at(g: &GMap, rule: &Rule, hooks: &[Dart]) -> Result<Match, String> 
     all.sort_unstable();
     if let Some(w) = all.windows(2).find(|w| w[0].0 == w[1].0) {
         let (x, k) = (w[0].0, w[0].1.max(w[1].1));
-        return Err(format!(
+        return Err(why!(
             "dart {x} would be matched twice (node '{}'): the pattern folds onto itself here",
             rule.nodes[k].name
         ));
@@ -1303,7 +1338,7 @@ impl RuleSet {
         let mut used = Marks::with_capacity(g.capacity());
         let mut out = Vec::new();
         for d in first {
-            let Ok(m) = match_at(g, rule, &[Dart(d)]) else {
+            let Some(m) = try_match(g, rule, &[Dart(d)]) else {
                 // (a hook orbit matched from one of its darts matches from all)
                 plans.insert(index, gp);
                 return Ok(None);
@@ -2007,7 +2042,7 @@ fn build_guard_plan(
         if seen.is_marked(d) {
             continue;
         }
-        let Ok(m) = match_at(g, rule, &[d]) else {
+        let Some(m) = try_match(g, rule, &[d]) else {
             continue;
         };
         for &x in &m.darts[hook] {
@@ -2022,7 +2057,10 @@ fn build_guard_plan(
         }
     }
     builder.add(rule, g, &b.ids, &batch);
-    let plan = builder.finish(g, &b.ids, jit_on);
+    let mut plan = builder.finish(g, &b.ids, jit_on);
+    // the patches after cuts append rows: room for an eighth more, so that the first ones
+    // do not copy every array (about 15 bytes more per face side)
+    plan.reserve_rows(plan.rows() / 8);
     g.track_changes();
     Ok(Some(GuardPlan {
         identity: g.identity(),
@@ -2106,7 +2144,7 @@ fn rematch(
         if !tried.mark(h) || used.is_marked(h) || ix.live_at(h).is_some() {
             continue;
         }
-        let Ok(m) = match_at(g, rule, &[h]) else {
+        let Some(m) = try_match(g, rule, &[h]) else {
             continue;
         };
         if !m.all_darts().any(|x| star.is_marked(x)) {
@@ -2297,7 +2335,7 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
                 continue;
             }
         }
-        let Ok(m) = match_at(g, rule, &[d]) else {
+        let Some(m) = try_match(g, rule, &[d]) else {
             continue;
         };
         if !overlap && m.all_darts().any(|x| used.is_marked(x)) {
