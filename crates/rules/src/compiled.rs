@@ -1752,19 +1752,7 @@ impl Plan {
             }
         }
         let n_new = added.row_match.len();
-        let mut rows = Rows {
-            row_match: std::mem::take(&mut self.row_match),
-            gathers: std::mem::take(&mut self.gathers),
-            csr: std::mem::take(&mut self.csr),
-            counts: std::mem::take(&mut self.counts),
-            writes: std::mem::take(&mut self.writes),
-        };
-        rows.append(added);
-        self.row_match = rows.row_match;
-        self.gathers = rows.gathers;
-        self.csr = rows.csr;
-        self.counts = rows.counts;
-        self.writes = rows.writes;
+        self.append_rows(added);
         self.rows = base + n_new;
         self.matches = kept_matches + new.len();
         self.dead += dead_now.len();
@@ -1813,19 +1801,7 @@ impl Plan {
             .0
             .extend(added.writes[0].iter().map(|&(r, _)| (r, r)));
         self.evaluations += added.writes[0].len();
-        let mut rows = Rows {
-            row_match: std::mem::take(&mut self.row_match),
-            gathers: std::mem::take(&mut self.gathers),
-            csr: std::mem::take(&mut self.csr),
-            counts: std::mem::take(&mut self.counts),
-            writes: std::mem::take(&mut self.writes),
-        };
-        rows.append(added);
-        self.row_match = rows.row_match;
-        self.gathers = rows.gathers;
-        self.csr = rows.csr;
-        self.counts = rows.counts;
-        self.writes = rows.writes;
+        self.append_rows(added);
         self.rows = base + n_new;
         self.matches += new.len();
         // `need` only grows: the kept rows' entries are unchanged
@@ -1862,6 +1838,24 @@ impl Plan {
         for (t, _) in &mut self.targets {
             t.reserve(t.len() / rows * extra + extra);
         }
+    }
+
+    /// Appends `added` (rows numbered after this plan's) to the plan's per-row arrays; the
+    /// caller updates the counts and targets.
+    fn append_rows(&mut self, added: Rows) {
+        let mut rows = Rows {
+            row_match: std::mem::take(&mut self.row_match),
+            gathers: std::mem::take(&mut self.gathers),
+            csr: std::mem::take(&mut self.csr),
+            counts: std::mem::take(&mut self.counts),
+            writes: std::mem::take(&mut self.writes),
+        };
+        rows.append(added);
+        self.row_match = rows.row_match;
+        self.gathers = rows.gathers;
+        self.csr = rows.csr;
+        self.counts = rows.counts;
+        self.writes = rows.writes;
     }
 
     /// The program columns that read embedding `target` (`ids` are the rule's embeddings).
