@@ -95,7 +95,8 @@ class TopologyChange(TypedDict):
     step: int
     #: The simulated time then.
     time: float
-    #: ``cut`` (a timed event or :meth:`Simulation.cut`) or ``fracture``.
+    #: ``cut`` (a timed event or :meth:`Simulation.cut`), ``blade`` (a step of a blade
+    #: event, or :meth:`Simulation.cut_swept`) or ``fracture``.
     kind: str
     #: Faces (3D) or edges (2D) unsewn.
     unsewn: int

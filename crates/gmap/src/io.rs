@@ -354,11 +354,15 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
         }
         let w = ty.width();
         e.values = match ty {
-            EmbeddingType::I64 => Column::Int(
-                (0..n_slots)
-                    .map(|_| r.u64().map(|x| x as i64))
-                    .collect::<Result<_, _>>()?,
-            ),
+            EmbeddingType::I64 => {
+                // (collected into a vector of the exact size: `collect` over results grows
+                // it by doubling, up to twice the memory the map then reports)
+                let mut v = Vec::with_capacity(n_slots);
+                for _ in 0..n_slots {
+                    v.push(r.u64()? as i64);
+                }
+                Column::Int(v)
+            }
             EmbeddingType::Bool => {
                 let bytes = r.take(n_slots)?;
                 if let Some(x) = bytes.iter().find(|&&x| x > 1) {
@@ -366,11 +370,13 @@ pub fn from_bytes(b: &[u8]) -> Result<GMap, FormatError> {
                 }
                 Column::Bool(bytes.iter().map(|&x| x == 1).collect())
             }
-            _ => Column::Real(
-                (0..n_slots * w)
-                    .map(|_| r.u64().map(f64::from_bits))
-                    .collect::<Result<_, _>>()?,
-            ),
+            _ => {
+                let mut v = Vec::with_capacity(n_slots * w);
+                for _ in 0..n_slots * w {
+                    v.push(f64::from_bits(r.u64()?));
+                }
+                Column::Real(v)
+            }
         };
         if let Some(d) = derived {
             let src = &g.embeddings[d.source.0 as usize];

@@ -333,6 +333,14 @@ fn file_round_trip_is_exact() {
             to_bytes(&h) == b,
             "save(load(save(g))) differs from save(g)"
         );
+        // a map read back holds no more than the map written (its columns were read into
+        // vectors of their size, not grown by doubling)
+        assert!(
+            h.memory_bytes() <= g.memory_bytes(),
+            "{} bytes read back, {} written",
+            h.memory_bytes(),
+            g.memory_bytes()
+        );
         assert_eq!(h.cell_counts(), g.cell_counts());
         assert!(h.is_valid());
         assert_eq!(h.real(w, Dart(3)), [0.1 + 0.2]);

@@ -459,11 +459,20 @@ impl Simulation {
         // plane): their box holds the centroids, so where it misses the region the guard is
         // false (a centroid outside the predicate's box fails it; two centroids on opposite
         // sides of the plane have a box meeting the plane inside the positions' box).
-        let bounds = self.positions_box();
+        // Where the region misses the positions' box, grown by far more than the rounding of
+        // a centroid or of its distance to the plane, no face can open: nothing is searched.
+        let bounds = self.positions_box().map(|(lo, hi)| {
+            let scale = lo.iter().chain(&hi).fold(0.0_f64, |m, v| m.max(v.abs()));
+            let m = 1e-9 * (1.0 + scale);
+            (lo.map(|v| v - m), hi.map(|v| v + m))
+        });
         let (name, params, region) = match cut {
             Cut::Plane { normal, offset } => {
                 let (normal, offset) = scaled_plane(*normal, *offset);
                 let region = bounds.and_then(|(lo, hi)| plane_box(normal, offset, lo, hi));
+                if region.is_none() && bounds.is_some() && normal.iter().any(|&v| v != 0.0) {
+                    return self.record_change("cut", 0);
+                }
                 (
                     "cut_plane".to_string(),
                     plane_params(normal, offset),
@@ -481,8 +490,8 @@ impl Simulation {
             }
         };
         let n = match region {
-            // nothing can pass where the box is empty, but the search decides (and reports)
-            Some((lo, hi)) if (0..3).all(|i| lo[i] <= hi[i]) => {
+            Some((lo, hi)) if (0..3).any(|i| lo[i] > hi[i]) => 0,
+            Some((lo, hi)) => {
                 let region = topomech_rules::Region {
                     embedding: "position".into(),
                     lo,
@@ -492,7 +501,7 @@ impl Simulation {
                     .apply_everywhere_within(&mut self.g, &name, &params, &region)?
                     .matches
             }
-            _ => {
+            None => {
                 self.rules
                     .apply_everywhere(&mut self.g, &name, &params)?
                     .matches

@@ -238,10 +238,20 @@ fn the_merged_files_are_the_per_dimension_files_as_before() {
         } else {
             ("<0,2>", "<2>")
         };
+        // and a second (2026-12-03): the plane cut compares the two distances' signs instead
+        // of testing their product, which underflows to 0 for tiny distances
+        let vol = if dim == 3 { "<0,1,2>" } else { "<0,1>" };
+        let product_guard = format!(
+            "  where (dot(mean{vol}(a.position), normal) - offset) * (dot(mean{vol}(b.position), normal) - offset) < 0.0"
+        );
+        let signs_guard = format!(
+            "  where {{\n    let da = dot(mean{vol}(a.position), normal) - offset\n    let db = dot(mean{vol}(b.position), normal) - offset\n    let opposite = (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)\n    opposite\n  }}"
+        );
         let was: Vec<(&str, String)> = was
             .iter()
             .map(|(n, t)| {
                 let t = t
+                    .replace(&product_guard, &signs_guard)
                     .replace(
                         "embedding spring_strain : f64 on <0>",
                         &format!("embedding spring_strain : f64 on {}", edge.0),

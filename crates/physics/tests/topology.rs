@@ -725,3 +725,40 @@ fn assert_same_links(a: &GMap, b: &GMap, what: &str) {
         }
     }
 }
+
+/// A plane cut of a body far smaller than usual (coordinates about 1e-170 m, whose signed
+/// distances to the plane multiply to a number below the smallest float) opens the faces it
+/// opens on the body at its usual size: the guard compares the two centroids' signs instead
+/// of testing their product, which underflowed to 0 and opened nothing.
+#[test]
+fn a_plane_cut_of_a_tiny_body_opens_the_faces_of_the_usual_one() {
+    let mesh = cuboid([4, 4, 4], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let model = || vec![model("stretch_cumulated", &[("stiffness", 1e3)])];
+    let mut counts = Vec::new();
+    for scale in [1.0, 1e-170] {
+        let mut s = sim(&mesh, model(), |_| {});
+        let x: Vec<[f64; 3]> = s
+            .vertex_vec3("position")
+            .unwrap()
+            .iter()
+            .map(|p| p.map(|v| v * scale))
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        let straight = s
+            .cut(&Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: 0.5 * scale,
+            })
+            .unwrap();
+        let tilted = s
+            .cut(&Cut::Plane {
+                normal: [1.0, 1.0, 0.0],
+                offset: 0.8 * scale,
+            })
+            .unwrap();
+        assert!(s.gmap().is_valid());
+        counts.push((straight.unsewn, tilted.unsewn));
+    }
+    assert!(counts[0].0 > 0 && counts[0].1 > 0, "{counts:?}");
+    assert_eq!(counts[0], counts[1], "the usual body against the tiny one");
+}

@@ -116,10 +116,20 @@ pub fn lex(src: &str) -> Result<Vec<(Tok, Pos)>, LexError> {
             let s: String = chars[start..i].iter().collect();
             col += (i - start) as u32;
             let tok = if real {
-                Tok::Real(s.parse().map_err(|_| LexError {
+                let x: f64 = s.parse().map_err(|_| LexError {
                     pos,
                     message: format!("bad number '{s}'"),
-                })?)
+                })?;
+                // a literal past the largest f64 would read as infinity
+                if !x.is_finite() {
+                    return Err(LexError {
+                        pos,
+                        message: format!(
+                            "number '{s}' is too large (the largest is about 1.8e308)"
+                        ),
+                    });
+                }
+                Tok::Real(x)
             } else {
                 Tok::Int(s.parse().map_err(|_| LexError {
                     pos,
@@ -195,6 +205,16 @@ mod tests {
                 Tok::Eof
             ]
         );
+    }
+
+    #[test]
+    fn a_real_past_the_largest_float_is_refused_not_read_as_infinity() {
+        let e = lex("x > 1e999").unwrap_err();
+        assert!(e.message.contains("'1e999' is too large"), "{}", e.message);
+        assert_eq!(e.pos, Pos { line: 1, col: 5 });
+        assert_eq!(lex("1.7e308").unwrap()[0].0, Tok::Real(1.7e308));
+        // underflow is no error: the nearest float is 0 or a subnormal
+        assert_eq!(lex("1e-999").unwrap()[0].0, Tok::Real(0.0));
     }
 
     #[test]
