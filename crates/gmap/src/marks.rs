@@ -122,12 +122,8 @@ thread_local! {
 
 /// Runs `f` with cleared marks from this thread's pool, sized for `capacity` darts.
 pub fn with_marks<R>(capacity: usize, f: impl FnOnce(&mut Marks) -> R) -> R {
-    let mut m = POOL.with(|p| p.borrow_mut().pop()).unwrap_or_default();
-    m.reserve_darts(capacity);
-    let r = f(&mut m);
-    m.clear();
-    POOL.with(|p| p.borrow_mut().push(m));
-    r
+    // drawn from the pool, and given back cleared when dropped (`Marks::drop`)
+    f(&mut Marks::with_capacity(capacity))
 }
 
 #[cfg(test)]

@@ -989,8 +989,9 @@ pub(crate) struct Plan {
     owner: Option<Owners>,
 }
 
-/// Per written embedding, which target writes each slot (see `Plan::owner`).
-type Owners = Vec<(usize, Vec<(u32, u32)>)>;
+/// Per written embedding (in the order of the writes), which target writes each slot (see
+/// `Plan::owner`).
+type Owners = Vec<Vec<(u32, u32)>>;
 
 /// A plan being built from batches of matches (see [`Plan::builder`]).
 pub(crate) struct PlanBuilder {
@@ -1571,15 +1572,9 @@ impl Plan {
             Some(base),
         );
         // the output buffer stays (resized by the next run, without a new allocation when
-        // the rows change little), its last block zeroed: the rows changed, so entries past
-        // the new last row may hold values of former rows that no run rewrites (see
-        // `size_out`), even where the buffer keeps its length
+        // the rows change little)
         plan.out = out;
-        let last = plan
-            .out
-            .len()
-            .saturating_sub(plan.chunk * plan.out_width.max(1));
-        plan.out[last..].fill(0.0);
+        plan.clear_last_block();
         (plan, false)
     }
 
@@ -1655,10 +1650,10 @@ impl Plan {
         if self.owner.is_none() {
             let mut owner: Owners = embs
                 .iter()
-                .map(|&e| (e, vec![(u32::MAX, 0); g.embedding(ids[e]).n_slots()]))
+                .map(|&e| vec![(u32::MAX, 0); g.embedding(ids[e]).n_slots()])
                 .collect();
             for (w, (t, _)) in self.targets.iter().enumerate() {
-                let table = &mut owner[emb_of(w)].1;
+                let table = &mut owner[emb_of(w)];
                 for &(row, s) in t {
                     table[s as usize] = (w as u32, row);
                 }
@@ -1668,8 +1663,8 @@ impl Plan {
         let owner = self.owner.as_mut().expect("built above");
         for (k, &e) in embs.iter().enumerate() {
             let n = g.embedding(ids[e]).n_slots();
-            if owner[k].1.len() < n {
-                owner[k].1.resize(n, (u32::MAX, 0));
+            if owner[k].len() < n {
+                owner[k].resize(n, (u32::MAX, 0));
             }
         }
         let is_dead_now = |r: u32| dead_now.binary_search(&r).is_ok();
@@ -1680,7 +1675,7 @@ impl Plan {
         for (w, pairs) in added.writes.iter().enumerate() {
             let k = emb_of(w);
             for &(row, s) in pairs {
-                let Some(&o) = owner[k].1.get(s as usize) else {
+                let Some(&o) = owner[k].get(s as usize) else {
                     return false;
                 };
                 if o.0 != u32::MAX && !is_dead_now(o.1) {
@@ -1731,7 +1726,7 @@ impl Plan {
         for (w, (t, _)) in self.targets.iter_mut().enumerate() {
             gone.clear();
             drop_rows(t, Some(&mut gone));
-            let table = &mut owner[emb_of(w)].1;
+            let table = &mut owner[emb_of(w)];
             for &(_, s) in &gone {
                 table[s as usize] = (u32::MAX, 0);
             }
@@ -1742,7 +1737,7 @@ impl Plan {
         // the new rows, appended
         let new_from: Vec<usize> = self.targets.iter().map(|(t, _)| t.len()).collect();
         for (w, pairs) in added.writes.iter().enumerate() {
-            let table = &mut owner[emb_of(w)].1;
+            let table = &mut owner[emb_of(w)];
             for &(row, s) in pairs {
                 let o = &mut table[s as usize];
                 if o.0 == u32::MAX {
@@ -1762,18 +1757,8 @@ impl Plan {
         // hold: at least as many as before (columns never shrink), and past the new targets
         let before = self.chunk_starts.take().map(|(_, slots)| slots);
         self.chunk_starts = self.chunk_starts_sorted(before.as_deref(), &new_from);
-        if let NativeState::Ready(nat, old) = &self.native {
-            self.native = match self.need_grown(&nat.kinds, old, base) {
-                Ok(need) => NativeState::Ready(std::sync::Arc::clone(nat), need),
-                Err(why) => NativeState::Failed(why),
-            };
-        }
-        // entries past the last row may hold a former run's values (see `Plan::patch`)
-        let last = self
-            .out
-            .len()
-            .saturating_sub(self.chunk * self.out_width.max(1));
-        self.out[last..].fill(0.0);
+        self.regrow_need(base);
+        self.clear_last_block();
         true
     }
 
@@ -1805,12 +1790,7 @@ impl Plan {
         self.rows = base + n_new;
         self.matches += new.len();
         // `need` only grows: the kept rows' entries are unchanged
-        if let NativeState::Ready(nat, old) = &self.native {
-            self.native = match self.need_grown(&nat.kinds, old, base) {
-                Ok(need) => NativeState::Ready(std::sync::Arc::clone(nat), need),
-                Err(why) => NativeState::Failed(why),
-            };
-        }
+        self.regrow_need(base);
         Some(())
     }
 
@@ -1838,6 +1818,28 @@ impl Plan {
         for (t, _) in &mut self.targets {
             t.reserve(t.len() / rows * extra + extra);
         }
+    }
+
+    /// After rows were appended from `base` on to rows whose index arrays held before: what
+    /// the native code may index, computed again over the appended rows only.
+    fn regrow_need(&mut self, base: usize) {
+        if let NativeState::Ready(nat, old) = &self.native {
+            self.native = match self.need_grown(&nat.kinds, old, base) {
+                Ok(need) => NativeState::Ready(std::sync::Arc::clone(nat), need),
+                Err(why) => NativeState::Failed(why),
+            };
+        }
+    }
+
+    /// Zeroes the last block of the kept output buffer after the rows changed: entries past
+    /// the new last row may hold values of former rows that no run rewrites (see
+    /// `size_out`), even where the buffer keeps its length.
+    fn clear_last_block(&mut self) {
+        let last = self
+            .out
+            .len()
+            .saturating_sub(self.chunk * self.out_width.max(1));
+        self.out[last..].fill(0.0);
     }
 
     /// Appends `added` (rows numbered after this plan's) to the plan's per-row arrays; the
@@ -2090,12 +2092,7 @@ impl Plan {
             + self.counts.iter().map(|x| x.capacity() * 8).sum::<usize>();
         let t: usize = self.targets.iter().map(|(t, _)| t.capacity() * 8).sum();
         let w: usize = self.writes.iter().map(|x| x.capacity() * 8).sum();
-        let o: usize = self
-            .owner
-            .iter()
-            .flatten()
-            .map(|(_, t)| t.capacity() * 8)
-            .sum();
+        let o: usize = self.owner.iter().flatten().map(|t| t.capacity() * 8).sum();
         g + c + t + w + o + self.row_match.capacity() * 4 + self.out.capacity() * 8
     }
 
@@ -3367,10 +3364,8 @@ mod tests {
         }
     }
 
-    /// `Rows::filter` moves runs of kept rows in place; this checks it against rebuilding
-    /// every array from the kept rows, over random plans (several matches per row, CSR rows
-    /// of 0 to 4 slots, writes of some rows only, a count aggregate) and random drops
-    /// (none, all, the first, the last, runs). Exact: both only copy integers and reals.
+    /// `gallop` against `partition_point` on a sorted array with runs of equal values, from
+    /// starts inside, at and past its end.
     #[test]
     fn galloping_finds_the_partition_point() {
         let v: Vec<u32> = (0..1000).map(|i| i / 3).collect();
@@ -3390,6 +3385,10 @@ mod tests {
         }
     }
 
+    /// `Rows::filter` moves runs of kept rows in place; this checks it against rebuilding
+    /// every array from the kept rows, over random plans (several matches per row, CSR rows
+    /// of 0 to 4 slots, writes of some rows only, a count aggregate) and random drops
+    /// (none, all, the first, the last, runs). Exact: both only copy integers and reals.
     #[test]
     fn filtering_by_runs_gives_the_rows_kept() {
         let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
