@@ -67,7 +67,7 @@ FIXED = "x < 1e-9"
 #: (dt, steps) per integrator. `static` is one linear solve: K = k I on the free vertices
 #: (each vertex on its own spring), which the first Newton step with conjugate gradients
 #: solves exactly, so only rounding remains: checked to 1e-12 of |offset| (the bound of
-#: crates/physics/tests/model_files.rs for the same model). The damped implicit run settles:
+#: crates/physics/tests/it/model_files.rs for the same model). The damped implicit run settles:
 #: with c = 20 1/s every vertex (k / m >= 100 1/s^2 on this mesh) is at least critically
 #: damped or decays like exp(-c t / 2); 6 s leave ~1e-26 of the start, and each step's solve
 #: is converged to 1e-8 of its residual: checked to 1e-10 of |offset|, as

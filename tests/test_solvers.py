@@ -7,7 +7,7 @@ matrices, checked against scikit-fem's assembly on the same mesh, against the fo
 themselves, and through a modal analysis whose frequency the dynamics reproduce.
 
 The solvers' agreement with a dense direct solve (1e-8) is tested in Rust
-(``crates/physics/tests/solvers.rs``); here each solver is run once through the whole
+(``crates/physics/tests/it/solvers.rs``); here each solver is run once through the whole
 stack."""
 
 from __future__ import annotations

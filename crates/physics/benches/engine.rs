@@ -30,7 +30,7 @@
 //! - `TOPOMECH_BENCH_SOLVER_PARTS`: `implicit`, `static` or both (the default)
 
 mod baselines;
-#[path = "../tests/common/renamed.rs"]
+#[path = "../tests/it/common/renamed.rs"]
 mod renamed;
 
 use std::fmt::Write as _;

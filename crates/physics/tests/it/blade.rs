@@ -1,0 +1,275 @@
+//! Progressive cutting: a blade (a segment) moving through the object during the run unsews,
+//! each step, the faces (3D) or edges (2D) between elements whose centroids the quad it swept
+//! during that step separates. Checked against the plane cut: a blade sweeping a whole
+//! cross-section of an object at rest, in the plane x = c, opens exactly the faces the plane
+//! cut x = c opens (both separate the same centroids: the segment between two centroids
+//! crosses the plane, inside the swept quad, exactly when they lie on opposite sides), and it
+//! opens them progressively (none before the blade moves, a part half-way, all at the end).
+//! After each step the map is valid and the mass and momentum are unchanged.
+
+// the shared test helpers index their arrays in loops, as the math reads
+#![allow(clippy::needless_range_loop)]
+
+use crate::common;
+
+use common::model;
+use topomech_gmap::generators::{cuboid, grid, BoxElement, GridElement};
+use topomech_gmap::mesh::{build, BuildOptions, Mesh};
+use topomech_physics::{Blade, Config, Cut, Simulation};
+
+fn sim(mesh: &Mesh, blades: Vec<Blade>) -> Simulation {
+    let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("stretch_cumulated", &[("stiffness", 1e3)])],
+        gravity: [0.0; 3],
+        blades,
+        dt: 1e-3,
+        ..Config::default()
+    };
+    Simulation::new(g, cfg).unwrap()
+}
+
+fn unsewn_so_far(s: &Simulation) -> usize {
+    s.topology_changes().iter().map(|c| c.unsewn).sum()
+}
+
+/// A blade through the plane x = 1.3 of a 2 x 1 x 1 box (at rest: no load), its segment
+/// along y spanning the box, swept along z from below to above in 10 steps.
+#[test]
+fn a_blade_opens_progressively_what_the_plane_cut_opens() {
+    for (mesh, three) in [
+        (cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra), true),
+        (grid([6, 4], [2.0, 1.0], GridElement::Quad), false),
+    ] {
+        let x = 1.3;
+        let mut planar = sim(&mesh, vec![]);
+        let want = planar
+            .cut(&Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: x,
+            })
+            .unwrap()
+            .unsewn;
+        assert!(want > 0);
+        // the box spans z in [0, 1] (3D); the sheet lies in z = 0 (2D): a knife through it,
+        // its segment along z, swept along y
+        let blade = if three {
+            Blade {
+                start: 0.0,
+                end: 0.01,
+                from: [[x, -0.5, -0.5], [x, 1.5, -0.5]],
+                to: [[x, -0.5, 1.5], [x, 1.5, 1.5]],
+            }
+        } else {
+            Blade {
+                start: 0.0,
+                end: 0.01,
+                from: [[x, -0.5, -1.0], [x, -0.5, 1.0]],
+                to: [[x, 1.5, -1.0], [x, 1.5, 1.0]],
+            }
+        };
+        let mut s = sim(&mesh, vec![blade]);
+        let m0 = s.total_mass().unwrap();
+        let mut counts = Vec::new();
+        for _ in 0..12 {
+            s.step().unwrap();
+            assert!(s.gmap().is_valid(), "valid after every step");
+            assert!((s.total_mass().unwrap() - m0).abs() <= 1e-12 * m0);
+            let p = s.momentum().unwrap();
+            assert!(
+                p.iter().all(|c| c.abs() <= 1e-9),
+                "momentum stays zero: {p:?}"
+            );
+            counts.push(unsewn_so_far(&s));
+        }
+        assert!(counts.windows(2).all(|w| w[0] <= w[1]), "{counts:?}");
+        assert!(counts[0] < want, "not all at once: {counts:?} of {want}");
+        assert!(
+            counts[4] > 0 && counts[4] < want,
+            "part-way: {counts:?} of {want}"
+        );
+        assert_eq!(*counts.last().unwrap(), want, "all by the end ({three})");
+        // after the blade stops, nothing more opens
+        assert_eq!(counts[10], counts[11]);
+        assert!(s.topology_changes().iter().all(|c| c.kind == "blade"));
+    }
+}
+
+/// `Simulation::cut_swept` applies one sweep now: the blade of the test above in one go.
+#[test]
+fn one_sweep_now_is_the_plane_cut_too() {
+    let mesh = cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let mut planar = sim(&mesh, vec![]);
+    let want = planar
+        .cut(&Cut::Plane {
+            normal: [1.0, 0.0, 0.0],
+            offset: 0.7,
+        })
+        .unwrap()
+        .unsewn;
+    let mut s = sim(&mesh, vec![]);
+    let got = s
+        .cut_swept(
+            [[0.7, -0.5, -0.5], [0.7, 1.5, -0.5]],
+            [[0.7, -0.5, 1.5], [0.7, 1.5, 1.5]],
+        )
+        .unwrap();
+    assert_eq!(got.unsewn, want);
+    assert!(!got.added_rows.is_empty());
+    // a sweep that misses the object opens nothing and is no error
+    let none = s
+        .cut_swept(
+            [[5.0, 0.0, 0.0], [5.0, 1.0, 0.0]],
+            [[5.0, 0.0, 1.0], [5.0, 1.0, 1.0]],
+        )
+        .unwrap();
+    assert_eq!(none.unsewn, 0);
+    let err = s
+        .cut_swept(
+            [[f64::NAN, 0.0, 0.0], [5.0, 1.0, 0.0]],
+            [[5.0, 0.0, 1.0], [5.0, 1.0, 1.0]],
+        )
+        .unwrap_err();
+    assert!(err.to_string().contains("finite"), "{err}");
+}
+
+#[test]
+fn bad_blades_are_refused_naming_them() {
+    let mesh = cuboid([2, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let ok = Blade {
+        start: 0.0,
+        end: 1.0,
+        from: [[0.5, 0.0, 0.0], [0.5, 1.0, 0.0]],
+        to: [[0.5, 0.0, 1.0], [0.5, 1.0, 1.0]],
+    };
+    for (blade, says) in [
+        (
+            Blade {
+                end: 0.0,
+                ..ok.clone()
+            },
+            "blade 0: its end must be a finite time after its start",
+        ),
+        (
+            Blade {
+                start: -1.0,
+                ..ok.clone()
+            },
+            "blade 0: its start must be a finite time >= 0",
+        ),
+        (
+            Blade {
+                to: [[0.5, f64::INFINITY, 1.0], [0.5, 1.0, 1.0]],
+                ..ok.clone()
+            },
+            "blade 0: its points must be finite",
+        ),
+    ] {
+        let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![model("stretch_cumulated", &[])],
+            blades: vec![blade],
+            ..Config::default()
+        };
+        let err = Simulation::new(g, cfg).err().unwrap().to_string();
+        assert!(err.contains(says), "{err}");
+    }
+    let s = sim(
+        &mesh,
+        vec![Blade {
+            start: 2.0,
+            end: 3.0,
+            ..ok
+        }],
+    );
+    let err = s.check_events(1.0).unwrap_err().to_string();
+    assert!(err.contains("blade 0 starts at t = 2"), "{err}");
+}
+
+/// The plane of the sweep through element centroids (x at the middle of a cell row, where
+/// tetrahedra have their centroids): a centroid on the blade's plane is on neither side, as
+/// for the plane cut, so both open the same faces (none, or those between other centroids)
+/// for every offset, on and off the centroids and cell boundaries.
+#[test]
+fn a_blade_through_centroids_opens_what_the_plane_cut_opens() {
+    let mesh = cuboid([8, 4, 4], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    for c in [0.0625, 0.1875, 0.3125, 0.4375, 0.5, 0.5625, 0.3, 0.71] {
+        let want = sim(&mesh, vec![])
+            .cut(&Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: c,
+            })
+            .unwrap()
+            .unsewn;
+        let got = sim(&mesh, vec![])
+            .cut_swept(
+                [[c, 0.7, -0.1], [c, 0.7, 0.6]],
+                [[c, -0.2, -0.1], [c, -0.2, 0.6]],
+            )
+            .unwrap()
+            .unsewn;
+        assert_eq!(got, want, "x = {c}");
+    }
+}
+
+/// A blade that has swept its whole path without crossing anything misses the object: an
+/// error at the step it stops, like a timed cut that separates nothing; a zero-length blade
+/// is refused.
+#[test]
+fn a_blade_that_misses_or_cannot_finish_is_an_error() {
+    let mesh = cuboid([2, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let far = Blade {
+        start: 0.0,
+        end: 0.003,
+        from: [[5.0, 0.0, 0.0], [5.0, 1.0, 0.0]],
+        to: [[5.0, 0.0, 1.0], [5.0, 1.0, 1.0]],
+    };
+    let mut s = sim(&mesh, vec![far.clone()]);
+    s.step().unwrap();
+    s.step().unwrap();
+    let err = s.step().unwrap_err().to_string();
+    assert!(
+        err.contains("blade 0 moved from t = 0 to t = 0.003 and crossed nothing"),
+        "{err}"
+    );
+    let s = sim(
+        &mesh,
+        vec![Blade {
+            end: 2.0,
+            ..far.clone()
+        }],
+    );
+    // a blade still moving when the run ends is allowed (it cuts what it crossed by then)
+    assert!(s.check_events(1.0).is_ok());
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("stretch_cumulated", &[])],
+        blades: vec![Blade {
+            from: [[0.5, 0.0, 0.0], [0.5, 0.0, 0.0]],
+            ..far
+        }],
+        ..Config::default()
+    };
+    let err = Simulation::new(g, cfg).err().unwrap().to_string();
+    assert!(err.contains("its two end points must differ"), "{err}");
+    let err = sim(&mesh, vec![])
+        .cut_swept(
+            [[0.5, 0.0, 0.0], [0.5, 0.0, 0.0]],
+            [[0.5, 0.0, 1.0], [0.5, 1.0, 1.0]],
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("must differ") && err.contains("at its start)"),
+        "{err}"
+    );
+    // coordinates whose differences' products would overflow: refused, not a silent miss
+    let err = sim(&mesh, vec![])
+        .cut_swept(
+            [[0.5, 1.7e308, 0.0], [0.5, 1.7e308, 1.0]],
+            [[0.5, -1.7e308, 0.0], [0.5, -1.7e308, 1.0]],
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("1e100"), "{err}");
+}

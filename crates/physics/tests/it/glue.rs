@@ -1,0 +1,267 @@
+//! The glue of a step built as syntax trees: a scene's predicate is one expression, never
+//! rule text. A predicate containing rule syntax is refused as a bad predicate naming its key
+//! and column; an ordinary predicate selects exactly the vertices (elements) it says,
+//! checked against the same predicate evaluated here in Rust on the rest positions.
+
+// the shared test helpers index arrays in loops, as the formulas they mirror do
+#![allow(clippy::needless_range_loop)]
+
+use crate::common;
+
+use common::model;
+use topomech_gmap::generators::{cuboid, BoxElement};
+use topomech_gmap::mesh::{build, BuildOptions, Mesh};
+use topomech_physics::{Config, Cut, MaterialRegion, PhysicsError, Simulation, TimedEvent};
+
+fn sim(mesh: &Mesh, f: impl FnOnce(&mut Config)) -> Result<Simulation, PhysicsError> {
+    let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
+    let mut cfg = Config {
+        models: vec![model("stretch_elementary", &[])],
+        ..Config::default()
+    };
+    f(&mut cfg);
+    Simulation::new(g, cfg)
+}
+
+fn mesh() -> Mesh {
+    cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra)
+}
+
+/// Sets one predicate of a configuration.
+type SetUp = Box<dyn FnOnce(&mut Config)>;
+
+/// Predicates that, spliced into rule text as they used to be, closed the guard and defined
+/// rules of their own (the first two made a valid file: the old code built the simulation
+/// with the extra rule `evil`). Each is refused at the column of its first token after the
+/// expression.
+const EVIL: [(&str, u32); 5] = [
+    (
+        "x < 1e-9 } compute { v.fixed = true } } rule evil { left { v : <1,2,3> hook } where { true",
+        10,
+    ),
+    (
+        "true } compute { v.fixed = true } } rule evil(d: vec3) { left { v : <1,2,3> hook } where { true",
+        6,
+    ),
+    (
+        "x < 0 } rule evil { left { v : <1,2,3> hook } compute { v.fixed = true } } rule x {",
+        7,
+    ),
+    ("x < 0 rule", 7),
+    ("x < 0  x > 1", 8),
+];
+
+/// Rule syntax in a fixed, prescribed, region or cut predicate is a bad predicate naming the
+/// configuration's key, the predicate and the column; no simulation is built.
+#[test]
+fn rule_syntax_in_a_predicate_is_refused_as_a_bad_predicate() {
+    let m = mesh();
+    for (p, col) in EVIL {
+        let cases: [(&str, &str, SetUp); 4] = [
+            (
+                "fixed-vertex",
+                "fixed[1]",
+                Box::new(|c: &mut Config| c.fixed = vec!["x < 1e-9".into(), p.into()]),
+            ),
+            (
+                "prescribed-displacement",
+                "prescribed[0]",
+                Box::new(|c: &mut Config| c.prescribed = vec![(p.into(), [0.0, 0.1, 0.0])]),
+            ),
+            (
+                "material-region",
+                "regions[0]",
+                Box::new(|c: &mut Config| {
+                    c.regions = vec![MaterialRegion {
+                        predicate: p.into(),
+                        young: Some(2e6),
+                        ..Default::default()
+                    }];
+                }),
+            ),
+            (
+                "cut",
+                "events[0]",
+                Box::new(|c: &mut Config| {
+                    c.events = vec![TimedEvent {
+                        time: 0.01,
+                        cut: Cut::Where(p.into()),
+                    }];
+                }),
+            ),
+        ];
+        for (kind, key, f) in cases {
+            let Err(e) = sim(&m, f) else {
+                panic!("{key} = {p:?} was accepted")
+            };
+            let msg = e.to_string();
+            assert!(matches!(e, PhysicsError::Config(_)), "{msg}");
+            let head = format!("bad {kind} predicate {key} {p:?}: column {col}: ");
+            assert!(msg.contains(&head), "expected {head:?} in: {msg}");
+            assert!(msg.contains("expected the end of the expression"), "{msg}");
+        }
+    }
+}
+
+/// A line break in a predicate does not hide rule syntax: the place is line and column.
+#[test]
+fn a_multi_line_predicate_is_refused_at_its_line_and_column() {
+    let p = "x < 1e-9\n}\nrule evil { left { v : <1,2,3> hook } where { true";
+    let e = sim(&mesh(), |c| c.fixed = vec![p.into()]).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("bad fixed-vertex predicate fixed[0] \"x < 1e-9\\n}\\nrule evil"),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains(": line 2, column 1: expected the end"),
+        "{e}"
+    );
+}
+
+/// Checker errors in a predicate (an unknown variable, a guard that is not a bool) keep
+/// naming the key, now with the column in the predicate; a bad region predicate names the
+/// region (it used to be reported as "bad fixed-vertex predicate in []").
+#[test]
+fn checker_errors_name_the_key_and_the_column() {
+    let m = mesh();
+    let e = sim(&m, |c| c.fixed = vec!["x < 1 && w > 2".into()]).unwrap_err();
+    assert!(
+        e.to_string().contains(
+            "bad fixed-vertex predicate fixed[0] \"x < 1 && w > 2\": column 10: unknown variable or parameter 'w'"
+        ),
+        "{e}"
+    );
+    let e = sim(&m, |c| c.fixed = vec!["x + 1".into()]).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("bad fixed-vertex predicate fixed[0] \"x + 1\": column 3: ")
+            && e.to_string().contains("expected bool"),
+        "{e}"
+    );
+    let e = sim(&m, |c| {
+        c.regions = vec![MaterialRegion {
+            predicate: "x >".into(),
+            density: Some(1.0),
+            ..Default::default()
+        }];
+    })
+    .unwrap_err();
+    assert!(
+        e.to_string().contains(
+            "bad material-region predicate regions[0] \"x >\": column 4: expected an expression"
+        ),
+        "{e}"
+    );
+    let e = sim(&m, |c| c.fixed = vec![String::new()]).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("bad fixed-vertex predicate fixed[0] \"\": column 1: expected an expression"),
+        "{e}"
+    );
+}
+
+/// A chain of 4000 additions is refused with the parser's depth error, not a stack overflow.
+#[test]
+fn a_long_operator_chain_gets_the_depth_error() {
+    let p = format!("{} < 0", vec!["x"; 4000].join(" + "));
+    let e = sim(&mesh(), |c| c.fixed = vec![p]).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("bad fixed-vertex predicate fixed[0]"),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains("expression nested too deeply: depth 257, the limit is 256"),
+        "{e}"
+    );
+}
+
+/// Ordinary predicates (with `&&`, `||`, `!`, functions, leading `let` bindings, blocks and
+/// `if`) select exactly the vertices the same predicate selects evaluated here on the rest
+/// positions; a prescribed vertex sits at rest + d exactly; a region sets the density of
+/// exactly the elements whose rest centroid satisfies it (total mass, to 1e-12 relative).
+#[test]
+fn ordinary_predicates_select_what_they_say() {
+    type Pred = fn([f64; 3]) -> bool;
+    let cases: [(&str, Pred); 5] = [
+        ("x < 1e-9", |p| p[0] < 1e-9),
+        ("x < 0.6 && !(y > 0.4) || z > 0.9", |p| {
+            p[0] < 0.6 && p[1] <= 0.4 || p[2] > 0.9
+        }),
+        ("let r = x - 1.0  abs(r) < 0.3", |p| {
+            (p[0] - 1.0).abs() < 0.3
+        }),
+        ("if y > 0.5 { x < 0.6 } else { x > 1.4 }", |p| {
+            if p[1] > 0.5 {
+                p[0] < 0.6
+            } else {
+                p[0] > 1.4
+            }
+        }),
+        ("{ let s = x + y  s <= 1.0 }", |p| p[0] + p[1] <= 1.0),
+    ];
+    let m = mesh();
+    for (text, f) in cases {
+        let s = sim(&m, |c| c.fixed = vec![text.into()]).unwrap();
+        let rest = s.vertex_vec3("rest").unwrap();
+        let fixed = s.vertex_bool("fixed").unwrap();
+        let expected: Vec<bool> = rest.iter().map(|&p| f(p)).collect();
+        assert!(
+            expected.iter().any(|&b| b) && !expected.iter().all(|&b| b),
+            "{text}"
+        );
+        assert_eq!(fixed, expected, "{text}");
+
+        let d = [0.01, -0.02, 0.03];
+        let s = sim(&m, |c| c.prescribed = vec![(text.into(), d)]).unwrap();
+        let (x, fixed) = (
+            s.vertex_vec3("position").unwrap(),
+            s.vertex_bool("fixed").unwrap(),
+        );
+        assert_eq!(fixed, expected, "{text}");
+        for i in 0..x.len() {
+            let want: Vec<f64> = (0..3)
+                .map(|a| rest[i][a] + if expected[i] { d[a] } else { 0.0 })
+                .collect();
+            assert_eq!(x[i].to_vec(), want, "{text}: vertex {i}");
+        }
+    }
+    // regions: the bar is 2 x 1 x 1 at density 1000 (mass 2000); no tetrahedron straddles
+    // x = 1 (a plane of grid nodes), so the predicate on the centroid selects exactly the left
+    // half: mass 1000 * 1 (right) + 2000 * 1 (left) = 3000
+    let base = sim(&m, |_| {}).unwrap().total_mass().unwrap();
+    let half = sim(&m, |c| {
+        c.regions = vec![MaterialRegion {
+            predicate: "let c = x  c < 1.0".into(),
+            density: Some(2000.0),
+            ..Default::default()
+        }];
+    })
+    .unwrap()
+    .total_mass()
+    .unwrap();
+    assert!((base - 2000.0).abs() < 1e-9 * base, "{base}");
+    assert!((half - 3000.0).abs() < 1e-9 * half, "{half}");
+}
+
+/// A predicate cut still runs as before: at its time it opens the faces whose centroid
+/// satisfies it, separating the halves of the bar.
+#[test]
+fn a_predicate_cut_still_cuts() {
+    let mut s = sim(&mesh(), |c| {
+        c.gravity = [0.0, 0.0, 0.0];
+        c.events = vec![TimedEvent {
+            time: 0.0,
+            cut: Cut::Where("abs(x - 1.0) < 1e-9".into()),
+        }];
+    })
+    .unwrap();
+    let before = s.vertex_vec3("rest").unwrap().len();
+    s.step().unwrap();
+    let after = s.vertex_vec3("rest").unwrap().len();
+    // the 3 x 3 vertices of the plane x = 1 are doubled
+    assert_eq!(after, before + 9, "{before} -> {after}");
+}

@@ -1,0 +1,153 @@
+//! External loads (`f_ext`) and the ground plane: a static solve balances the loads by the
+//! reactions of the held vertices; the loads stay as set; a body falling along -z stops on a
+//! ground whose normal is the opposite of gravity.
+
+// Numeric reference code: index loops mirror the math; the default normal is compared exactly
+// (-g / |g| of an axis-aligned g is exact).
+#![allow(clippy::needless_range_loop, clippy::float_cmp)]
+
+use crate::common;
+
+use common::model;
+use topomech_gmap::generators::{cuboid, BoxElement};
+use topomech_gmap::mesh::{build, BuildOptions, Mesh};
+use topomech_physics::{Config, Ground, Integrator, ModelSpec, PhysicsError, Simulation};
+
+fn sim(
+    mesh: &Mesh,
+    models: Vec<ModelSpec>,
+    f: impl FnOnce(&mut Config),
+) -> Result<Simulation, PhysicsError> {
+    let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
+    let mut cfg = Config {
+        models,
+        ..Config::default()
+    };
+    f(&mut cfg);
+    Simulation::new(g, cfg)
+}
+
+/// A bar of tetrahedra held at x = 0, loaded by forces on its end x = 1 (no gravity): the
+/// static solve reaches equilibrium, so the forces on the free vertices (models plus loads)
+/// vanish and the reactions on the held ones add up to the total load (the models' internal
+/// forces sum to zero). The solve stops at a residual of 1e-10 of the load: 1e-8 here.
+#[test]
+fn static_solve_balances_external_loads() {
+    let mesh = cuboid([4, 1, 1], [1.0, 0.2, 0.2], BoxElement::Tetra);
+    let mut s = sim(&mesh, vec![model("linear_fem", &[])], |c| {
+        c.young = 1e6;
+        c.gravity = [0.0; 3];
+        c.fixed = vec!["x < 1e-9".into()];
+        c.integrator = Integrator::Static;
+        c.dt = 1.0;
+    })
+    .unwrap();
+    let rest = s.vertex_vec3("rest").unwrap();
+    let load: Vec<[f64; 3]> = rest
+        .iter()
+        .map(|x| {
+            if x[0] > 1.0 - 1e-9 {
+                [0.5, -1.0, 0.25]
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    let n_end = load.iter().filter(|f| f[1] != 0.0).count();
+    assert_eq!(n_end, 4);
+    s.set_external_forces(&load).unwrap();
+    s.step().unwrap();
+    assert_eq!(s.external_forces().unwrap(), load, "the loads stay as set");
+    s.forces().unwrap();
+    let force = s.vertex_vec3("force").unwrap();
+    let fixed = s.vertex_bool("fixed").unwrap();
+    let total = [0.5 * 4.0, -4.0, 0.25 * 4.0];
+    let mut reaction = [0.0; 3];
+    for (f, held) in force.iter().zip(&fixed) {
+        if *held {
+            for a in 0..3 {
+                reaction[a] += f[a];
+            }
+        } else {
+            assert!(f.iter().all(|x| x.abs() < 1e-8), "{f:?}");
+        }
+    }
+    for a in 0..3 {
+        assert!((reaction[a] - total[a]).abs() < 1e-8, "{reaction:?}");
+    }
+    let u = s.vertex_vec3("position").unwrap();
+    assert!(u.iter().zip(&rest).any(|(x, r)| (x[1] - r[1]) < -1e-4));
+}
+
+/// Loads of the wrong length or non-finite are refused, naming the row.
+#[test]
+fn bad_external_loads_are_refused() {
+    let mesh = cuboid([1, 1, 1], [1.0, 1.0, 1.0], BoxElement::Hexa);
+    let mut s = sim(&mesh, vec![model("stretch_elementary", &[])], |_| {}).unwrap();
+    let n = s.vertex_darts().len();
+    let e = s.set_external_forces(&vec![[0.0; 3]; n - 1]).unwrap_err();
+    assert!(
+        e.to_string().contains("7 values given for 8 vertices"),
+        "{e}"
+    );
+    let mut bad = vec![[0.0; 3]; n];
+    bad[3][2] = f64::INFINITY;
+    let e = s.set_external_forces(&bad).unwrap_err();
+    assert!(
+        e.to_string().contains("must be finite: vertices 3 are not"),
+        "{e}"
+    );
+}
+
+/// Gravity along -z: the ground's default normal is +z, so a box stops on the plane z = h
+/// (given as a height, or as a point without normal): no vertex is ever below it (1e-12),
+/// and the box did reach it (a vertex on it, 1e-9). A zero normal is refused, naming the ground.
+#[test]
+fn ground_normal_defaults_to_the_opposite_of_gravity() {
+    let mesh = cuboid([1, 1, 1], [0.2, 0.2, 0.2], BoxElement::Hexa);
+    for ground in [
+        Ground::Height(-0.1),
+        Ground::Plane {
+            point: [3.0, -7.0, -0.1],
+            normal: None,
+        },
+        Ground::Plane {
+            point: [0.0, 0.0, -0.1],
+            normal: Some([0.0, 0.0, 5.0]),
+        },
+    ] {
+        let mut s = sim(
+            &mesh,
+            vec![model("stretch_elementary", &[("stiffness", 1e4)])],
+            |c| {
+                c.gravity = [0.0, 0.0, -9.81];
+                c.ground = Some(ground);
+            },
+        )
+        .unwrap();
+        // the lowest z over the run (the springs may bounce the box back up)
+        let mut lowest = f64::INFINITY;
+        for _ in 0..400 {
+            s.step().unwrap();
+            let z = s
+                .vertex_vec3("position")
+                .unwrap()
+                .iter()
+                .map(|p| p[2])
+                .fold(f64::INFINITY, f64::min);
+            assert!(z >= -0.1 - 1e-12, "{ground:?}: {z}");
+            lowest = lowest.min(z);
+        }
+        assert!(lowest < -0.1 + 1e-9, "{ground:?}: {lowest}");
+    }
+    let e = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.ground = Some(Ground::Plane {
+            point: [0.0; 3],
+            normal: Some([0.0; 3]),
+        });
+    })
+    .unwrap_err();
+    assert!(e.to_string().contains("ground: the normal"), "{e}");
+    assert_eq!(Ground::up([0.0, 0.0, -9.81]), [0.0, 0.0, 1.0]);
+    assert_eq!(Ground::up([0.0; 3]), [0.0, 1.0, 0.0]);
+}

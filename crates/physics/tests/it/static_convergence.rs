@@ -1,0 +1,184 @@
+//! A static solve that does not converge never reports success: a heavy load that one Newton
+//! solve cannot balance converges by line search and automatic load stepping, to the state a
+//! hundred converged load increments reach; a body with no equilibrium fails with
+//! `Diverged`, its state kept as before the step, and the solver report says why.
+
+// The load fraction reached is set to exactly 1.0 on success.
+#![allow(clippy::needless_range_loop, clippy::float_cmp)]
+
+use crate::common;
+
+use common::model;
+use topomech_gmap::generators::{cuboid, BoxElement};
+use topomech_gmap::mesh::{build, BuildOptions};
+use topomech_physics::{Config, Integrator, PhysicsError, Simulation, STALL_TOLERANCE};
+
+/// A cantilever of tetrahedra held at x = 0, stretch springs (an exact Jacobian, nonlinear
+/// under large rotations), no gravity, `tip` on each vertex of the end x = 2.
+fn cantilever(tip: [f64; 3]) -> Simulation {
+    let mesh = cuboid([6, 1, 1], [2.0, 0.25, 0.25], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("stretch_elementary", &[("stiffness", 1e3)])],
+        gravity: [0.0; 3],
+        fixed: vec!["x < 1e-9".into()],
+        integrator: Integrator::Static,
+        dt: 1.0,
+        ..Config::default()
+    };
+    let mut s = Simulation::new(g, cfg).unwrap();
+    let load = tip_load(&s, tip, 1.0);
+    s.set_external_forces(&load).unwrap();
+    s
+}
+
+fn tip_load(s: &Simulation, tip: [f64; 3], fraction: f64) -> Vec<[f64; 3]> {
+    s.vertex_vec3("rest")
+        .unwrap()
+        .iter()
+        .map(|x| {
+            if x[0] > 2.0 - 1e-9 {
+                tip.map(|f| f * fraction)
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect()
+}
+
+/// The largest difference of two position sets, relative to the largest displacement.
+fn relative_difference(a: &[[f64; 3]], b: &[[f64; 3]], rest: &[[f64; 3]]) -> f64 {
+    let mut diff = 0.0f64;
+    let mut disp = 0.0f64;
+    for i in 0..a.len() {
+        for k in 0..3 {
+            diff = diff.max((a[i][k] - b[i][k]).abs());
+            disp = disp.max((a[i][k] - rest[i][k]).abs());
+        }
+    }
+    diff / disp
+}
+
+const HEAVY: [f64; 3] = [0.0, -10.0, 0.0];
+
+/// Today's regression: the whole heavy load at once made Newton stop after its iteration
+/// limit and report success with a residual far above the load. Now the step converges (by
+/// load stepping), its residual is within the tolerance, and the result is the state that
+/// 100 converged static steps at fractions k/100 of the load reach, to 1e-8 relative.
+#[test]
+fn heavy_load_converges_by_load_stepping_to_the_incremental_solution() {
+    let mut s = cantilever(HEAVY);
+    let rest = s.vertex_vec3("rest").unwrap();
+    s.step().unwrap();
+    let report = s.solver_report().unwrap().clone();
+    assert!(report.converged, "{report:?}");
+    assert!(report.relative_residual <= STALL_TOLERANCE, "{report:?}");
+    assert!(
+        report.load_steps > 1,
+        "the load needed stepping: {report:?}"
+    );
+    assert_eq!(report.load_fraction, 1.0);
+    let once = s.vertex_vec3("position").unwrap();
+
+    let mut inc = cantilever(HEAVY);
+    for k in 1..=100 {
+        let load = tip_load(&inc, HEAVY, f64::from(k) / 100.0);
+        inc.set_external_forces(&load).unwrap();
+        inc.step().unwrap();
+        let r = inc.solver_report().unwrap();
+        assert!(r.converged && r.load_steps == 1, "increment {k}: {r:?}");
+    }
+    let stepped = inc.vertex_vec3("position").unwrap();
+    let d = relative_difference(&once, &stepped, &rest);
+    assert!(d < 1e-8, "relative difference {d:e}");
+    // and a large deflection (the nonlinear regime, where one Newton solve fails)
+    let tip = once
+        .iter()
+        .zip(&rest)
+        .map(|(x, r)| r[1] - x[1])
+        .fold(0.0f64, f64::max);
+    assert!(tip > 0.4, "tip deflection {tip}");
+}
+
+/// A light load (tip deflection 2e-3 of the length) converges in one increment, and the report says so.
+#[test]
+fn light_load_converges_in_one_increment() {
+    let mut s = cantilever([0.0, -0.01, 0.0]);
+    assert!(s.solver_report().is_none());
+    s.step().unwrap();
+    let r = s.solver_report().unwrap();
+    assert!(
+        r.converged && r.load_steps == 1 && r.iterations >= 1,
+        "{r:?}"
+    );
+    assert_eq!(r.integrator, "static");
+    assert!(r.relative_residual <= STALL_TOLERANCE);
+}
+
+/// A body held nowhere under gravity has no equilibrium: every load increment fails, the
+/// step raises `Diverged` naming the relative residual, the tolerance and what to try, and
+/// the positions are those before the step.
+#[test]
+fn unbalanced_load_fails_with_the_residual() {
+    let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("stretch_elementary", &[("stiffness", 1e3)])],
+        integrator: Integrator::Static,
+        dt: 1.0,
+        ..Config::default()
+    };
+    let mut s = Simulation::new(g, cfg).unwrap();
+    let before = s.vertex_vec3("position").unwrap();
+    let e = s.step().unwrap_err();
+    let PhysicsError::Diverged { step, why, .. } = &e else {
+        panic!("{e:?}");
+    };
+    assert_eq!(*step, 1);
+    let msg = e.to_string();
+    for part in [
+        "relative residual",
+        "tolerance 1e-10",
+        "smaller load",
+        "implicit_euler",
+    ] {
+        assert!(msg.contains(part), "{part:?} missing from {msg}");
+    }
+    assert!(why.contains("did not converge"), "{why}");
+    assert_eq!(s.vertex_vec3("position").unwrap(), before);
+    assert_eq!(s.steps(), 0);
+    let r = s.solver_report().unwrap();
+    assert!(!r.converged, "{r:?}");
+    assert!(r.relative_residual > 0.1, "{r:?}");
+}
+
+/// An implicit Euler step reports its linear solve: converged, within its tolerance, no load
+/// stepping; the explicit integrators report nothing.
+#[test]
+fn implicit_euler_step_reports_its_linear_solve() {
+    let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    for (integrator, reported) in [
+        (Integrator::ImplicitEuler, true),
+        (Integrator::SymplecticEuler, false),
+    ] {
+        let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![model("stretch_elementary", &[("stiffness", 1e3)])],
+            fixed: vec!["x < 1e-9".into()],
+            integrator,
+            ..Config::default()
+        };
+        let mut s = Simulation::new(g, cfg).unwrap();
+        s.step().unwrap();
+        s.step().unwrap();
+        let Some(r) = s.solver_report() else {
+            assert!(!reported);
+            continue;
+        };
+        assert!(reported);
+        assert_eq!(r.integrator, "implicit_euler");
+        assert!(r.converged && r.iterations >= 1, "{r:?}");
+        assert!(r.relative_residual <= r.tolerance, "{r:?}");
+        assert_eq!((r.load_steps, r.load_stepped_steps), (0, 0));
+    }
+}

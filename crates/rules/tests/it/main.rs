@@ -1,0 +1,24 @@
+//! The integration tests of topomech-rules, one module a file, built as one test binary (one
+//! compile of what the files share and one link, instead of one a file). Run one file's
+//! tests with `cargo test -p topomech-rules --test it <file>::`.
+
+mod build;
+mod builtins;
+mod checker;
+mod dimension_independent;
+mod embedding_consistency;
+mod fuzz;
+mod guard_plans;
+mod hardening;
+mod interrupt;
+mod interrupt_rewire;
+mod invariant_guards;
+mod jit;
+mod model_decl;
+mod modeling;
+mod nonfinite;
+mod numbering;
+mod overflow_elements;
+mod plans;
+mod readme;
+mod shared_matches;
