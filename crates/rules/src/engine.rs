@@ -2371,6 +2371,13 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
                 k = chain[k_];
             }
             if dup {
+                // every dart of its hook orbit gives this footprint again (the hook orbit is
+                // the same set of darts from each, and so is every node reached from it):
+                // tried once, not once per dart (a spring's second end, or a pattern's
+                // mirror image, was matched again from each of its ~10 darts)
+                for &x in &m.darts[hook] {
+                    used.mark(x);
+                }
                 continue;
             }
             chain.push(head[min]);

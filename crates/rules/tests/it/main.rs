@@ -7,6 +7,7 @@ mod builtins;
 mod checker;
 mod dimension_independent;
 mod embedding_consistency;
+mod find_all_reference;
 mod fuzz;
 mod guard_plans;
 mod hardening;
