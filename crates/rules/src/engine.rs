@@ -2145,6 +2145,11 @@ fn rematch(
             continue;
         }
         let Some(m) = try_match(g, rule, &[h]) else {
+            // no dart of the hook orbit matches (see `find_all`): tried once for all of them
+            // (a face side opened by a cut, now free, was tried from each of its darts)
+            for x in rows_of(g, h, &rule.hook_orbit).0 {
+                tried.mark(x);
+            }
             continue;
         };
         if !m.all_darts().any(|x| star.is_marked(x)) {
@@ -2336,6 +2341,16 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
             }
         }
         let Some(m) = try_match(g, rule, &[d]) else {
+            // With one hook, whether the left graph matches does not depend on which dart of
+            // the hook orbit is the hook: from each, the hook orbit is the same set of darts
+            // (its rows in another order), every node reached through the arcs is too, and
+            // every test (free darts, links between rows, orbit labels, darts matched twice)
+            // is over all rows. So the orbit's other darts fail too: skipped (a rule that
+            // changes the topology keeps them apart from the footprints, as for a guard).
+            let skip = if overlap { &mut used } else { &mut failed };
+            for x in rows_of(g, d, &rule.hook_orbit).0 {
+                skip.mark(x);
+            }
             continue;
         };
         if !overlap && m.all_darts().any(|x| used.is_marked(x)) {
