@@ -149,6 +149,16 @@ SEG = "from = [[1.0, -1.0, 0.5], [1.0, 2.0, 0.5]]\nto = [[1.0, -1.0, 0.6], [1.0,
             "event[0].from",
             "must differ",
         ),
+        (
+            BLADE + "from = [[1, 1e200, 0], [1, 0, 0]]\nto = [[1, 0, 0], [1, 1, 0]]\n",
+            "event[0].from[0][1]",
+            "at most 1e100 in magnitude",
+        ),
+        (
+            BLADE + "from = [[1, 1, 0], [1, 0, 0]]\nto = [[1, 0, 0], [-1e101, 1, 0]]\n",
+            "event[0].to[1][0]",
+            "at most 1e100 in magnitude",
+        ),
         (BLADE + SEG + "time = 0.001\n", "event[0].time", "give start and end"),
         (BLADE + SEG + "speed = 3\n", "event[0].speed", "unknown key"),
         (

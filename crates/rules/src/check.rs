@@ -1026,6 +1026,11 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         }
     }
     check_embeddings(c, rn, &nodes, &right_arcs, &left_arcs, embs, &writes, arity);
+    // a guard may tell the hook positions apart (a per-dart flag on the hook): then the
+    // footprint may pass from one only, and nothing can be said
+    if !changes_topology && hooks.len() == 1 && guard.is_none() {
+        check_mirror(c, rn, &nodes, &left_arcs, hooks[0], embs, &writes);
+    }
     let errors_now = c.errors();
     if errors_now > errors_before {
         return None;
@@ -1047,6 +1052,131 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         guard_reads: guard.as_ref().map(reads_of).unwrap_or_default(),
         guard,
     })
+}
+
+/// Warns where a computation rule's left graph maps onto itself with the hook moved (an
+/// automorphism: a permutation `s` of its nodes keeping every node's orbit type and every
+/// arc) and the `compute` block writes a node's embedding but not its image's. The global
+/// application matches each footprint (set of darts) once, from whichever of its hook
+/// positions it meets first; the footprint found from the other is the same one and is
+/// skipped. So a spring `a -0- b` written only at `a` leaves the other end of every edge
+/// unwritten (which one depends on the dart numbering, and may change after a cut). A write
+/// of `n.e` is covered when `s(n).e` is written too, or when a path of arcs whose labels are
+/// all in the orbit of `e` joins `n` and `s(n)` (then their darts share `e`'s cells: an edge
+/// embedding on `<0,2,3>` written at `a` is written at `b`). Rules with a guard are not
+/// checked: a guard may tell the hook positions apart (the shear springs' `n0.face0`).
+fn check_mirror(
+    c: &mut Ctx,
+    rn: &str,
+    nodes: &[Node],
+    arcs: &[(usize, u8, usize)],
+    hook: usize,
+    embs: &[EmbDecl],
+    writes: &[(usize, usize, Pos, HashSet<usize>)],
+) {
+    let left: Vec<usize> = (0..nodes.len())
+        .filter(|&k| nodes[k].left.is_some())
+        .collect();
+    // small patterns only: the search tries permutations
+    if left.len() < 2 || left.len() > 7 || writes.is_empty() {
+        return;
+    }
+    let norm = |(a, i, b): (usize, u8, usize)| (a.min(b), i, a.max(b));
+    let mut want: Vec<(usize, u8, usize)> = arcs.iter().map(|&x| norm(x)).collect();
+    want.sort_unstable();
+    // every automorphism moving the hook, by backtracking over the left nodes
+    let mut found: Vec<Vec<usize>> = Vec::new();
+    let mut perm = vec![usize::MAX; nodes.len()];
+    let mut taken = vec![false; nodes.len()];
+    let ok = |p: &[usize]| {
+        if p[hook] == hook {
+            return false;
+        }
+        let mut got: Vec<(usize, u8, usize)> = arcs
+            .iter()
+            .map(|&(a, i, b)| norm((p[a], i, p[b])))
+            .collect();
+        got.sort_unstable();
+        got == want
+    };
+    extend_automorphism(0, &left, nodes, &mut perm, &mut taken, &mut found, &ok);
+    // whether `a` and `b` are joined by arcs whose labels are all in `orbit`
+    let joined = |a: usize, b: usize, orbit: OrbitType| {
+        let mut seen = vec![false; nodes.len()];
+        let mut stack = vec![a];
+        seen[a] = true;
+        while let Some(x) = stack.pop() {
+            if x == b {
+                return true;
+            }
+            for &(p, i, q) in arcs {
+                if orbit.contains(usize::from(i)) {
+                    for (u, v) in [(p, q), (q, p)] {
+                        if u == x && !seen[v] {
+                            seen[v] = true;
+                            stack.push(v);
+                        }
+                    }
+                }
+            }
+        }
+        false
+    };
+    for p in &found {
+        for (k, e, pos, _) in writes {
+            let image = p[*k];
+            let covered = image == *k
+                || writes.iter().any(|(k2, e2, _, _)| *k2 == image && e2 == e)
+                || joined(*k, image, embs[*e].orbit);
+            if !covered {
+                c.warning(
+                    *pos,
+                    "mirror-write",
+                    format!(
+                        "rule '{rn}': its left graph maps onto itself with '{}' in the place of '{}', so each footprint is matched once, from either; '{}.{}' is written but '{}.{}' is not, so the orbits matched as '{}' are left unwritten (write both, as a spring writes a.f = f and b.f = -f)",
+                        nodes[image].name,
+                        nodes[*k].name,
+                        nodes[*k].name,
+                        embs[*e].name,
+                        nodes[image].name,
+                        embs[*e].name,
+                        nodes[image].name,
+                    ),
+                );
+                // one warning per rule
+                return;
+            }
+        }
+    }
+}
+
+/// The permutations of the left nodes `left` extending `perm` (fixed up to `left[at]`) that
+/// keep every node's orbit type and that `ok` accepts, into `out` (see [`check_mirror`]).
+fn extend_automorphism(
+    at: usize,
+    left: &[usize],
+    nodes: &[Node],
+    perm: &mut [usize],
+    taken: &mut [bool],
+    out: &mut Vec<Vec<usize>>,
+    ok: &dyn Fn(&[usize]) -> bool,
+) {
+    if at == left.len() {
+        if ok(perm) {
+            out.push(perm.to_vec());
+        }
+        return;
+    }
+    let k = left[at];
+    for &t in left {
+        if !taken[t] && nodes[t].left == nodes[k].left {
+            taken[t] = true;
+            perm[k] = t;
+            extend_automorphism(at + 1, left, nodes, perm, taken, out, ok);
+            taken[t] = false;
+        }
+    }
+    perm[k] = usize::MAX;
 }
 
 fn check_incident(c: &mut Ctx, rn: &str, nodes: &[Node], dim: usize) {

@@ -111,7 +111,17 @@ def _segment(t: _Table, k: str, fail: _Fail) -> list[list[float]]:
         at = f"{t.key(k)}[{i}]"
         if not isinstance(p, list) or len(p) != 3:
             raise fail(at, f"expected an array of 3 numbers, got {_show(p)}")
-        points.append([_number(x, f"{at}[{j}]", fail) for j, x in enumerate(p)])
+        point = [_number(x, f"{at}[{j}]", fail) for j, x in enumerate(p)]
+        for j, x in enumerate(point):
+            # the crossing test takes products of three coordinate differences: past this
+            # they overflow (Simulation refuses them too; named here, where they are written)
+            if abs(x) > 1e100:
+                raise fail(
+                    f"{at}[{j}]",
+                    f"must be at most 1e100 in magnitude (the blade's crossing test would "
+                    f"overflow), got {_show(x)}",
+                )
+        points.append(point)
     if points[0] == points[1]:
         raise fail(t.key(k), "the blade's two end points must differ")
     return points

@@ -296,3 +296,51 @@ fn warnings_do_not_refuse() {
     assert_eq!(w[0].condition, "unused");
     assert!(w[0].to_string().contains("warning[unused]"));
 }
+
+/// A computation rule whose left graph maps onto itself with the hook moved (a spring's two
+/// ends) is matched once per footprint: writing one end only leaves the other unwritten, a
+/// warning at the write. Writing both ends, or an embedding whose orbit joins the two ends
+/// (an edge embedding), or a pattern with no such symmetry, passes without it.
+#[test]
+fn mirror_write() {
+    let head = "dimension 3\nembedding position : vec3 on <1,2,3>\nembedding f : vec3 on <2,3>\nembedding l : f64 on <0,2,3>\nembedding h : f64 on <>\n";
+    let spring = |body: &str| {
+        format!("{head}rule s {{\n  left {{ a : <2,3> hook   b : <2,3>   a -0- b }}\n  compute {{\n{body}\n  }}\n}}\n")
+    };
+    let mirror = |src: &str| -> Vec<Diagnostic> {
+        check(src)
+            .expect("accepted: a warning only")
+            .into_iter()
+            .filter(|d| d.condition == "mirror-write")
+            .collect()
+    };
+    let w = mirror(&spring("    a.f = b.position - a.position"));
+    assert_eq!(w.len(), 1, "{w:#?}");
+    assert_eq!(w[0].severity, Severity::Warning);
+    assert_eq!((w[0].pos.line, w[0].pos.col), (9, 5), "{}", w[0]);
+    assert!(
+        w[0].message.contains("'a.f' is written but 'b.f' is not"),
+        "{}",
+        w[0]
+    );
+    assert!(w[0]
+        .to_string()
+        .starts_with("t.tmr:9:5: warning[mirror-write]"));
+    // both ends written: no warning
+    assert!(mirror(&spring(
+        "    a.f = b.position - a.position\n    b.f = a.position - b.position"
+    ))
+    .is_empty());
+    // an edge embedding: the two ends are one edge
+    assert!(mirror(&spring("    a.l = norm(b.position - a.position)")).is_empty());
+    // half-edges: the same symmetry
+    let half = format!(
+        "{head}rule s {{\n  left {{ a : <> hook   b : <>   a -0- b }}\n  compute {{ a.h = norm(b.position - a.position) }}\n}}\n"
+    );
+    assert_eq!(mirror(&half).len(), 1);
+    // no symmetry moving the hook: the two nodes have other orbit types
+    let asym = format!(
+        "{head}rule s {{\n  left {{ a : <2,3> hook   b : <1,3>   a -0- b }}\n  compute {{ a.f = b.position - a.position }}\n}}\n"
+    );
+    assert!(mirror(&asym).is_empty());
+}
