@@ -1100,34 +1100,17 @@ fn check_mirror(
         got == want
     };
     extend_automorphism(0, &left, nodes, &mut perm, &mut taken, &mut found, &ok);
-    // whether `a` and `b` are joined by arcs whose labels are all in `orbit`
-    let joined = |a: usize, b: usize, orbit: OrbitType| {
-        let mut seen = vec![false; nodes.len()];
-        let mut stack = vec![a];
-        seen[a] = true;
-        while let Some(x) = stack.pop() {
-            if x == b {
-                return true;
-            }
-            for &(p, i, q) in arcs {
-                if orbit.contains(usize::from(i)) {
-                    for (u, v) in [(p, q), (q, p)] {
-                        if u == x && !seen[v] {
-                            seen[v] = true;
-                            stack.push(v);
-                        }
-                    }
-                }
-            }
-        }
-        false
-    };
     for p in &found {
         for (k, e, pos, _) in writes {
             let image = p[*k];
-            let covered = image == *k
-                || writes.iter().any(|(k2, e2, _, _)| *k2 == image && e2 == e)
-                || joined(*k, image, embs[*e].orbit);
+            let covered =
+                image == *k || writes.iter().any(|(k2, e2, _, _)| *k2 == image && e2 == e) || {
+                    // joined by arcs whose labels are all in the embedding's orbit
+                    let comp = components(nodes.len(), arcs, embs[*e].orbit, |n| {
+                        nodes[n].left.is_some()
+                    });
+                    comp[*k] == comp[image]
+                };
             if !covered {
                 c.warning(
                     *pos,

@@ -111,8 +111,9 @@ def _segment(t: _Table, k: str, fail: _Fail) -> list[list[float]]:
         at = f"{t.key(k)}[{i}]"
         if not isinstance(p, list) or len(p) != 3:
             raise fail(at, f"expected an array of 3 numbers, got {_show(p)}")
-        point = [_number(x, f"{at}[{j}]", fail) for j, x in enumerate(p)]
-        for j, x in enumerate(point):
+        point: list[float] = []
+        for j, v in enumerate(p):
+            x = _number(v, f"{at}[{j}]", fail)
             # the crossing test takes products of three coordinate differences: past this
             # they overflow (Simulation refuses them too; named here, where they are written)
             if abs(x) > 1e100:
@@ -121,6 +122,7 @@ def _segment(t: _Table, k: str, fail: _Fail) -> list[list[float]]:
                     f"must be at most 1e100 in magnitude (the blade's crossing test would "
                     f"overflow), got {_show(x)}",
                 )
+            point.append(x)
         points.append(point)
     if points[0] == points[1]:
         raise fail(t.key(k), "the blade's two end points must differ")
