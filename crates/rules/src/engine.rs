@@ -489,6 +489,9 @@ pub struct RuleSet {
     patches: std::sync::atomic::AtomicUsize,
     /// Those of `patches` made in place ([`RuleSet::plan_patches_in_place`]).
     in_place_patches: std::sync::atomic::AtomicUsize,
+    /// Runs of a compiled plan that failed and were applied by the interpreter instead (see
+    /// [`RuleSet::plan_fallbacks`]).
+    fallbacks: std::sync::atomic::AtomicUsize,
     /// The compiled guards of rules that change the topology, by rule index (see
     /// [`RuleSet::guarded_matches`]).
     guard_plans: std::sync::Mutex<HashMap<usize, GuardPlan>>,
@@ -711,6 +714,7 @@ impl RuleSet {
             jit: crate::jit::enabled_by_env(),
             patches: std::sync::atomic::AtomicUsize::new(0),
             in_place_patches: std::sync::atomic::AtomicUsize::new(0),
+            fallbacks: std::sync::atomic::AtomicUsize::new(0),
             guard_plans: std::sync::Mutex::new(HashMap::new()),
             guard_runs: std::sync::atomic::AtomicUsize::new(0),
             guard_patches: std::sync::atomic::AtomicUsize::new(0),
@@ -1126,6 +1130,8 @@ impl RuleSet {
                 }
                 // the interpreter reports what failed, with the dart (or applies the rule
                 // where a failure was in a branch the interpreter does not take)
+                self.fallbacks
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 let ms = find_all(g, &b, poll)?;
                 apply_matches(g, &b, &ms, poll)
             }
@@ -1490,6 +1496,14 @@ impl RuleSet {
     /// guard over the hook orbits near the region only, since this rule set was made.
     pub fn culled_guard_runs(&self) -> usize {
         self.culled_runs.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// How many runs of a compiled plan (native code or the plan evaluator) failed (a value
+    /// not finite, a built-in refusing its argument, two writes of one orbit that differ) and
+    /// were left to the interpreter, which reports the error or applies the rule, since this
+    /// rule set was made.
+    pub fn plan_fallbacks(&self) -> usize {
+        self.fallbacks.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// How many times a plan was patched after a topology change instead of rebuilt (see

@@ -379,8 +379,32 @@ impl Gen<'_, '_> {
         }
         m
     }
-    /// `builtins::norm`, branches as selects.
+    /// `builtins::norm`: the square root of the sum of squares where that sum lies in
+    /// `[NORM_DIRECT_MIN, f64::MAX]`, else (a branch to a block of its own, rarely taken)
+    /// [`Gen::norm_scaled`].
     fn norm(&mut self, x: &[Value]) -> Value {
+        let sq: Vec<Value> = x.iter().map(|&v| self.b.ins().fmul(v, v)).collect();
+        let s = self.rust_sum(&sq);
+        let lo = self.f(builtins::NORM_DIRECT_MIN);
+        let hi = self.f(f64::MAX);
+        // false for NaN: ordered comparisons
+        let ge = self.b.ins().fcmp(FloatCC::GreaterThanOrEqual, s, lo);
+        let le = self.b.ins().fcmp(FloatCC::LessThanOrEqual, s, hi);
+        let direct = self.b.ins().band(ge, le);
+        let scaled = self.b.create_block();
+        let join = self.b.create_block();
+        let r = self.b.append_block_param(join, types::F64);
+        let root = self.b.ins().sqrt(s);
+        self.b.ins().brif(direct, join, &[root.into()], scaled, &[]);
+        self.b.set_cold_block(scaled);
+        self.b.switch_to_block(scaled);
+        let m = self.norm_scaled(x);
+        self.b.ins().jump(join, &[m.into()]);
+        self.b.switch_to_block(join);
+        r
+    }
+    /// `builtins::norm_scaled`, branches as selects.
+    fn norm_scaled(&mut self, x: &[Value]) -> Value {
         let m = self.max_abs(x);
         let zero = self.f(0.0);
         let inf = self.f(f64::INFINITY);
@@ -873,7 +897,7 @@ pub(crate) fn compile(
                             let zero = g.f(0.0);
                             let is0 = g.b.ins().fcmp(FloatCC::Equal, m, zero);
                             let z: Vec<Value> = x.iter().map(|&a| g.b.ins().fdiv(a, m)).collect();
-                            let n = g.norm(&z);
+                            let n = g.norm_scaled(&z);
                             z.iter()
                                 .map(|&a| {
                                     let q = g.b.ins().fdiv(a, n);
