@@ -289,3 +289,21 @@ def test_view_bad_port_exits_2_from_the_command_line(run_dir: Path) -> None:
 def test_server_refuses_a_port_out_of_range(run_dir: Path) -> None:
     with pytest.raises(ValueError, match="port must be an integer from 0 to 65535"):
         Server(run_dir, 70000)
+
+
+def test_the_up_direction_survives_a_huge_gravity() -> None:
+    """The viewer's up vector is the unit vector opposite to gravity, computed without
+    overflow for a gravity past 1.3e154 (where the plain norm's squares overflow; it was
+    written as (-0, -0, -0) with a numpy RuntimeWarning), and +y for zero gravity."""
+    import warnings
+
+    import numpy as np
+
+    from topomech.recording import _up_of
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(_up_of([0.0, 1e308, 0.0]), [-0.0, -1.0, -0.0])
+        np.testing.assert_allclose(_up_of([3e300, 0.0, -4e300]), [-0.6, 0.0, 0.8], rtol=1e-15)
+        np.testing.assert_allclose(_up_of([0.0, -9.81, 0.0]), [0.0, 1.0, 0.0], rtol=1e-15)
+        np.testing.assert_array_equal(_up_of([0.0, 0.0, 0.0]), [0.0, 1.0, 0.0])

@@ -806,8 +806,7 @@ class Recorder:
         # relative to the origin, like the positions
         low = self._low if self._low is not None else np.zeros(3)
         high = self._high if self._high is not None else np.ones(3)
-        g = self.gravity
-        up = (-g / np.linalg.norm(g)) if np.linalg.norm(g) > 0 else np.array([0.0, 1.0, 0.0])
+        up = _up_of(self.gravity)
         meta = {
             "format": VIEW_FORMAT,
             "version": VIEW_VERSION,
@@ -1016,3 +1015,15 @@ def read_energy(path: Path) -> dict[str, F64]:
     header, body = rows[0], rows[1:]
     cols = np.array(body, dtype=np.float64).reshape(len(body), len(header))
     return {h: cols[:, i] for i, h in enumerate(header)}
+
+
+def _up_of(gravity: Any) -> np.ndarray:
+    """The viewer's up direction, shape (3,): the unit vector opposite to ``gravity`` (any
+    finite length, scaled by its largest entry first so that a huge one does not overflow),
+    or +y for zero or non-finite gravity."""
+    g = np.asarray(gravity, dtype=float).reshape(3)
+    m = float(np.max(np.abs(g))) if np.all(np.isfinite(g)) else 0.0
+    if m == 0.0:
+        return np.array([0.0, 1.0, 0.0])
+    g = g / m
+    return -g / float(np.linalg.norm(g))

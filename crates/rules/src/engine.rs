@@ -3004,15 +3004,26 @@ fn finite(v: &Val) -> bool {
 
 /// A non-finite value for a message: a scalar or vector in full, a matrix by its type and its
 /// first non-finite entry.
+/// A real for a message: as Rust prints it, except a finite value of magnitude at least 1e16
+/// or below 1e-5 (not zero), which is written with an exponent (`-1.2610724267397287e300`, not
+/// its 301 digits).
+fn short_real(x: f64) -> String {
+    if x.is_finite() && x != 0.0 && !(1e-5..1e16).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        x.to_string()
+    }
+}
+
 fn describe_non_finite(v: &Val) -> String {
     let list = |a: &[f64]| {
         a.iter()
-            .map(ToString::to_string)
+            .map(|&x| short_real(x))
             .collect::<Vec<_>>()
             .join(", ")
     };
     match v {
-        Val::F(x) => x.to_string(),
+        Val::F(x) => short_real(*x),
         Val::V2(a) => format!("({})", list(a)),
         Val::V3(a) => format!("({})", list(a)),
         Val::M(m) => {
@@ -3022,7 +3033,7 @@ fn describe_non_finite(v: &Val) -> String {
                 v.ty(),
                 k / m.cols.max(1),
                 k % m.cols.max(1),
-                m.data.get(k).copied().unwrap_or(f64::NAN)
+                short_real(m.data.get(k).copied().unwrap_or(f64::NAN))
             )
         }
         Val::I(i) => i.to_string(),
@@ -3272,6 +3283,18 @@ impl fmt::Display for Match {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A non-finite value's description stays short: huge and tiny finite entries get an
+    /// exponent, ordinary ones print as before, and the non-finite one is named.
+    #[test]
+    fn a_non_finite_value_is_described_briefly() {
+        let d = describe_non_finite(&Val::V3([-1.25e300, f64::NEG_INFINITY, 0.0]));
+        assert_eq!(d, "(-1.25e300, -inf, 0)");
+        assert_eq!(describe_non_finite(&Val::V2([1.5, f64::NAN])), "(1.5, NaN)");
+        assert_eq!(describe_non_finite(&Val::F(f64::INFINITY)), "inf");
+        assert_eq!(short_real(2.5e-7), "2.5e-7");
+        assert_eq!(short_real(-12345.5), "-12345.5");
+    }
 
     /// The guards the fast search relies on are proven invariant over the rows of a match,
     /// and those whose value may differ between rows are not: a plane cut (reads both
