@@ -1019,11 +1019,10 @@ def read_energy(path: Path) -> dict[str, F64]:
 
 def _up_of(gravity: Any) -> np.ndarray:
     """The viewer's up direction, shape (3,): the unit vector opposite to ``gravity`` (any
-    finite length, scaled by its largest entry first so that a huge one does not overflow),
-    or +y for zero or non-finite gravity."""
+    finite length: ``math.hypot`` does not overflow where the squares would), or +y for
+    zero or non-finite gravity."""
     g = np.asarray(gravity, dtype=float).reshape(3)
-    m = float(np.max(np.abs(g))) if np.all(np.isfinite(g)) else 0.0
-    if m == 0.0:
+    n = math.hypot(*(float(v) for v in g))
+    if n == 0.0 or not math.isfinite(n):
         return np.array([0.0, 1.0, 0.0])
-    g = g / m
-    return -g / float(np.linalg.norm(g))
+    return -g / n

@@ -3002,10 +3002,8 @@ fn finite(v: &Val) -> bool {
     }
 }
 
-/// A non-finite value for a message: a scalar or vector in full, a matrix by its type and its
-/// first non-finite entry.
 /// A real for a message: as Rust prints it, except a finite value of magnitude at least 1e16
-/// or below 1e-5 (not zero), which is written with an exponent (`-1.2610724267397287e300`, not
+/// or below 1e-5 (not zero), which is written with an exponent (`-1.25e300`, not
 /// its 301 digits).
 fn short_real(x: f64) -> String {
     if x.is_finite() && x != 0.0 && !(1e-5..1e16).contains(&x.abs()) {
@@ -3015,6 +3013,8 @@ fn short_real(x: f64) -> String {
     }
 }
 
+/// A non-finite value for a message: a scalar or vector in full, a matrix by its type and its
+/// first non-finite entry.
 fn describe_non_finite(v: &Val) -> String {
     let list = |a: &[f64]| {
         a.iter()
