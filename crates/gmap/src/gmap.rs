@@ -52,9 +52,12 @@ pub struct GMap {
 pub(crate) struct ChangeLog {
     /// The log covers every change made at versions `>= from`.
     from: u64,
-    entries: Vec<(u64, u32)>,
-    /// Per dart, one more than the tag of its last entry (0: none), so that a dart is
-    /// listed once per tag (a re-slotting touches it once per embedding).
+    /// (tag, dart, whether its links changed or it was created or removed: else only its
+    /// slot in some embedding changed)
+    entries: Vec<(u64, u32, bool)>,
+    /// Per dart, twice one more than the tag of its last entry, plus one when that entry
+    /// was a link change (0: none), so that a dart is listed once per tag and kind (a
+    /// re-slotting touches it once per embedding).
     last: Vec<u64>,
 }
 
@@ -62,20 +65,35 @@ pub(crate) struct ChangeLog {
 /// older half is dropped (the versions it covered are then no longer answered).
 const LOG_MIN_LIMIT: usize = 1 << 16;
 
-/// Records that dart `d` changed while the map was at `version` (a free function, so that it
-/// can be called while an embedding of the map is borrowed).
+/// Records that the links of dart `d` changed (or that it was created or removed) while the
+/// map was at `version` (a free function, so that it can be called while an embedding of the
+/// map is borrowed).
 #[inline]
 pub(crate) fn note(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize) {
+    note_kind(log, version, d, capacity, true);
+}
+
+/// Records that the slot of dart `d` in some embedding changed while the map was at
+/// `version`, its links staying (see [`note`]).
+#[inline]
+pub(crate) fn note_slot(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize) {
+    note_kind(log, version, d, capacity, false);
+}
+
+#[inline]
+fn note_kind(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize, links: bool) {
     let Some(l) = log else { return };
     let i = d as usize;
     if i >= l.last.len() {
         l.last.resize((i + 1).max(capacity), 0);
     }
-    if l.last[i] == version + 1 {
+    let tag = (version + 1) << 1;
+    // listed at this tag already as a link change, or as a slot change and this is one
+    if l.last[i] == tag | 1 || (l.last[i] == tag && !links) {
         return;
     }
-    l.last[i] = version + 1;
-    l.entries.push((version, d));
+    l.last[i] = tag | u64::from(links);
+    l.entries.push((version, d, links));
     if l.entries.len() > LOG_MIN_LIMIT.max(capacity) {
         // drop every entry tagged up to the middle one's tag: the log then answers from the
         // next version on
@@ -200,6 +218,28 @@ impl GMap {
         }
         let start = l.entries.partition_point(|e| e.0 < version);
         let mut out: Vec<Dart> = l.entries[start..].iter().map(|e| Dart(e.1)).collect();
+        out.sort_unstable();
+        out.dedup();
+        Some(out)
+    }
+
+    /// The darts of [`GMap::changed_since`] whose links changed, or that were created or
+    /// removed, since version `version`: those whose slots only changed are left out. Every
+    /// orbit that was split, merged or re-slotted holds one (a re-slotting walks the orbits
+    /// around the darts whose links changed), so an orbit holding none is an orbit of the map
+    /// at `version`, on the same slots of every embedding. `None` as for
+    /// [`GMap::changed_since`].
+    pub fn relinked_since(&self, version: u64) -> Option<Vec<Dart>> {
+        let l = self.log.as_ref()?;
+        if version < l.from || version > self.version {
+            return None;
+        }
+        let start = l.entries.partition_point(|e| e.0 < version);
+        let mut out: Vec<Dart> = l.entries[start..]
+            .iter()
+            .filter(|e| e.2)
+            .map(|e| Dart(e.1))
+            .collect();
         out.sort_unstable();
         out.dedup();
         Some(out)
@@ -992,7 +1032,7 @@ impl GMap {
 
     /// Recomputes the derived embeddings `ids`, which share a [`GMap::refresh_key`].
     fn recompute(&mut self, ids: &[EmbeddingId]) {
-        let Some(Some((orbit, src_orbit, at))) = ids.first().map(|&id| self.refresh_key(id)) else {
+        let Some(Some((orbit, _, at))) = ids.first().map(|&id| self.refresh_key(id)) else {
             return;
         };
         let mut es: Vec<Embedding> = ids
@@ -1007,19 +1047,14 @@ impl GMap {
         let mut m = Marks::with_capacity(self.capacity());
         // Only the orbits around what changed since the last refresh, when the sources were
         // not written since and the change log covers that version: an orbit of `e` holding no
-        // dart of the source orbits of the changed darts is the same orbit, on the same slot,
-        // over the same source slots holding the same values (a topology change re-slots and
-        // recombines only orbits holding a changed dart), so its value stands.
-        let local: Option<Vec<Dart>> = at.and_then(|v| self.changed_since(v)).map(|changed| {
-            let mut near = Marks::with_capacity(self.capacity());
-            let mut out = Vec::new();
-            for &c in &changed {
-                if self.is_alive(c) && !near.is_marked(c) {
-                    self.visit_orbit(c, src_orbit, &mut near, |x| out.push(x));
-                }
-            }
-            out
-        });
+        // dart whose links changed is the same orbit, on the same slot, over the same source
+        // slots holding the same values, so its value stands. (A topology change re-slots and
+        // recombines, and so changes the values of, only the orbits holding such a dart
+        // ([`GMap::relinked_since`]); the source's orbit type is a sub-orbit of `e`'s, so a
+        // source orbit holding one lies in an orbit of `e` holding it.)
+        let local: Option<Vec<Dart>> = at
+            .and_then(|v| self.relinked_since(v))
+            .map(|changed| changed.into_iter().filter(|&c| self.is_alive(c)).collect());
         let all: Vec<Dart>;
         let starts: &[Dart] = if let Some(l) = &local {
             l
@@ -1034,19 +1069,33 @@ impl GMap {
         let mut walk = Marks::with_capacity(if local.is_some() { self.capacity() } else { 0 });
         let mut darts: Vec<Dart> = Vec::new();
         let mut seen: Vec<usize> = Vec::new();
+        // the source slots already listed for a large orbit (a bit per slot number; small
+        // orbits search `seen` instead)
+        let mut listed = Marks::default();
+        let mut acc: Vec<f64> = Vec::new();
         for &d in starts {
             if m.is_marked(d) {
                 continue;
             }
-            let (d, marks) = if local.is_some() {
-                let mut lo = d;
-                self.visit_orbit(d, orbit, &mut m, |x| lo = lo.min(x));
-                (lo, &mut walk)
-            } else {
-                (d, &mut m)
-            };
             darts.clear();
-            self.visit_orbit(d, orbit, marks, |x| darts.push(x));
+            let d = if local.is_some() {
+                // the orbit's smallest dart: the walk from it is the one the full refresh
+                // makes; when `d` is that dart, this walk is it already (no dart of the
+                // orbit was marked before it)
+                let mut lo = d;
+                self.visit_orbit(d, orbit, &mut m, |x| {
+                    lo = lo.min(x);
+                    darts.push(x);
+                });
+                if lo != d {
+                    darts.clear();
+                    self.visit_orbit(lo, orbit, &mut walk, |x| darts.push(x));
+                }
+                lo
+            } else {
+                self.visit_orbit(d, orbit, &mut m, |x| darts.push(x));
+                d
+            };
             for (e, id) in es.iter_mut().zip(ids) {
                 let der = e.derived.expect("a derived embedding");
                 debug_assert!(
@@ -1054,13 +1103,23 @@ impl GMap {
                     "a derived embedding is not its own source"
                 );
                 let src = self.embedding(der.source);
-                let w = src.ty.width();
+                // the distinct source slots, in the order of the walk
                 seen.clear();
-                for &x in &darts {
-                    let s = src.slot(x);
-                    if !seen.contains(&s) {
-                        seen.push(s);
+                if darts.len() <= 32 {
+                    for &x in &darts {
+                        let s = src.slot(x);
+                        if !seen.contains(&s) {
+                            seen.push(s);
+                        }
                     }
+                } else {
+                    for &x in &darts {
+                        let s = src.slot(x);
+                        if listed.mark(Dart(s as u32)) {
+                            seen.push(s);
+                        }
+                    }
+                    listed.clear();
                 }
                 let target = e.slot(d);
                 match der.aggregate {
@@ -1073,13 +1132,14 @@ impl GMap {
                         } else {
                             Policy::Mean
                         };
-                        // merge src slots into a scratch value, then copy into the target
-                        // column
-                        let mut scratch = src.values.clone_slots(w, &seen);
-                        let idx: Vec<usize> = (0..seen.len()).collect();
-                        scratch.merge(w, policy, &idx, 0);
-                        let v = scratch.get(w, 0);
-                        e.values.set(w, target, &v);
+                        src.values.aggregate_to(
+                            src.ty.width(),
+                            policy,
+                            &seen,
+                            &mut e.values,
+                            target,
+                            &mut acc,
+                        );
                     }
                 }
             }
@@ -1094,6 +1154,44 @@ impl GMap {
 }
 
 impl Column {
+    /// Writes into slot `to` of `out` the sum (`policy` [`Policy::Sum`]) or the mean
+    /// ([`Policy::Mean`]) of this column's `slots`, added in their order from zero: what
+    /// [`Column::merge`] of copies of them gives, bit for bit, without the copies. `out` has
+    /// this column's kind and `width`; `acc` is scratch.
+    pub(crate) fn aggregate_to(
+        &self,
+        width: usize,
+        policy: Policy,
+        slots: &[usize],
+        out: &mut Column,
+        to: usize,
+        acc: &mut Vec<f64>,
+    ) {
+        debug_assert!(matches!(policy, Policy::Sum | Policy::Mean));
+        match (self, out) {
+            (Column::Real(v), Column::Real(o)) => {
+                acc.clear();
+                acc.resize(width, 0.0);
+                for &s in slots {
+                    for (a, x) in acc.iter_mut().zip(&v[s * width..(s + 1) * width]) {
+                        *a += x;
+                    }
+                }
+                if policy == Policy::Mean {
+                    for a in acc.iter_mut() {
+                        *a /= slots.len() as f64;
+                    }
+                }
+                o[to * width..(to + 1) * width].copy_from_slice(acc);
+            }
+            (Column::Int(v), Column::Int(o)) => {
+                o[to] = slots.iter().map(|&s| v[s]).fold(0i64, i64::wrapping_add);
+            }
+            (Column::Bool(v), Column::Bool(o)) => o[to] = slots.iter().any(|&s| v[s]),
+            _ => unreachable!("a derived embedding has its source's type"),
+        }
+    }
+
     /// A new column holding copies of `slots`, in order.
     pub(crate) fn clone_slots(&self, width: usize, slots: &[usize]) -> Column {
         match self {

@@ -481,38 +481,46 @@ impl GMap {
             self.embeddings[f].slot_of = Arc::default();
         }
         let mut targets = Vec::with_capacity(plan.orbits.len());
-        self.apply_reslot(k, plan, None, &mut targets);
+        let mut touched = Vec::new();
+        self.apply_reslot(k, plan, None, &mut targets, &mut touched);
         for &f in followers {
-            let (table, uses, free) = {
+            // the follower's use counts were the leader's (see `reslot_all`): only those of
+            // the slots the leader's re-slotting touched, and those it appended, change
+            let (table, free, n) = {
                 let e = &self.embeddings[k];
                 (
                     Arc::clone(&e.slot_of),
-                    e.slot_use.clone(),
                     e.free_slots.clone(),
+                    e.slot_use.len(),
                 )
             };
-            let e = &mut self.embeddings[f];
+            let (lead, e) = pick2(&mut self.embeddings, k, f);
             e.slot_of = table;
-            e.slot_use = uses;
+            e.slot_use.resize(n, 0);
+            for &t in &touched {
+                e.slot_use[t] = lead.slot_use[t];
+            }
+            debug_assert_eq!(e.slot_use, lead.slot_use, "a follower's use counts");
             e.free_slots = free;
             let w = e.ty.width();
             while e.n_slots() < e.slot_use.len() {
                 e.values.push_default(w);
             }
-            self.apply_reslot(f, plan, Some(&targets), &mut Vec::new());
+            self.apply_reslot(f, plan, Some(&targets), &mut Vec::new(), &mut Vec::new());
         }
     }
 
     /// `given`: the slot of each new orbit, chosen already (for a follower of
     /// [`GMap::apply_group`], whose table and bookkeeping its leader updated): then only the
     /// values are written. Otherwise the slot chosen for each new orbit is appended to
-    /// `targets`.
+    /// `targets`, and every slot whose use count changed to `touched` (some more than once).
     fn apply_reslot(
         &mut self,
         k: usize,
         plan: &Reslot,
         given: Option<&[usize]>,
         targets: &mut Vec<usize>,
+        touched: &mut Vec<usize>,
     ) {
         let cap = self.capacity();
         let e = &mut self.embeddings[k];
@@ -527,7 +535,7 @@ impl GMap {
         let snapshot = e.values.clone_slots(w, &plan.olds);
         let mut reused = vec![false; plan.olds.len()];
         let mut emptied: Vec<usize> = Vec::new();
-        let mut rows: Vec<usize> = Vec::new();
+        let mut acc: Vec<f64> = Vec::new();
         for (oi, o) in plan.orbits.iter().enumerate() {
             let slots = &plan.slots[o.slots.clone()];
             let target = if let Some(t) = given {
@@ -536,47 +544,27 @@ impl GMap {
                 reused[q] = true;
                 plan.olds[q]
             } else {
-                e.alloc_slot(0) as usize
+                let s = e.alloc_slot(0) as usize;
+                touched.push(s);
+                s
             };
             targets.push(target);
-            if slots.is_empty() {
-                let zero = match &e.values {
-                    Column::Real(_) => crate::Value::Real(vec![0.0; w]),
-                    Column::Int(_) => crate::Value::Int(0),
-                    Column::Bool(_) => crate::Value::Bool(false),
-                };
-                e.values.set(w, target, &zero);
-            } else if matches!(policy, Policy::Copy | Policy::Error) {
-                // the merge copies the first slot
-                e.values.set(w, target, &snapshot.get(w, slots[0]));
-            } else {
-                rows.clear();
-                rows.extend_from_slice(slots);
-                let mut scratch = snapshot.clone_slots(w, &rows);
-                if policy == Policy::Sum {
-                    for (r, &q) in slots.iter().enumerate() {
-                        let parts = plan.parts[q];
-                        if parts > 1 {
-                            scratch.scale(w, r, parts);
-                        }
-                    }
-                }
-                let idx: Vec<usize> = (0..slots.len()).collect();
-                scratch.merge(w, policy, &idx, 0);
-                e.values.set(w, target, &scratch.get(w, 0));
-            }
+            e.values
+                .combine(w, policy, &snapshot, slots, &plan.parts, target, &mut acc);
             if given.is_some() {
                 continue;
             }
             for &d in &plan.darts[o.darts.clone()] {
                 let s = e.slot_of[d.index()] as usize;
                 if s != target {
-                    crate::gmap::note(&mut self.log, self.version, d.0, cap);
+                    crate::gmap::note_slot(&mut self.log, self.version, d.0, cap);
                     e.slot_use[s] -= 1;
                     if e.slot_use[s] == 0 {
                         emptied.push(s);
                     }
                     e.slot_use[target] += 1;
+                    touched.push(s);
+                    touched.push(target);
                     Arc::make_mut(&mut e.slot_of)[d.index()] = target as u32;
                 }
             }
@@ -586,6 +574,18 @@ impl GMap {
                 e.free_slots.push(s as u32);
             }
         }
+    }
+}
+
+/// Mutable borrows of two distinct entries of `v`.
+fn pick2<T>(v: &mut [T], a: usize, b: usize) -> (&mut T, &mut T) {
+    assert_ne!(a, b, "two distinct entries");
+    if a < b {
+        let (x, y) = v.split_at_mut(b);
+        (&mut x[a], &mut y[0])
+    } else {
+        let (x, y) = v.split_at_mut(a);
+        (&mut y[0], &mut x[b])
     }
 }
 
@@ -646,16 +646,71 @@ impl Hasher for SlotHasher {
 type SlotMap = HashMap<usize, usize, BuildHasherDefault<SlotHasher>>;
 
 impl Column {
-    /// Divides slot `q` by `parts` (a share of a split sum); integers take the floor share.
-    pub(crate) fn scale(&mut self, width: usize, q: usize, parts: usize) {
-        match self {
-            Column::Real(v) => {
-                for x in &mut v[q * width..(q + 1) * width] {
-                    *x /= parts as f64;
+    /// Writes into slot `to` the value of a new orbit covering the rows `rows` of `snapshot`
+    /// (the old slots' values) under `policy`: zero without rows; the first row's value for
+    /// [`Policy::Copy`] and [`Policy::Error`]; else their sum or mean, added in order from
+    /// zero, a row covered by `parts[q] > 1` new orbits taking its share under
+    /// [`Policy::Sum`] (its value divided by `parts[q]`). What scaling copies of the rows and merging
+    /// them ([`Column::merge`]) gives, bit for bit, without the copies; `acc` is scratch.
+    #[allow(clippy::too_many_arguments)]
+    fn combine(
+        &mut self,
+        width: usize,
+        policy: Policy,
+        snapshot: &Column,
+        rows: &[usize],
+        parts: &[usize],
+        to: usize,
+        acc: &mut Vec<f64>,
+    ) {
+        let copy = matches!(policy, Policy::Copy | Policy::Error);
+        let share = |q: usize| if policy == Policy::Sum { parts[q] } else { 1 };
+        match (self, snapshot) {
+            (Column::Real(o), Column::Real(v)) => {
+                acc.clear();
+                acc.resize(width, 0.0);
+                if let (true, Some(&q)) = (copy, rows.first()) {
+                    acc.copy_from_slice(&v[q * width..(q + 1) * width]);
+                } else if !copy {
+                    for &q in rows {
+                        let n = share(q);
+                        for (a, &x) in acc.iter_mut().zip(&v[q * width..(q + 1) * width]) {
+                            *a += if n > 1 { x / n as f64 } else { x };
+                        }
+                    }
+                    if policy == Policy::Mean && !rows.is_empty() {
+                        for a in acc.iter_mut() {
+                            *a /= rows.len() as f64;
+                        }
+                    }
                 }
+                o[to * width..(to + 1) * width].copy_from_slice(acc);
             }
-            Column::Int(v) => v[q] /= parts as i64,
-            Column::Bool(_) => {}
+            (Column::Int(o), Column::Int(v)) => {
+                o[to] = match (copy, rows.first()) {
+                    (_, None) => 0,
+                    (true, Some(&q)) => v[q],
+                    (false, _) => rows
+                        .iter()
+                        .map(|&q| {
+                            let n = share(q);
+                            if n > 1 {
+                                v[q] / n as i64
+                            } else {
+                                v[q]
+                            }
+                        })
+                        .fold(0i64, i64::wrapping_add),
+                };
+            }
+            (Column::Bool(o), Column::Bool(v)) => {
+                o[to] = match (copy, rows.first()) {
+                    (_, None) => false,
+                    (true, Some(&q)) => v[q],
+                    (false, _) => rows.iter().any(|&q| v[q]),
+                };
+            }
+            _ => unreachable!("a snapshot of the column itself"),
         }
     }
 }

@@ -221,7 +221,7 @@ impl GMap {
                 e.slot_use[target] = darts.len() as u32;
                 for d in darts {
                     if e.slot_of[d.index()] != target as u32 {
-                        crate::gmap::note(&mut self.log, self.version, d.0, cap);
+                        crate::gmap::note_slot(&mut self.log, self.version, d.0, cap);
                         Arc::make_mut(&mut e.slot_of)[d.index()] = target as u32;
                     }
                 }
@@ -278,7 +278,7 @@ impl GMap {
                     e.values.copy_slot(w, s, ns);
                     for d in part {
                         Arc::make_mut(&mut e.slot_of)[d.index()] = ns as u32;
-                        crate::gmap::note(&mut self.log, self.version, d.0, cap);
+                        crate::gmap::note_slot(&mut self.log, self.version, d.0, cap);
                     }
                     new_slots.push(ns);
                 }

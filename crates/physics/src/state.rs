@@ -151,10 +151,10 @@ impl Rows {
         }
     }
 
-    /// [`Rows::renumber`] from the darts `changed` since the numbering was made (links,
-    /// slots, created, removed: [`GMap::changed_since`]), walking only the vertex orbits
-    /// that hold one. The same numbering: a vertex orbit (on the new map) without a changed
-    /// dart is closed under the old links, so it is an old orbit, with the same smallest dart
+    /// [`Rows::renumber`] from the darts `changed` since the numbering was made (their links
+    /// changed, or they were created or removed: [`GMap::relinked_since`]), walking only the
+    /// vertex orbits that hold one. The same numbering: a vertex orbit (on the new map) without
+    /// a changed dart is closed under the old links, so it is an old orbit, with the same smallest dart
     /// and row; every other orbit holds a changed dart, and is numbered here as `renumber`
     /// numbers it (the row of the old representatives it holds, or a new row, appended in
     /// increasing order of its smallest dart: the new orbits are all among these). The old
@@ -166,7 +166,19 @@ impl Rows {
     ) -> Result<Vec<usize>, PhysicsError> {
         let vertex = OrbitType::vertex(g.dimension());
         let n_rows = self.darts.len();
-        let rep = |x: Dart| self.orbits.binary_search(&x).ok();
+        // the old representatives, marked: most darts walked are none, and a bit says so
+        // faster than a search
+        let mut reps = Marks::with_capacity(g.capacity());
+        for &d in &self.orbits {
+            reps.mark(d);
+        }
+        let rep = |x: Dart| {
+            if reps.is_marked(x) {
+                self.orbits.binary_search(&x).ok()
+            } else {
+                None
+            }
+        };
         // the old representatives replaced, and the orbits holding a changed dart: (smallest
         // dart, row of the old representatives it holds or usize::MAX)
         let mut replaced: Vec<usize> = Vec::new();
@@ -340,7 +352,7 @@ impl Simulation {
         }
         // from the change record when it covers the numbering's version (it does once
         // recording started: plans start it, and so does this), else over the whole map
-        let added = match self.g.changed_since(self.vertex_darts_version) {
+        let added = match self.g.relinked_since(self.vertex_darts_version) {
             Some(changed) => {
                 // tests (debug builds, small maps) check it against the whole-map numbering
                 let check = (cfg!(debug_assertions) && self.g.capacity() < 200_000)

@@ -122,13 +122,27 @@ fn a_local_refresh_of_derived_embeddings_equals_a_full_one() {
         }
     }
     g.track_changes();
-    for round in 0..3 {
+    // unsewing volumes (alpha3: vertices and edges split), unsewing inside a volume (alpha2:
+    // the source's <2>-orbits split too, and its sum policy halves the value of the slot a
+    // part keeps, though that part's darts keep their slot), and unsewing volumes by a batch
+    // rewrite (`GMap::rewire`, as rules do)
+    for round in 0..6 {
+        let dim_cut = if round == 3 || round == 4 { 2 } else { 3 };
         let d = g
             .darts()
-            .filter(|&d| !g.is_free(3, d))
+            .filter(|&d| !g.is_free(dim_cut, d))
             .nth(7 * round)
             .unwrap();
-        g.unsew(3, d).unwrap();
+        if round == 5 {
+            let face = g.orbit(d, g.sew_orbit(3));
+            let changes: Vec<(usize, Dart, Dart)> = face
+                .iter()
+                .flat_map(|&x| [(3, x, x), (3, g.alpha(3, x), g.alpha(3, x))])
+                .collect();
+            g.rewire(&changes, &[], &[]).unwrap();
+        } else {
+            g.unsew(dim_cut, d).unwrap();
+        }
         g.refresh_derived(); // local
         let mut fresh = g.clone();
         for (name, o, agg) in &names {
