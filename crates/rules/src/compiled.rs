@@ -1579,17 +1579,19 @@ impl Plan {
     }
 
     /// [`Plan::patch`] without moving or renumbering the kept rows, for a plan without
-    /// aggregate slot lists or duplicate writes: the rows of the dropped matches stay where
-    /// they are, *dead*: their index arrays become those of a live row (so that they still
-    /// evaluate to finite values, which nothing writes), their write targets go (an ordered
+    /// duplicate writes: the rows of the dropped matches stay where they are, *dead*: their
+    /// index arrays become those of a live row (so that they still evaluate to finite
+    /// values, which nothing writes; an aggregate's slot list keeps its length, every entry
+    /// the live row's first slot, and the new rows' lists are appended after the last one's),
+    /// their write targets go (an ordered
     /// pass over the targets), and the new matches' rows are appended, each target checked
     /// against the table of which row writes each slot (`owner`, kept in the plan). What it
     /// costs grows with the rows dropped and added, and one pass over the targets; it gives
     /// the same values on the map as [`Plan::patch`]'s other path (every live row is the
     /// same row, with the same index arrays; only the order of the rows differs).
     ///
-    /// `false`, with the plan unchanged, where it does not apply: aggregates, duplicate
-    /// writes, no chunked scatter, a new target on a slot a live row writes (a duplicate:
+    /// `false`, with the plan unchanged, where it does not apply: duplicate writes, no
+    /// chunked scatter, a new target on a slot a live row writes (a duplicate:
     /// the full path decides), or more dead rows than an eighth of the plan (at least 1024),
     /// when the full path compacts it.
     #[allow(clippy::too_many_arguments)]
@@ -1604,11 +1606,7 @@ impl Plan {
         new: &[Match],
         numbers: &[u32],
     ) -> bool {
-        if self.prog.guard
-            || !self.dups.is_empty()
-            || self.chunk_starts.is_none()
-            || self.csr.iter().any(|(offs, _)| offs.len() > 1)
-            || self.rows == 0
+        if self.prog.guard || !self.dups.is_empty() || self.chunk_starts.is_none() || self.rows == 0
         {
             return false;
         }
@@ -1687,14 +1685,25 @@ impl Plan {
                 }
             }
         }
-        // from here on the plan changes: the dead rows compute the live row's values
+        // from here on the plan changes: the dead rows compute the live row's values, but
+        // for their aggregates' slot lists, which stay where they are (the offsets grow row
+        // by row): each entry becomes the live row's first slot, so a dead row aggregates as
+        // many copies of a value the live row reads as it had slots (its count stays)
         for &r in &dead_now {
             let r = r as usize;
             for x in &mut self.gathers {
                 x[r] = x[live];
             }
-            for c in &mut self.counts {
-                if c.len() == self.rows {
+            for ((offs, slots), c) in self.csr.iter_mut().zip(&mut self.counts) {
+                if offs.len() > 1 {
+                    let (lo, hi) = (offs[r] as usize, offs[r + 1] as usize);
+                    if let Some(&s) = slots
+                        .get(offs[live] as usize..offs[live + 1] as usize)
+                        .and_then(<[u32]>::first)
+                    {
+                        slots[lo..hi].fill(s);
+                    }
+                } else if c.len() == self.rows {
                     c[r] = c[live];
                 }
             }

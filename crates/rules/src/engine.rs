@@ -1513,7 +1513,7 @@ impl RuleSet {
     }
 
     /// How many of [`RuleSet::plan_patches`] left the kept rows in place (a plan without
-    /// aggregates or duplicate writes: the dropped matches' rows stay, dead, until a patch
+    /// duplicate writes: the dropped matches' rows stay, dead, until a patch
     /// compacts the plan; see "Topology changes during a run" in the README).
     pub fn plan_patches_in_place(&self) -> usize {
         self.in_place_patches

@@ -381,7 +381,7 @@ fn prepare_cuts_changes_no_result() {
 }
 
 /// Plans patched in place (the rows of dropped matches left dead where they are, the new
-/// ones appended: a plan without aggregates, such as the springs' and the integrator's) give
+/// ones appended: the springs', the accumulation's with its aggregates, the integrator's) give
 /// the forces of plans built from scratch after each of a series of cuts (a simulation
 /// never rebuilding its plans, against one rebuilding them before each comparison), and keep
 /// doing so once the dead rows are many and a patch compacts the plan instead (the other
@@ -434,7 +434,10 @@ fn plans_patched_in_place_and_then_compacted_give_fresh_forces() {
             &format!("{what}, a step later"),
         );
     }
-    assert!(in_place >= 9, "{in_place} patches in place");
-    // the plans with aggregates, and the compactions, take the other path
+    // three plans patched per cut (springs, accumulation, integrator): more than two per
+    // cut in place means the accumulation's, which has aggregates, is among them (16 of 27
+    // before aggregates were patched in place, 24 after)
+    assert!(in_place > 18, "{in_place} patches in place");
+    // the compactions take the other path
     assert!(other >= 9, "{other} patches by filtering");
 }
