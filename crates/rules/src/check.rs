@@ -221,6 +221,13 @@ pub struct Rule {
     /// The embeddings the guard reads (directly or in aggregates): the matches a guard
     /// accepts change only when the topology or one of these does.
     pub guard_reads: Vec<usize>,
+    /// For a rule with one hook: the other nodes an automorphism of the left graph (a
+    /// permutation of its nodes keeping every node's orbit type and every arc) maps the hook
+    /// to. A match's darts at such a node are the hook orbit of another match with the same
+    /// footprint (the first composed with the automorphism); searches matching each footprint
+    /// once need not start there. Empty for larger patterns (more than 7 left nodes: not
+    /// searched).
+    pub hook_images: Vec<usize>,
 }
 
 /// The result of checking files: their shared dimension and embeddings, and their rules.
@@ -1035,7 +1042,13 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
     if errors_now > errors_before {
         return None;
     }
+    let hook_images = if hooks.len() == 1 {
+        hook_images(&nodes, &left_arcs, hooks[0])
+    } else {
+        Vec::new()
+    };
     Some(Rule {
+        hook_images,
         name: r.name.clone(),
         file: c.file.to_string(),
         params: env.params,
@@ -1074,33 +1087,10 @@ fn check_mirror(
     embs: &[EmbDecl],
     writes: &[(usize, usize, Pos, HashSet<usize>)],
 ) {
-    let left: Vec<usize> = (0..nodes.len())
-        .filter(|&k| nodes[k].left.is_some())
-        .collect();
-    // small patterns only: the search tries permutations
-    if left.len() < 2 || left.len() > 7 || writes.is_empty() {
+    if writes.is_empty() {
         return;
     }
-    let norm = |(a, i, b): (usize, u8, usize)| (a.min(b), i, a.max(b));
-    let mut want: Vec<(usize, u8, usize)> = arcs.iter().map(|&x| norm(x)).collect();
-    want.sort_unstable();
-    // every automorphism moving the hook, by backtracking over the left nodes
-    let mut found: Vec<Vec<usize>> = Vec::new();
-    let mut perm = vec![usize::MAX; nodes.len()];
-    let mut taken = vec![false; nodes.len()];
-    let ok = |p: &[usize]| {
-        if p[hook] == hook {
-            return false;
-        }
-        let mut got: Vec<(usize, u8, usize)> = arcs
-            .iter()
-            .map(|&(a, i, b)| norm((p[a], i, p[b])))
-            .collect();
-        got.sort_unstable();
-        got == want
-    };
-    extend_automorphism(0, &left, nodes, &mut perm, &mut taken, &mut found, &ok);
-    for p in &found {
+    for p in &automorphisms_moving(nodes, arcs, hook) {
         for (k, e, pos, _) in writes {
             let image = p[*k];
             let covered =
@@ -1131,6 +1121,54 @@ fn check_mirror(
             }
         }
     }
+}
+
+/// Every automorphism of the left graph (`nodes` with a left side, `arcs`) that moves
+/// `hook`, as a permutation of the nodes (`usize::MAX` for nodes without a left side);
+/// none for a pattern of fewer than 2 or more than 7 left nodes (the search tries
+/// permutations).
+fn automorphisms_moving(
+    nodes: &[Node],
+    arcs: &[(usize, u8, usize)],
+    hook: usize,
+) -> Vec<Vec<usize>> {
+    let left: Vec<usize> = (0..nodes.len())
+        .filter(|&k| nodes[k].left.is_some())
+        .collect();
+    if left.len() < 2 || left.len() > 7 {
+        return Vec::new();
+    }
+    let norm = |(a, i, b): (usize, u8, usize)| (a.min(b), i, a.max(b));
+    let mut want: Vec<(usize, u8, usize)> = arcs.iter().map(|&x| norm(x)).collect();
+    want.sort_unstable();
+    // by backtracking over the left nodes
+    let mut found: Vec<Vec<usize>> = Vec::new();
+    let mut perm = vec![usize::MAX; nodes.len()];
+    let mut taken = vec![false; nodes.len()];
+    let ok = |p: &[usize]| {
+        if p[hook] == hook {
+            return false;
+        }
+        let mut got: Vec<(usize, u8, usize)> = arcs
+            .iter()
+            .map(|&(a, i, b)| norm((p[a], i, p[b])))
+            .collect();
+        got.sort_unstable();
+        got == want
+    };
+    extend_automorphism(0, &left, nodes, &mut perm, &mut taken, &mut found, &ok);
+    found
+}
+
+/// The nodes the automorphisms of the left graph map `hook` to (see [`Rule::hook_images`]).
+fn hook_images(nodes: &[Node], arcs: &[(usize, u8, usize)], hook: usize) -> Vec<usize> {
+    let mut out: Vec<usize> = automorphisms_moving(nodes, arcs, hook)
+        .iter()
+        .map(|p| p[hook])
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// The permutations of the left nodes `left` extending `perm` (fixed up to `left[at]`) that

@@ -1213,8 +1213,10 @@ impl RuleSet {
             expr_orbits(guard, b.embs, &mut chains);
         }
         let (star, candidates, dropped) = drop_changed(g, rule, &mut ix, &changed, &chains)?;
-        // new matches, from the candidate hooks not in a kept match's hook orbit
+        // new matches, from the candidate hooks not in a kept match's hook orbit (where the
+        // left graph has one node, a footprint is one hook orbit: no two are the same)
         let hook = rule.hooks[0];
+        let single = rule.nodes.iter().filter(|n| n.left.is_some()).count() == 1;
         let mut prints: std::collections::HashSet<Vec<u32>, FastHash> =
             std::collections::HashSet::default();
         let new = rematch(
@@ -1223,6 +1225,7 @@ impl RuleSet {
             &ix,
             &star,
             candidates,
+            &rule.hook_images,
             |m| match &rule.guard {
                 None => Some(true),
                 // an error is left to a rebuild, which reports it
@@ -1233,6 +1236,9 @@ impl RuleSet {
                 },
             },
             |m| {
+                if single {
+                    return true;
+                }
                 let mut key: Vec<u32> = m.all_darts().map(|x| x.0).collect();
                 key.sort_unstable();
                 prints.insert(key)
@@ -2111,7 +2117,16 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
     let (star, candidates, _) = drop_changed(g, rule, &mut index, &changed, &chains)?;
     let hook = rule.hooks[0];
     // one row per hook orbit: no guard evaluated (the plan does), no footprint merged
-    let new = rematch(g, rule, &index, &star, candidates, |_| Some(true), |_| true)?;
+    let new = rematch(
+        g,
+        rule,
+        &index,
+        &star,
+        candidates,
+        &[],
+        |_| Some(true),
+        |_| true,
+    )?;
     let numbers: Vec<u32> = new
         .iter()
         .map(|m| {
@@ -2138,13 +2153,18 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
 /// not tried yet, not in the hook orbit of a match found here or of a live match of `ix`,
 /// the match there when it holds a dart of `C*` (`star`; else it is a kept match's) and
 /// `pass` accepts it (`None`: give up, the plan is rebuilt); its hook orbit is then taken,
-/// and the match kept when `fresh` says it is not one found already.
+/// and the match kept when `fresh` says it is not one found already. `mirrors`: nodes whose
+/// darts in an accepted match are taken too, for a `fresh` refusing a footprint found before
+/// ([`Rule::hook_images`]: a match from them has the same footprint); empty where every
+/// hook orbit is wanted.
+#[allow(clippy::too_many_arguments)]
 fn rematch(
     g: &GMap,
     rule: &Rule,
     ix: &Index,
     star: &Marks,
     candidates: Vec<Dart>,
+    mirrors: &[usize],
     mut pass: impl FnMut(&Match) -> Option<bool>,
     mut fresh: impl FnMut(&Match) -> bool,
 ) -> Option<Vec<Match>> {
@@ -2174,6 +2194,12 @@ fn rematch(
         }
         for &x in &m.darts[hook] {
             used.mark(x);
+        }
+        // the hook orbits of the same footprint's other matches: `fresh` would refuse them
+        for &n in mirrors {
+            for &x in &m.darts[n] {
+                used.mark(x);
+            }
         }
         if fresh(&m) {
             new.push(m);

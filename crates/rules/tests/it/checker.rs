@@ -297,6 +297,25 @@ fn warnings_do_not_refuse() {
     assert!(w[0].to_string().contains("warning[unused]"));
 }
 
+/// `Rule::hook_images`, which lets a patch skip the hook orbits whose match is one found
+/// already (the same footprint): the other end of a spring (both ends `<2,3>`, or both
+/// half-edges `<>`); none where the two ends have other orbit types, or where the hook is
+/// the middle of a chain whose two arcs have other labels (nothing maps it elsewhere).
+#[test]
+fn hook_images_are_the_nodes_an_automorphism_moves_the_hook_to() {
+    let head = "dimension 3\nembedding position : vec3 on <1,2,3>\nembedding h : f64 on <>\n";
+    let images = |left: &str| -> Vec<usize> {
+        let src = format!("{head}rule s {{\n  left {{ {left} }}\n  compute {{ a.h = 1.0 }}\n}}\n");
+        let (rs, _) = load_sources(&[("t.tmr".into(), src)]).expect("accepted");
+        rs.rule("s").expect("declared").hook_images.clone()
+    };
+    // node indices in declaration order
+    assert_eq!(images("a : <2,3> hook   b : <2,3>   a -0- b"), vec![1]);
+    assert_eq!(images("b : <> a : <> hook   b -0- a"), vec![0]);
+    assert!(images("a : <2,3> hook   b : <1,3>   a -0- b").is_empty());
+    assert!(images("b : <> a : <> hook   c : <>   a -0- b   a -1- c").is_empty());
+}
+
 /// A computation rule whose left graph maps onto itself with the hook moved (a spring's two
 /// ends) is matched once per footprint: writing one end only leaves the other unwritten, a
 /// warning at the write. Writing both ends, or an embedding whose orbit joins the two ends
