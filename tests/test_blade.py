@@ -150,6 +150,11 @@ SEG = "from = [[1.0, -1.0, 0.5], [1.0, 2.0, 0.5]]\nto = [[1.0, -1.0, 0.6], [1.0,
             "must differ",
         ),
         (
+            BLADE + "from = [[1, 0, 0], [1, 1, 0]]\nto = [[1, 0, 0], [1, 1, 0]]\n",
+            "event[0].to",
+            "would not move",
+        ),
+        (
             BLADE + "from = [[1, 1e200, 0], [1, 0, 0]]\nto = [[1, 0, 0], [1, 1, 0]]\n",
             "event[0].from[0][1]",
             "at most 1e100 in magnitude",

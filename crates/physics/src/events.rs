@@ -9,7 +9,8 @@ use crate::*;
 #[derive(Clone, Debug, PartialEq)]
 pub enum Cut {
     /// The plane `normal . x = offset`: elements whose centroids (at the time of the cut) lie
-    /// on opposite sides are separated.
+    /// on opposite sides are separated (a centroid whose distance to the plane is within
+    /// 1e-12 of the other's is on the plane, as for a blade).
     Plane {
         /// Normal of the plane.
         normal: [f64; 3],
@@ -62,7 +63,7 @@ impl Blade {
     }
 
     /// Why this blade cannot run, if it cannot: a start before 0, an end not after the start,
-    /// a non-finite time or point.
+    /// a non-finite time or point, a segment of zero length, or one that does not move.
     pub fn problem(&self) -> Option<String> {
         if !(self.start >= 0.0 && self.start.is_finite()) {
             return Some(format!(
@@ -76,7 +77,14 @@ impl Blade {
                 self.start, self.end
             ));
         }
-        segments_problem(&self.from, &self.to)
+        if let Some(why) = segments_problem(&self.from, &self.to) {
+            return Some(why);
+        }
+        // (a sweep of `cut_swept` may stand still: it cuts nothing)
+        (self.from == self.to).then(|| {
+            "its segment must move: `from` and `to` are the same segment, so it would sweep nothing"
+                .to_string()
+        })
     }
 }
 

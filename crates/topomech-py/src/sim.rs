@@ -922,7 +922,8 @@ impl PySimulation {
 
     /// Cuts now along the plane `normal . x = offset`: every face (3D) or edge (2D) between
     /// two elements whose centroids lie on opposite sides is unsewn, and the vertices on it
-    /// split. Returns how many faces or edges were unsewn (0 when the plane misses the object:
+    /// split (a centroid whose distance is within 1e-12 of the other's is on the plane).
+    /// Returns how many faces or edges were unsewn (0 when the plane misses the object:
     /// nothing changes then) and the rows appended, int64 (k,) (existing rows keep their
     /// meaning).
     fn cut<'py>(

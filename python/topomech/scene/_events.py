@@ -150,6 +150,12 @@ def _blade(t: _Table, fail: _Fail) -> dict[str, Any]:
         "from": _segment(t, "from", fail),
         "to": _segment(t, "to", fail),
     }
+    if blade["from"] == blade["to"]:
+        raise fail(
+            t.key("to"),
+            f"the same segment as {t.key('from')}: the blade would not move, so it would "
+            "sweep nothing",
+        )
     t.done()
     return blade
 

@@ -244,8 +244,10 @@ fn the_merged_files_are_the_per_dimension_files_as_before() {
         let product_guard = format!(
             "  where (dot(mean{vol}(a.position), normal) - offset) * (dot(mean{vol}(b.position), normal) - offset) < 0.0"
         );
+        // and a third (2026-12-03): a centroid within 1e-12 of the other's distance from the
+        // plane is on it, as for a blade (rounding put centroids on the plane on either side)
         let signs_guard = format!(
-            "  where {{\n    let da = dot(mean{vol}(a.position), normal) - offset\n    let db = dot(mean{vol}(b.position), normal) - offset\n    let opposite = (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)\n    opposite\n  }}"
+            "  where {{\n    let da = dot(mean{vol}(a.position), normal) - offset\n    let db = dot(mean{vol}(b.position), normal) - offset\n    let opposite = (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)\n    let near = min(abs(da), abs(db))\n    let far = max(abs(da), abs(db))\n    opposite && near > 1e-12 * far\n  }}"
         );
         let was: Vec<(&str, String)> = was
             .iter()
