@@ -327,9 +327,10 @@ class Simulation:
         elements whose centroids lie on opposite sides is unsewn and the vertices on it split
         (a centroid whose distance to the plane is within 1e-12 of the other's counts as on
         the plane, as for a blade: rounding does not open part of the faces of a plane
-        through centroids). Returns a :class:`TopologyResult`: how many faces or edges were unsewn (0 when the
-        plane misses the object; nothing changes then) and the rows appended for the split
-        vertices. Raises :class:`TypeError` / :class:`ValueError` for a bad argument."""
+        through centroids). Returns a :class:`TopologyResult`: how many faces or edges were
+        unsewn (0 when the plane misses the object; nothing changes then) and the rows
+        appended for the split vertices. Raises :class:`TypeError` / :class:`ValueError` for
+        a bad argument."""
         unsewn, added = self._core.cut(normal, offset)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 
