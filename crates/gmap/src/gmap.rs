@@ -245,6 +245,32 @@ impl GMap {
         Some(out)
     }
 
+    /// [`GMap::changed_since`] and [`GMap::relinked_since`] from one pass over the record:
+    /// `(changed, relinked)`, each sorted, each dart once; `relinked` is a subset of
+    /// `changed`. `None` as for [`GMap::changed_since`].
+    pub fn changes_since(&self, version: u64) -> Option<(Vec<Dart>, Vec<Dart>)> {
+        let l = self.log.as_ref()?;
+        if version < l.from || version > self.version {
+            return None;
+        }
+        let start = l.entries.partition_point(|e| e.0 < version);
+        // (dart, relinked), sorted so that a dart's relinked entry, if any, comes last
+        let mut all: Vec<(u32, bool)> = l.entries[start..].iter().map(|e| (e.1, e.2)).collect();
+        all.sort_unstable();
+        let mut changed: Vec<Dart> = Vec::with_capacity(all.len());
+        let mut relinked: Vec<Dart> = Vec::new();
+        for (k, &(d, r)) in all.iter().enumerate() {
+            if all.get(k + 1).is_some_and(|n| n.0 == d) {
+                continue;
+            }
+            changed.push(Dart(d));
+            if r {
+                relinked.push(Dart(d));
+            }
+        }
+        Some((changed, relinked))
+    }
+
     /// Whether `d` is a live dart of this map.
     #[inline]
     pub fn is_alive(&self, d: Dart) -> bool {

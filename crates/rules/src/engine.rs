@@ -489,6 +489,8 @@ pub struct RuleSet {
     patches: std::sync::atomic::AtomicUsize,
     /// Those of `patches` made in place ([`RuleSet::plan_patches_in_place`]).
     in_place_patches: std::sync::atomic::AtomicUsize,
+    /// Matches of patched plans rebuilt without a search ([`RuleSet::matches_rebuilt`]).
+    rebuilt: std::sync::atomic::AtomicUsize,
     /// Runs of a compiled plan that failed and were applied by the interpreter instead (see
     /// [`RuleSet::plan_fallbacks`]).
     fallbacks: std::sync::atomic::AtomicUsize,
@@ -714,6 +716,7 @@ impl RuleSet {
             jit: crate::jit::enabled_by_env(),
             patches: std::sync::atomic::AtomicUsize::new(0),
             in_place_patches: std::sync::atomic::AtomicUsize::new(0),
+            rebuilt: std::sync::atomic::AtomicUsize::new(0),
             fallbacks: std::sync::atomic::AtomicUsize::new(0),
             guard_plans: std::sync::Mutex::new(HashMap::new()),
             guard_runs: std::sync::atomic::AtomicUsize::new(0),
@@ -1164,6 +1167,16 @@ impl RuleSet {
     ///   node `n`'s path on the new map reaches the hook orbit of an old match holding it at
     ///   node `n`, or else a dart of `C` nearer the hook on that path, from which walking
     ///   back reaches it (every link before the first changed dart of the path is unchanged).
+    /// - Without a guard, let `R` be the relinked darts of `C` ([`GMap::changes_since`]:
+    ///   links changed, created, removed). A dropped match whose footprint misses `R` is the
+    ///   match found again from its old hook dart, with the same darts ([`match_at`] reads
+    ///   only its footprint's links): [`rebuild_unlinked`] rebuilds it without a search, and
+    ///   the plan gives it new rows (its slots may have changed). A match of the new map
+    ///   whose footprint misses `R` was one of the old map (the same links), so it is kept
+    ///   or rebuilt; the others hold a dart `y` of `R` and are found from the hook darts
+    ///   walked back from `y`, as above, with `R` in place of `C*`. (A guard may read values
+    ///   that changed: a rebuilt match would need it again, so there every dart of `C*` is
+    ///   walked back from.)
     ///
     /// Only rules without a guard (a guard may read what changed) and with one hook are
     /// patched, compiled plans or plans without matches, on the map (same identity) and
@@ -1195,7 +1208,14 @@ impl RuleSet {
         {
             return None;
         }
-        let changed = g.changed_since(old.identity.1)?;
+        // without a guard, a dropped match whose footprint kept its links is rebuilt from its
+        // hook dart, and the search looks only around the relinked darts (see below)
+        let (changed, relinked) = if rule.guard.is_none() {
+            let (c, r) = g.changes_since(old.identity.1)?;
+            (c, Some(marks_of(g, &r)))
+        } else {
+            (g.changed_since(old.identity.1)?, None)
+        };
         let compiled = match kind {
             PlanKind::Compiled(p) => Some(p),
             PlanKind::Matches(ms) if ms.is_empty() && self.compile => None,
@@ -1212,10 +1232,21 @@ impl RuleSet {
         if let Some(guard) = &rule.guard {
             expr_orbits(guard, b.embs, &mut chains);
         }
-        let (star, candidates, dropped) = drop_changed(g, rule, &mut ix, &changed, &chains)?;
-        // new matches, from the candidate hooks not in a kept match's hook orbit (where the
-        // left graph has one node, a footprint is one hook orbit: no two are the same)
+        let (star, candidates, dropped) =
+            drop_changed(g, rule, &mut ix, &changed, &chains, relinked.as_ref())?;
+        let kept = ix.live;
         let hook = rule.hooks[0];
+        // the dropped matches whose footprint kept its links, rebuilt (new numbers, new rows)
+        let mut all: Vec<Match> = match &relinked {
+            Some(r) => rebuild_unlinked(g, rule, &ix, &dropped, r)?,
+            None => Vec::new(),
+        };
+        self.rebuilt
+            .fetch_add(all.len(), std::sync::atomic::Ordering::Relaxed);
+        let mut numbers: Vec<u32> = all.iter().map(|m| ix.push(m, hook)).collect();
+        // new matches, from the candidate hooks not in a kept or rebuilt match's hook orbit
+        // (where the left graph has one node, a footprint is one hook orbit: no two are the
+        // same)
         let single = rule.nodes.iter().filter(|n| n.left.is_some()).count() == 1;
         let mut prints: std::collections::HashSet<Vec<u32>, FastHash> =
             std::collections::HashSet::default();
@@ -1223,7 +1254,7 @@ impl RuleSet {
             g,
             rule,
             &ix,
-            &star,
+            relinked.as_ref().unwrap_or(&star),
             candidates,
             &rule.hook_images,
             |m| match &rule.guard {
@@ -1244,8 +1275,8 @@ impl RuleSet {
                 prints.insert(key)
             },
         )?;
-        let kept = ix.live;
-        let numbers: Vec<u32> = new.iter().map(|m| ix.push(m, hook)).collect();
+        numbers.extend(new.iter().map(|m| ix.push(m, hook)));
+        all.extend(new);
         let kind = match compiled {
             Some(p) => {
                 let alive = &ix.alive;
@@ -1256,7 +1287,7 @@ impl RuleSet {
                     &|k| alive[k as usize],
                     &dropped,
                     kept,
-                    &new,
+                    &all,
                     &numbers,
                 );
                 if in_place {
@@ -1265,7 +1296,7 @@ impl RuleSet {
                 }
                 PlanKind::Compiled(Box::new(p))
             }
-            None if new.is_empty() => PlanKind::Matches(Arc::new(Vec::new())),
+            None if all.is_empty() => PlanKind::Matches(Arc::new(Vec::new())),
             // a plan without matches gains some: rebuilt (binding, and so creating, the
             // rule's embeddings)
             None => return None,
@@ -1526,6 +1557,13 @@ impl RuleSet {
             .load(std::sync::atomic::Ordering::Relaxed)
     }
 
+    /// How many matches [`RuleSet::plan_patches`] rebuilt from their hook dart without a
+    /// search (a match dropped because slots it reads changed, its footprint's links not),
+    /// since this rule set was made.
+    pub fn matches_rebuilt(&self) -> usize {
+        self.rebuilt.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
     /// Drops every plan (they are rebuilt when needed): after rules that run once. The
     /// matches shared by rules of one pattern stay (until the topology changes or
     /// [`RuleSet::clear_shared_matches`]), so the rules run next reuse those of the rules
@@ -1781,14 +1819,17 @@ impl RuleSet {
 /// The patching of a plan's matches after a topology change (see [`RuleSet::patch_plan`]):
 /// `C*`, the darts of `changed` with, for each chain of orbit types in `chains`, the orbits
 /// along it of the live darts of `changed`; every match of `ix` holding a dart of `C*` is
-/// dropped. Returns the marks of `C*` and the candidate hook darts of the new matches;
-/// `None` when the index has seen too much churn (a rebuild compacts it).
+/// dropped. Returns the marks of `C*`, the candidate hook darts of the new matches (walked
+/// back from every dart of `C*`, or, with `relinked`, from its marked darts only: see
+/// [`rebuild_unlinked`]) and the matches dropped; `None` when the index has seen too much
+/// churn (a rebuild compacts it).
 fn drop_changed(
     g: &GMap,
     rule: &Rule,
     ix: &mut Index,
     changed: &[Dart],
     chains: &[Vec<OrbitType>],
+    relinked: Option<&Marks>,
 ) -> Option<(Marks, Vec<Dart>, Vec<u32>)> {
     let cap = g.capacity();
     if ix.of_hook.len() < cap {
@@ -1837,7 +1878,7 @@ fn drop_changed(
                 ix.live -= 1;
                 dropped.push(k);
             }
-            if g.is_alive(h) {
+            if g.is_alive(h) && relinked.is_none_or(|r| r.is_marked(y)) {
                 candidates.push(h);
             }
         }
@@ -1847,6 +1888,80 @@ fn drop_changed(
         return None;
     }
     Some((star, candidates, dropped))
+}
+
+/// The matches among `dropped` (matches of `ix`, dropped by [`drop_changed`]) whose
+/// footprint holds no dart of `relinked` (the darts whose links changed, or that were
+/// created or removed, since `ix` was current), rebuilt from their hook darts without a
+/// search: each is the match [`match_at`] gives on the map now from the same hook dart, the
+/// same darts in the same rows. `None` where a match cannot be rebuilt so (a node no arc
+/// path reaches; the caller rebuilds the plan).
+///
+/// Why: [`match_at`] reads only the links of the darts of the match it returns. Walking the
+/// hook orbit from the match's first hook dart ([`rows_of`]) and each node's arc path
+/// ([`node_paths`]) from the hook darts reads the links of footprint darts only, so as long
+/// as every dart reached is not relinked it reaches the old footprint's darts, in the old
+/// order, and they are not relinked either: the old match, whose every check (links,
+/// freeness) reads links that did not change. The first relinked dart such a walk reaches
+/// is one of the old footprint's (every link read before it is unchanged): that match is
+/// left out, as it should (its footprint changed; [`rematch`] finds what is there now).
+fn rebuild_unlinked(
+    g: &GMap,
+    rule: &Rule,
+    ix: &Index,
+    dropped: &[u32],
+    relinked: &Marks,
+) -> Option<Vec<Match>> {
+    let hook = rule.hooks[0];
+    let paths = node_paths(rule);
+    let mut out = Vec::new();
+    'matches: for &k in dropped {
+        let hd = &ix.hook_darts
+            [ix.hook_start[k as usize] as usize..ix.hook_start[k as usize + 1] as usize];
+        if hd.iter().any(|&d| relinked.is_marked(Dart(d))) {
+            continue;
+        }
+        let (first, next) = rows_of(g, Dart(hd[0]), &rule.hook_orbit);
+        if first.len() != hd.len() || first.iter().zip(hd).any(|(a, &b)| a.0 != b) {
+            // (not reached: the walk reads unchanged links only, see above)
+            return None;
+        }
+        let mut darts: Vec<Vec<Dart>> = vec![Vec::new(); rule.nodes.len()];
+        for (n, nd) in rule.nodes.iter().enumerate() {
+            if nd.left.is_none() {
+                continue;
+            }
+            let p = paths[n].as_ref()?;
+            let mut col = Vec::with_capacity(first.len());
+            for &h in &first {
+                let mut x = h;
+                for &l in p {
+                    x = g.alpha(usize::from(l), x);
+                    if relinked.is_marked(x) {
+                        continue 'matches;
+                    }
+                }
+                col.push(x);
+            }
+            darts[n] = col;
+        }
+        debug_assert!(darts[hook] == first);
+        out.push(Match {
+            rows: first.len(),
+            next,
+            darts,
+        });
+    }
+    Some(out)
+}
+
+/// `darts` marked, in marks the size of `g`.
+fn marks_of(g: &GMap, darts: &[Dart]) -> Marks {
+    let mut m = Marks::with_capacity(g.capacity());
+    for &d in darts {
+        m.mark(d);
+    }
+    m
 }
 
 /// The `vec3` embedding named `embedding` of `g`, for a region of rule `name`'s guard.
@@ -2097,13 +2212,15 @@ const GUARD_BATCH: usize = 4096;
 
 /// `gp` patched for the map's new topology, as [`RuleSet::patch_plan`] patches a compiled
 /// plan (the same proof, with one row per hook orbit instead of one per footprint, and no
-/// guard evaluated: the plan evaluates it when it runs); `None` when it cannot be (another
+/// guard evaluated: the plan evaluates it when it runs, so dropped rows whose footprint kept
+/// its links are rebuilt as without a guard); `None` when it cannot be (another
 /// map, a change record that does not cover its version, too much churn).
 fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
     if gp.identity.0 != g.identity().0 {
         return None;
     }
-    let changed = g.changed_since(gp.identity.1)?;
+    let (changed, relinked) = g.changes_since(gp.identity.1)?;
+    let relinked = marks_of(g, &relinked);
     let rule = b.rule;
     let GuardPlan {
         mut plan,
@@ -2114,26 +2231,30 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
         ..
     } = gp;
     let chains: Vec<Vec<OrbitType>> = plan.agg_orbits().into_iter().map(|o| vec![o]).collect();
-    let (star, candidates, _) = drop_changed(g, rule, &mut index, &changed, &chains)?;
+    let (_, candidates, dropped) =
+        drop_changed(g, rule, &mut index, &changed, &chains, Some(&relinked))?;
     let hook = rule.hooks[0];
-    // one row per hook orbit: no guard evaluated (the plan does), no footprint merged
-    let new = rematch(
+    // the dropped rows whose footprint kept its links, rebuilt (see `RuleSet::patch_plan`),
+    // then one row per new hook orbit: no guard evaluated (the plan does), no footprint
+    // merged
+    let mut new = rebuild_unlinked(g, rule, &index, &dropped, &relinked)?;
+    let mut push = |m: &Match, index: &mut Index| {
+        first.push(m.darts[hook].iter().map(|d| d.0).min().expect("a row"));
+        index.push(m, hook)
+    };
+    let mut numbers: Vec<u32> = new.iter().map(|m| push(m, &mut index)).collect();
+    let found = rematch(
         g,
         rule,
         &index,
-        &star,
+        &relinked,
         candidates,
         &[],
         |_| Some(true),
         |_| true,
     )?;
-    let numbers: Vec<u32> = new
-        .iter()
-        .map(|m| {
-            first.push(m.darts[hook].iter().map(|d| d.0).min().expect("a row"));
-            index.push(m, hook)
-        })
-        .collect();
+    numbers.extend(found.iter().map(|m| push(m, &mut index)));
+    new.extend(found);
     // rows stay numbered by match (row k is match k's row 0): the dropped matches' rows
     // stay in the plan, their values ignored (`RuleSet::guarded_matches` keeps the live
     // matches only), and the new ones are appended; a rebuild compacts (`drop_changed`)

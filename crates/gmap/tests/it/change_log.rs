@@ -85,6 +85,17 @@ fn unsewn_faces_and_their_orbits_are_listed_and_nothing_else_changed() {
     let all = g.changed_since(v0).unwrap();
     assert!(changed.iter().chain(&since1).all(|x| all.contains(x)));
     check(&g, &before, &all);
+    // `changes_since` is both lists from one pass over the record, at every version
+    for v in [v0, v1, g.version()] {
+        let (c, r) = g.changes_since(v).unwrap();
+        assert_eq!(Some(&c), g.changed_since(v).as_ref(), "changed since {v}");
+        assert_eq!(Some(&r), g.relinked_since(v).as_ref(), "relinked since {v}");
+        assert!(r.iter().all(|x| c.contains(x)));
+    }
+    assert!(
+        g.changes_since(g.version() + 1).is_none(),
+        "a future version"
+    );
     // a clone has its own identity but keeps the record
     let c = g.clone();
     assert_eq!(c.changed_since(v0).unwrap(), all);

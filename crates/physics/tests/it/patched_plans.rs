@@ -130,6 +130,16 @@ fn check_change(
     );
 }
 
+/// After [`check_change`]: matches were rebuilt without a search since `rebuilt_before` (a
+/// change that opens faces re-slots the vertices around them, whose springs and elements
+/// keep their links: `RuleSet::matches_rebuilt`).
+fn check_rebuilt(s: &Simulation, rebuilt_before: usize, what: &str) {
+    assert!(
+        s.rules().matches_rebuilt() > rebuilt_before,
+        "{what}: no match was rebuilt"
+    );
+}
+
 /// Applies `change` to `s`, checks it (see [`check_change`]), and returns the faces opened.
 fn change(s: &mut Simulation, what: &str, f: impl FnOnce(&mut Simulation) -> usize) -> usize {
     // plans built on the current topology, so that the change patches them
@@ -137,9 +147,11 @@ fn change(s: &mut Simulation, what: &str, f: impl FnOnce(&mut Simulation) -> usi
     let mass = s.total_mass().unwrap();
     let momentum = s.momentum().unwrap();
     let patches = s.rules().plan_patches();
+    let rebuilt = s.rules().matches_rebuilt();
     let n = f(s);
     assert!(n > 0, "{what}: nothing opened");
     check_change(s, mass, momentum, patches, what);
+    check_rebuilt(s, rebuilt, what);
     n
 }
 
