@@ -581,11 +581,43 @@ fn pattern_key(rule: &Rule) -> Option<String> {
     if rule.guard.is_some() || rule.changes_topology {
         return None;
     }
+    Some(left_graph_key(rule))
+}
+
+/// The left graph of `rule` as a key (see [`pattern_key`]), whatever its guard.
+fn left_graph_key(rule: &Rule) -> String {
     let nodes: Vec<_> = rule.nodes.iter().map(|n| (&n.left, n.left_src)).collect();
-    Some(format!(
+    format!(
         "{nodes:?}|{:?}|{:?}|{:?}|{}",
         rule.left_arcs, rule.hooks, rule.hook_orbit, rule.arity
-    ))
+    )
+}
+
+/// Whether the matches of `rule` (a computation rule with a guard) are those of its left
+/// graph without the guard that pass the guard, evaluated at each match's row 0, in the same
+/// order and from the same hook darts, so that they may be taken from the shared matches of
+/// that left graph ([`RuleSet::matches_of`]). True when the left graph is one node, its
+/// hook, and the guard is row-invariant ([`row_invariant`]):
+/// - the footprint of a match is then its hook orbit, so two hook orbits never give one
+///   footprint, and [`find_all`]'s de-duplication never compares matches of two orbits;
+/// - without the guard, [`find_all`] takes the first dart of each hook orbit (in dart
+///   order) that matches, and marks the orbit; with it, that same dart gives the same match,
+///   whose guard has one value on every row: where it holds, the match is kept, and where it
+///   fails the orbit is marked (a leading conjunct failing on the hook dart alone fails at
+///   every dart of the orbit, which then gives nothing either way).
+///
+/// Integrators (`where !v.fixed`) and the predicates that hold or load vertices and select
+/// material regions are of this kind: they reuse the vertex or element matches of the rules
+/// planned before them instead of walking every dart of the map again.
+fn guard_filters_shared(rule: &Rule, embs: &[EmbDecl]) -> bool {
+    !rule.changes_topology
+        && rule.nodes.len() == 1
+        && rule.left_arcs.is_empty()
+        && rule.hooks.len() == 1
+        && rule
+            .guard
+            .as_ref()
+            .is_some_and(|e| row_invariant(e, &left_labels(rule), embs))
 }
 
 impl Clone for RuleSet {
@@ -1606,9 +1638,35 @@ impl RuleSet {
         b: &Bound,
         poll: &mut Poll,
     ) -> Result<Arc<Vec<Match>>, ApplyError> {
+        if b.rule.guard.is_some() && guard_filters_shared(b.rule, b.embs) {
+            let all = self.shared_of(g, b, left_graph_key(b.rule), poll, true)?;
+            let guard = b.rule.guard.as_ref().expect("a guard");
+            let mut kept = Vec::new();
+            for m in all.iter() {
+                let mut ev = Eval::new(g, b, m);
+                let hook = m.darts[b.rule.hooks[0]][0];
+                if ev.eval(guard, 0).map_err(|e| eval_err(&b.rule.name, hook, &e))? == Val::B(true) {
+                    kept.push(m.clone());
+                }
+            }
+            return Ok(Arc::new(kept));
+        }
         let Some(key) = pattern_key(b.rule) else {
             return Ok(Arc::new(find_all(g, b, poll)?));
         };
+        self.shared_of(g, b, key, poll, false)
+    }
+
+    /// The matches of the left graph `key` on `g`, shared or found now (and kept); without
+    /// the guard of `b.rule` when `unguarded`.
+    fn shared_of(
+        &self,
+        g: &GMap,
+        b: &Bound,
+        key: String,
+        poll: &mut Poll,
+        unguarded: bool,
+    ) -> Result<Arc<Vec<Match>>, ApplyError> {
         {
             let mut shared = self
                 .shared
@@ -1622,7 +1680,24 @@ impl RuleSet {
                 return Ok(Arc::clone(ms));
             }
         }
-        let ms = Arc::new(find_all(g, b, poll)?);
+        let ms = Arc::new(if unguarded {
+            let rule = Rule {
+                guard: None,
+                ..b.rule.clone()
+            };
+            find_all(
+                g,
+                &Bound {
+                    rule: &rule,
+                    embs: b.embs,
+                    ids: b.ids.clone(),
+                    params: b.params.clone(),
+                },
+                poll,
+            )?
+        } else {
+            find_all(g, b, poll)?
+        });
         let mut shared = self
             .shared
             .lock()

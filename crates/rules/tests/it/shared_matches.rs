@@ -9,7 +9,7 @@
 
 use topomech_gmap::generators::{grid, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions};
-use topomech_gmap::GMap;
+use topomech_gmap::{GMap, Value};
 use topomech_rules::{load_sources, Params, RuleSet};
 
 const RULES: &str = "dimension 2
@@ -140,5 +140,102 @@ fn a_topology_change_drops_the_shared_matches() {
     assert_eq!(rules.shared_patterns(), 1);
     for (x, y) in values(&g, "len_a").iter().zip(values(&g, "len_b")) {
         assert_eq!(2.0 * x, y);
+    }
+}
+
+const VERTEX_RULES: &str = "dimension 2
+embedding position : vec3 on <1,2> policy mean
+embedding held     : bool on <1,2>
+embedding a_plain  : f64 on <1,2>
+embedding a_held   : f64 on <1,2>
+embedding a_dart   : f64 on <1,2>
+embedding mark     : bool on <>
+
+rule hold_left {
+  left { v : <1,2> hook }
+  compute { v.held = x(v.position) < 0.5 }
+}
+rule vertex_plain {
+  left { v : <1,2> hook }
+  compute { v.a_plain = 1.0 + x(v.position) }
+}
+# a row-invariant guard on a one-node pattern: the plain matches, filtered
+rule vertex_free {
+  left { v : <1,2> hook }
+  where !v.held && y(v.position) > 0.5
+  compute { v.a_held = 1.0 + x(v.position) }
+}
+# a guard that reads a dart embedding: not row-invariant, its own matches
+rule vertex_marked {
+  left { v : <1,2> hook }
+  where v.mark
+  compute { v.a_dart = 1.0 + x(v.position) }
+}
+";
+
+/// The vertex rules' map: a 3 x 2 quad grid with `mark` set on a few darts (not whole
+/// vertices), so that the dart-level guard of `vertex_marked` depends on the hook dart.
+fn vertex_setup() -> (GMap, RuleSet) {
+    let (mut g, _) = build(
+        &grid([3, 2], [3.0, 2.0], GridElement::Quad),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let (rules, _) = load_sources(&[("vertex.tmr".to_string(), VERTEX_RULES.to_string())]).unwrap();
+    rules.prepare_named(&mut g, &["mark"]).unwrap();
+    let mark = g.embedding_id("mark").unwrap();
+    let darts: Vec<_> = g.darts().collect();
+    for d in darts.iter().step_by(3) {
+        g.set_value(mark, *d, &Value::Bool(true)).unwrap();
+    }
+    (g, rules)
+}
+
+/// `emb` at every dart, in dart order (0 where a rule wrote nothing).
+fn vertex_values(g: &GMap, emb: &str) -> Vec<f64> {
+    let id = g.embedding_id(emb).unwrap();
+    g.darts().map(|d| g.real(id, d)[0]).collect()
+}
+
+#[test]
+fn a_one_node_rule_with_a_row_invariant_guard_filters_the_shared_matches() {
+    // Checks that the integrators' kind of rule (one node, a guard with one value on its
+    // whole orbit) takes the plain matches of its left graph instead of a search of its own,
+    // and that this changes nothing: the same matches and values (bit for bit: the same
+    // arithmetic on the same rows) as the rule planned alone on a fresh map, compiled or
+    // interpreted; a guard that reads a dart embedding keeps its own search.
+    let none = Params::new();
+    let run = |shared: bool, compiled: bool| {
+        let (mut g, mut rules) = vertex_setup();
+        rules.set_compiled(compiled);
+        rules.apply_everywhere(&mut g, "hold_left", &none).unwrap();
+        rules.clear_shared_matches();
+        if shared {
+            let plain = rules.apply_everywhere(&mut g, "vertex_plain", &none).unwrap();
+            assert_eq!(plain.matches, 12, "a 3 x 2 grid has 12 vertices");
+            assert_eq!(rules.shared_patterns(), 1);
+        }
+        let free = rules.apply_everywhere(&mut g, "vertex_free", &none).unwrap();
+        let marked = rules.apply_everywhere(&mut g, "vertex_marked", &none).unwrap();
+        if compiled {
+            assert_eq!(
+                rules.shared_patterns(),
+                1,
+                "the guarded rules add no pattern of their own"
+            );
+        }
+        (
+            free.matches,
+            marked.matches,
+            vertex_values(&g, "a_held"),
+            vertex_values(&g, "a_dart"),
+        )
+    };
+    let reference = run(false, false);
+    // x >= 0.5 and y > 0.5: the vertices at x in {1, 2, 3} and y in {1, 2}
+    assert_eq!(reference.0, 6);
+    assert!(reference.1 > 0);
+    for (shared, compiled) in [(true, true), (true, false), (false, true)] {
+        assert_eq!(run(shared, compiled), reference, "shared {shared}, compiled {compiled}");
     }
 }
