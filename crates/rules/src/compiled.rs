@@ -1079,6 +1079,12 @@ struct Rows {
     writes: Vec<Vec<(u32, u32)>>,
 }
 
+thread_local! {
+    /// Per dart, the row plus one whose aggregate walked its orbit in [`Rows::of`] (0: none
+    /// yet): a table the size of the map, per thread, reset for the darts set.
+    static ORBIT_ROW: RefCell<Vec<u32>> = const { RefCell::new(Vec::new()) };
+}
+
 impl Rows {
     /// The rows of `matches` (numbered `ids[k]` for `matches[k]`), the first one numbered
     /// `base`.
@@ -1147,38 +1153,70 @@ impl Rows {
             .collect();
         let mut csr = Vec::new();
         let mut counts = Vec::new();
-        // one orbit walk at a time, into `darts`, with `marks` cleared after each (it costs
-        // the darts marked): no allocation per row
+        // One orbit walk per orbit, not per row: the rows of one orbit (the twelve half-edges
+        // of a tetrahedron aggregating over its volume) get the same slot list, in increasing
+        // slot order (what the interpreter sums in, see `Eval::aggregate`), copied from the
+        // first row that walked it. `row_of[d] - 1` is that row for each dart `d` of a walked
+        // orbit (a table the size of the map, per thread, reset for the darts set).
         let mut marks = Marks::with_capacity(g.capacity());
         let mut darts: Vec<Dart> = Vec::new();
-        for ak in &prog.aggs {
-            let mut offs = Vec::with_capacity(n + 1);
-            let mut slots: Vec<u32> = Vec::new();
-            let mut cnt = Vec::with_capacity(n);
-            offs.push(0);
-            for row in 0..n {
-                darts.clear();
-                g.visit_orbit(dart(ak.node, row), ak.orbit, &mut marks, |x| darts.push(x));
-                marks.clear();
-                match ak.emb {
-                    None => cnt.push(darts.len() as f64),
-                    Some(emb) => {
-                        let e = g.embedding(emb_ids[emb]);
-                        let start = slots.len();
-                        for &x in &darts {
-                            let s = e.slot(x) as u32;
-                            if !slots[start..].contains(&s) {
-                                slots.push(s);
-                            }
+        let mut walked: Vec<Dart> = Vec::new();
+        ORBIT_ROW.with(|t| {
+            let mut row_of = t.borrow_mut();
+            if row_of.len() < g.capacity() {
+                row_of.resize(g.capacity(), 0);
+            }
+            for ak in &prog.aggs {
+                let mut offs = Vec::with_capacity(n + 1);
+                let mut slots: Vec<u32> = Vec::new();
+                let mut cnt = Vec::with_capacity(n);
+                offs.push(0);
+                for row in 0..n {
+                    let d = dart(ak.node, row);
+                    let first = row_of[d.index()];
+                    if first != 0 {
+                        let r0 = (first - 1) as usize;
+                        cnt.push(cnt[r0]);
+                        if ak.emb.is_some() {
+                            slots.extend_from_within(offs[r0] as usize..offs[r0 + 1] as usize);
+                            offs.push(slots.len() as u32);
                         }
-                        cnt.push((slots.len() - start) as f64);
-                        offs.push(slots.len() as u32);
+                        continue;
+                    }
+                    darts.clear();
+                    g.visit_orbit(d, ak.orbit, &mut marks, |x| darts.push(x));
+                    marks.clear();
+                    for &x in &darts {
+                        row_of[x.index()] = row as u32 + 1;
+                    }
+                    walked.extend_from_slice(&darts);
+                    match ak.emb {
+                        None => cnt.push(darts.len() as f64),
+                        Some(emb) => {
+                            let e = g.embedding(emb_ids[emb]);
+                            let start = slots.len();
+                            slots.extend(darts.iter().map(|&x| e.slot(x) as u32));
+                            slots[start..].sort_unstable();
+                            let mut k = start;
+                            for j in start..slots.len() {
+                                if j == start || slots[j] != slots[k - 1] {
+                                    slots[k] = slots[j];
+                                    k += 1;
+                                }
+                            }
+                            slots.truncate(k);
+                            cnt.push((slots.len() - start) as f64);
+                            offs.push(slots.len() as u32);
+                        }
                     }
                 }
+                for x in walked.drain(..) {
+                    row_of[x.index()] = 0;
+                }
+                csr.push((offs, slots));
+                counts.push(cnt);
             }
-            csr.push((offs, slots));
-            counts.push(cnt);
-        }
+        });
         let writes = prog
             .writes
             .iter()

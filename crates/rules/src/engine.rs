@@ -3462,15 +3462,12 @@ impl<'a> Eval<'a> {
             return Ok(Val::I(darts.len() as i64));
         };
         let e = self.g.embedding(self.b.ids[emb]);
-        let mut slots: Vec<usize> = Vec::new();
-        let mut reps: Vec<Dart> = Vec::new();
-        for x in darts {
-            let s = e.slot(x);
-            if !slots.contains(&s) {
-                slots.push(s);
-                reps.push(x);
-            }
-        }
+        // the orbit's distinct slots in increasing order: the sum is a function of the orbit,
+        // the same bits from each of its darts (compiled plans sum in this order too)
+        let mut slots: Vec<(usize, Dart)> = darts.into_iter().map(|x| (e.slot(x), x)).collect();
+        slots.sort_unstable_by_key(|&(s, _)| s);
+        slots.dedup_by_key(|&mut (s, _)| s);
+        let reps: Vec<Dart> = slots.into_iter().map(|(_, x)| x).collect();
         if kind == AggKind::Count {
             return Ok(Val::I(reps.len() as i64));
         }
