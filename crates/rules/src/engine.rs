@@ -1645,7 +1645,11 @@ impl RuleSet {
             for m in all.iter() {
                 let mut ev = Eval::new(g, b, m);
                 let hook = m.darts[b.rule.hooks[0]][0];
-                if ev.eval(guard, 0).map_err(|e| eval_err(&b.rule.name, hook, &e))? == Val::B(true) {
+                if ev
+                    .eval(guard, 0)
+                    .map_err(|e| eval_err(&b.rule.name, hook, &e))?
+                    == Val::B(true)
+                {
                     kept.push(m.clone());
                 }
             }

@@ -2,6 +2,7 @@
 //! compile of what the files share and one link, instead of one a file). Run one file's
 //! tests with `cargo test -p topomech-rules --test it <file>::`.
 
+mod aggregate_order;
 mod build;
 mod builtins;
 mod checker;

@@ -211,12 +211,18 @@ fn a_one_node_rule_with_a_row_invariant_guard_filters_the_shared_matches() {
         rules.apply_everywhere(&mut g, "hold_left", &none).unwrap();
         rules.clear_shared_matches();
         if shared {
-            let plain = rules.apply_everywhere(&mut g, "vertex_plain", &none).unwrap();
+            let plain = rules
+                .apply_everywhere(&mut g, "vertex_plain", &none)
+                .unwrap();
             assert_eq!(plain.matches, 12, "a 3 x 2 grid has 12 vertices");
             assert_eq!(rules.shared_patterns(), 1);
         }
-        let free = rules.apply_everywhere(&mut g, "vertex_free", &none).unwrap();
-        let marked = rules.apply_everywhere(&mut g, "vertex_marked", &none).unwrap();
+        let free = rules
+            .apply_everywhere(&mut g, "vertex_free", &none)
+            .unwrap();
+        let marked = rules
+            .apply_everywhere(&mut g, "vertex_marked", &none)
+            .unwrap();
         if compiled {
             assert_eq!(
                 rules.shared_patterns(),
@@ -236,6 +242,10 @@ fn a_one_node_rule_with_a_row_invariant_guard_filters_the_shared_matches() {
     assert_eq!(reference.0, 6);
     assert!(reference.1 > 0);
     for (shared, compiled) in [(true, true), (true, false), (false, true)] {
-        assert_eq!(run(shared, compiled), reference, "shared {shared}, compiled {compiled}");
+        assert_eq!(
+            run(shared, compiled),
+            reference,
+            "shared {shared}, compiled {compiled}"
+        );
     }
 }
