@@ -234,6 +234,15 @@ impl Column {
     }
 
     /// Appends one default (zero / false) value.
+    /// Grows (or shrinks) the column to `slots` slots of `width` values, new ones default.
+    pub(crate) fn resize_default(&mut self, width: usize, slots: usize) {
+        match self {
+            Column::Real(v) => v.resize(slots * width, 0.0),
+            Column::Int(v) => v.resize(slots, 0),
+            Column::Bool(v) => v.resize(slots, false),
+        }
+    }
+
     pub(crate) fn push_default(&mut self, width: usize) {
         match self {
             Column::Real(v) => v.extend(std::iter::repeat_n(0.0, width)),

@@ -7,6 +7,11 @@ use crate::marks::{with_marks, Marks};
 use crate::{Aggregate, Dart, EmbeddingError, GMapError, LinkError, OrbitType};
 use std::sync::Arc;
 
+thread_local! {
+    /// The stack of [`GMap::visit_orbit`], kept per thread between walks.
+    static WALK_STACK: std::cell::Cell<Vec<Dart>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
 /// Largest number of darts a map holds (indices are `u32`).
 pub const MAX_DARTS: usize = u32::MAX as usize - 1;
 
@@ -467,7 +472,13 @@ impl GMap {
             return;
         }
         let dims: [usize; 4] = [0, 1, 2, 3];
-        let mut stack = vec![d];
+        // the stack is this thread's, kept between walks (a walk per half-edge of a large
+        // map allocated one each); a walk started from `f` takes an empty one of its own
+        let mut stack = WALK_STACK
+            .try_with(std::cell::Cell::take)
+            .unwrap_or_default();
+        stack.clear();
+        stack.push(d);
         while let Some(x) = stack.pop() {
             f(x);
             for &i in &dims[..=self.dim] {
@@ -479,6 +490,7 @@ impl GMap {
                 }
             }
         }
+        let _ = WALK_STACK.try_with(|s| s.set(stack));
     }
 
     /// The darts of the orbit `o` of `d`, `d` first.
@@ -744,9 +756,7 @@ impl GMap {
     fn build_embedding(&self, mut e: Embedding) -> Embedding {
         let w = e.ty.width();
         if e.is_direct() {
-            for _ in 0..self.capacity() {
-                e.values.push_default(w);
-            }
+            e.values.resize_default(w, self.capacity());
             return e;
         }
         if let Some(t) = self
@@ -757,24 +767,26 @@ impl GMap {
             e.slot_of = Arc::clone(&t.slot_of);
             e.slot_use.clone_from(&t.slot_use);
             e.free_slots.clone_from(&t.free_slots);
-            for _ in 0..e.slot_use.len() {
-                e.values.push_default(w);
-            }
+            e.values.resize_default(w, e.slot_use.len());
             return e;
         }
         let mut slot_of = vec![u32::MAX; self.capacity()];
         let mut m = Marks::with_capacity(self.capacity());
+        // a new embedding has no slot: one per orbit, numbered in order, and the value
+        // column sized once at the end (not grown slot by slot)
+        debug_assert!(e.slot_use.is_empty() && e.free_slots.is_empty());
         for d in self.darts() {
             if !m.is_marked(d) {
-                let s = e.alloc_slot(0);
+                let s = e.slot_use.len() as u32;
                 let mut k = 0;
                 self.visit_orbit(d, e.orbit, &mut m, |x| {
                     slot_of[x.index()] = s;
                     k += 1;
                 });
-                e.slot_use[s as usize] = k;
+                e.slot_use.push(k);
             }
         }
+        e.values.resize_default(w, e.slot_use.len());
         // Removed darts point at slot 0 (never read); keep the table dense.
         for s in &mut slot_of {
             if *s == u32::MAX {

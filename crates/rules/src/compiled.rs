@@ -1044,10 +1044,16 @@ enum NativeState {
 
 /// Partition of the rows: rows joined through the orbit positions `uniform` share a class.
 /// Returns, per row, its class's first row.
-fn class_reps(m: &Match, arity: usize, uniform: &[usize], rep: &mut Vec<u32>) {
+fn class_reps(
+    m: &Match,
+    arity: usize,
+    uniform: &[usize],
+    rep: &mut Vec<u32>,
+    stack: &mut Vec<usize>,
+) {
     rep.clear();
     rep.resize(m.rows, u32::MAX);
-    let mut stack = Vec::new();
+    stack.clear();
     for r0 in 0..m.rows {
         if rep[r0] != u32::MAX {
             continue;
@@ -1103,6 +1109,7 @@ impl Rows {
         let mut write_rows: Vec<Vec<(u32, Dart)>> = vec![Vec::new(); nw];
         let mut rep = Vec::new();
         let mut reps: Vec<Vec<u32>> = vec![Vec::new(); nw];
+        let mut stack = Vec::new();
         let mut row_match = Vec::new();
         for (mi, m) in matches.iter().enumerate() {
             if prog.guard {
@@ -1114,8 +1121,20 @@ impl Rows {
                 continue;
             }
             for (w, (_, _, _, uniform)) in prog.writes.iter().enumerate() {
-                class_reps(m, rule.arity, uniform, &mut rep);
                 reps[w].clear();
+                // a write uniform along every orbit position has one class (the rows of a
+                // match are one orbit, connected through its positions): row 0; a write
+                // uniform along the positions of an earlier one has its classes
+                if (0..rule.arity).all(|t| uniform.contains(&t)) {
+                    reps[w].push(0);
+                    continue;
+                }
+                if let Some(v) = (0..w).find(|&v| prog.writes[v].3 == *uniform) {
+                    let (done, rest) = reps.split_at_mut(w);
+                    rest[0].extend_from_slice(&done[v]);
+                    continue;
+                }
+                class_reps(m, rule.arity, uniform, &mut rep, &mut stack);
                 reps[w].extend(
                     rep.iter()
                         .enumerate()

@@ -305,12 +305,13 @@ fn match_explained(g: &GMap, rule: &Rule, hooks: &[Dart], explain: bool) -> Resu
         };
     }
     let arity = rule.arity;
-    let (first, next) = rows_of(g, hooks[0], &rule.hook_orbit);
+    let (mut first, next) = rows_of(g, hooks[0], &rule.hook_orbit);
     let rows = first.len();
     let mut darts: Vec<Vec<Dart>> = vec![Vec::new(); rule.nodes.len()];
     for (j, &h) in rule.hooks.iter().enumerate() {
         let col = if j == 0 {
-            first.clone()
+            // the other hooks' walks read `next` only
+            std::mem::take(&mut first)
         } else {
             // the other hooks' orbits, walked in parallel with the first
             let mut col: Vec<Option<Dart>> = vec![None; rows];
@@ -1638,9 +1639,13 @@ impl RuleSet {
         b: &Bound,
         poll: &mut Poll,
     ) -> Result<Arc<Vec<Match>>, ApplyError> {
-        if b.rule.guard.is_some() && guard_filters_shared(b.rule, b.embs) {
+        if let Some(guard) = b
+            .rule
+            .guard
+            .as_ref()
+            .filter(|_| guard_filters_shared(b.rule, b.embs))
+        {
             let all = self.shared_of(g, b, left_graph_key(b.rule), poll, true)?;
-            let guard = b.rule.guard.as_ref().expect("a guard");
             let mut kept = Vec::new();
             for m in all.iter() {
                 let mut ev = Eval::new(g, b, m);
@@ -2517,6 +2522,7 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
     // darts of its hook are marked, and a match found again from another hook (the same
     // footprint) is skipped.
     let overlap = !rule.changes_topology;
+    let one_node = rule.nodes.len() == 1 && rule.left_arcs.is_empty();
     // Leading conjuncts of the guard that read the hook dart only are tried first, on the hook
     // dart alone (row 0 of a match is its hook dart): most darts fail them, and need no match.
     let hook = rule.hooks[0];
@@ -2610,7 +2616,13 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
                 continue;
             }
         }
-        if overlap {
+        if overlap && one_node {
+            // the footprint is the hook orbit, marked as a whole below for every match kept:
+            // no later dart can give it again, so there is nothing to compare
+            for &x in &m.darts[hook] {
+                used.mark(x);
+            }
+        } else if overlap {
             key.clear();
             key.extend(m.all_darts().map(|x| x.0));
             key.sort_unstable();
@@ -3353,8 +3365,23 @@ impl<'a> Eval<'a> {
             g,
             b,
             m,
-            locals: vec![None; b.rule.n_locals],
-            let_row: vec![None; b.rule.n_locals],
+            // grown when a `let` is first set: a guard tried at every dart of a map
+            // (`where n0.vertex0`) allocates nothing
+            locals: Vec::new(),
+            let_row: Vec::new(),
+        }
+    }
+
+    /// Sets local `k` to `v` (computed at row `r`, when from the compute block).
+    fn set_local(&mut self, k: usize, v: Val, r: Option<usize>) {
+        if self.locals.len() <= k {
+            let n = self.b.rule.n_locals.max(k + 1);
+            self.locals.resize(n, None);
+            self.let_row.resize(n, None);
+        }
+        self.locals[k] = Some(v);
+        if r.is_some() {
+            self.let_row[k] = r;
         }
     }
 
@@ -3371,10 +3398,9 @@ impl<'a> Eval<'a> {
             }
             if let TStmt::Let(k, e) = s {
                 // a `let` of the compute block is evaluated once per row of a match
-                if self.let_row[*k] != Some(r) {
+                if self.let_row.get(*k).copied().flatten() != Some(r) {
                     let v = self.eval(e, r)?;
-                    self.locals[*k] = Some(v);
-                    self.let_row[*k] = Some(r);
+                    self.set_local(*k, v, Some(r));
                 }
             }
         }
@@ -3396,9 +3422,11 @@ impl<'a> Eval<'a> {
         Ok(match e {
             TExpr::Const(v) => v.clone(),
             TExpr::Param(k) => self.b.params[*k].clone(),
-            TExpr::Local(k) => self.locals[*k]
-                .clone()
-                .ok_or_else(|| crate::value::EvalError("variable used before it is set".into()))?,
+            TExpr::Local(k) => {
+                self.locals.get(*k).cloned().flatten().ok_or_else(|| {
+                    crate::value::EvalError("variable used before it is set".into())
+                })?
+            }
             TExpr::Read { node, emb } => self.read(*emb, self.m.darts[*node][r]),
             TExpr::Agg {
                 kind,
@@ -3442,7 +3470,7 @@ impl<'a> Eval<'a> {
             TExpr::Block(lets, res) => {
                 for (k, v) in lets {
                     let x = self.eval(v, r)?;
-                    self.locals[*k] = Some(x);
+                    self.set_local(*k, x, None);
                 }
                 self.eval(res, r)?
             }
