@@ -19,13 +19,13 @@ use std::fmt;
 use std::sync::Arc;
 
 use topomech_gmap::{
-    Dart, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType, Policy, RewireError, Value,
+    ColumnRef, Dart, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType, Policy, RewireError, Value,
 };
 
 use crate::ast::AggKind;
 use crate::builtins;
 use crate::check::{Checked, EmbDecl, Rule, Source, TExpr, TStmt};
-use crate::value::{binop, unop, BinOp, Ty, Val};
+use crate::value::{binop, unop, BinOp, Ty, UnOp, Val};
 
 /// Why a rule did not apply.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -2533,6 +2533,15 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
             prefix.truncate(k);
         }
     }
+    // The prefix conjuncts that test a boolean embedding of the hook (`n0.vertex0`,
+    // `!v.fixed`): read from their column for each dart instead of through the interpreter
+    // (a dart fails the prefix when one conjunct is false, in any order: an error is left to
+    // the full evaluation, and a flag's read has none).
+    let flags: Vec<(EmbeddingId, bool)> = prefix
+        .iter()
+        .filter_map(|e| flag_conjunct(g, b, e, hook))
+        .collect();
+    prefix.retain(|e| flag_conjunct(g, b, e, hook).is_none());
     // A guard reading every node through embeddings on orbits that contain the node's orbit
     // has one value on every row of a match: a dart of the hook orbit that fails it, fails it
     // for all, so the hook orbit is tried once (a plane cut's guard, which walks both
@@ -2572,6 +2581,13 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
             });
         }
         if used.is_marked(d) || (!overlap && failed.is_marked(d)) {
+            continue;
+        }
+        // flags first (`n0.vertex0`, `!v.fixed`): read from their column, no evaluation
+        if flags
+            .iter()
+            .any(|&(id, want)| flag_at(g, id, d) != Some(want))
+        {
             continue;
         }
         if !prefix.is_empty() {
@@ -2662,6 +2678,32 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
         out.push(m);
     }
     Ok(out)
+}
+
+/// `Some((id, want))` when `e` is `n.flag` (`want` true) or `!n.flag` (false) for the hook
+/// node `n` and a boolean, non-derived embedding `flag` of the map: a test [`flag_at`] makes
+/// from the column, as the interpreter would read it.
+fn flag_conjunct(g: &GMap, b: &Bound, e: &TExpr, hook: usize) -> Option<(EmbeddingId, bool)> {
+    let (read, want) = match e {
+        TExpr::Un(UnOp::Not, a) => (&**a, false),
+        e => (e, true),
+    };
+    let TExpr::Read { node, emb } = read else {
+        return None;
+    };
+    let id = *b.ids.get(*emb)?;
+    let e = g.embedding(id);
+    (*node == hook && e.derived().is_none() && matches!(e.column(), ColumnRef::Bool(_)))
+        .then_some((id, want))
+}
+
+/// The value of the boolean embedding `id` at the live dart `d` (`None` for another column).
+fn flag_at(g: &GMap, id: EmbeddingId, d: Dart) -> Option<bool> {
+    let e = g.embedding(id);
+    match e.column() {
+        ColumnRef::Bool(v) => v.get(e.slot(d)).copied(),
+        _ => None,
+    }
 }
 
 /// The operands of the leading `&&` chain of `e`, in evaluation order.

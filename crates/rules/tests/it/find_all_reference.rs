@@ -115,3 +115,120 @@ fn global_matches_are_those_of_the_reference_search_on_a_mixed_grid() {
         &["edge_ends"],
     );
 }
+
+const RULES_FLAGS: &str = "dimension 3
+embedding position : vec3 on <1,2,3> policy mean
+embedding mark     : bool on <>
+embedding held     : bool on <1,2,3>
+embedding s : f64 on <2,3>
+embedding h : f64 on <>
+embedding v : f64 on <1,2,3>
+# a dart flag on the hook: tried dart by dart (not row-invariant)
+rule marked_ends {
+  left { a : <2,3> hook   b : <2,3>   a -0- b }
+  where a.mark
+  compute { a.s = norm(b.position - a.position) }
+}
+# a negated flag and a second flag
+rule unmarked_half_edges {
+  left { a : <> hook   b : <>   a -0- b }
+  where !a.mark && !a.held
+  compute { a.h = norm(b.position - a.position) }
+}
+# a vertex flag on a one-node pattern (the integrators' `where !v.fixed`)
+rule free_vertices {
+  left { v : <1,2,3> hook }
+  where !v.held
+  compute { v.v = norm(v.position) }
+}
+";
+
+/// The reference search of a rule whose guard is `flags` on the hook dart (each an
+/// embedding and the value it must have, read with `GMap::value`): a dart whose flags fail
+/// is skipped without marking anything, as the definition says (the guard is evaluated at
+/// each match's hook dart, row 0).
+fn reference_flagged(
+    g: &GMap,
+    rule: &topomech_rules::check::Rule,
+    hook: usize,
+    flags: &[(&str, bool)],
+) -> Vec<Vec<Vec<Dart>>> {
+    let mut used: HashSet<Dart> = HashSet::new();
+    let mut prints: HashSet<Vec<Dart>> = HashSet::new();
+    let mut out = Vec::new();
+    for d in g.darts() {
+        if used.contains(&d) {
+            continue;
+        }
+        let pass = flags.iter().all(|(name, want)| {
+            let id = g.embedding_id(name).unwrap();
+            g.value(id, d).unwrap() == topomech_gmap::Value::Bool(*want)
+        });
+        if !pass {
+            continue;
+        }
+        let Ok(m) = match_at(g, rule, &[d]) else {
+            continue;
+        };
+        let mut key: Vec<Dart> = m.darts.iter().flatten().copied().collect();
+        key.sort_unstable();
+        if !prints.insert(key) {
+            continue;
+        }
+        used.extend(m.darts[hook].iter().copied());
+        out.push(m.darts);
+    }
+    out
+}
+
+#[test]
+fn guards_testing_flags_find_the_matches_of_the_reference_search() {
+    // Checks the engine's fast test of flag conjuncts (read from their column, not through
+    // the interpreter) against the definition, with the flags set on scattered darts and
+    // vertices so that some hook orbits pass at some darts only.
+    let (mut g, _) = build(
+        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let (rules, _) = load_sources(&[("flags.tmr".to_string(), RULES_FLAGS.to_string())]).unwrap();
+    rules.prepare_named(&mut g, &["mark", "held"]).unwrap();
+    let (mark, held) = (
+        g.embedding_id("mark").unwrap(),
+        g.embedding_id("held").unwrap(),
+    );
+    let darts: Vec<Dart> = g.darts().collect();
+    for (k, &d) in darts.iter().enumerate() {
+        if k % 7 == 0 || k % 11 == 3 {
+            g.set_value(mark, d, &topomech_gmap::Value::Bool(true))
+                .unwrap();
+        }
+        if k % 97 == 5 {
+            g.set_value(held, d, &topomech_gmap::Value::Bool(true))
+                .unwrap();
+        }
+    }
+    for (name, flags) in [
+        ("marked_ends", &[("mark", true)][..]),
+        (
+            "unmarked_half_edges",
+            &[("mark", false), ("held", false)][..],
+        ),
+        ("free_vertices", &[("held", false)][..]),
+    ] {
+        let rule = rules.rule(name).unwrap();
+        let want = reference_flagged(&g, rule, rule.hooks[0], flags);
+        let got: Vec<Vec<Vec<Dart>>> = rules
+            .find_matches(&mut g, name, &Params::new())
+            .unwrap()
+            .into_iter()
+            .map(|m| m.darts)
+            .collect();
+        assert!(!want.is_empty(), "{name}: the guard passes somewhere");
+        assert_eq!(got.len(), want.len(), "{name}: as many matches");
+        assert!(
+            got == want,
+            "{name}: the same matches, in order, node for node"
+        );
+    }
+}
