@@ -2670,6 +2670,18 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
             for &x in &m.darts[rule.hooks[0]] {
                 used.mark(x);
             }
+            // The darts of a node the automorphisms of the left graph move the hook to
+            // (`Rule::hook_images`) are a hook orbit whose every dart gives this footprint
+            // again (the match composed with the automorphism): its tries would end as
+            // duplicates, or fail the guard, so they are skipped (a spring's other end, a
+            // half-edge's partner: half the tries of a symmetric pattern).
+            for &n in &rule.hook_images {
+                if n != hook {
+                    for &x in &m.darts[n] {
+                        used.mark(x);
+                    }
+                }
+            }
         } else {
             for x in m.all_darts() {
                 used.mark(x);
