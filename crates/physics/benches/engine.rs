@@ -1318,12 +1318,16 @@ fn static_cantilever(target: usize, against: topomech_physics::LinearSolver) -> 
 /// The solver section (issue 17): `TOPOMECH_BENCH_SOLVER_SIZES` (default `1.5e3,1e5`; empty
 /// or `0` skips it) and `TOPOMECH_BENCH_SOLVER_STEPS` (timed steps, default 5).
 fn solvers() -> J {
+    // `0` reads as no size (it skips the section, as the doc says)
     let sizes: Vec<usize> = env_list("TOPOMECH_BENCH_SOLVER_SIZES", "1.5e3,1e5", |s| {
         s.parse::<f64>()
             .ok()
-            .filter(|x| *x >= 1.0)
+            .filter(|x| *x == 0.0 || *x >= 1.0)
             .map(|x| x as usize)
-    });
+    })
+    .into_iter()
+    .filter(|&n| n > 0)
+    .collect();
     if sizes.is_empty() {
         return J::Null;
     }
