@@ -659,21 +659,19 @@ struct Index {
     /// Per dart, the match whose hook orbit held it when that match was added (`u32::MAX`
     /// for none). Hook orbits of the live matches are disjoint (as in [`find_all`], where a
     /// match's hook darts are marked used), so an entry naming a live match is right; one
-    /// naming a dropped match is stale. Built from `hook_darts` at the first patch
-    /// ([`Index::dart_table`]), not with the plan: a map-sized table per plan is set-up time
-    /// and memory that a simulation never cut does not need. Empty until then.
+    /// naming a dropped match is stale.
     of_hook: Vec<u32>,
 }
 
 impl Index {
-    fn new(ids: Vec<EmbeddingId>) -> Index {
+    fn new(ids: Vec<EmbeddingId>, capacity: usize) -> Index {
         Index {
             ids,
             alive: Vec::new(),
             live: 0,
             hook_start: vec![0],
             hook_darts: Vec::new(),
-            of_hook: Vec::new(),
+            of_hook: vec![u32::MAX; capacity],
         }
     }
 
@@ -682,45 +680,16 @@ impl Index {
         let k = self.alive.len() as u32;
         self.alive.push(true);
         self.live += 1;
-        let built = !self.of_hook.is_empty();
         for &d in &m.darts[hook] {
             self.hook_darts.push(d.0);
-            if built {
-                if self.of_hook.len() <= d.index() {
-                    self.of_hook.resize(d.index() + 1, u32::MAX);
-                }
-                self.of_hook[d.index()] = k;
-            }
+            self.of_hook[d.index()] = k;
         }
         self.hook_start.push(self.hook_darts.len() as u32);
         k
     }
 
-    /// Builds `of_hook` if it is not yet (from every match added, in order, as the pushes
-    /// would have: a later match's entry replaces an earlier one's), and grows it to darts
-    /// `0..capacity`.
-    fn dart_table(&mut self, capacity: usize) {
-        if self.of_hook.is_empty() {
-            self.of_hook = vec![u32::MAX; capacity.max(1)];
-            for k in 0..self.alive.len() {
-                let (a, z) = (self.hook_start[k] as usize, self.hook_start[k + 1] as usize);
-                for &d in &self.hook_darts[a..z] {
-                    let d = d as usize;
-                    if self.of_hook.len() <= d {
-                        self.of_hook.resize(d + 1, u32::MAX);
-                    }
-                    self.of_hook[d] = k as u32;
-                }
-            }
-        }
-        if self.of_hook.len() < capacity {
-            self.of_hook.resize(capacity, u32::MAX);
-        }
-    }
-
-    /// The live match whose hook orbit holds `d`, if any ([`Index::dart_table`] built).
+    /// The live match whose hook orbit holds `d`, if any.
     fn live_at(&self, d: Dart) -> Option<u32> {
-        debug_assert!(!self.of_hook.is_empty(), "the dart table is built");
         let k = *self.of_hook.get(d.index())?;
         (k != u32::MAX && self.alive[k as usize]).then_some(k)
     }
@@ -1140,7 +1109,7 @@ impl RuleSet {
                 } else {
                     self.bind(g, name, params)?.ids
                 };
-                let mut ix = Index::new(ids);
+                let mut ix = Index::new(ids, g.capacity());
                 for m in matches.iter() {
                     ix.push(m, b.rule.hooks[0]);
                 }
@@ -1947,7 +1916,9 @@ fn drop_changed(
     relinked: Option<&Marks>,
 ) -> Option<(Marks, Vec<Dart>, Vec<u32>)> {
     let cap = g.capacity();
-    ix.dart_table(cap);
+    if ix.of_hook.len() < cap {
+        ix.of_hook.resize(cap, u32::MAX);
+    }
     // C*: the changed darts and their aggregated orbits
     let mut star = Marks::with_capacity(cap);
     let mut cstar: Vec<Dart> = Vec::with_capacity(changed.len());
@@ -2273,7 +2244,7 @@ fn build_guard_plan(
     };
     let hook = rule.hooks[0];
     let mut builder = crate::compiled::Plan::builder(prog, rule, g, &b.ids);
-    let mut index = Index::new(b.ids.clone());
+    let mut index = Index::new(b.ids.clone(), g.capacity());
     let mut first = Vec::new();
     let mut seen = Marks::with_capacity(g.capacity());
     // the matches are held a batch at a time
