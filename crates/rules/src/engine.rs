@@ -594,6 +594,29 @@ fn left_graph_key(rule: &Rule) -> String {
     )
 }
 
+/// The key of the matches of a computation rule with a guard: its left graph, its guard
+/// and what the guard reads (the embeddings, by id, with their write counts, and the
+/// rule's parameter values), so that rules with the same left graph and the same guard (a
+/// model's init, step and Jacobian rules over its elements, `where n0.vertex0 && ...`)
+/// share their matches while nothing the guard reads changes: [`find_all`] depends on the
+/// rule through nothing else (the leading conjuncts and the row-invariance it tests come
+/// from the guard and the embeddings' orbits). `None` for a rule that changes the topology
+/// or has no guard.
+fn guarded_key(g: &GMap, b: &Bound) -> Option<String> {
+    let rule = b.rule;
+    let guard = rule.guard.as_ref().filter(|_| !rule.changes_topology)?;
+    let reads: Vec<(u32, u64)> = rule
+        .guard_reads
+        .iter()
+        .map(|&e| (b.ids[e].0, g.embedding(b.ids[e]).writes()))
+        .collect();
+    Some(format!(
+        "{}|where {guard:?}|reads {reads:?}|params {:?}",
+        left_graph_key(rule),
+        b.params
+    ))
+}
+
 /// Whether the matches of `rule` (a computation rule with a guard) are those of its left
 /// graph without the guard that pass the guard, evaluated at each match's row 0, in the same
 /// order and from the same hook darts, so that they may be taken from the shared matches of
@@ -1660,7 +1683,7 @@ impl RuleSet {
             }
             return Ok(Arc::new(kept));
         }
-        let Some(key) = pattern_key(b.rule) else {
+        let Some(key) = pattern_key(b.rule).or_else(|| guarded_key(g, b)) else {
             return Ok(Arc::new(find_all(g, b, poll)?));
         };
         self.shared_of(g, b, key, poll, false)

@@ -34,6 +34,12 @@ rule edge_len_g {
   where x(a.position) < 1.0
   compute { a.len_g = norm(b.position - a.position) }
 }
+# the same left graph and guard as edge_len_g: its matches
+rule edge_len_g2 {
+  left { p : <2> hook   q : <2>   p -0- q }
+  where x(p.position) < 1.0
+  compute { p.len_h = 3.0 * norm(q.position - p.position) }
+}
 # the hook on a half-edge: another pattern
 rule edge_len_h {
   left { a : <> hook   b : <>   a -0- b }
@@ -87,13 +93,13 @@ fn rules_of_one_pattern_share_their_matches_and_their_results_hold() {
     rules.apply_everywhere(&mut g, "edge_len_g", &none).unwrap();
     assert_eq!(
         rules.shared_patterns(),
-        1,
-        "a guarded rule keeps its own matches"
+        2,
+        "a guarded rule keeps its own matches (shared with rules of the same guard only)"
     );
     rules.apply_everywhere(&mut g, "edge_len_h", &none).unwrap();
     assert_eq!(
         rules.shared_patterns(),
-        2,
+        3,
         "another hook is another pattern"
     );
     for (rule, emb) in [
@@ -226,8 +232,8 @@ fn a_one_node_rule_with_a_row_invariant_guard_filters_the_shared_matches() {
         if compiled {
             assert_eq!(
                 rules.shared_patterns(),
-                1,
-                "the guarded rules add no pattern of their own"
+                2,
+                "vertex_free adds no pattern of its own; vertex_marked keeps its own search"
             );
         }
         (
@@ -248,4 +254,45 @@ fn a_one_node_rule_with_a_row_invariant_guard_filters_the_shared_matches() {
             "shared {shared}, compiled {compiled}"
         );
     }
+}
+
+#[test]
+fn rules_of_one_pattern_and_one_guard_share_their_matches_while_what_the_guard_reads_stays() {
+    // Checks that a second rule with the left graph and guard of a first takes its matches
+    // (no new pattern kept), and that a write to an embedding the guard reads makes the
+    // next one search again: its matches are then those of a rule planned alone on the
+    // changed map.
+    let none = Params::new();
+    let (mut g, rules) = setup();
+    let first = rules.apply_everywhere(&mut g, "edge_len_g", &none).unwrap();
+    let patterns = rules.shared_patterns();
+    let second = rules
+        .apply_everywhere(&mut g, "edge_len_g2", &none)
+        .unwrap();
+    assert_eq!(
+        rules.shared_patterns(),
+        patterns,
+        "the same matches, shared"
+    );
+    assert_eq!(first.matches, second.matches);
+    // move every vertex left by 1: more edge ends pass x < 1
+    let pos = g.embedding_id("position").unwrap();
+    for d in g.orbit_representatives(topomech_gmap::OrbitType::vertex(2)) {
+        let p = g.real(pos, d).to_vec();
+        g.set_value(pos, d, &Value::Real(vec![p[0] - 1.0, p[1], p[2]]))
+            .unwrap();
+    }
+    let moved = rules
+        .apply_everywhere(&mut g, "edge_len_g2", &none)
+        .unwrap();
+    assert!(
+        moved.matches > second.matches,
+        "the guard saw the new positions"
+    );
+    // the same map, a fresh rule set: the rule planned alone
+    let (_, fresh) = setup();
+    let alone = fresh
+        .apply_everywhere(&mut g, "edge_len_g2", &none)
+        .unwrap();
+    assert_eq!(moved.matches, alone.matches);
 }
