@@ -2144,19 +2144,16 @@ impl GuardPlan {
         for r in c.rows..rows {
             buf.clear();
             self.plan.row_slots(&cols, r, &mut buf);
-            let Some(&s0) = buf.first() else {
+            if buf.is_empty() {
                 c.always.push(r as u32);
                 continue;
-            };
+            }
             if buf.iter().any(|&s| 3 * s as usize + 3 > x.len()) {
                 return None;
             }
-            let p0 = &x[3 * s0 as usize..3 * s0 as usize + 3];
-            for &s in &buf[1..] {
-                let p = &x[3 * s as usize..3 * s as usize + 3];
-                for k in 0..3 {
-                    c.extent[k] = c.extent[k].max((p[k] - p0[k]).abs() + 2.0 * moved[k]);
-                }
+            let (s0, ext) = row_anchor(&buf, x);
+            for k in 0..3 {
+                c.extent[k] = c.extent[k].max(ext[k] + 2.0 * moved[k]);
             }
             c.tail.push((s0, r as u32));
         }
@@ -2201,19 +2198,16 @@ impl GuardPlan {
         for (r, f) in first.iter_mut().enumerate() {
             buf.clear();
             self.plan.row_slots(cols, r, &mut buf);
-            let Some(&s0) = buf.first() else {
+            if buf.is_empty() {
                 always.push(r as u32);
                 continue;
-            };
+            }
             if buf.iter().any(|&s| s as usize >= slots) {
                 return None;
             }
-            let p0 = &x[3 * s0 as usize..3 * s0 as usize + 3];
-            for &s in &buf[1..] {
-                let p = &x[3 * s as usize..3 * s as usize + 3];
-                for k in 0..3 {
-                    extent[k] = extent[k].max((p[k] - p0[k]).abs());
-                }
+            let (s0, ext) = row_anchor(&buf, x);
+            for k in 0..3 {
+                extent[k] = extent[k].max(ext[k]);
             }
             *f = s0;
         }
@@ -2739,6 +2733,35 @@ fn flag_at(g: &GMap, id: EmbeddingId, d: Dart) -> Option<bool> {
         ColumnRef::Bool(v) => v.get(e.slot(d)).copied(),
         _ => None,
     }
+}
+
+/// The slot a row of a guard plan is indexed by (see [`GuardPlan::candidates`]): of the
+/// slots `buf` the row reads (points `x[3 s..3 s + 3]`, every slot inside `x`), the one
+/// nearest to their mean, and per coordinate the largest distance from it to the others.
+/// A central point keeps the extent every row's box is grown by small: the first slot read
+/// could be a far corner (an aggregate's slots come in increasing order, so a volume's
+/// centroid may list its apex first), and a larger extent sends more rows to the guard.
+fn row_anchor(buf: &[u32], x: &[f64]) -> (u32, [f64; 3]) {
+    let point = |s: u32| &x[3 * s as usize..3 * s as usize + 3];
+    let mut mean = [0.0_f64; 3];
+    for &s in buf {
+        for (m, v) in mean.iter_mut().zip(point(s)) {
+            *m += v / buf.len() as f64;
+        }
+    }
+    let d2 = |s: u32| (0..3).map(|k| (point(s)[k] - mean[k]).powi(2)).sum::<f64>();
+    let s0 = buf
+        .iter()
+        .copied()
+        .min_by(|&a, &b| d2(a).total_cmp(&d2(b)))
+        .expect("a slot");
+    let mut ext = [0.0_f64; 3];
+    for &s in buf {
+        for ((e, v), v0) in ext.iter_mut().zip(point(s)).zip(point(s0)) {
+            *e = e.max((v - v0).abs());
+        }
+    }
+    (s0, ext)
 }
 
 /// The operands of the leading `&&` chain of `e`, in evaluation order.
