@@ -46,25 +46,7 @@ rule edge_ends {
 
 /// The reference search (see the module comment): per match kept, its darts per node.
 fn reference(g: &GMap, rule: &topomech_rules::check::Rule, hook: usize) -> Vec<Vec<Vec<Dart>>> {
-    let mut used: HashSet<Dart> = HashSet::new();
-    let mut prints: HashSet<Vec<Dart>> = HashSet::new();
-    let mut out = Vec::new();
-    for d in g.darts() {
-        if used.contains(&d) {
-            continue;
-        }
-        let Ok(m) = match_at(g, rule, &[d]) else {
-            continue;
-        };
-        let mut key: Vec<Dart> = m.darts.iter().flatten().copied().collect();
-        key.sort_unstable();
-        if !prints.insert(key) {
-            continue;
-        }
-        used.extend(m.darts[hook].iter().copied());
-        out.push(m.darts);
-    }
-    out
+    reference_flagged(g, rule, hook, &[])
 }
 
 fn check(mesh: &Mesh, source: &str, names: &[&str]) {
@@ -74,19 +56,29 @@ fn check(mesh: &Mesh, source: &str, names: &[&str]) {
         let rule = rules.rule(name).unwrap();
         let hook = rule.hooks[0];
         let want = reference(&g, rule, hook);
-        let got: Vec<Vec<Vec<Dart>>> = rules
-            .find_matches(&mut g, name, &Params::new())
-            .unwrap()
-            .into_iter()
-            .map(|m| m.darts)
-            .collect();
-        assert!(!want.is_empty(), "{name}: the pattern matches somewhere");
-        assert_eq!(got.len(), want.len(), "{name}: as many matches");
-        assert!(
-            got == want,
-            "{name}: the same matches, in order, node for node"
-        );
+        assert_engine_finds(&mut g, &rules, name, &want);
     }
+}
+
+/// The engine's global matches of rule `name` are `want` (not empty), in order, node for node.
+fn assert_engine_finds(
+    g: &mut GMap,
+    rules: &topomech_rules::RuleSet,
+    name: &str,
+    want: &[Vec<Vec<Dart>>],
+) {
+    let got: Vec<Vec<Vec<Dart>>> = rules
+        .find_matches(g, name, &Params::new())
+        .unwrap()
+        .into_iter()
+        .map(|m| m.darts)
+        .collect();
+    assert!(!want.is_empty(), "{name}: the pattern matches somewhere");
+    assert_eq!(got.len(), want.len(), "{name}: as many matches");
+    assert!(
+        got == want,
+        "{name}: the same matches, in order, node for node"
+    );
 }
 
 #[test]
@@ -218,17 +210,6 @@ fn guards_testing_flags_find_the_matches_of_the_reference_search() {
     ] {
         let rule = rules.rule(name).unwrap();
         let want = reference_flagged(&g, rule, rule.hooks[0], flags);
-        let got: Vec<Vec<Vec<Dart>>> = rules
-            .find_matches(&mut g, name, &Params::new())
-            .unwrap()
-            .into_iter()
-            .map(|m| m.darts)
-            .collect();
-        assert!(!want.is_empty(), "{name}: the guard passes somewhere");
-        assert_eq!(got.len(), want.len(), "{name}: as many matches");
-        assert!(
-            got == want,
-            "{name}: the same matches, in order, node for node"
-        );
+        assert_engine_finds(&mut g, &rules, name, &want);
     }
 }
