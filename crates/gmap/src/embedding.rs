@@ -233,7 +233,6 @@ impl Column {
         }
     }
 
-    /// Appends one default (zero / false) value.
     /// Grows (or shrinks) the column to `slots` slots of `width` values, new ones default.
     pub(crate) fn resize_default(&mut self, width: usize, slots: usize) {
         match self {
@@ -243,6 +242,7 @@ impl Column {
         }
     }
 
+    /// Appends one default (zero / false) value.
     pub(crate) fn push_default(&mut self, width: usize) {
         match self {
             Column::Real(v) => v.extend(std::iter::repeat_n(0.0, width)),

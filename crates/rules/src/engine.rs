@@ -1669,13 +1669,27 @@ impl RuleSet {
             .filter(|_| guard_filters_shared(b.rule, b.embs))
         {
             let all = self.shared_of(g, b, left_graph_key(b.rule), poll, true)?;
+            // as `find_all` decides: a match one of whose leading conjuncts reading the hook
+            // alone is false is skipped, whatever the others give (an error among them is
+            // not reported); else the guard is evaluated whole
+            let mut conjuncts = Vec::new();
+            leading_conjuncts(guard, &mut conjuncts);
+            let hook = b.rule.hooks[0];
+            if let Some(k) = conjuncts.iter().position(|e| !reads_only(e, hook)) {
+                conjuncts.truncate(k);
+            }
             let mut kept = Vec::new();
             for m in all.iter() {
                 let mut ev = Eval::new(g, b, m);
-                let hook = m.darts[b.rule.hooks[0]][0];
+                if conjuncts
+                    .iter()
+                    .any(|e| matches!(ev.eval(e, 0), Ok(Val::B(false))))
+                {
+                    continue;
+                }
                 if ev
                     .eval(guard, 0)
-                    .map_err(|e| eval_err(&b.rule.name, hook, &e))?
+                    .map_err(|e| eval_err(&b.rule.name, m.darts[hook][0], &e))?
                     == Val::B(true)
                 {
                     kept.push(m.clone());

@@ -156,6 +156,8 @@ embedding a_plain  : f64 on <1,2>
 embedding a_held   : f64 on <1,2>
 embedding a_dart   : f64 on <1,2>
 embedding mark     : bool on <>
+embedding m        : mat3 on <1,2>
+embedding a_inv    : f64 on <1,2>
 
 rule hold_left {
   left { v : <1,2> hook }
@@ -170,6 +172,13 @@ rule vertex_free {
   left { v : <1,2> hook }
   where !v.held && y(v.position) > 0.5
   compute { v.a_held = 1.0 + x(v.position) }
+}
+# a guard whose first conjunct fails to evaluate (m is zero: singular) where the second is
+# false: skipped there, as the search does; an error where the second holds
+rule vertex_inverse {
+  left { v : <1,2> hook }
+  where det(inverse(v.m)) > 0.0 && v.held
+  compute { v.a_inv = 1.0 }
 }
 # a guard that reads a dart embedding: not row-invariant, its own matches
 rule vertex_marked {
@@ -295,4 +304,43 @@ fn rules_of_one_pattern_and_one_guard_share_their_matches_while_what_the_guard_r
         .apply_everywhere(&mut g, "edge_len_g2", &none)
         .unwrap();
     assert_eq!(moved.matches, alone.matches);
+}
+
+#[test]
+fn a_guard_that_fails_to_evaluate_is_skipped_or_reported_alike_with_shared_matches() {
+    // Checks that the filtered shared matches decide as the search itself (`find_matches`,
+    // the global search with the guard) does: a match one of whose leading conjuncts is
+    // false is skipped even where another conjunct fails to evaluate (here `inverse` of a
+    // singular matrix), and the failure is reported where no conjunct is false.
+    let none = Params::new();
+    let (mut g, rules) = vertex_setup();
+    // no vertex held: `v.held` is false everywhere, nothing is reported
+    assert!(rules
+        .find_matches(&mut g, "vertex_inverse", &none)
+        .unwrap()
+        .is_empty());
+    rules
+        .apply_everywhere(&mut g, "vertex_plain", &none)
+        .unwrap();
+    let rep = rules
+        .apply_everywhere(&mut g, "vertex_inverse", &none)
+        .unwrap();
+    assert_eq!(rep.matches, 0);
+    // some held: the singular matrix is reported by both, naming the rule
+    rules.apply_everywhere(&mut g, "hold_left", &none).unwrap();
+    rules
+        .apply_everywhere(&mut g, "vertex_plain", &none)
+        .unwrap();
+    let singular = |e: &topomech_rules::ApplyError| {
+        matches!(e, topomech_rules::ApplyError::Eval { rule, message, .. }
+            if rule == "vertex_inverse" && message.contains("singular"))
+    };
+    let searched = rules
+        .find_matches(&mut g, "vertex_inverse", &none)
+        .unwrap_err();
+    assert!(singular(&searched), "{searched}");
+    let filtered = rules
+        .apply_everywhere(&mut g, "vertex_inverse", &none)
+        .unwrap_err();
+    assert!(singular(&filtered), "{filtered}");
 }
