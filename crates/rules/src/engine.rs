@@ -617,6 +617,55 @@ fn guarded_key(g: &GMap, b: &Bound) -> Option<String> {
     ))
 }
 
+/// Appends to `out` the bits of the values of the parameters `b`'s guard reads, in the order
+/// of the rule's parameters (nothing for a rule without a guard, or whose guard reads none).
+fn guard_param_bits(b: &Bound, out: &mut Vec<u64>) {
+    fn params_in(e: &TExpr, out: &mut Vec<usize>) {
+        match e {
+            TExpr::Param(k) => out.push(*k),
+            TExpr::Const(_) | TExpr::Local(_) | TExpr::Read { .. } | TExpr::Agg { .. } => {}
+            TExpr::Bin(_, a, c) => {
+                params_in(a, out);
+                params_in(c, out);
+            }
+            TExpr::Un(_, a) | TExpr::ToReal(a) => params_in(a, out),
+            TExpr::Call(_, args) => {
+                for a in args {
+                    params_in(a, out);
+                }
+            }
+            TExpr::If(c, a, d) => {
+                params_in(c, out);
+                params_in(a, out);
+                params_in(d, out);
+            }
+            TExpr::Block(lets, res) => {
+                for (_, v) in lets {
+                    params_in(v, out);
+                }
+                params_in(res, out);
+            }
+        }
+    }
+    let Some(guard) = &b.rule.guard else {
+        return;
+    };
+    let mut ks = Vec::new();
+    params_in(guard, &mut ks);
+    ks.sort_unstable();
+    ks.dedup();
+    for k in ks {
+        match &b.params[k] {
+            Val::F(x) => out.push(x.to_bits()),
+            Val::I(i) => out.push(*i as u64),
+            Val::B(x) => out.push(u64::from(*x)),
+            Val::V2(v) => out.extend(v.iter().map(|x| x.to_bits())),
+            Val::V3(v) => out.extend(v.iter().map(|x| x.to_bits())),
+            Val::M(m) => out.extend(m.data.iter().map(|x| x.to_bits())),
+        }
+    }
+}
+
 /// Whether the matches of `rule` (a computation rule with a guard) are those of its left
 /// graph without the guard that pass the guard, evaluated at each match's row 0, in the same
 /// order and from the same hook darts, so that they may be taken from the shared matches of
@@ -1098,12 +1147,15 @@ impl RuleSet {
             .iter()
             .position(|r| std::ptr::eq(r, b.rule))
             .expect("bound rule is ours");
-        let reads: Vec<u64> = b
+        let mut reads: Vec<u64> = b
             .rule
             .guard_reads
             .iter()
             .map(|&e| g.embedding(b.ids[e]).writes())
             .collect();
+        // and the values of the parameters the guard reads: the matches it accepts, so the
+        // plan, depend on them (a rule applied again with another threshold)
+        guard_param_bits(&b, &mut reads);
         let mut plans = self
             .plans
             .lock()

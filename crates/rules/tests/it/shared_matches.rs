@@ -180,6 +180,12 @@ rule vertex_inverse {
   where det(inverse(v.m)) > 0.0 && v.held
   compute { v.a_inv = 1.0 }
 }
+# a guard reading a parameter: the matches depend on its value
+rule vertex_beyond(t: f64) {
+  left { v : <1,2> hook }
+  where x(v.position) > t
+  compute { v.a_inv = 2.0 }
+}
 # a guard that reads a dart embedding: not row-invariant, its own matches
 rule vertex_marked {
   left { v : <1,2> hook }
@@ -343,4 +349,27 @@ fn a_guard_that_fails_to_evaluate_is_skipped_or_reported_alike_with_shared_match
         .apply_everywhere(&mut g, "vertex_inverse", &none)
         .unwrap_err();
     assert!(singular(&filtered), "{filtered}");
+}
+
+#[test]
+fn a_rule_applied_again_with_another_parameter_of_its_guard_takes_its_new_matches() {
+    // Checks that a plan (and the shared matches under it) is not reused when a parameter
+    // the guard reads changed: each application matches what the search with that value
+    // finds (found by QA: the plan kept the first value's matches).
+    let (mut g, rules) = vertex_setup();
+    for t in [0.5, 1.5, -1.0, 2.5, 0.5] {
+        let p: Params = [("t".to_string(), topomech_rules::Val::F(t))].into();
+        let want = rules
+            .find_matches(&mut g, "vertex_beyond", &p)
+            .unwrap()
+            .len();
+        // x in {0, 1, 2, 3} on 3 rows of vertices
+        assert_eq!(
+            want,
+            3 * (0..4).filter(|&x| f64::from(x) > t).count(),
+            "t = {t}"
+        );
+        let got = rules.apply_everywhere(&mut g, "vertex_beyond", &p).unwrap();
+        assert_eq!(got.matches, want, "t = {t}");
+    }
 }
