@@ -259,6 +259,12 @@ def develop() -> int:
         code = build()
         if code == 0:
             code = path()
+            if code == 3:
+                print(
+                    "the wheel just built is older than the sources (one changed during the "
+                    "build): run the command again",
+                    file=sys.stderr,
+                )
     if code != 0:
         return code
     wheel = fresh_wheel()
