@@ -9,8 +9,9 @@ signal): ``KeyboardInterrupt`` with the map valid and unchanged, or exit 130 wit
 stderr, no Rust panic, no traceback and no output file.
 
 The rule is a computation rule whose guard (a long but shallow expression, false everywhere)
-costs tens of microseconds per dart: the whole application is matching, which the engine
-interrupts between darts. ``ANSWER_S`` is generous against a loaded machine; the engine polls
+costs tens of microseconds per evaluation: the whole application is matching, which the
+engine interrupts between tries (the guard has one value on a vertex, so it is evaluated once
+per vertex, on the vertices' matches). ``ANSWER_S`` is generous against a loaded machine; the engine polls
 every 10 ms.
 """
 
@@ -34,8 +35,8 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a sub
 
 #: Seconds allowed between SIGINT and the end of the process.
 ANSWER_S = 2.0
-#: Grid size: 4 * N^2 darts, each one guard evaluation.
-N = 60
+#: Grid size: 4 * N^2 darts, (N + 1)^2 vertices, each one guard evaluation.
+N = 180
 
 # a guard with ~900 arithmetic operations that is false everywhere (the position is >= 0),
 # written as 30 bracketed sums of 30 terms: long but only ~60 deep

@@ -1732,6 +1732,14 @@ impl RuleSet {
             }
             let mut kept = Vec::new();
             for m in all.iter() {
+                if poll.tick(1) {
+                    return Err(ApplyError::Interrupted {
+                        rule: b.rule.name.clone(),
+                        stage: "finding matches",
+                        found: kept.len(),
+                        applied: 0,
+                    });
+                }
                 let mut ev = Eval::new(g, b, m);
                 if conjuncts
                     .iter()
