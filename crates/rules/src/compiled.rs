@@ -1091,6 +1091,21 @@ thread_local! {
     static ORBIT_ROW: RefCell<Vec<u32>> = const { RefCell::new(Vec::new()) };
 }
 
+/// [`ORBIT_ROW`] borrowed, with the darts set in it: reset when dropped, also on a panic, so
+/// that no later plan on the thread takes a stale entry for a walked orbit.
+struct OrbitRows<'a> {
+    row_of: std::cell::RefMut<'a, Vec<u32>>,
+    walked: Vec<Dart>,
+}
+
+impl Drop for OrbitRows<'_> {
+    fn drop(&mut self) {
+        for x in self.walked.drain(..) {
+            self.row_of[x.index()] = 0;
+        }
+    }
+}
+
 impl Rows {
     /// The rows of `matches` (numbered `ids[k]` for `matches[k]`), the first one numbered
     /// `base`.
@@ -1179,9 +1194,12 @@ impl Rows {
         // orbit (a table the size of the map, per thread, reset for the darts set).
         let mut marks = Marks::with_capacity(g.capacity());
         let mut darts: Vec<Dart> = Vec::new();
-        let mut walked: Vec<Dart> = Vec::new();
         ORBIT_ROW.with(|t| {
-            let mut row_of = t.borrow_mut();
+            let mut table = OrbitRows {
+                row_of: t.borrow_mut(),
+                walked: Vec::new(),
+            };
+            let OrbitRows { row_of, walked } = &mut table;
             if row_of.len() < g.capacity() {
                 row_of.resize(g.capacity(), 0);
             }
