@@ -1716,34 +1716,47 @@ impl ExprCheck<'_, '_> {
     }
 }
 
-/// The embeddings an expression reads, sorted, without repeats.
-pub(crate) fn reads_of(e: &TExpr) -> Vec<usize> {
-    fn walk(e: &TExpr, out: &mut Vec<usize>) {
-        match e {
-            TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
-            TExpr::Read { emb, .. } => out.push(*emb),
-            TExpr::Agg { emb, .. } => out.extend(emb.iter().copied()),
-            TExpr::Bin(_, a, b) => {
-                walk(a, out);
-                walk(b, out);
-            }
-            TExpr::Un(_, a) | TExpr::ToReal(a) => walk(a, out),
-            TExpr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
-            TExpr::If(c, a, b) => {
-                walk(c, out);
-                walk(a, out);
-                walk(b, out);
-            }
-            TExpr::Block(lets, r) => {
-                for (_, v) in lets {
-                    walk(v, out);
-                }
-                walk(r, out);
+/// Calls `f` on `e` and on every expression inside it, parents before their operands.
+pub(crate) fn visit(e: &TExpr, f: &mut dyn FnMut(&TExpr)) {
+    f(e);
+    match e {
+        TExpr::Const(_)
+        | TExpr::Param(_)
+        | TExpr::Local(_)
+        | TExpr::Read { .. }
+        | TExpr::Agg { .. } => {}
+        TExpr::Bin(_, a, b) => {
+            visit(a, f);
+            visit(b, f);
+        }
+        TExpr::Un(_, a) | TExpr::ToReal(a) => visit(a, f),
+        TExpr::Call(_, args) => {
+            for a in args {
+                visit(a, f);
             }
         }
+        TExpr::If(c, a, b) => {
+            visit(c, f);
+            visit(a, f);
+            visit(b, f);
+        }
+        TExpr::Block(lets, r) => {
+            for (_, v) in lets {
+                visit(v, f);
+            }
+            visit(r, f);
+        }
     }
+}
+
+/// The embeddings an expression reads, sorted, without repeats.
+pub(crate) fn reads_of(e: &TExpr) -> Vec<usize> {
     let mut out = Vec::new();
-    walk(e, &mut out);
+    visit(e, &mut |x| match x {
+        TExpr::Read { emb, .. } => out.push(*emb),
+        TExpr::Agg { emb, .. } => out.extend(emb.iter().copied()),
+        _ => {}
+    });
     out.sort_unstable();
     out.dedup();
     out

@@ -620,38 +620,15 @@ fn guarded_key(g: &GMap, b: &Bound) -> Option<String> {
 /// Appends to `out` the bits of the values of the parameters `b`'s guard reads, in the order
 /// of the rule's parameters (nothing for a rule without a guard, or whose guard reads none).
 fn guard_param_bits(b: &Bound, out: &mut Vec<u64>) {
-    fn params_in(e: &TExpr, out: &mut Vec<usize>) {
-        match e {
-            TExpr::Param(k) => out.push(*k),
-            TExpr::Const(_) | TExpr::Local(_) | TExpr::Read { .. } | TExpr::Agg { .. } => {}
-            TExpr::Bin(_, a, c) => {
-                params_in(a, out);
-                params_in(c, out);
-            }
-            TExpr::Un(_, a) | TExpr::ToReal(a) => params_in(a, out),
-            TExpr::Call(_, args) => {
-                for a in args {
-                    params_in(a, out);
-                }
-            }
-            TExpr::If(c, a, d) => {
-                params_in(c, out);
-                params_in(a, out);
-                params_in(d, out);
-            }
-            TExpr::Block(lets, res) => {
-                for (_, v) in lets {
-                    params_in(v, out);
-                }
-                params_in(res, out);
-            }
-        }
-    }
     let Some(guard) = &b.rule.guard else {
         return;
     };
     let mut ks = Vec::new();
-    params_in(guard, &mut ks);
+    crate::check::visit(guard, &mut |e| {
+        if let TExpr::Param(k) = e {
+            ks.push(*k);
+        }
+    });
     ks.sort_unstable();
     ks.dedup();
     for k in ks {
