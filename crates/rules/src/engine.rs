@@ -596,7 +596,7 @@ fn left_graph_key(rule: &Rule) -> String {
 
 /// The key of the matches of a computation rule with a guard: its left graph, its guard
 /// and what the guard reads (the embeddings, by id, with their write counts, and the
-/// rule's parameter values), so that rules with the same left graph and the same guard (a
+/// values of the parameters it reads, [`guard_param_bits`]), so that rules with the same left graph and the same guard (a
 /// model's init, step and Jacobian rules over its elements, `where n0.vertex0 && ...`)
 /// share their matches while nothing the guard reads changes: [`find_all`] depends on the
 /// rule through nothing else (the leading conjuncts and the row-invariance it tests come
@@ -610,10 +610,11 @@ fn guarded_key(g: &GMap, b: &Bound) -> Option<String> {
         .iter()
         .map(|&e| (b.ids[e].0, g.embedding(b.ids[e]).writes()))
         .collect();
+    let mut params = Vec::new();
+    guard_param_bits(b, &mut params);
     Some(format!(
-        "{}|where {guard:?}|reads {reads:?}|params {:?}",
+        "{}|where {guard:?}|reads {reads:?}|params {params:?}",
         left_graph_key(rule),
-        b.params
     ))
 }
 
@@ -643,6 +644,12 @@ fn guard_param_bits(b: &Bound, out: &mut Vec<u64>) {
     }
 }
 
+/// Whether the left graph of `rule` is one node and no arc: a match's footprint is then its
+/// hook orbit.
+fn one_node(rule: &Rule) -> bool {
+    rule.nodes.len() == 1 && rule.left_arcs.is_empty()
+}
+
 /// Whether the matches of `rule` (a computation rule with a guard) are those of its left
 /// graph without the guard that pass the guard, evaluated at each match's row 0, in the same
 /// order and from the same hook darts, so that they may be taken from the shared matches of
@@ -661,8 +668,7 @@ fn guard_param_bits(b: &Bound, out: &mut Vec<u64>) {
 /// planned before them instead of walking every dart of the map again.
 fn guard_filters_shared(rule: &Rule, embs: &[EmbDecl]) -> bool {
     !rule.changes_topology
-        && rule.nodes.len() == 1
-        && rule.left_arcs.is_empty()
+        && one_node(rule)
         && rule.hooks.len() == 1
         && rule
             .guard
@@ -1701,12 +1707,8 @@ impl RuleSet {
             // as `find_all` decides: a match one of whose leading conjuncts reading the hook
             // alone is false is skipped, whatever the others give (an error among them is
             // not reported); else the guard is evaluated whole
-            let mut conjuncts = Vec::new();
-            leading_conjuncts(guard, &mut conjuncts);
             let hook = b.rule.hooks[0];
-            if let Some(k) = conjuncts.iter().position(|e| !reads_only(e, hook)) {
-                conjuncts.truncate(k);
-            }
+            let conjuncts = hook_prefix(guard, hook);
             let mut kept = Vec::new();
             for m in all.iter() {
                 if poll.tick(1) {
@@ -2590,26 +2592,26 @@ fn find_all(g: &GMap, b: &Bound, poll: &mut Poll) -> Result<Vec<Match>, ApplyErr
     // darts of its hook are marked, and a match found again from another hook (the same
     // footprint) is skipped.
     let overlap = !rule.changes_topology;
-    let one_node = rule.nodes.len() == 1 && rule.left_arcs.is_empty();
+    let one_node = one_node(rule);
     // Leading conjuncts of the guard that read the hook dart only are tried first, on the hook
     // dart alone (row 0 of a match is its hook dart): most darts fail them, and need no match.
     let hook = rule.hooks[0];
-    let mut prefix = Vec::new();
-    if let Some(guard) = &rule.guard {
-        leading_conjuncts(guard, &mut prefix);
-        if let Some(k) = prefix.iter().position(|e| !reads_only(e, hook)) {
-            prefix.truncate(k);
-        }
-    }
     // The prefix conjuncts that test a boolean embedding of the hook (`n0.vertex0`,
     // `!v.fixed`): read from their column for each dart instead of through the interpreter
     // (a dart fails the prefix when one conjunct is false, in any order: an error is left to
     // the full evaluation, and a flag's read has none).
-    let flags: Vec<(EmbeddingId, bool)> = prefix
-        .iter()
-        .filter_map(|e| flag_conjunct(g, b, e, hook))
-        .collect();
-    prefix.retain(|e| flag_conjunct(g, b, e, hook).is_none());
+    let mut flags: Vec<(EmbeddingId, bool)> = Vec::new();
+    let mut prefix = rule
+        .guard
+        .as_ref()
+        .map_or_else(Vec::new, |e| hook_prefix(e, hook));
+    prefix.retain(|e| match flag_conjunct(g, b, e, hook) {
+        Some(f) => {
+            flags.push(f);
+            false
+        }
+        None => true,
+    });
     // A guard reading every node through embeddings on orbits that contain the node's orbit
     // has one value on every row of a match: a dart of the hook orbit that fails it, fails it
     // for all, so the hook orbit is tried once (a plane cut's guard, which walks both
@@ -2813,6 +2815,17 @@ fn row_anchor(buf: &[u32], x: &[f64]) -> (u32, [f64; 3]) {
         }
     }
     (s0, ext)
+}
+
+/// The leading conjuncts of the guard `e` that read the hook node `hook` only, up to the
+/// first that reads more: what [`find_all`] tries on the hook dart alone.
+fn hook_prefix(e: &TExpr, hook: usize) -> Vec<&TExpr> {
+    let mut prefix = Vec::new();
+    leading_conjuncts(e, &mut prefix);
+    if let Some(k) = prefix.iter().position(|e| !reads_only(e, hook)) {
+        prefix.truncate(k);
+    }
+    prefix
 }
 
 /// The operands of the leading `&&` chain of `e`, in evaluation order.
