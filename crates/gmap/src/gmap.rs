@@ -64,6 +64,8 @@ pub(crate) struct ChangeLog {
     /// was a link change (0: none), so that a dart is listed once per tag and kind (a
     /// re-slotting touches it once per embedding).
     last: Vec<u64>,
+    /// Entries recorded since recording started (those dropped included).
+    recorded: u64,
 }
 
 /// At most this many entries (or one per dart of the map, if more) are kept: past it the
@@ -99,6 +101,7 @@ fn note_kind(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize,
     }
     l.last[i] = tag | u64::from(links);
     l.entries.push((version, d, links));
+    l.recorded += 1;
     if l.entries.len() > LOG_MIN_LIMIT.max(capacity) {
         // drop every entry tagged up to the middle one's tag: the log then answers from the
         // next version on
@@ -207,6 +210,7 @@ impl GMap {
                 from: self.version,
                 entries: Vec::new(),
                 last: vec![0; self.capacity()],
+                recorded: 0,
             });
         }
     }
@@ -248,6 +252,14 @@ impl GMap {
         out.sort_unstable();
         out.dedup();
         Some(out)
+    }
+
+    /// The state of the change record: the first version it covers and how many entries it
+    /// has recorded (those dropped since included); `None` when changes are not recorded.
+    /// Every change recorded adds one, so with [`GMap::identity`] it fixes what
+    /// [`GMap::changes_since`] answers: a cache of that answer keys on both.
+    pub fn change_record(&self) -> Option<(u64, u64)> {
+        self.log.as_ref().map(|l| (l.from, l.recorded))
     }
 
     /// [`GMap::changed_since`] and [`GMap::relinked_since`] from one pass over the record:

@@ -5,7 +5,8 @@
 //! patches them around the changed darts, and that is counted as part of the change. The
 //! compiled guards through which cuts find their faces are built once beforehand (as a
 //! simulation does at set-up for the cuts its configuration declares), and timed apart.
-//! Prints the median of repeated runs (`cargo bench -p topomech-physics`).
+//! Prints the median of repeated runs (`cargo bench -p topomech-physics`), on one thread
+//! (`TOPOMECH_TOPOLOGY_THREADS` sets another count; see `main`).
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -179,6 +180,17 @@ fn profile(case: &str, n: [usize; 3]) {
 }
 
 fn main() {
+    // one thread unless TOPOMECH_TOPOLOGY_THREADS says otherwise: on a 2-vCPU machine the
+    // 2 ms step of this box on two threads swings between 1.7 and 5.6 ms from step to step
+    // (one thread: 2.0-2.3 ms), which no ratio to a step survives
+    let threads: usize = std::env::var("TOPOMECH_TOPOLOGY_THREADS")
+        .ok()
+        .and_then(|x| x.parse().ok())
+        .unwrap_or(1);
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build_global()
+        .expect("the global thread pool");
     let n = [26, 26, 25];
     if let Ok(case) = std::env::var("TOPOMECH_TOPOLOGY_PROFILE") {
         profile(&case, n);
@@ -237,20 +249,25 @@ fn main() {
     }
     // a step with fracture enabled where nothing breaks (strains stay far below 50%), against
     // a step without: alternated samples, after both have built their plans
-    let mut plain = simulation(n);
-    let mut brittle = simulation_with(
+    // (at 0.1 ms, a time step the undamped box stays stable with for hundreds of steps: at
+    // the default 1 ms it goes unstable after about 8)
+    let stable_dt = 1e-4;
+    let mut plain = simulation_dt(n, None, vec![], vec![], stable_dt);
+    let mut brittle = simulation_dt(
         n,
         Some(Fracture {
             criterion: Criterion::Strain,
             threshold: 0.5,
         }),
         vec![],
+        vec![],
+        stable_dt,
     );
     plain.step().expect("steps");
     brittle.step().expect("steps");
     let mut plain_steps = Vec::new();
     let mut brittle_steps = Vec::new();
-    for _ in 0..5 {
+    for _ in 0..9 {
         plain_steps.push(seconds(|| black_box(plain.step()).expect("steps")));
         brittle_steps.push(seconds(|| black_box(brittle.step()).expect("steps")));
     }
@@ -292,28 +309,42 @@ fn main() {
     });
     let blade_faces: usize = bladed.topology_changes().iter().map(|c| c.unsewn).sum();
     let blade_cutting = bladed.topology_changes().len();
-    let dt = plain.config().dt;
-    // one face cut (a predicate cut, a timed event at the end of the third step): that step
-    // and the next, against plain steps
-    let mut single = simulation_events(
+    let dt = stable_dt;
+    // single-face cuts (predicate cuts, timed events at the end of steps 3, 13, 23, ...: a
+    // face or two each, at other places), each step with a cut and the next against the
+    // plain steps of the same run between them
+    let single_cuts = 5;
+    let mut single = simulation_dt(
         n,
         None,
         vec![],
-        vec![TimedEvent {
-            time: 3.0 * dt,
-            cut: Cut::Where("x > 0.99 && x < 1.01 && y < 0.02 && z < 0.03".into()),
-        }],
+        (0..single_cuts)
+            .map(|k| TimedEvent {
+                time: f64::from(10 * k + 3) * dt,
+                cut: Cut::Where(format!(
+                    "x > 0.99 && x < 1.01 && y > {} && y < {} && z < 0.03",
+                    0.045 * f64::from(k),
+                    0.045 * f64::from(k) + 0.04
+                )),
+            })
+            .collect(),
+        dt,
     );
     single.step().expect("steps");
-    // plain steps of that run before the cut (the event is at the end of its third step)
+    let (mut single_cut_steps, mut single_next_steps) = (Vec::new(), Vec::new());
+    // step 2, plain
     let mut single_plains = vec![seconds(|| black_box(single.step()).expect("steps"))];
-    let single_cut = seconds(|| black_box(single.step()).expect("steps"));
-    let single_next = seconds(|| black_box(single.step()).expect("steps"));
-    let single_faces: usize = single.topology_changes().iter().map(|c| c.unsewn).sum();
-    // and plain steps after it, once the plans are patched
-    for _ in 0..4 {
-        single_plains.push(seconds(|| black_box(single.step()).expect("steps")));
+    for _ in 0..single_cuts {
+        // step 3 (13, 23, ...) ends with the cut, step 4 patches the plans, steps 5-12 are plain
+        let before = single.topology_changes().len();
+        single_cut_steps.push(seconds(|| black_box(single.step()).expect("steps")));
+        assert_eq!(single.topology_changes().len(), before + 1, "the step cut");
+        single_next_steps.push(seconds(|| black_box(single.step()).expect("steps")));
+        for _ in 0..8 {
+            single_plains.push(seconds(|| black_box(single.step()).expect("steps")));
+        }
     }
+    let single_faces: usize = single.topology_changes().iter().map(|c| c.unsewn).sum();
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
@@ -326,7 +357,7 @@ fn main() {
         median(&mut bursts),
     );
     println!(
-        "topology changes on a box of {tets} tetrahedra, stretch_cumulated (median of 2 runs; a steady step: of 6):"
+        "topology changes on a box of {tets} tetrahedra, stretch_cumulated, {threads} thread(s) (median of 2 runs; a steady step: of 6):"
     );
     println!(
         "  one step, steady state (forces, accumulation, symplectic Euler)  {:8.1} ms",
@@ -338,12 +369,21 @@ fn main() {
     println!("  one fracture burst ({burst_faces} faces opened)                        {:8.1} ms  = {:.2} steps", bt * 1e3, bt / st);
     println!("  {blade_steps} steps with a blade crossing the middle ({blade_faces} faces, {blade_cutting} steps cutting) {:8.1} ms  = {:.2}x the same steps without it ({:.1} ms)", with * 1e3, with / without, without * 1e3);
     let single_plain = median(&mut single_plains);
-    println!("  a step cutting {single_faces} face(s) (predicate event), then the next       {:8.1} ms + {:.1} ms  = {:.2} + {:.2} steps (a plain step of that run: {:.1} ms, median of 5)", single_cut * 1e3, single_next * 1e3, single_cut / st, single_next / st, single_plain * 1e3);
-    // the cut's own cost is its step less a plain step of that run (the event is part of a
-    // step), to which the next step (plans patched) adds: issue 16's measure, in steps of
-    // that run
-    let single_cost = (single_cut - single_plain).max(0.0) + single_next;
-    println!("  the single-face cut (its step less a plain step) plus the next step  {:8.1} ms  = {:.2} plain steps of that run", single_cost * 1e3, single_cost / single_plain);
+    // a cut's own cost is its step less a plain step of that run (the event is part of a
+    // step), to which the next step (plans patched) adds: issue 16's measure, in plain steps
+    // of that run, per cut; the median of the cuts
+    let mut single_costs: Vec<f64> = single_cut_steps
+        .iter()
+        .zip(&single_next_steps)
+        .map(|(c, n)| (c - single_plain).max(0.0) + n)
+        .collect();
+    let single_cost = median(&mut single_costs);
+    let (sc, sn) = (
+        median(&mut single_cut_steps),
+        median(&mut single_next_steps),
+    );
+    println!("  a step cutting a face (predicate event), then the next (median of {single_cuts}) {:8.1} ms + {:.1} ms  = {:.2} + {:.2} plain steps of that run ({:.1} ms, median of {}; {single_faces} faces in all)", sc * 1e3, sn * 1e3, sc / single_plain, sn / single_plain, single_plain * 1e3, single_plains.len());
+    println!("  the single-face cut (its step less a plain step) plus the next step  {:8.1} ms  = {:.2} plain steps of that run (median of {single_cuts} cuts)", single_cost * 1e3, single_cost / single_plain);
     let (ps, bs) = (median(&mut plain_steps), median(&mut brittle_steps));
-    println!("  a step with fracture enabled, nothing breaking (median of 5)    {:8.1} ms  = {:.2} steps without ({:.1} ms)", bs * 1e3, bs / ps, ps * 1e3);
+    println!("  a step with fracture enabled, nothing breaking (median of 9)    {:8.1} ms  = {:.2} steps without ({:.1} ms)", bs * 1e3, bs / ps, ps * 1e3);
 }

@@ -243,18 +243,33 @@ impl Rows {
                     .map_err(|e| PhysicsError::Config(e.to_string()))?;
             }
         }
-        let mut all: Vec<(Dart, usize)> = self
+        // the kept orbits (in increasing order of their darts, as `orbits` is) and the walked
+        // ones (sorted above) merged: one pass, where a sort of the whole numbering cost
+        // most of a single-face cut's renumbering
+        let total = self.orbits.len() - replaced.len() + walked.len();
+        let (mut orbits, mut row_of) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        let mut kept = self
             .orbits
             .iter()
             .zip(&self.row_of)
             .enumerate()
             .filter(|(k, _)| !is_replaced[*k])
             .map(|(_, (&d, &r))| (d, r))
-            .chain(walked)
-            .collect();
-        all.sort_unstable_by_key(|w| w.0);
-        self.orbits = all.iter().map(|w| w.0).collect();
-        self.row_of = all.iter().map(|w| w.1).collect();
+            .peekable();
+        let mut walked = walked.into_iter().peekable();
+        loop {
+            let next = match (kept.peek(), walked.peek()) {
+                (Some(a), Some(b)) if a.0 < b.0 => kept.next(),
+                (Some(_) | None, Some(_)) => walked.next(),
+                (Some(_), None) => kept.next(),
+                (None, None) => break,
+            };
+            let (d, r) = next.expect("peeked");
+            orbits.push(d);
+            row_of.push(r);
+        }
+        self.orbits = orbits;
+        self.row_of = row_of;
         self.index(n_rows + added.len());
         Ok(added)
     }

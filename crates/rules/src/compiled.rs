@@ -1785,8 +1785,10 @@ impl Plan {
         }
         // their targets and writes go (the pairs are in row order, as `dead_now`): each dead
         // row's pairs found by bisection, the runs between them moved down
+        // (returns the pairs dropped per dead row: `(row, count)`, in row order)
         let drop_rows = |v: &mut Vec<(u32, u32)>, mut gone: Option<&mut Vec<(u32, u32)>>| {
             let mut cut: Vec<(usize, usize)> = Vec::with_capacity(dead_now.len());
+            let mut per_row: Vec<(u32, u32)> = Vec::new();
             let mut from = 0;
             for &r in &dead_now {
                 let lo = gallop(v, from, |p| p.0 < r);
@@ -1796,6 +1798,7 @@ impl Plan {
                         g.extend_from_slice(&v[lo..hi]);
                     }
                     cut.push((lo, hi));
+                    per_row.push((r, (hi - lo) as u32));
                 }
                 from = hi;
             }
@@ -1805,11 +1808,13 @@ impl Plan {
                 .zip(cut.iter().map(|c| c.0).chain(std::iter::once(n)))
                 .filter(|(lo, hi)| lo < hi);
             compact(v, runs);
+            per_row
         };
         let mut gone = Vec::new();
+        let mut removed: Vec<Vec<(u32, u32)>> = Vec::with_capacity(self.targets.len());
         for (w, (t, _)) in self.targets.iter_mut().enumerate() {
             gone.clear();
-            drop_rows(t, Some(&mut gone));
+            removed.push(drop_rows(t, Some(&mut gone)));
             let table = &mut owner[emb_of(w)];
             for &(_, s) in &gone {
                 table[s as usize] = (u32::MAX, 0);
@@ -1836,11 +1841,29 @@ impl Plan {
         self.matches = kept_matches + new.len();
         self.dead += dead_now.len();
         self.evaluations = self.writes.iter().map(Vec::len).sum();
-        // where each chunk's targets start, found again by bisection (the targets stay in
-        // row order: kept ones in place, new ones after), and the slots each column must
-        // hold: at least as many as before (columns never shrink), and past the new targets
-        let before = self.chunk_starts.take().map(|(_, slots)| slots);
-        self.chunk_starts = self.chunk_starts_sorted(before.as_deref(), &new_from);
+        // where each chunk's targets start (the targets stay in row order: kept ones in
+        // place, new ones after): a boundary over the old rows moves down by the targets
+        // dropped before it, one over the new rows is found by bisection; and the slots
+        // each column must hold: at least as many as before (columns never shrink), and
+        // past the new targets
+        let before = self.chunk_starts.take();
+        self.chunk_starts = match before {
+            Some((starts, slots)) => {
+                let shifted = self.shifted_chunk_starts(&starts, &removed, base);
+                let (_, slots) = self
+                    .chunk_starts_sorted(Some(&slots), &new_from, false)
+                    .expect("checked on entry");
+                debug_assert_eq!(
+                    Some(&shifted),
+                    self.chunk_starts_sorted(None, &new_from, true)
+                        .as_ref()
+                        .map(|x| &x.0),
+                    "chunk starts moved as bisection finds them"
+                );
+                Some((shifted, slots))
+            }
+            None => None,
+        };
         self.regrow_need(base);
         self.clear_last_block();
         true
@@ -2226,16 +2249,53 @@ impl Plan {
                 t.sort_unstable_by_key(|x| x.0);
             }
         }
-        self.chunk_starts_sorted(None, &vec![0; self.targets.len()])
+        self.chunk_starts_sorted(None, &vec![0; self.targets.len()], true)
+    }
+
+    /// The chunk starts of targets from which the pairs `removed[w]` (per write, `(row,
+    /// count)` in row order) were dropped and to which the pairs of rows `base..` were
+    /// appended, from `old`, the starts before (over `base` rows): a boundary at or below
+    /// `base` moves down by the pairs dropped before it; one past it is found by bisection.
+    fn shifted_chunk_starts(
+        &self,
+        old: &[Vec<u32>],
+        removed: &[Vec<(u32, u32)>],
+        base: usize,
+    ) -> Vec<Vec<u32>> {
+        let chunks = self.rows.div_ceil(self.chunk);
+        self.targets
+            .iter()
+            .zip(old.iter().zip(removed))
+            .map(|((t, _), (old, removed))| {
+                let (mut k, mut gone, mut at) = (0, 0u32, 0);
+                (0..=chunks)
+                    .map(|c| {
+                        let b = c * self.chunk;
+                        if b <= base && c < old.len() {
+                            while k < removed.len() && (removed[k].0 as usize) < b {
+                                gone += removed[k].1;
+                                k += 1;
+                            }
+                            at = (old[c] - gone) as usize;
+                        } else {
+                            at = gallop(t, at, |&(r, _)| (r as usize) < b);
+                        }
+                        at as u32
+                    })
+                    .collect()
+            })
+            .collect()
     }
 
     /// [`Plan::chunk_starts`] for targets known to be in row order, with `slots` a bound
     /// already known for the targets of each write before `from[w]` (those after are looked
     /// at): what a patch in place needs, at a cost of a bisection per chunk.
+    /// (`with_starts` false: the starts are left empty, for a caller that has them.)
     fn chunk_starts_sorted(
         &self,
         slots: Option<&[usize]>,
         from: &[usize],
+        with_starts: bool,
     ) -> Option<(Vec<Vec<u32>>, Vec<usize>)> {
         if self.prog.guard || !self.dups.is_empty() || self.rows == 0 {
             return None;
@@ -2245,15 +2305,18 @@ impl Plan {
             .iter()
             .all(|(t, _)| t.is_sorted_by_key(|x| x.0)));
         let chunks = self.rows.div_ceil(self.chunk);
-        let starts = self
-            .targets
-            .iter()
-            .map(|(t, _)| {
-                (0..=chunks)
-                    .map(|c| t.partition_point(|&(r, _)| (r as usize) < c * self.chunk) as u32)
-                    .collect()
-            })
-            .collect();
+        let starts = if with_starts {
+            self.targets
+                .iter()
+                .map(|(t, _)| {
+                    (0..=chunks)
+                        .map(|c| t.partition_point(|&(r, _)| (r as usize) < c * self.chunk) as u32)
+                        .collect()
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         // per write, the slots its column must hold: one past its largest target
         let slots = self
             .targets

@@ -505,6 +505,10 @@ pub struct RuleSet {
     /// Applications whose compiled guard ran over the hook orbits near a region only (see
     /// [`RuleSet::apply_everywhere_within`]).
     culled_runs: std::sync::atomic::AtomicUsize,
+    /// The last [`GMap::changes_since`] the plans' patches asked for, with the map state it
+    /// answered for (see [`RuleSet::changes_since`]): the plans of one step patched after a
+    /// topology change all ask for the same one.
+    changes: std::sync::Mutex<Option<ChangesMemo>>,
 }
 
 /// The guard of a rule that changes the topology, compiled over every hook orbit where the
@@ -685,6 +689,14 @@ impl Clone for RuleSet {
     }
 }
 
+/// A [`GMap::changes_since`] answer and the map state it was given for: (identity and
+/// topology version, change record, version asked for).
+#[derive(Debug)]
+struct ChangesMemo {
+    key: ((u64, u64), (u64, u64), u64),
+    changes: Arc<(Vec<Dart>, Vec<Dart>)>,
+}
+
 /// The plan of a computation rule, and what it was computed from.
 #[derive(Debug)]
 struct Plan {
@@ -810,7 +822,30 @@ impl RuleSet {
             guard_runs: std::sync::atomic::AtomicUsize::new(0),
             guard_patches: std::sync::atomic::AtomicUsize::new(0),
             culled_runs: std::sync::atomic::AtomicUsize::new(0),
+            changes: std::sync::Mutex::new(None),
         }
+    }
+
+    /// [`GMap::changes_since`]`(version)`, shared by the plans that ask for it at one state
+    /// of the map: the answer is kept with the map's identity and topology version and the
+    /// state of its change record ([`GMap::change_record`]), which together fix it (every
+    /// change the record answers from adds an entry or moves the version), and given again
+    /// while they are the same.
+    fn changes_since(&self, g: &GMap, version: u64) -> Option<Arc<(Vec<Dart>, Vec<Dart>)>> {
+        let key = (g.identity(), g.change_record()?, version);
+        let mut memo = self
+            .changes
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(m) = memo.as_ref().filter(|m| m.key == key) {
+            return Some(Arc::clone(&m.changes));
+        }
+        let changes = Arc::new(g.changes_since(version)?);
+        *memo = Some(ChangesMemo {
+            key,
+            changes: Arc::clone(&changes),
+        });
+        Some(changes)
     }
 
     /// The dimension of the rules.
@@ -1301,12 +1336,9 @@ impl RuleSet {
         }
         // without a guard, a dropped match whose footprint kept its links is rebuilt from its
         // hook dart, and the search looks only around the relinked darts (see below)
-        let (changed, relinked) = if rule.guard.is_none() {
-            let (c, r) = g.changes_since(old.identity.1)?;
-            (c, Some(marks_of(g, &r)))
-        } else {
-            (g.changed_since(old.identity.1)?, None)
-        };
+        let changes = self.changes_since(g, old.identity.1)?;
+        let changed = &changes.0;
+        let relinked = rule.guard.is_none().then(|| marks_of(g, &changes.1));
         let compiled = match kind {
             PlanKind::Compiled(p) => Some(p),
             PlanKind::Matches(ms) if ms.is_empty() && self.compile => None,
@@ -1324,7 +1356,7 @@ impl RuleSet {
             expr_orbits(guard, b.embs, &mut chains);
         }
         let (star, candidates, dropped) =
-            drop_changed(g, rule, &mut ix, &changed, &chains, relinked.as_ref())?;
+            drop_changed(g, rule, &mut ix, changed, &chains, relinked.as_ref())?;
         let kept = ix.live;
         let hook = rule.hooks[0];
         // the dropped matches whose footprint kept its links, rebuilt (new numbers, new rows)
@@ -1523,7 +1555,9 @@ impl RuleSet {
         let gp = match old {
             Some(gp) if gp.identity == g.identity() && gp.reads == reads => Some(gp),
             Some(gp) if gp.reads == reads => {
-                let p = patch_guard_plan(g, b, gp);
+                let p = self
+                    .changes_since(g, gp.identity.1)
+                    .and_then(|changes| patch_guard_plan(g, b, gp, &changes));
                 if p.is_some() {
                     self.guard_patches
                         .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -2164,8 +2198,7 @@ impl GuardPlan {
             return None;
         }
         let x = g.embedding(emb).real_column()?;
-        // a value that is not finite: every row (the guard decides)
-        if x.len() % 3 != 0 || x.iter().any(|v| !v.is_finite()) {
+        if x.len() % 3 != 0 {
             return None;
         }
         let rows = self.plan.rows();
@@ -2179,10 +2212,21 @@ impl GuardPlan {
         // the slots created since: their values now join the snapshot
         let old = c.values.len();
         c.values.extend_from_slice(&x[old..]);
-        // per coordinate, the largest change of a value since it joined the snapshot
-        let mut moved = [0.0_f64; 3];
-        for (k, (a, b)) in c.values.iter().zip(x).enumerate() {
-            moved[k % 3] = moved[k % 3].max((a - b).abs());
+        // per coordinate, the largest change of a value since it joined the snapshot, and
+        // whether every value is finite (in one pass: a value that is not finite gives
+        // every row, and the guard decides)
+        let (mut moved, mut finite) = ([0.0_f64; 3], true);
+        for (a, b) in c.values.chunks_exact(3).zip(x.chunks_exact(3)) {
+            for k in 0..3 {
+                finite &= b[k].is_finite();
+                moved[k] = moved[k].max((a[k] - b[k]).abs());
+            }
+        }
+        if !finite {
+            // the snapshot holds finite values only (a slot joins with a finite value)
+            c.values.truncate(old);
+            self.cull = Some(c);
+            return None;
         }
         let spans = c.extent.iter().fold(0.0_f64, |m, &e| m.max(e));
         if moved.iter().any(|&m| m > spans.max(f64::MIN_POSITIVE)) {
@@ -2369,12 +2413,17 @@ const GUARD_BATCH: usize = 4096;
 /// guard evaluated: the plan evaluates it when it runs, so dropped rows whose footprint kept
 /// its links are rebuilt as without a guard); `None` when it cannot be (another
 /// map, a change record that does not cover its version, too much churn).
-fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
+fn patch_guard_plan(
+    g: &GMap,
+    b: &Bound,
+    gp: GuardPlan,
+    changes: &(Vec<Dart>, Vec<Dart>),
+) -> Option<GuardPlan> {
     if gp.identity.0 != g.identity().0 {
         return None;
     }
-    let (changed, relinked) = g.changes_since(gp.identity.1)?;
-    let relinked = marks_of(g, &relinked);
+    let (changed, relinked) = changes;
+    let relinked = marks_of(g, relinked);
     let rule = b.rule;
     let GuardPlan {
         mut plan,
@@ -2386,7 +2435,7 @@ fn patch_guard_plan(g: &GMap, b: &Bound, gp: GuardPlan) -> Option<GuardPlan> {
     } = gp;
     let chains: Vec<Vec<OrbitType>> = plan.agg_orbits().into_iter().map(|o| vec![o]).collect();
     let (_, candidates, dropped) =
-        drop_changed(g, rule, &mut index, &changed, &chains, Some(&relinked))?;
+        drop_changed(g, rule, &mut index, changed, &chains, Some(&relinked))?;
     let hook = rule.hooks[0];
     // the dropped rows whose footprint kept its links, rebuilt (see `RuleSet::patch_plan`),
     // then one row per new hook orbit: no guard evaluated (the plan does), no footprint

@@ -352,3 +352,54 @@ fn a_rewrite_keeps_shared_slot_tables_shared_and_gives_the_unshared_result() {
     assert_eq!(g.real(mean, d), h.real(mean, d));
     assert!(g.is_valid());
 }
+
+/// A map's identity, change record and changed darts at one state.
+type State = ((u64, u64), (u64, u64), Vec<Dart>);
+
+/// `change_record` (what a cache of `changes_since` keys on, with the map's identity) moves
+/// with every change recorded and only then: reads leave it, and at every state it takes
+/// again, `changes_since` gives again what it gave.
+#[test]
+fn the_change_record_moves_with_every_recorded_change() {
+    let (mut g, _) = build(
+        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(g.change_record(), None, "not tracked yet");
+    g.track_changes();
+    let v0 = g.version();
+    assert_eq!(g.change_record(), Some((v0, 0)));
+    let faces: Vec<Dart> = g
+        .orbit_representatives(OrbitType::parse("<0,1>").unwrap())
+        .into_iter()
+        .filter(|&d| !g.is_free(3, d))
+        .take(3)
+        .collect();
+    let mut seen: Vec<State> = Vec::new();
+    for &f in &faces {
+        let before = g.change_record().unwrap();
+        let changes = g.changes_since(v0).unwrap();
+        assert_eq!(g.change_record(), Some(before), "a read records nothing");
+        assert_eq!(
+            g.changes_since(v0).unwrap(),
+            changes,
+            "same state, same answer"
+        );
+        seen.push((g.identity(), before, changes.0));
+        g.unsew(3, f).unwrap();
+        let after = g.change_record().unwrap();
+        assert_eq!(after.0, before.0, "the record covers the same versions");
+        assert!(
+            after.1 > before.1,
+            "an unsewing adds entries: {before:?} -> {after:?}"
+        );
+    }
+    // every state seen had its own key and its own answer
+    for (k, a) in seen.iter().enumerate() {
+        for b in &seen[k + 1..] {
+            assert_ne!((a.0, a.1), (b.0, b.1));
+            assert_ne!(a.2, b.2);
+        }
+    }
+}
