@@ -65,6 +65,21 @@ fn simulation_dt(
     Simulation::new(g, cfg).expect("builds")
 }
 
+/// `count` predicate cuts of a face or two each (at x = 1, z near 0, y moving up by 0.045
+/// from one to the next), timed at the end of steps `first`, `first + 10`, ... of `dt`.
+fn single_face_cuts(count: u32, first: u32, dt: f64) -> Vec<TimedEvent> {
+    (0..count)
+        .map(|k| TimedEvent {
+            time: f64::from(10 * k + first) * dt,
+            cut: Cut::Where(format!(
+                "x > 0.99 && x < 1.01 && y > {} && y < {} && z < 0.03",
+                0.045 * f64::from(k),
+                0.045 * f64::from(k) + 0.04
+            )),
+        })
+        .collect()
+}
+
 fn seconds(f: impl FnOnce()) -> f64 {
     let t = Instant::now();
     f();
@@ -92,20 +107,7 @@ fn profile(case: &str, n: [usize; 3]) {
             vec![],
         ),
         // a cut of a face or two every 10 steps (20 at most)
-        "single" => (
-            None,
-            vec![],
-            (0..(steps / 10).min(20))
-                .map(|k| TimedEvent {
-                    time: f64::from(10 * k + 5) * dt,
-                    cut: Cut::Where(format!(
-                        "x > 0.99 && x < 1.01 && y > {} && y < {} && z < 0.03",
-                        0.045 * f64::from(k),
-                        0.045 * f64::from(k) + 0.04
-                    )),
-                })
-                .collect(),
-        ),
+        "single" => (None, vec![], single_face_cuts((steps / 10).min(20), 5, dt)),
         // a plane cut (about 1,300 faces) every 10 steps, at x = 0.3, 0.4, ... (15 at most)
         "plane" => (
             None,
@@ -314,22 +316,7 @@ fn main() {
     // face or two each, at other places), each step with a cut and the next against the
     // plain steps of the same run between them
     let single_cuts = 5;
-    let mut single = simulation_dt(
-        n,
-        None,
-        vec![],
-        (0..single_cuts)
-            .map(|k| TimedEvent {
-                time: f64::from(10 * k + 3) * dt,
-                cut: Cut::Where(format!(
-                    "x > 0.99 && x < 1.01 && y > {} && y < {} && z < 0.03",
-                    0.045 * f64::from(k),
-                    0.045 * f64::from(k) + 0.04
-                )),
-            })
-            .collect(),
-        dt,
-    );
+    let mut single = simulation_dt(n, None, vec![], single_face_cuts(single_cuts, 3, dt), dt);
     single.step().expect("steps");
     let (mut single_cut_steps, mut single_next_steps) = (Vec::new(), Vec::new());
     // step 2, plain

@@ -38,13 +38,28 @@ fn check(g: &GMap, before: &[(Dart, [Dart; 4], Vec<usize>)], changed: &[Dart]) {
     }
 }
 
-#[test]
-fn unsewn_faces_and_their_orbits_are_listed_and_nothing_else_changed() {
-    let (mut g, _) = build(
+/// A box of 3 x 2 x 2 cells of tetrahedra.
+fn small_box() -> GMap {
+    build(
         &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
         &BuildOptions::default(),
     )
-    .unwrap();
+    .unwrap()
+    .0
+}
+
+/// One dart of each of the first `n` faces between two volumes.
+fn interior_faces(g: &GMap, n: usize) -> Vec<Dart> {
+    g.orbit_representatives(OrbitType::parse("<0,1>").unwrap())
+        .into_iter()
+        .filter(|&d| !g.is_free(3, d))
+        .take(n)
+        .collect()
+}
+
+#[test]
+fn unsewn_faces_and_their_orbits_are_listed_and_nothing_else_changed() {
+    let mut g = small_box();
     assert!(g.changed_since(g.version()).is_none(), "not tracked yet");
     g.track_changes();
     let v0 = g.version();
@@ -52,12 +67,7 @@ fn unsewn_faces_and_their_orbits_are_listed_and_nothing_else_changed() {
     assert!(g.changed_since(v0 + 1).is_none(), "a future version");
     let before = snapshot(&g);
     // unsew a few interior faces
-    let faces: Vec<Dart> = g
-        .orbit_representatives(OrbitType::parse("<0,1>").unwrap())
-        .into_iter()
-        .filter(|&d| !g.is_free(3, d))
-        .take(3)
-        .collect();
+    let faces = interior_faces(&g, 3);
     assert_eq!(faces.len(), 3);
     for d in faces {
         if !g.is_free(3, d) {
@@ -107,11 +117,7 @@ fn unsewn_faces_and_their_orbits_are_listed_and_nothing_else_changed() {
 #[test]
 fn a_local_refresh_of_derived_embeddings_equals_a_full_one() {
     use topomech_gmap::{Aggregate, EmbeddingType, Policy, Value};
-    let (mut g, _) = build(
-        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
-        &BuildOptions::default(),
-    )
-    .unwrap();
+    let mut g = small_box();
     let dim = g.dimension();
     // a value per <2>-orbit (a pair of darts in a volume), aggregated per vertex and edge
     let src_orbit = OrbitType::parse("<2>").unwrap();
@@ -181,11 +187,7 @@ fn a_local_refresh_of_derived_embeddings_equals_a_full_one() {
 fn an_embedding_added_on_an_existing_orbit_type_shares_its_slots_and_stays_valid() {
     use topomech_gmap::io::{from_bytes, to_bytes};
     use topomech_gmap::{EmbeddingType, Policy, Value};
-    let (mut g, _) = build(
-        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
-        &BuildOptions::default(),
-    )
-    .unwrap();
+    let mut g = small_box();
     let vertex = OrbitType::vertex(g.dimension());
     let pos = g.require("position").unwrap();
     let first = g
@@ -361,21 +363,12 @@ type State = ((u64, u64), (u64, u64), Vec<Dart>);
 /// again, `changes_since` gives again what it gave.
 #[test]
 fn the_change_record_moves_with_every_recorded_change() {
-    let (mut g, _) = build(
-        &cuboid([3, 2, 2], [3.0, 2.0, 2.0], BoxElement::Tetra),
-        &BuildOptions::default(),
-    )
-    .unwrap();
+    let mut g = small_box();
     assert_eq!(g.change_record(), None, "not tracked yet");
     g.track_changes();
     let v0 = g.version();
     assert_eq!(g.change_record(), Some((v0, 0)));
-    let faces: Vec<Dart> = g
-        .orbit_representatives(OrbitType::parse("<0,1>").unwrap())
-        .into_iter()
-        .filter(|&d| !g.is_free(3, d))
-        .take(3)
-        .collect();
+    let faces = interior_faces(&g, 3);
     let mut seen: Vec<State> = Vec::new();
     for &f in &faces {
         let before = g.change_record().unwrap();
