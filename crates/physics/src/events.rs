@@ -88,6 +88,35 @@ impl Blade {
     }
 }
 
+/// The largest vertex coordinate (in magnitude) a plane or predicate cut takes: a guard sums
+/// the positions of a volume's darts (a few dozen) for its centroid, and beyond this the sum
+/// could overflow to infinity and open the wrong faces without a word (found by QA at 1e308).
+const CENTROID_LIMIT: f64 = 1e300;
+
+/// The largest coordinate (in magnitude) a blade takes, of its points and of the vertex
+/// positions: its crossing test multiplies three differences of them.
+const CROSSING_LIMIT: f64 = 1e100;
+
+/// `Err` naming the largest vertex coordinate when the box of the positions (`bounds`, see
+/// `Simulation::positions_box`) reaches past `limit` in magnitude: `what` could not be
+/// computed right.
+fn positions_problem(
+    bounds: Option<([f64; 3], [f64; 3])>,
+    limit: f64,
+    what: &str,
+) -> Result<(), PhysicsError> {
+    let Some((lo, hi)) = bounds else {
+        return Ok(());
+    };
+    let largest = lo.iter().chain(&hi).fold(0.0_f64, |m, v| m.max(v.abs()));
+    if largest > limit {
+        return Err(PhysicsError::Config(format!(
+            "{what} needs vertex coordinates of at most {limit:e} in magnitude (its test would overflow); the largest is {largest:e}"
+        )));
+    }
+    Ok(())
+}
+
 /// Why a blade's segments at its two poses cannot cut: a non-finite point, or two end points
 /// that coincide.
 fn segments_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String> {
@@ -96,7 +125,12 @@ fn segments_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String> 
     }
     // the crossing test takes differences and products of three of them: beyond this the
     // products overflow, and a crossing would be missed silently
-    if from.iter().chain(to).flatten().any(|x| x.abs() > 1e100) {
+    if from
+        .iter()
+        .chain(to)
+        .flatten()
+        .any(|x| x.abs() > CROSSING_LIMIT)
+    {
         return Some(
             "its coordinates must be at most 1e100 in magnitude (the crossing test would overflow)"
                 .to_string(),
@@ -329,7 +363,7 @@ impl Simulation {
                 let n = self.apply_cut(&cut, Some(k))?.unsewn;
                 if n == 0 {
                     return Err(PhysicsError::Config(format!(
-                        "{} separates nothing: it misses the object",
+                        "{} separates nothing: it misses the object, or every face it meets is open already",
                         describe(&self.cfg.events[k])
                     )));
                 }
@@ -380,6 +414,7 @@ impl Simulation {
         from: [[f64; 3]; 2],
         to: [[f64; 3]; 2],
     ) -> Result<TopologyResult, PhysicsError> {
+        positions_problem(self.positions_box(), CROSSING_LIMIT, "a blade")?;
         // the guard of `cut_swept` is false where the segment between the two centroids
         // misses the swept quad, so where the box of the positions it reads (whose hull
         // holds both centroids, and so the segment) misses the quad's box: only the faces
@@ -469,7 +504,9 @@ impl Simulation {
         // sides of the plane have a box meeting the plane inside the positions' box).
         // Where the region misses the positions' box, grown by far more than the rounding of
         // a centroid or of its distance to the plane, no face can open: nothing is searched.
-        let bounds = self.positions_box().map(|(lo, hi)| {
+        let bounds = self.positions_box();
+        positions_problem(bounds, CENTROID_LIMIT, "a cut")?;
+        let bounds = bounds.map(|(lo, hi)| {
             let scale = lo.iter().chain(&hi).fold(0.0_f64, |m, v| m.max(v.abs()));
             let m = 1e-9 * (1.0 + scale);
             (lo.map(|v| v - m), hi.map(|v| v + m))

@@ -636,6 +636,52 @@ fn a_plane_cut_does_not_depend_on_the_scale_of_its_normal() {
     }
 }
 
+/// Vertex coordinates whose sums could overflow are refused by the cuts that sum them, with
+/// the largest coordinate named (QA: a body scaled to 1e308 had its plane cut open 5 faces of
+/// the 30 it opens at 1e307, without a word): a plane cut takes them up to 1e300 (it opens
+/// there what it opens at scale 1 scaled), a blade up to 1e100, as it does its own points.
+#[test]
+fn cuts_refuse_coordinates_their_tests_would_overflow() {
+    let mesh = cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let scaled = |k: f64| {
+        let mut s = sim(&mesh, vec![model("stretch_elementary", &[])], |_| {});
+        let x: Vec<[f64; 3]> = s
+            .vertex_vec3("position")
+            .unwrap()
+            .iter()
+            .map(|p| p.map(|v| v * k))
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        s
+    };
+    let plane = |s: &mut Simulation| {
+        s.cut(&Cut::Plane {
+            normal: [1.0, -1.0, 0.0],
+            offset: 0.0,
+        })
+    };
+    let want = plane(&mut scaled(1.0)).unwrap().unsewn;
+    assert!(want > 0);
+    assert_eq!(plane(&mut scaled(1e299)).unwrap().unsewn, want);
+    let err = plane(&mut scaled(5e307)).unwrap_err().to_string();
+    assert!(
+        err.contains("at most 1e300") && err.contains("the largest is 1e308"),
+        "{err}"
+    );
+    let blade = |s: &mut Simulation| {
+        s.cut_swept(
+            [[1.0, -1.0, -1.0], [1.0, -1.0, 2.0]],
+            [[1.0, 2.0, -1.0], [1.0, 2.0, 2.0]],
+        )
+    };
+    assert!(blade(&mut scaled(1.0)).unwrap().unsewn > 0);
+    let err = blade(&mut scaled(1e101)).unwrap_err().to_string();
+    assert!(
+        err.contains("a blade needs vertex coordinates of at most 1e100"),
+        "{err}"
+    );
+}
+
 /// A stress fracture on a mesh whose volumes are not all tetrahedra is refused when the
 /// simulation is built (the stress is computed per tetrahedron: a hexahedron would never
 /// break, silently).
