@@ -414,7 +414,8 @@ impl Simulation {
         from: [[f64; 3]; 2],
         to: [[f64; 3]; 2],
     ) -> Result<TopologyResult, PhysicsError> {
-        positions_problem(self.positions_box(), CROSSING_LIMIT, "a blade")?;
+        let bounds = self.positions_box();
+        positions_problem(bounds, CROSSING_LIMIT, "a blade")?;
         // the guard of `cut_swept` is false where the segment between the two centroids
         // misses the swept quad, so where the box of the positions it reads (whose hull
         // holds both centroids, and so the segment) misses the quad's box: only the faces
@@ -425,6 +426,22 @@ impl Simulation {
             for k in 0..3 {
                 lo[k] = lo[k].min(p[k]);
                 hi[k] = hi[k].max(p[k]);
+            }
+        }
+        // and where the quad's box misses the positions' box, grown by far more than the
+        // crossing test's tolerance (1e-12 of the quad's edges) and its rounding, no face can
+        // open: nothing is searched (a blade before or after it crosses the body costs a
+        // pass over the positions, not the guard's)
+        if let Some((plo, phi)) = bounds {
+            let scale = plo
+                .iter()
+                .chain(&phi)
+                .chain(&lo)
+                .chain(&hi)
+                .fold(0.0_f64, |m, v| m.max(v.abs()));
+            let m = 1e-9 * (1.0 + scale);
+            if (0..3).any(|k| lo[k] > phi[k] + m || hi[k] < plo[k] - m) {
+                return self.record_change("blade", 0);
             }
         }
         let region = topomech_rules::Region {

@@ -124,6 +124,30 @@ fn one_sweep_now_is_the_plane_cut_too() {
         )
         .unwrap();
     assert_eq!(none.unsewn, 0);
+    // one whose quad's box misses the positions' box is not searched at all (the guard does
+    // not run), and one whose box only meets it is
+    let runs = s.rules().compiled_guard_runs().0;
+    let far = s
+        .cut_swept(
+            [[0.7, 2.0, -0.5], [0.7, 2.0, 1.5]],
+            [[0.7, 3.0, -0.5], [0.7, 3.0, 1.5]],
+        )
+        .unwrap();
+    assert_eq!(far.unsewn, 0);
+    assert_eq!(s.rules().compiled_guard_runs().0, runs, "no search");
+    let y_max = s
+        .vertex_vec3("position")
+        .unwrap()
+        .iter()
+        .fold(f64::NEG_INFINITY, |m, p| m.max(p[1]));
+    let near = s
+        .cut_swept(
+            [[0.7, y_max, -0.5], [0.7, y_max, 1.5]],
+            [[0.7, 3.0, -0.5], [0.7, 3.0, 1.5]],
+        )
+        .unwrap();
+    assert_eq!(near.unsewn, 0, "no centroid is on the body's boundary");
+    assert_eq!(s.rules().compiled_guard_runs().0, runs + 1, "searched");
     let err = s
         .cut_swept(
             [[f64::NAN, 0.0, 0.0], [5.0, 1.0, 0.0]],
