@@ -987,6 +987,25 @@ pub(crate) struct Plan {
     /// slot, `(write, row)`, or `(u32::MAX, 0)`: built at the first in-place patch, kept
     /// up to date by the next ones.
     owner: Option<Owners>,
+    /// The values of read-only gathers copied in row order (see [`Plan::pack_read_only`]),
+    /// which the native code reads through `identity` instead of the gathers' slots.
+    packed: Vec<Packed>,
+    /// Per program column, its write count at the last chunked run (`u64::MAX`: none yet).
+    last_writes: Vec<u64>,
+    /// `0, 1, 2, ...`: the index array of every packed gather (at least `rows` long while
+    /// one is packed).
+    identity: Vec<u32>,
+}
+
+/// A gather's values in row order: what the plan's only gather of program column `col`
+/// (gather `idx`) reads on each row, copied when the column's write count was `writes`;
+/// empty for a gather that reads the column in order already (not worth a copy).
+#[derive(Debug)]
+struct Packed {
+    col: usize,
+    idx: usize,
+    writes: u64,
+    values: Vec<f64>,
 }
 
 /// Per written embedding (in the order of the writes), which target writes each slot (see
@@ -1571,6 +1590,9 @@ impl Plan {
             chunk_starts: None,
             dead: 0,
             owner: None,
+            packed: Vec::new(),
+            last_writes: Vec::new(),
+            identity: Vec::new(),
         };
         plan.chunk_starts = plan.chunk_starts();
         // native code already generated stays (it depends on the program, the column kinds
@@ -1764,6 +1786,8 @@ impl Plan {
         // for their aggregates' slot lists, which stay where they are (the offsets grow row
         // by row): each entry becomes the live row's first slot, so a dead row aggregates as
         // many copies of a value the live row reads as it had slots (its count stays)
+        // (the packed gathers hold the rows before)
+        self.packed.clear();
         for &r in &dead_now {
             let r = r as usize;
             for x in &mut self.gathers {
@@ -1952,6 +1976,8 @@ impl Plan {
     /// Appends `added` (rows numbered after this plan's) to the plan's per-row arrays; the
     /// caller updates the counts and targets.
     fn append_rows(&mut self, added: Rows) {
+        // the packed gathers hold the rows before
+        self.packed.clear();
         let mut rows = Rows {
             row_match: std::mem::take(&mut self.row_match),
             gathers: std::mem::take(&mut self.gathers),
@@ -2087,6 +2113,9 @@ impl Plan {
             chunk_starts: None,
             dead: 0,
             owner: None,
+            packed: Vec::new(),
+            last_writes: Vec::new(),
+            identity: Vec::new(),
         })
     }
 
@@ -2189,6 +2218,87 @@ impl Plan {
     }
 
     /// Bytes held by the plan's arrays.
+    /// Copies in row order the values of each gather that reads, alone (no other gather
+    /// or aggregate reads its column, no other gather goes through its index array), a
+    /// column of reals this plan does not write and that held still since the plan's last chunked run (its
+    /// write count is the same): what a model reads but does not change from step to step
+    /// (rest shapes, stiffness tensors, masses), which the native code then reads
+    /// sequentially (through `identity`) instead of at scattered slots. A copy whose column
+    /// was written since is dropped (the gather reads the column again until it holds still
+    /// for a run), and so is every copy when the plan's rows change. The values are the
+    /// column's at the gathered slots: the same bits. Issue 15's "read-only per-element data
+    /// packed in row order at plan time".
+    fn pack_read_only(&mut self, g: &GMap, ids: &[EmbeddingId]) {
+        let n = self.prog.cols.len();
+        if self.last_writes.len() != n {
+            self.last_writes = vec![u64::MAX; n];
+        }
+        let written = |e: usize| self.prog.writes.iter().any(|w| ids[w.1] == ids[e]);
+        let mut fresh: Vec<Packed> = Vec::new();
+        for op in &self.prog.ops {
+            let Op::Gather { dst, col, idx } = *op else {
+                continue;
+            };
+            // the column's only gather, and the only one through its index array (several
+            // columns on one orbit share an index array: packed, it would become the
+            // identity for them too)
+            let alone = self.prog.ops.iter().all(|o| match o {
+                Op::Gather { col: c, idx: i, .. } => (*c == col) == (*i == idx),
+                Op::Agg { col: c, .. } => *c != col,
+                _ => true,
+            });
+            let e = self.prog.cols[col];
+            if !alone || written(e) {
+                continue;
+            }
+            let emb = g.embedding(ids[e]);
+            let ColumnRef::Real(x) = emb.column() else {
+                continue;
+            };
+            let count = emb.writes();
+            let w = self.prog.regs[dst].width;
+            match self.packed.iter().position(|p| p.col == col) {
+                Some(k) if self.packed[k].writes == count => {}
+                Some(k) => {
+                    self.packed.swap_remove(k);
+                }
+                None if self.last_writes[col] == count => {
+                    let slots = &self.gathers[idx][..self.rows];
+                    // a gather that reads its slots in increasing order over a range at
+                    // most 1.5 times the rows already streams the column: a copy would
+                    // cost memory for nothing (a co-rotational plan's 144 floats per tet);
+                    // such a gather is recorded as not worth a copy (`values` empty)
+                    let (lo, hi) = slots
+                        .iter()
+                        .fold((u32::MAX, 0), |(lo, hi), &s| (lo.min(s), hi.max(s)));
+                    let span = (hi as usize + 1).saturating_sub(lo as usize);
+                    let streams = slots.is_sorted() && 2 * span <= 3 * self.rows;
+                    let mut values = Vec::new();
+                    let inside = streams
+                        || slots.iter().all(|&s| {
+                            x.get(s as usize * w..(s as usize + 1) * w)
+                                .map(|v| values.extend_from_slice(v))
+                                .is_some()
+                        });
+                    if inside {
+                        fresh.push(Packed {
+                            col,
+                            idx,
+                            writes: count,
+                            values,
+                        });
+                    }
+                }
+                None => {}
+            }
+            self.last_writes[col] = count;
+        }
+        self.packed.append(&mut fresh);
+        if self.packed.iter().any(|p| !p.values.is_empty()) && self.identity.len() < self.rows {
+            self.identity = (0..self.rows as u32).collect();
+        }
+    }
+
     pub(crate) fn memory_bytes(&self) -> usize {
         let g: usize = self.gathers.iter().map(|x| x.capacity() * 4).sum();
         let c: usize = self
@@ -2200,7 +2310,14 @@ impl Plan {
         let t: usize = self.targets.iter().map(|(t, _)| t.capacity() * 8).sum();
         let w: usize = self.writes.iter().map(|x| x.capacity() * 8).sum();
         let o: usize = self.owner.iter().flatten().map(|t| t.capacity() * 8).sum();
-        g + c + t + w + o + self.row_match.capacity() * 4 + self.out.capacity() * 8
+        let p: usize = self
+            .packed
+            .iter()
+            .map(|p| p.values.capacity() * 8)
+            .sum::<usize>()
+            + self.identity.capacity() * 4
+            + self.last_writes.capacity() * 8;
+        g + c + t + w + o + p + self.row_match.capacity() * 4 + self.out.capacity() * 8
     }
 
     /// Where the value of the write whose output offset is `off` and width `width` lies in
@@ -2363,6 +2480,10 @@ impl Plan {
         let NativeState::Ready(nat, need) = &self.native else {
             return None;
         };
+        // owned, so that the read-only gathers can be packed now (`&mut self`; each copy
+        // checks its slots inside its column)
+        let (nat, need) = (std::sync::Arc::clone(nat), need.clone());
+        self.pack_read_only(g, ids);
         let fills = self.prog.fill_values(&pvals);
         if nat.kinds != kinds || !self.prog.fills_fit(&fills) {
             return None;
@@ -2412,6 +2533,11 @@ impl Plan {
             }
             col_p.push(p);
         }
+        // the read-only gathers read their values in row order (packed above), through the
+        // identity
+        for p in self.packed.iter().filter(|p| !p.values.is_empty()) {
+            col_p[p.col] = p.values.as_ptr().cast::<u8>();
+        }
         let write_col: Vec<Col> = self
             .prog
             .writes
@@ -2434,7 +2560,11 @@ impl Plan {
             }
         }
         let out = SyncPtr(self.out.as_mut_ptr());
-        let tables = ArgTables::new(&self.gathers, &self.csr, &self.counts, nat, col_p, &fills);
+        let mut tables =
+            ArgTables::new(&self.gathers, &self.csr, &self.counts, &nat, col_p, &fills);
+        for p in self.packed.iter().filter(|p| !p.values.is_empty()) {
+            tables.gathers[p.idx] = self.identity.as_ptr();
+        }
         let args = tables.args(out.0);
         let store_chunk = |c: usize| {
             // SAFETY: block `c` of the output buffer (inside it: `n_chunks` blocks) is
@@ -2477,8 +2607,11 @@ impl Plan {
         let one = |c: usize| -> bool {
             let (first, n) = (c * ch, (rows - c * ch).min(ch));
             // SAFETY: as in `Plan::evaluate`: `args` describes this plan's arrays, for which
-            // `nat` was compiled (kinds, lengths against `need`, fills checked above); rows
-            // `first..first + n` are chunk `c`, run by this call only, writing block `c`.
+            // `nat` was compiled (kinds, lengths against `need`, fills checked above), but
+            // for each packed gather, whose column is its `rows * width` values in row order
+            // and whose index array is `identity`, row `r` at `r` (`pack_read_only`: at
+            // least `rows` long), so the code reads inside it; rows `first..first + n` are
+            // chunk `c`, run by this call only, writing block `c`.
             if unsafe { nat.call(&args, first, n) } != 0 {
                 return false;
             }

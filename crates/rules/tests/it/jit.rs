@@ -9,7 +9,7 @@
 use proptest::prelude::*;
 use topomech_gmap::generators::{grid, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions};
-use topomech_gmap::GMap;
+use topomech_gmap::{ColumnMut, GMap};
 use topomech_rules::{load_sources, Params, RuleSet, Val};
 
 const HEADER: &str = "dimension 2
@@ -361,4 +361,64 @@ rule r(p: f64, q: vec3) {{
         assert_eq!(slow, fast, "case {k}");
         assert_eq!(slow.is_err(), k >= 3, "case {k}: {slow:?}");
     }
+}
+
+/// Read-only gathers packed in row order (`Plan::pack_read_only`): a column the rule reads
+/// but does not write, at scattered slots (a rule on darts reading a vertex embedding), is
+/// copied at the plan's second run (its write count held still since the first) and read
+/// from the copy after, which the plan's memory shows; a write to it from outside (here
+/// every vertex's velocity scaled through `column_mut`) is seen at the next run; and every
+/// run gives the evaluator's bits. Fails if the copy is kept after the write, or taken for a
+/// column that changes between runs.
+#[test]
+fn a_read_only_column_packed_in_row_order_sees_later_writes() {
+    let src = format!(
+        "{HEADER}
+embedding out_d : vec3 on <>
+
+rule r {{
+  left {{ d : <> hook }}
+  compute {{ d.out_d = 2.0 * d.velocity + vec3(1.0, 0.0, 0.0) }}
+}}
+"
+    );
+    let outcome = |jit: bool| {
+        let (mut rules, _) = load_sources(&[("pack.tmr".to_string(), src.clone())]).unwrap();
+        rules.set_jit(jit);
+        let mut g = mesh();
+        rules.prepare(&mut g).unwrap();
+        for init in ["init_v", "init_f"] {
+            rules
+                .apply_everywhere(&mut g, init, &Params::new())
+                .unwrap();
+        }
+        let velocity = g.require("velocity").unwrap();
+        let mut runs = Vec::new();
+        let mut bytes = Vec::new();
+        for k in 0..5 {
+            if k == 3 {
+                let ColumnMut::Real(v) = g.column_mut(velocity).unwrap() else {
+                    panic!("a column of reals")
+                };
+                for x in v.iter_mut() {
+                    *x = 3.0 * *x - 0.5;
+                }
+            }
+            rules.apply_everywhere(&mut g, "r", &Params::new()).unwrap();
+            bytes.push(rules.plan_bytes());
+            let out = g.require("out_d").unwrap();
+            let values = g.embedding(out).real_column().unwrap();
+            runs.push(values.iter().map(|x| x.to_bits()).collect::<Vec<u64>>());
+        }
+        (runs, bytes)
+    };
+    let (slow, _) = outcome(false);
+    let (fast, bytes) = outcome(true);
+    assert_ne!(slow[2], slow[3], "the write changed the values");
+    assert_eq!(slow, fast, "the evaluator's bits at every run");
+    let darts = mesh().darts().count();
+    assert!(
+        bytes[1] >= bytes[0] + 24 * darts,
+        "packed at the second run: {bytes:?} ({darts} darts)"
+    );
 }
