@@ -535,7 +535,11 @@ class Simulation:
         """Writes every value of the stored embedding ``name`` in the layout of
         :meth:`embedding` (as :meth:`GMap.set_embedding`); derived embeddings (the
         vertex ``mass``, a sum of ``corner_mass``) are recomputed and the next step starts
-        from the values written. Nothing is written when it raises: :class:`KeyError`,
+        from the values written. What a model's init rules computed once at set-up from an
+        embedding is not computed again: writing ``young`` or ``poisson`` after set-up
+        changes no stiffness of the FEM models (their ``k_elem``, ``t_vertex``, ``t_edge``...,
+        computed from them then); write those, or build a new simulation. Nothing is written
+        when it raises: :class:`KeyError`,
         :class:`TypeError`, :class:`ValueError` and :class:`EmbeddingError` as
         :meth:`GMap.set_embedding`; :class:`ValueError` also when the orbits of one particle
         (a pinched vertex kept as one row) would get different positions, velocities or other
