@@ -228,7 +228,7 @@ def test_load_files_together(tmp_path: Path) -> None:
 def test_load_a_missing_file(tmp_path: Path) -> None:
     missing = tmp_path / "missing.tmr"
     with pytest.raises(
-        topomech.RuleError, match=r"missing\.tmr:1:1: error\[syntax\]: cannot read the file"
+        topomech.RuleError, match=r"missing\.tmr:1:1: error\[file\]: cannot read the file"
     ):
         RuleSet.load([missing])
     with pytest.raises(ValueError, match="at least one"):

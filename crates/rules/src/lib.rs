@@ -82,7 +82,7 @@ pub fn load_files(paths: &[&Path]) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Dia
                 file: p.display().to_string(),
                 pos: ast::Pos { line: 1, col: 1 },
                 severity: Severity::Error,
-                condition: "syntax",
+                condition: "file",
                 message: format!("cannot read the file: {e}"),
             }),
         }
