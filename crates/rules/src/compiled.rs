@@ -1117,11 +1117,18 @@ struct OrbitRows<'a> {
     walked: Vec<Dart>,
 }
 
-impl Drop for OrbitRows<'_> {
-    fn drop(&mut self) {
+impl OrbitRows<'_> {
+    /// Clears the entries of the darts set.
+    fn reset(&mut self) {
         for x in self.walked.drain(..) {
             self.row_of[x.index()] = 0;
         }
+    }
+}
+
+impl Drop for OrbitRows<'_> {
+    fn drop(&mut self) {
+        self.reset();
     }
 }
 
@@ -1218,9 +1225,8 @@ impl Rows {
                 row_of: t.borrow_mut(),
                 walked: Vec::new(),
             };
-            let OrbitRows { row_of, walked } = &mut table;
-            if row_of.len() < g.capacity() {
-                row_of.resize(g.capacity(), 0);
+            if table.row_of.len() < g.capacity() {
+                table.row_of.resize(g.capacity(), 0);
             }
             for ak in &prog.aggs {
                 let mut offs = Vec::with_capacity(n + 1);
@@ -1229,7 +1235,7 @@ impl Rows {
                 offs.push(0);
                 for row in 0..n {
                     let d = dart(ak.node, row);
-                    let first = row_of[d.index()];
+                    let first = table.row_of[d.index()];
                     if first != 0 {
                         let r0 = (first - 1) as usize;
                         cnt.push(cnt[r0]);
@@ -1243,9 +1249,9 @@ impl Rows {
                     g.visit_orbit(d, ak.orbit, &mut marks, |x| darts.push(x));
                     marks.clear();
                     for &x in &darts {
-                        row_of[x.index()] = row as u32 + 1;
+                        table.row_of[x.index()] = row as u32 + 1;
                     }
-                    walked.extend_from_slice(&darts);
+                    table.walked.extend_from_slice(&darts);
                     match ak.emb {
                         None => cnt.push(darts.len() as f64),
                         Some(emb) => {
@@ -1266,9 +1272,7 @@ impl Rows {
                         }
                     }
                 }
-                for x in walked.drain(..) {
-                    row_of[x.index()] = 0;
-                }
+                table.reset();
                 csr.push((offs, slots));
                 counts.push(cnt);
             }
@@ -1874,17 +1878,12 @@ impl Plan {
         self.chunk_starts = match before {
             Some((starts, slots)) => {
                 let shifted = self.shifted_chunk_starts(&starts, &removed, base);
-                let (_, slots) = self
-                    .chunk_starts_sorted(Some(&slots), &new_from, false)
-                    .expect("checked on entry");
                 debug_assert_eq!(
-                    Some(&shifted),
-                    self.chunk_starts_sorted(None, &new_from, true)
-                        .as_ref()
-                        .map(|x| &x.0),
+                    shifted,
+                    self.bisected_chunk_starts(),
                     "chunk starts moved as bisection finds them"
                 );
-                Some((shifted, slots))
+                Some((shifted, self.target_slots(Some(&slots), &new_from)))
             }
             None => None,
         };
@@ -2217,7 +2216,6 @@ impl Plan {
         }
     }
 
-    /// Bytes held by the plan's arrays.
     /// Copies in row order the values of each gather that reads, alone (no other gather
     /// or aggregate reads its column, no other gather goes through its index array), a
     /// column of reals this plan does not write and that held still since the plan's last chunked run (its
@@ -2299,6 +2297,7 @@ impl Plan {
         }
     }
 
+    /// Bytes held by the plan's arrays.
     pub(crate) fn memory_bytes(&self) -> usize {
         let g: usize = self.gathers.iter().map(|x| x.capacity() * 4).sum();
         let c: usize = self
@@ -2366,7 +2365,7 @@ impl Plan {
                 t.sort_unstable_by_key(|x| x.0);
             }
         }
-        self.chunk_starts_sorted(None, &vec![0; self.targets.len()], true)
+        self.chunk_starts_sorted()
     }
 
     /// The chunk starts of targets from which the pairs `removed[w]` (per write, `(row,
@@ -2404,43 +2403,41 @@ impl Plan {
             .collect()
     }
 
-    /// [`Plan::chunk_starts`] for targets known to be in row order, with `slots` a bound
-    /// already known for the targets of each write before `from[w]` (those after are looked
-    /// at): what a patch in place needs, at a cost of a bisection per chunk.
-    /// (`with_starts` false: the starts are left empty, for a caller that has them.)
-    fn chunk_starts_sorted(
-        &self,
-        slots: Option<&[usize]>,
-        from: &[usize],
-        with_starts: bool,
-    ) -> Option<(Vec<Vec<u32>>, Vec<usize>)> {
+    /// [`Plan::chunk_starts`] for targets known to be in row order.
+    fn chunk_starts_sorted(&self) -> Option<(Vec<Vec<u32>>, Vec<usize>)> {
         if self.prog.guard || !self.dups.is_empty() || self.rows == 0 {
             return None;
         }
+        Some((self.bisected_chunk_starts(), self.target_slots(None, &[])))
+    }
+
+    /// Per write, where the targets of each chunk start, found by a bisection per chunk
+    /// (the targets must be in row order).
+    fn bisected_chunk_starts(&self) -> Vec<Vec<u32>> {
         debug_assert!(self
             .targets
             .iter()
             .all(|(t, _)| t.is_sorted_by_key(|x| x.0)));
         let chunks = self.rows.div_ceil(self.chunk);
-        let starts = if with_starts {
-            self.targets
-                .iter()
-                .map(|(t, _)| {
-                    (0..=chunks)
-                        .map(|c| t.partition_point(|&(r, _)| (r as usize) < c * self.chunk) as u32)
-                        .collect()
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        // per write, the slots its column must hold: one past its largest target
-        let slots = self
-            .targets
+        self.targets
+            .iter()
+            .map(|(t, _)| {
+                (0..=chunks)
+                    .map(|c| t.partition_point(|&(r, _)| (r as usize) < c * self.chunk) as u32)
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Per write, the slots its column must hold: one past its largest target, with
+    /// `known` a bound already known for the targets of each write before `from[w]` (those
+    /// after are looked at; without it, all are).
+    fn target_slots(&self, known: Option<&[usize]>, from: &[usize]) -> Vec<usize> {
+        self.targets
             .iter()
             .enumerate()
             .map(|(w, (t, _))| {
-                let (known, from) = match slots {
+                let (known, from) = match known {
                     Some(s) if s.len() == self.targets.len() => (s[w], from[w].min(t.len())),
                     _ => (0, 0),
                 };
@@ -2449,8 +2446,7 @@ impl Plan {
                     .map(|&(_, s)| s as usize + 1)
                     .fold(known, usize::max)
             })
-            .collect();
-        Some((starts, slots))
+            .collect()
     }
 
     /// A run of the native code that checks each chunk's values finite as soon as the chunk

@@ -598,10 +598,11 @@ fn left_graph_key(rule: &Rule) -> String {
     )
 }
 
-/// The key of the matches of a computation rule with a guard: its left graph, its guard
-/// and what the guard reads (the embeddings, by id, with their write counts, and the
-/// values of the parameters it reads, [`guard_param_bits`]), so that rules with the same left graph and the same guard (a
-/// model's init, step and Jacobian rules over its elements, `where n0.vertex0 && ...`)
+/// The key of the matches of a computation rule with a guard: its left graph, its guard,
+/// the embeddings it reads (by id) and what it depends on ([`guard_state`]: their write
+/// counts, the values of the parameters it reads), so that rules with the same left graph
+/// and the same guard (a model's init, step and Jacobian rules over its elements,
+/// `where n0.vertex0 && ...`)
 /// share their matches while nothing the guard reads changes: [`find_all`] depends on the
 /// rule through nothing else (the leading conjuncts and the row-invariance it tests come
 /// from the guard and the embeddings' orbits). `None` for a rule that changes the topology
@@ -609,17 +610,26 @@ fn left_graph_key(rule: &Rule) -> String {
 fn guarded_key(g: &GMap, b: &Bound) -> Option<String> {
     let rule = b.rule;
     let guard = rule.guard.as_ref().filter(|_| !rule.changes_topology)?;
-    let reads: Vec<(u32, u64)> = rule
+    let ids: Vec<u32> = rule.guard_reads.iter().map(|&e| b.ids[e].0).collect();
+    Some(format!(
+        "{}|where {guard:?}|reads {ids:?}|state {:?}",
+        left_graph_key(rule),
+        guard_state(g, b),
+    ))
+}
+
+/// What the guard of `b`'s rule depends on in the map and the parameters: the write counts
+/// of the embeddings it reads, then the bits of the parameters it reads
+/// ([`guard_param_bits`]). A plan and shared guarded matches stay valid while it is the same.
+fn guard_state(g: &GMap, b: &Bound) -> Vec<u64> {
+    let mut state: Vec<u64> = b
+        .rule
         .guard_reads
         .iter()
-        .map(|&e| (b.ids[e].0, g.embedding(b.ids[e]).writes()))
+        .map(|&e| g.embedding(b.ids[e]).writes())
         .collect();
-    let mut params = Vec::new();
-    guard_param_bits(b, &mut params);
-    Some(format!(
-        "{}|where {guard:?}|reads {reads:?}|params {params:?}",
-        left_graph_key(rule),
-    ))
+    guard_param_bits(b, &mut state);
+    state
 }
 
 /// Appends to `out` the bits of the values of the parameters `b`'s guard reads, in the order
@@ -1165,15 +1175,9 @@ impl RuleSet {
             .iter()
             .position(|r| std::ptr::eq(r, b.rule))
             .expect("bound rule is ours");
-        let mut reads: Vec<u64> = b
-            .rule
-            .guard_reads
-            .iter()
-            .map(|&e| g.embedding(b.ids[e]).writes())
-            .collect();
-        // and the values of the parameters the guard reads: the matches it accepts, so the
+        // with the values of the parameters the guard reads: the matches it accepts, so the
         // plan, depend on them (a rule applied again with another threshold)
-        guard_param_bits(&b, &mut reads);
+        let reads = guard_state(g, &b);
         let mut plans = self
             .plans
             .lock()
