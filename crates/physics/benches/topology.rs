@@ -86,13 +86,18 @@ fn seconds(f: impl FnOnce()) -> f64 {
     t.elapsed().as_secs_f64()
 }
 
-/// `TOPOMECH_TOPOLOGY_PROFILE=fracture|single|plane|blade|plain`: runs only that case, repeatedly, and
+/// `TOPOMECH_TOPOLOGY_PROFILE=fracture|single|plane|blade|plain` (or `idle`, see
+/// [`fracture_idle`]): runs only that case, repeatedly, and
 /// prints the time of its steps after the first (`TOPOMECH_TOPOLOGY_STEPS` of them, 100 by
 /// default; for a profiler, see `TOPOMECH_PERF_CTL` below; `TOPOMECH_STEPTIMES=1` also
 /// prints each step's time, in ms).
 fn profile(case: &str, n: [usize; 3]) {
     // a time step the undamped box stays stable with for hundreds of steps
     let dt = 1e-4;
+    if case == "idle" {
+        fracture_idle(n, dt);
+        return;
+    }
     let steps: u32 = std::env::var("TOPOMECH_TOPOLOGY_STEPS")
         .ok()
         .and_then(|x| x.parse().ok())
@@ -138,7 +143,7 @@ fn profile(case: &str, n: [usize; 3]) {
         ),
         other => {
             panic!(
-                "TOPOMECH_TOPOLOGY_PROFILE: fracture, single, plane, blade or plain, not {other:?}"
+                "TOPOMECH_TOPOLOGY_PROFILE: fracture, single, plane, blade, plain or idle, not {other:?}"
             )
         }
     };
@@ -179,6 +184,43 @@ fn profile(case: &str, n: [usize; 3]) {
         t * 1e3,
         t * 1e3 / f64::from(steps - 1)
     );
+}
+
+/// `TOPOMECH_TOPOLOGY_PROFILE=idle`: the step with fracture enabled and nothing breaking
+/// against a plain one, as the bench measures it (alternated steps of two simulations), over
+/// `TOPOMECH_TOPOLOGY_STEPS` pairs (100 by default): the medians and their ratio.
+fn fracture_idle(n: [usize; 3], dt: f64) {
+    let pairs: usize = std::env::var("TOPOMECH_TOPOLOGY_STEPS")
+        .ok()
+        .and_then(|x| x.parse().ok())
+        .unwrap_or(100);
+    let fracture = Fracture {
+        criterion: Criterion::Strain,
+        threshold: 0.5,
+    };
+    let mut plain = simulation_dt(n, None, vec![], vec![], dt);
+    let mut brittle = simulation_dt(n, Some(fracture), vec![], vec![], dt);
+    plain.step().expect("steps");
+    brittle.step().expect("steps");
+    let (mut p, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..pairs {
+        p.push(seconds(|| black_box(plain.step()).expect("steps")));
+        b.push(seconds(|| black_box(brittle.step()).expect("steps")));
+    }
+    assert!(brittle.topology_changes().is_empty(), "nothing breaks");
+    let (pm, bm) = (median(&mut p), median(&mut b));
+    println!(
+        "idle: fracture enabled {:.3} ms, without {:.3} ms: {:.3} steps (medians of {pairs})",
+        bm * 1e3,
+        pm * 1e3,
+        bm / pm
+    );
+}
+
+/// The median (the upper one of an even count).
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 fn main() {
@@ -332,10 +374,6 @@ fn main() {
         }
     }
     let single_faces: usize = single.topology_changes().iter().map(|c| c.unsewn).sum();
-    let median = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     let pt = median(&mut prepares);
     let (st, ct, at, bt) = (
         median(&mut steps),

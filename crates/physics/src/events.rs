@@ -236,6 +236,15 @@ fn criterion_rules(c: Criterion) -> (&'static str, &'static str, &'static str) {
     }
 }
 
+/// The rule a criterion's measure needs run once beforehand (the strain's inverse rest
+/// lengths, from the rest positions).
+fn criterion_init(c: Criterion) -> Option<&'static str> {
+    match c {
+        Criterion::Stress => None,
+        Criterion::Strain => Some("spring_strains_init"),
+    }
+}
+
 /// The box that the conjunction `text` (a predicate cut's, on the side's centroid `x`, `y`,
 /// `z`) confines the centroid to, from its conjuncts that compare a coordinate with a number
 /// (`x > 0.99`, `0.2 >= y`, `z == 0`; others, and a predicate that is not a conjunction of
@@ -474,6 +483,7 @@ impl Simulation {
                     .into()
             }));
         }
+        self.init_measure(f.criterion)?;
         self.rules.apply_everywhere(&mut self.g, measure, &none)?;
         // The guards of the shipped criteria compare a mean of the measure with the threshold
         // (the mean spring strain of a face's edges; the mean of the two elements' largest
@@ -683,6 +693,7 @@ impl Simulation {
         if self.rules.rule(rule).is_err() || self.rules.rule(measure).is_err() {
             return Ok(());
         }
+        self.init_measure(criterion)?;
         let rep = self
             .rules
             .apply_everywhere(&mut self.g, measure, &Params::new())?;
@@ -697,6 +708,20 @@ impl Simulation {
         }
         let p: Params = [("threshold".to_string(), Val::F(1.0))].into();
         self.rules.prepare_guard(&mut self.g, rule, &p)?;
+        Ok(())
+    }
+
+    /// Runs the rule the criterion's measure needs once beforehand, the first time only:
+    /// from the rest positions then, as the springs' rest lengths are computed at set-up
+    /// (edges that later changes split keep their values).
+    fn init_measure(&mut self, criterion: Criterion) -> Result<(), PhysicsError> {
+        if let Some(init) = criterion_init(criterion) {
+            if !self.measure_ready {
+                self.rules
+                    .apply_everywhere(&mut self.g, init, &Params::new())?;
+                self.measure_ready = true;
+            }
+        }
         Ok(())
     }
 

@@ -90,6 +90,9 @@ pub struct Simulation {
     events_done: Vec<bool>,
     /// The faces (3D) or edges (2D) each blade has opened so far.
     blades_opened: Vec<usize>,
+    /// Whether the rule a fracture criterion's measure needs run once beforehand has run
+    /// (the strain's inverse rest lengths; see `events::criterion_init`).
+    measure_ready: bool,
     /// The topology changes so far.
     changes: Vec<TopologyChange>,
     /// The position and velocity columns before the step being taken (kept between steps so

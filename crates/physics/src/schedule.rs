@@ -566,6 +566,7 @@ impl Simulation {
             size,
             events_done: vec![false; cfg_events],
             blades_opened: vec![0; cfg_blades],
+            measure_ready: false,
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
             forces_written: None,

@@ -264,6 +264,20 @@ fn the_merged_files_are_the_per_dimension_files_as_before() {
                             "rule spring_strains {{\n  left {{ a : {0} hook   b : {0}   a -0- b }}",
                             edge.1
                         ),
+                    )
+                    // and a fourth (2026-12-05): the strain multiplies by the inverse rest
+                    // length of the edge, computed once by an init rule, instead of dividing
+                    // by the rest positions' distance each time
+                    .replace(
+                        "a.spring_strain = norm(b.position - a.position) / norm(b.rest - a.rest) - 1.0",
+                        "a.spring_strain = norm(b.position - a.position) * a.spring_inv_l0 - 1.0",
+                    )
+                    .replace(
+                        "rule spring_strains {",
+                        &format!(
+                            "embedding spring_inv_l0 : f64 on {0}\n\nrule spring_strains_init {{\n  left {{ a : {1} hook   b : {1}   a -0- b }}\n  compute {{ a.spring_inv_l0 = 1.0 / norm(b.rest - a.rest) }}\n}}\n\nrule spring_strains {{",
+                            edge.0, edge.1
+                        ),
                     );
                 (*n, t)
             })

@@ -515,9 +515,11 @@ fn fracture_skips_the_search_only_when_nothing_can_open() {
         let mut s = new();
         s.set_vertex_vec3("position", &stretched).unwrap();
         let mut g = s.gmap().clone();
-        s.rules()
-            .apply_everywhere(&mut g, "spring_strains", &Params::new())
-            .unwrap();
+        for rule in ["spring_strains_init", "spring_strains"] {
+            s.rules()
+                .apply_everywhere(&mut g, rule, &Params::new())
+                .unwrap();
+        }
         let id = g.embedding_id("spring_strain").unwrap();
         let max = g
             .orbit_representatives(OrbitType::parse("<0>").unwrap())
@@ -807,4 +809,94 @@ fn a_plane_cut_of_a_tiny_body_opens_the_faces_of_the_usual_one() {
     }
     assert!(counts[0].0 > 0 && counts[0].1 > 0, "{counts:?}");
     assert_eq!(counts[0], counts[1], "the usual body against the tiny one");
+}
+
+/// The strain criterion multiplies each edge's length by its inverse rest length, computed
+/// once (`spring_strains_init`) before the first fracture test; edges that later cuts and
+/// fractures split must keep it (their orbits' values are copied to both parts). After a
+/// plane cut, a fracture burst and steps, on a box (3D) and a sheet (2D): every edge's
+/// stored value equals 1 / |rest_b - rest_a| of its two vertices now, and every edge's strain
+/// is |x_b - x_a| / |rest_b - rest_a| - 1 computed here; 4 ulps (one product and the
+/// rounding of the reciprocal against a quotient).
+#[test]
+fn the_strains_inverse_rest_lengths_survive_cuts_and_fractures() {
+    for (mesh, dim) in [
+        (cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra), 3),
+        (grid([8, 4], [4.0, 2.0], GridElement::Triangle), 2),
+    ] {
+        let mut s = sim(
+            &mesh,
+            vec![model("stretch_cumulated", &[("stiffness", 1e4)])],
+            |c| {
+                c.gravity = [0.0; 3];
+                c.fracture = Some(Fracture {
+                    criterion: Criterion::Strain,
+                    threshold: 0.2,
+                });
+            },
+        );
+        s.cut(&Cut::Plane {
+            normal: [1.0, 0.0, 0.0],
+            offset: 1.3,
+        })
+        .unwrap();
+        // stretch a slab so that the fracture opens faces there
+        let x: Vec<[f64; 3]> = s
+            .vertex_vec3("rest")
+            .unwrap()
+            .iter()
+            .map(|p| {
+                if p[0] > 0.4 && p[0] < 0.9 {
+                    [p[0], 1.5 * p[1], p[2]]
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        let opened = s
+            .fracture(Fracture {
+                criterion: Criterion::Strain,
+                threshold: 0.2,
+            })
+            .unwrap()
+            .unsewn;
+        assert!(opened > 0, "{dim}D: the fracture opened nothing");
+        for _ in 0..3 {
+            s.step().unwrap();
+        }
+        // the strains of the state now, as the criterion computes them
+        let mut g = s.gmap().clone();
+        s.rules()
+            .apply_everywhere(&mut g, "spring_strains", &topomech_rules::Params::new())
+            .unwrap();
+        let (rest, pos) = (g.require("rest").unwrap(), g.require("position").unwrap());
+        let (inv, strain) = (
+            g.require("spring_inv_l0").unwrap(),
+            g.require("spring_strain").unwrap(),
+        );
+        let dist = |a: &[f64], b: &[f64]| {
+            ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt()
+        };
+        let close = |a: f64, b: f64| (a - b).abs() <= 4.0 * f64::EPSILON * a.abs().max(b.abs());
+        let mut edges = 0;
+        for d in g.orbit_representatives(OrbitType::edge(dim)) {
+            let e = g.alpha(0, d);
+            let l0 = dist(g.real(rest, d), g.real(rest, e));
+            let l = dist(g.real(pos, d), g.real(pos, e));
+            let stored = g.real(inv, d)[0];
+            assert!(
+                close(stored, 1.0 / l0),
+                "{dim}D edge at {d}: {stored} vs 1/{l0}"
+            );
+            let want = l / l0 - 1.0;
+            let got = g.real(strain, d)[0];
+            assert!(
+                (got - want).abs() <= 4.0 * f64::EPSILON * (1.0 + want.abs()),
+                "{dim}D edge at {d}: strain {got} vs {want}"
+            );
+            edges += 1;
+        }
+        assert!(edges > 0);
+    }
 }
