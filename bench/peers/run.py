@@ -465,6 +465,51 @@ def markdown(doc: dict[str, Any], peers: list[str]) -> str:
             + ", ".join(f"{r['case']} {r['model_check_rel_force_diff']:.1e}" for r in checks)
             + "."
         )
+    nh = [r for r in doc["timing"] if "time_per_step_ms_neohookean" in r]
+    if nh:
+        L.append("")
+        L.append(
+            "## Neo-Hookean against Newton's (same meshes; tip error of the cantilever of the "
+            "same mesh)\n"
+        )
+        L.append(
+            "| case | topomech neohookean ms | Newton ms | topomech / Newton | "
+            "topomech neohookean tip error | Newton tip error (Smith's Lame parameters) |"
+        )
+        L.append("|---|---|---|---|---|---|")
+        for r in nh:
+            new = next(
+                (
+                    x
+                    for x in doc["timing"]
+                    if x["peer"] == "newton" and x["case"] == r["case"] and "time_per_step_ms" in x
+                ),
+                None,
+            )
+            acc_case = SAME_MESH.get(r["case"])
+
+            def variant(peer: str, start: str, acc_case: str | None = acc_case) -> str:
+                a = next(
+                    (x for x in doc["accuracy"] if x["peer"] == peer and x["case"] == acc_case),
+                    None,
+                )
+                for v in (a or {}).get("variants", []):
+                    if v["name"].startswith(start) and "rel_error" in v:
+                        return _pct(v["rel_error"])
+                return "-"
+
+            ms = r["time_per_step_ms_neohookean"]
+            L.append(
+                f"| {r['case']} | {ms:.3g} | {_ms(new)} | "
+                + ("-" if new is None else f"{ms / new['time_per_step_ms']:.1f}x")
+                + f" | {variant('topomech', 'stable Neo-Hookean')} | "
+                f"{variant('newton', 'Smith reparametrisation')} |"
+            )
+        L.append(
+            "\nBoth are the stable Neo-Hookean of Smith, de Goes & Kim 2018; Newton's in f32, "
+            "topomech's in f64. Newton's tip error is that of its run given Smith's "
+            "reparametrised Lame parameters (its documented ones are far off, above)."
+        )
     pb = [r for r in doc["timing"] if "time_per_step_ms_1_substep" in r]
     if pb:
         L.append("")

@@ -728,6 +728,42 @@ impl<'a> Compiler<'a> {
                     _ => None,
                 }
             }
+            // an entry, a row or a column at constant indices inside the matrix (a vector is
+            // a column); out of range, the built-in's own error at run time (`Generic`)
+            ("get", [m @ (Ty::Mat(..) | Ty::Vec2 | Ty::Vec3), Ty::I64, Ty::I64]) => {
+                let (r, c) = match m {
+                    Ty::Mat(r, c) => (usize::from(*r), usize::from(*c)),
+                    _ => (m.width(), 1),
+                };
+                match (Self::const_int(&args[1]), Self::const_int(&args[2])) {
+                    (Some(i), Some(j))
+                        if (0..r as i64).contains(&i) && (0..c as i64).contains(&j) =>
+                    {
+                        Some(vec![(i as usize * c + j as usize) as u32])
+                    }
+                    _ => None,
+                }
+            }
+            ("row2" | "row3", [Ty::Mat(r, c), Ty::I64]) if usize::from(*c) == ty.width() => {
+                let (r, c) = (usize::from(*r), usize::from(*c));
+                match Self::const_int(&args[1]) {
+                    Some(i) if (0..r as i64).contains(&i) => {
+                        let i = i as usize;
+                        Some((i * c..(i + 1) * c).map(|x| x as u32).collect())
+                    }
+                    _ => None,
+                }
+            }
+            ("col2" | "col3", [Ty::Mat(r, c), Ty::I64]) if usize::from(*r) == ty.width() => {
+                let (r, c) = (usize::from(*r), usize::from(*c));
+                match Self::const_int(&args[1]) {
+                    Some(j) if (0..c as i64).contains(&j) => {
+                        let j = j as usize;
+                        Some((0..r).map(|i| (i * c + j) as u32).collect())
+                    }
+                    _ => None,
+                }
+            }
             ("block2" | "block3", [Ty::Mat(r, c), Ty::I64, Ty::I64]) => {
                 let k = if name == "block2" { 2 } else { 3 };
                 let (r, c) = (usize::from(*r), usize::from(*c));
@@ -754,7 +790,8 @@ impl<'a> Compiler<'a> {
         if let Some(map) = pick {
             // the arguments that are data (not constant indices)
             let srcs: Vec<R> = match name {
-                "vecn_get2" | "vecn_get3" | "block2" | "block3" => vec![rs[0]],
+                "vecn_get2" | "vecn_get3" | "block2" | "block3" | "get" | "row2" | "row3"
+                | "col2" | "col3" => vec![rs[0]],
                 _ => rs.clone(),
             };
             debug_assert_eq!(map.len(), ty.width());

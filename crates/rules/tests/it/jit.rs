@@ -102,6 +102,10 @@ impl Gen {
             14 => format!("trace({})", self.m(d)),
             15 => format!("x({} * {})", self.m(d), self.v(d)),
             16 => format!("angle({}, {})", self.v(d), self.v(d)),
+            17 => {
+                let (i, j) = (self.pick(3), self.pick(3));
+                format!("get({}, {i}, {j})", self.m(d))
+            }
             _ => format!("({} * {} + {})", self.s(d), self.s(d), self.s(d)),
         }
     }
@@ -131,6 +135,10 @@ impl Gen {
             7 => format!("normalize({})", self.v(d)),
             8 => format!("vec3({}, {}, {})", self.s(d), self.s(d), self.s(d)),
             9 => format!("({} * {})", self.m(d), self.v(d)),
+            11 => {
+                let (f, k) = (["col3", "row3"][self.pick(2) as usize], self.pick(3));
+                format!("{f}({}, {k})", self.m(d))
+            }
             10 => format!(
                 "if {} {{ {} }} else {{ {} }}",
                 self.b(d),
@@ -421,4 +429,54 @@ rule r {{
         bytes[1] >= bytes[0] + 24 * darts,
         "packed at the second run: {bytes:?} ({darts} darts)"
     );
+}
+
+/// `get`, `row2`/`row3` and `col2`/`col3` at constant indices compile to moves of the
+/// matrix's entries (no call to the built-in): the interpreter's bits with the evaluator and
+/// with native code; at a constant index outside the matrix, the built-in's own error from
+/// all three.
+#[test]
+fn selections_at_constant_indices_give_the_interpreters_bits_and_errors() {
+    let g0 = mesh();
+    let ok = "let m = outer(f.fvel, q) + mat_from_cols3(q, mean<0,1>(f.position), f.fvel)
+    let m2 = mat2(get(m, 0, 0), get(m, 2, 1), p, get(f.fvel, 1, 0))
+    f.out_s = get(m, 1, 2) + get(f.fvel, 2, 0) + x(row2(m2, 1)) + y(col2(m2, 0))
+    f.out_v = col3(m, 0) + 2.0 * row3(m, 2) - col3(transpose(m), 1)
+    f.out_m = mat_from_cols3(col3(m, 2), row3(m, 1), col3(m, 1))";
+    let out_of_range = [
+        "f.out_s = get(outer(f.fvel, q), 3, 0)\n    f.out_v = q\n    f.out_m = outer(q, q)",
+        "f.out_s = p\n    f.out_v = col3(outer(f.fvel, q), -1)\n    f.out_m = outer(q, q)",
+        "f.out_s = p\n    f.out_v = row3(outer(f.fvel, q), 3)\n    f.out_m = outer(q, q)",
+    ];
+    for (k, body) in std::iter::once(ok).chain(out_of_range).enumerate() {
+        let src = format!(
+            "{HEADER}
+rule r(p: f64, q: vec3) {{
+  left {{ f : <0,1> hook }}
+  compute {{
+    {body}
+  }}
+}}
+"
+        );
+        let (mut rules, _) = load_sources(&[("sel.tmr".to_string(), src.clone())]).unwrap();
+        let mut g = g0.clone();
+        rules.prepare(&mut g).unwrap();
+        for init in ["init_v", "init_f"] {
+            rules
+                .apply_everywhere(&mut g, init, &Params::new())
+                .unwrap();
+        }
+        rules.set_compiled(false);
+        let (interpreted, _) = run(&mut rules, &g, false, 1);
+        rules.set_compiled(true);
+        let (evaluated, _) = run(&mut rules, &g, false, 1);
+        let (native, plans) = run(&mut rules, &g, true, 3);
+        assert_eq!(interpreted.is_ok(), k == 0, "case {k}: {interpreted:?}");
+        assert_eq!(evaluated, interpreted, "case {k}: evaluator");
+        assert_eq!(native, interpreted, "case {k}: native code");
+        if k == 0 {
+            assert_eq!(plans, vec![("r".to_string(), true)], "case {k}");
+        }
+    }
 }
