@@ -19,6 +19,7 @@ MODEL_TITLES = {
     "cloth": "cloth (cumulated stretch springs)",
     "corotational": "co-rotational tetrahedra",
     "mass_tensor": "mass-tensor tetrahedra",
+    "neohookean": "stable Neo-Hookean tetrahedra",
 }
 
 

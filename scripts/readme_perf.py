@@ -40,8 +40,14 @@ TITLES = {
     "cloth": "cumulated stretch springs, quad cloth",
     "corotational": "co-rotational FEM",
     "mass_tensor": "mass-tensor",
+    "neohookean": "stable Neo-Hookean",
 }
-SHORT = {"cloth": "cloth", "corotational": "co-rotational", "mass_tensor": "mass-tensor"}
+SHORT = {
+    "cloth": "cloth",
+    "corotational": "co-rotational",
+    "mass_tensor": "mass-tensor",
+    "neohookean": "Neo-Hookean",
+}
 UNITS = {"quad": "quads", "tet": "tets"}
 
 

@@ -1,7 +1,8 @@
 //! The engine against hand-written baselines (issue 6): one full simulation step
 //! (interactions, accumulation, symplectic Euler) through the rules, against the same
-//! algorithm written by hand on flat arrays (`baselines/mod.rs`), for three models — cumulated
-//! stretch springs on a quad cloth, co-rotational tetrahedra, mass-tensor tetrahedra — at about
+//! algorithm written by hand on flat arrays (`baselines/mod.rs`), for four models — cumulated
+//! stretch springs on a quad cloth, co-rotational tetrahedra, mass-tensor tetrahedra, stable
+//! Neo-Hookean tetrahedra — at about
 //! 10^3 .. 10^6 elements (quads for the cloth, tetrahedra for the volumes).
 //!
 //! For each model and size: the simulation is built and deformed; its baseline is built from the
@@ -18,7 +19,7 @@
 //!
 //! Environment:
 //! - `TOPOMECH_BENCH_SIZES`: target element counts, e.g. `1e3,1e4` (default `1e3,1e4,1e5,1e6`)
-//! - `TOPOMECH_BENCH_MODELS`: any of `cloth,corotational,mass_tensor` (default all)
+//! - `TOPOMECH_BENCH_MODELS`: any of `cloth,corotational,mass_tensor,neohookean` (default all)
 //! - `TOPOMECH_BENCH_THREADS`: engine pool sizes (default `1,2`)
 //! - `TOPOMECH_BENCH_CASE_BUDGET_S`: seconds one case may take (default 120)
 //! - `TOPOMECH_BENCH_TOTAL_BUDGET_S`: seconds for the whole bench (default 360)
@@ -163,6 +164,7 @@ fn model_named(s: &str) -> Option<Model> {
         "cloth" | "stretch_cumulated" => Some(Model::Cloth),
         "corotational" | "corot" => Some(Model::Corotational),
         "mass_tensor" | "mass-tensor" => Some(Model::MassTensor),
+        "neohookean" | "neo-hookean" => Some(Model::NeoHookean),
         _ => None,
     }
 }
@@ -172,6 +174,7 @@ fn model_label(m: Model) -> &'static str {
         Model::Cloth => "cloth",
         Model::Corotational => "corotational",
         Model::MassTensor => "mass_tensor",
+        Model::NeoHookean => "neohookean",
     }
 }
 
@@ -1379,7 +1382,7 @@ fn main() {
     });
     let models = env_list(
         "TOPOMECH_BENCH_MODELS",
-        "cloth,corotational,mass_tensor",
+        "cloth,corotational,mass_tensor,neohookean",
         model_named,
     );
     let threads: Vec<usize> = env_list("TOPOMECH_BENCH_THREADS", "1,2", |s| {

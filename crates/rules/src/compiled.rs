@@ -829,6 +829,9 @@ impl<'a> Compiler<'a> {
             self.p.ops.push(Op::Pick { dst, srcs, map });
             return Ok((dst, ty));
         }
+        if let Some(r) = self.spring(name, &rs, &ts)? {
+            return Ok((r, Ty::Vec3));
+        }
         let fast = match (name, ts.as_slice()) {
             ("dot", [a, b]) if a == b => Some(Fast::Dot),
             ("norm", [_]) => Some(Fast::Norm),
@@ -900,6 +903,86 @@ impl<'a> Compiler<'a> {
             ty,
         });
         Ok((dst, ty))
+    }
+}
+
+impl Compiler<'_> {
+    /// `dot(a, b)` of two registers of one width.
+    fn dot(&mut self, a: (R, Ty), b: (R, Ty)) -> (R, Ty) {
+        let dst = self.reg(1);
+        self.p.ops.push(Op::Fast {
+            f: Fast::Dot,
+            dst,
+            args: vec![a.0, b.0],
+        });
+        (dst, Ty::F64)
+    }
+
+    /// `spring_force(xa, xb, va, vb, k, c, l0)` and `spring_jvp(xa, xb, va, vb, dxa, dxb, dva,
+    /// dvb, k, c, l0)` (the damped spring of `mechanics`, Provot 1995) written as the plan's
+    /// own operations, in the built-in's order of operations (the same bits as the
+    /// interpreter), so that a rule calling them needs no call to the built-in per row.
+    /// `None` for another call, or with scalars that are not reals (the generic call then).
+    fn spring(&mut self, name: &str, rs: &[R], ts: &[Ty]) -> Result<Option<R>, Unsupported> {
+        let nv = match name {
+            "spring_force" if ts.len() == 7 => 4,
+            "spring_jvp" if ts.len() == 11 => 8,
+            _ => return Ok(None),
+        };
+        if !ts[..nv].iter().all(|t| *t == Ty::Vec3) || !ts[nv..].iter().all(|t| *t == Ty::F64) {
+            return Ok(None);
+        }
+        let v = |i: usize| (rs[i], Ty::Vec3);
+        let (k, c, l0) = (
+            (rs[nv], Ty::F64),
+            (rs[nv + 1], Ty::F64),
+            (rs[nv + 2], Ty::F64),
+        );
+        // d = xb - xa, l = sqrt(d . d), u = d / l, dv = vb - va
+        let d = self.binary(BinOp::Sub, v(1), v(0))?;
+        let dd = self.dot(d, d);
+        let l = self.reg(1);
+        self.p.ops.push(Op::F1 {
+            f: |x| builtins::scalar1("sqrt", x),
+            name: "sqrt",
+            dst: l,
+            a: dd.0,
+        });
+        let l = (l, Ty::F64);
+        let u = self.binary(BinOp::Div, d, l)?;
+        let dv = self.binary(BinOp::Sub, v(3), v(2))?;
+        if nv == 4 {
+            // (k (l - l0) + c (dv . u)) u
+            let p = self.dot(dv, u);
+            let t1 = self.binary(BinOp::Sub, l, l0)?;
+            let t2 = self.binary(BinOp::Mul, k, t1)?;
+            let t3 = self.binary(BinOp::Mul, c, p)?;
+            let s = self.binary(BinOp::Add, t2, t3)?;
+            return Ok(Some(self.binary(BinOp::Mul, s, u)?.0));
+        }
+        // w = dxb - dxa, z = dvb - dva, pw = w - (u . w) u;
+        // k ((1 - l0 / l) pw + (u . w) u) + (c / l) ((dv . pw) u + (dv . u) pw) + c (u . z) u
+        let w = self.binary(BinOp::Sub, v(5), v(4))?;
+        let z = self.binary(BinOp::Sub, v(7), v(6))?;
+        let uw = self.dot(u, w);
+        let uwu = self.binary(BinOp::Mul, uw, u)?;
+        let pw = self.binary(BinOp::Sub, w, uwu)?;
+        let (dvpw, dvu, uz) = (self.dot(dv, pw), self.dot(dv, u), self.dot(u, z));
+        let one = self.constant(&Val::F(1.0))?;
+        let q = self.binary(BinOp::Div, l0, l)?;
+        let q = self.binary(BinOp::Sub, one, q)?;
+        let a = self.binary(BinOp::Mul, q, pw)?;
+        let a = self.binary(BinOp::Add, a, uwu)?;
+        let a = self.binary(BinOp::Mul, k, a)?;
+        let cl = self.binary(BinOp::Div, c, l)?;
+        let e = self.binary(BinOp::Mul, dvpw, u)?;
+        let f = self.binary(BinOp::Mul, dvu, pw)?;
+        let e = self.binary(BinOp::Add, e, f)?;
+        let e = self.binary(BinOp::Mul, cl, e)?;
+        let a = self.binary(BinOp::Add, a, e)?;
+        let cuz = self.binary(BinOp::Mul, c, uz)?;
+        let j = self.binary(BinOp::Mul, cuz, u)?;
+        Ok(Some(self.binary(BinOp::Add, a, j)?.0))
     }
 }
 

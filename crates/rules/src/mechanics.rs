@@ -199,11 +199,13 @@ pub fn eval(name: &str, args: &[Val]) -> Result<Option<Val>, EvalError> {
             ) else {
                 return Ok(None);
             };
+            // (the dot products are `builtins::dot`'s, as the compiled plans' are: see
+            // `Compiler::spring` in compiled.rs)
             let d = sub(xb, xa);
-            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let l = crate::builtins::dot(&d, &d).sqrt();
             let u = [d[0] / l, d[1] / l, d[2] / l];
             let dv = sub(vb, va);
-            let s = k * (l - l0) + c * (dv[0] * u[0] + dv[1] * u[1] + dv[2] * u[2]);
+            let s = k * (l - l0) + c * crate::builtins::dot(&dv, &u);
             Some(Val::V3([s * u[0], s * u[1], s * u[2]]))
         }
         ("spring_jvp", a) if a.len() == 11 => {
@@ -421,7 +423,8 @@ pub fn tet_stiffness(x: [[f64; 3]; 4], young: f64, poisson: f64) -> Result<Mat, 
 /// d = xb - xa, u = d / l, P w = w - (u.w) u, w = dxb - dxa, z = dvb - dva, dv = vb - va:
 /// k [(1 - l0/l) P w + (u.w) u] + (c / l) [(dv.P w) u + (dv.u) P w] + c (u.z) u.
 fn spring_jvp(v: &[[f64; 3]; 8], k: f64, c: f64, l0: f64) -> [f64; 3] {
-    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    // `builtins::dot`, as the compiled plans' (see `Compiler::spring` in compiled.rs)
+    let dot = |a: [f64; 3], b: [f64; 3]| crate::builtins::dot(&a, &b);
     let d = sub(v[1], v[0]);
     let l = dot(d, d).sqrt();
     let u = d.map(|x| x / l);

@@ -17,7 +17,10 @@
 //!   algorithm as the engine's `polar` built-in (scaled Newton iteration, one-sided Jacobi SVD
 //!   where it does not apply);
 //! - [`MassTensor`]: mass-tensor tetrahedra (Cotin et al. 2000), `f_i = -K_ii u_i - sum_j K_ij u_j`
-//!   with the tensors cumulated on vertices and edges, `u = x - X`.
+//!   with the tensors cumulated on vertices and edges, `u = x - X`;
+//! - [`NeoHookean`]: stable Neo-Hookean tetrahedra (Smith, de Goes & Kim 2018,
+//!   doi:10.1145/3180491), `P = mu (1 - 1/(I_C + 1)) F + lambda (J - alpha) cof F`, forces
+//!   `H = -V P Dm^-T` (`neohookean` in `models/hyperelastic3d.tmr`).
 //!
 //! Initialisation (rest lengths, stiffness matrices, masses, cumulated tensors) is read from
 //! the engine's map after `Simulation::new`, so that both start from identical numbers; the
@@ -511,6 +514,120 @@ impl Baseline for MassTensor {
     }
 }
 
+/// Stable Neo-Hookean tetrahedra (`neohookean`): per element `F = Ds Dm^-1`, the first
+/// Piola-Kirchhoff stress `P = mu (1 - 1 / (I_C + 1)) F + lambda (J - alpha) cof F` with
+/// `I_C = tr(F^T F)`, `J = det F`, `alpha = 1 + 3 mu / (4 lambda)`, `cof F` the columns
+/// `f1 x f2, f2 x f0, f0 x f1`, and the forces `H = -V P Dm^-T` on vertices 1-3, their
+/// negated sum on vertex 0 (Smith, de Goes & Kim 2018, doi:10.1145/3180491; Sifakis & Barbic
+/// 2012 for `H`). The rest data (`Dm^-1`, `V`, the reparametrised Lame parameters) are read
+/// from the engine's map, as the rule's init computes them.
+pub struct NeoHookean {
+    /// Vertex state.
+    pub s: State,
+    tets: Vec<[u32; 4]>,
+    /// Inverse rest edge matrix `Dm^-1`.
+    dm_inv: Vec<M3>,
+    /// Per tet: rest volume, mu and lambda.
+    material: Vec<[f64; 3]>,
+}
+
+impl NeoHookean {
+    /// From a simulation of `neohookean` on tetrahedra.
+    pub fn from_sim(sim: &Simulation) -> Self {
+        let g = sim.gmap();
+        let label = vertex_labels(g);
+        let tv = tet_vertices(g, &label);
+        let mut b = NeoHookean {
+            s: State::from_sim(sim),
+            tets: Vec::with_capacity(tv.len()),
+            dm_inv: Vec::with_capacity(tv.len()),
+            material: Vec::with_capacity(tv.len()),
+        };
+        for (n0, verts) in tv {
+            b.tets.push(verts);
+            b.dm_inv.push(m3(read(g, "hyper_dm_inv", n0)));
+            let [v] = read(g, "hyper_volume", n0);
+            let [mu] = read(g, "nh_mu", n0);
+            let [lambda] = read(g, "nh_lambda", n0);
+            b.material.push([v, mu, lambda]);
+        }
+        b
+    }
+
+    fn forces(&mut self) {
+        self.s.clear_forces();
+        let (x, f) = (&self.s.x, &mut self.s.f);
+        for ((t, dm), &[vol, mu, lambda]) in self.tets.iter().zip(&self.dm_inv).zip(&self.material)
+        {
+            let p = t.map(|i| x[i as usize]);
+            let e = [sub(p[1], p[0]), sub(p[2], p[0]), sub(p[3], p[0])];
+            // F = Ds Dm^-1, row-major; its columns c0, c1, c2
+            let mut fm = [[0.0; 3]; 3];
+            for r in 0..3 {
+                for c in 0..3 {
+                    fm[r][c] = e[0][r] * dm[0][c] + e[1][r] * dm[1][c] + e[2][r] * dm[2][c];
+                }
+            }
+            let col = |c: usize| [fm[0][c], fm[1][c], fm[2][c]];
+            let (c0, c1, c2) = (col(0), col(1), col(2));
+            let cof = [cross(c1, c2), cross(c2, c0), cross(c0, c1)];
+            let ic = dot(c0, c0) + dot(c1, c1) + dot(c2, c2);
+            let j = dot(c0, cof[0]);
+            let alpha = 1.0 + 0.75 * mu / lambda;
+            let a = mu * (1.0 - 1.0 / (ic + 1.0));
+            let b = lambda * (j - alpha);
+            // P = a F + b cof F (cof F's column k is cof[k])
+            let mut pm = [[0.0; 3]; 3];
+            for r in 0..3 {
+                for c in 0..3 {
+                    pm[r][c] = a * fm[r][c] + b * cof[c][r];
+                }
+            }
+            // H = -V P Dm^-T: column k of H is the force on vertex k + 1
+            let mut f0 = [0.0; 3];
+            for k in 0..3 {
+                let mut h = [0.0; 3];
+                for r in 0..3 {
+                    h[r] = -vol * (pm[r][0] * dm[k][0] + pm[r][1] * dm[k][1] + pm[r][2] * dm[k][2]);
+                }
+                let fk = &mut f[t[k + 1] as usize];
+                for r in 0..3 {
+                    fk[r] += h[r];
+                    f0[r] -= h[r];
+                }
+            }
+            let fv = &mut f[t[0] as usize];
+            for r in 0..3 {
+                fv[r] += f0[r];
+            }
+        }
+    }
+}
+
+impl Baseline for NeoHookean {
+    fn step(&mut self) {
+        self.forces();
+        self.s.integrate();
+    }
+    fn positions(&self) -> &[V3] {
+        &self.s.x
+    }
+    fn memory_bytes(&self) -> usize {
+        self.s.memory_bytes() + self.tets.len() * (16 + 72 + 24)
+    }
+    /// Per tet: vertex numbers, Dm^-1, volume, mu and lambda (112 B); edges (9), F (45), the
+    /// three cofactor columns (27), I_C (17), J (5), the scalars (7), P (27), H (45 and its
+    /// 9 scalings), the forces (18): 209 operations, 2 divisions.
+    fn work(&self) -> Work {
+        let t = self.tets.len() as f64;
+        self.s.work().add(Work {
+            bytes: t * 112.0,
+            flops: t * 209.0,
+            sqrt_div: t * 2.0,
+        })
+    }
+}
+
 // ---------------------------------------------------------------------------- polar rotation
 
 fn norm(a: V3) -> f64 {
@@ -754,11 +871,18 @@ pub enum Model {
     Corotational,
     /// `mass_tensor` on a box of tetrahedra (elements: tetrahedra).
     MassTensor,
+    /// `neohookean` on a box of tetrahedra (elements: tetrahedra).
+    NeoHookean,
 }
 
 impl Model {
     /// Every model, in report order.
-    pub const ALL: [Model; 3] = [Model::Cloth, Model::Corotational, Model::MassTensor];
+    pub const ALL: [Model; 4] = [
+        Model::Cloth,
+        Model::Corotational,
+        Model::MassTensor,
+        Model::NeoHookean,
+    ];
 
     /// The engine's name of the model.
     pub fn kind(self) -> &'static str {
@@ -766,6 +890,7 @@ impl Model {
             Model::Cloth => "stretch_cumulated",
             Model::Corotational => "corotational",
             Model::MassTensor => "mass_tensor",
+            Model::NeoHookean => "neohookean",
         }
     }
 
@@ -773,7 +898,7 @@ impl Model {
     pub fn element(self) -> &'static str {
         match self {
             Model::Cloth => "quad",
-            Model::Corotational | Model::MassTensor => "tet",
+            Model::Corotational | Model::MassTensor | Model::NeoHookean => "tet",
         }
     }
 
@@ -787,7 +912,7 @@ impl Model {
                 let n = (t.sqrt().round() as usize).max(2);
                 (vec![n, n], n * n)
             }
-            Model::Corotational | Model::MassTensor => {
+            Model::Corotational | Model::MassTensor | Model::NeoHookean => {
                 let n = ((t / 12.0).cbrt().round() as usize).max(2);
                 let nx = ((t / (6.0 * (n * n) as f64)).round() as usize).max(2);
                 (vec![nx, n, n], 6 * nx * n * n)
@@ -812,7 +937,7 @@ impl Model {
                 grid([cells[0], cells[1]], [1.0, 1.0], GridElement::Quad),
                 vec![("stiffness".into(), 1e3), ("damping".into(), 0.1)],
             ),
-            Model::Corotational | Model::MassTensor => {
+            Model::Corotational | Model::MassTensor | Model::NeoHookean => {
                 let len = cells[0] as f64 / cells[1] as f64;
                 (
                     cuboid(
@@ -858,7 +983,7 @@ impl Model {
         let pi = std::f64::consts::PI;
         match self {
             Model::Cloth => [p[0], p[1], 0.05 * (pi * p[0]).sin() * (pi * p[1]).sin()],
-            Model::Corotational | Model::MassTensor => {
+            Model::Corotational | Model::MassTensor | Model::NeoHookean => {
                 let th = 0.2 * p[0];
                 let (s, c) = th.sin_cos();
                 let (y, z) = (p[1] - 0.5, p[2] - 0.5);
@@ -873,6 +998,7 @@ impl Model {
             Model::Cloth => Box::new(Cloth::from_sim(sim)),
             Model::Corotational => Box::new(Corotational::from_sim(sim)),
             Model::MassTensor => Box::new(MassTensor::from_sim(sim)),
+            Model::NeoHookean => Box::new(NeoHookean::from_sim(sim)),
         }
     }
 }

@@ -42,6 +42,11 @@ fn mass_tensor_baseline_matches_the_engine() {
     check(Model::MassTensor, 150);
 }
 
+#[test]
+fn neohookean_baseline_matches_the_engine() {
+    check(Model::NeoHookean, 150);
+}
+
 /// The baseline's polar rotation: a rotation, and the rotation of R S for S symmetric
 /// positive definite.
 #[test]

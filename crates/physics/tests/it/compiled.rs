@@ -115,6 +115,7 @@ fn every_model_runs_compiled_and_matches_the_interpreter_bit_for_bit() {
 fn jacobian_vector_products_and_other_integrators_match_too() {
     for &(kind, dim) in &[
         ("stretch_cumulated", 2),
+        ("shear_isotropic", 2),
         ("corotational", 3),
         ("mass_tensor", 3),
     ] {
