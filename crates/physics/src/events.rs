@@ -236,6 +236,29 @@ fn criterion_rules(c: Criterion) -> (&'static str, &'static str, &'static str) {
     }
 }
 
+/// What the strain criterion knew at its last evaluation, to skip the next ones while no
+/// spring can have reached the threshold: the position column then (slot by slot), the
+/// largest strain computed then (`max_strain`, over every slot of the strain column, dead
+/// ones included), the largest inverse rest length (`max_inv`, likewise), and the topology
+/// version and the write count of the inverse rest lengths then.
+///
+/// Why a skip is exact: an edge's strain is `|x_b - x_a| / l0 - 1`; if no vertex moved more
+/// than `delta` since, its length changed by at most `2 delta` (the triangle inequality),
+/// so its strain by at most `2 delta / l0 <= 2 delta max_inv`, and no strain exceeds
+/// `max_strain + 2 delta max_inv`. The mean over a face's edges that the fracture rule
+/// compares is at most the largest strain: while that bound, with a margin of 1e-9 of it
+/// (far above the few roundings of a strain, a distance and the sums), is at most the
+/// threshold's bound, no face can open, and the strains are not computed. The strain
+/// column then holds the strains of the last step that computed them.
+#[derive(Clone, Debug)]
+pub(crate) struct StrainBound {
+    positions: Vec<f64>,
+    max_strain: f64,
+    max_inv: f64,
+    version: u64,
+    inv_writes: u64,
+}
+
 /// The rule a criterion's measure needs run once beforehand (the strain's inverse rest
 /// lengths, from the rest positions).
 fn criterion_init(c: Criterion) -> Option<&'static str> {
@@ -484,6 +507,12 @@ impl Simulation {
             }));
         }
         self.init_measure(f.criterion)?;
+        // the bound the threshold is compared with (see below)
+        let bound = f.threshold - 64.0 * f64::EPSILON * f.threshold.abs();
+        if f.criterion == Criterion::Strain && self.strain_cannot_reach(bound) {
+            return Ok(TopologyResult::default());
+        }
+        self.strain_bound = None;
         self.rules.apply_everywhere(&mut self.g, measure, &none)?;
         // The guards of the shipped criteria compare a mean of the measure with the threshold
         // (the mean spring strain of a face's edges; the mean of the two elements' largest
@@ -495,8 +524,18 @@ impl Simulation {
         // search, which decides.
         if let Some(id) = self.g.embedding_id(column) {
             if let Some(values) = self.g.embedding(id).real_column() {
-                let bound = f.threshold - 64.0 * f64::EPSILON * f.threshold.abs();
-                if values.iter().all(|&x| x <= bound) {
+                // the largest value (NaN: infinite, "may exceed")
+                let max = values.iter().fold(f64::NEG_INFINITY, |m, &x| {
+                    if x.is_nan() {
+                        f64::INFINITY
+                    } else {
+                        m.max(x)
+                    }
+                });
+                if max <= bound {
+                    if f.criterion == Criterion::Strain {
+                        self.strain_bound = self.strain_state(max);
+                    }
                     return Ok(TopologyResult::default());
                 }
             }
@@ -709,6 +748,64 @@ impl Simulation {
         let p: Params = [("threshold".to_string(), Val::F(1.0))].into();
         self.rules.prepare_guard(&mut self.g, rule, &p)?;
         Ok(())
+    }
+
+    /// Whether no spring's strain can exceed `bound` now, by what the last evaluation knew
+    /// (see [`StrainBound`]): `false` when it does not know (none yet, the topology or the
+    /// inverse rest lengths changed since, a column of another length, a non-finite value).
+    fn strain_cannot_reach(&self, bound: f64) -> bool {
+        let Some(b) = &self.strain_bound else {
+            return false;
+        };
+        let (Some(pos), Some(inv)) = (
+            self.g.embedding_id("position"),
+            self.g.embedding_id("spring_inv_l0"),
+        ) else {
+            return false;
+        };
+        let Some(x) = self.g.embedding(pos).real_column() else {
+            return false;
+        };
+        if b.version != self.g.version()
+            || b.inv_writes != self.g.embedding(inv).writes()
+            || x.len() != b.positions.len()
+        {
+            return false;
+        }
+        // the largest distance a vertex moved since (NaN where a position is not finite)
+        let mut delta2 = 0.0_f64;
+        for (p, q) in x.chunks_exact(3).zip(b.positions.chunks_exact(3)) {
+            let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+            let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            delta2 = if d2.is_nan() {
+                f64::NAN
+            } else {
+                delta2.max(d2)
+            };
+        }
+        let reach = b.max_strain + 2.0 * delta2.sqrt() * b.max_inv;
+        reach + 1e-9 * (1.0 + reach.abs()) <= bound
+    }
+
+    /// The state [`Simulation::strain_cannot_reach`] starts from, after an evaluation whose
+    /// largest strain was `max_strain`; `None` where a column is missing or a value is not
+    /// finite.
+    fn strain_state(&self, max_strain: f64) -> Option<StrainBound> {
+        let pos = self.g.embedding_id("position")?;
+        let inv = self.g.embedding_id("spring_inv_l0")?;
+        let positions = self.g.embedding(pos).real_column()?.to_vec();
+        let invs = self.g.embedding(inv).real_column()?;
+        let max_inv = invs.iter().fold(0.0_f64, |m, &x| m.max(x.abs()));
+        if !(max_strain.is_finite() && max_inv.is_finite() && invs.iter().all(|x| x.is_finite())) {
+            return None;
+        }
+        Some(StrainBound {
+            positions,
+            max_strain,
+            max_inv,
+            version: self.g.version(),
+            inv_writes: self.g.embedding(inv).writes(),
+        })
     }
 
     /// Runs the rule the criterion's measure needs once beforehand, the first time only:

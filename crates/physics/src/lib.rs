@@ -93,6 +93,9 @@ pub struct Simulation {
     /// Whether the rule a fracture criterion's measure needs run once beforehand has run
     /// (the strain's inverse rest lengths; see `events::criterion_init`).
     measure_ready: bool,
+    /// The strain criterion's state at its last evaluation, which lets a step whose vertices
+    /// moved too little since skip it (see `events::StrainBound`).
+    strain_bound: Option<events::StrainBound>,
     /// The topology changes so far.
     changes: Vec<TopologyChange>,
     /// The position and velocity columns before the step being taken (kept between steps so

@@ -567,6 +567,7 @@ impl Simulation {
             events_done: vec![false; cfg_events],
             blades_opened: vec![0; cfg_blades],
             measure_ready: false,
+            strain_bound: None,
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
             forces_written: None,

@@ -900,3 +900,77 @@ fn the_strains_inverse_rest_lengths_survive_cuts_and_fractures() {
         assert!(edges > 0);
     }
 }
+
+/// The strain criterion skips its evaluation while no spring can have reached the threshold
+/// since the last one (no vertex moved far enough: `events::StrainBound`). On a box, a slab
+/// stretched a little more at each call: the calls where the slab moved little skip (the
+/// strain column is left as it was), the others compute; and every call opens exactly what
+/// the same call opens on a new simulation set to the same positions (which has no last
+/// evaluation to skip from), up to and including the first call that opens faces.
+#[test]
+fn the_strain_criterion_skips_only_calls_where_nothing_can_open() {
+    let mesh = cuboid([6, 2, 2], [3.0, 1.0, 1.0], BoxElement::Tetra);
+    let threshold = 0.2;
+    let fracture = Fracture {
+        criterion: Criterion::Strain,
+        threshold,
+    };
+    let new = || {
+        sim(
+            &mesh,
+            vec![model("stretch_cumulated", &[("stiffness", 1e4)])],
+            |c| {
+                c.gravity = [0.0; 3];
+                c.fracture = Some(fracture);
+            },
+        )
+    };
+    let mut s = new();
+    let rest = s.vertex_vec3("rest").unwrap();
+    let strains = |s: &Simulation| {
+        let g = s.gmap();
+        g.embedding(g.require("spring_strain").unwrap())
+            .real_column()
+            .unwrap()
+            .to_vec()
+    };
+    let (mut skipped, mut computed) = (0, 0);
+    let mut opened = 0;
+    for k in 0..200 {
+        // the slab 1 < x < 2 stretched along y by up to 30% (0.15% a call), and the rest
+        // of the box by a millionth a call: the ends move very little, the slab more and more
+        let e = 0.0015 * f64::from(k);
+        let x: Vec<[f64; 3]> = rest
+            .iter()
+            .map(|p| {
+                let t =
+                    ((p[0] - 1.0).clamp(0.0, 1.0) * (2.0 - p[0]).clamp(0.0, 1.0) * 4.0).min(1.0);
+                [p[0], p[1] * (1.0 + e * t + 1e-6 * f64::from(k)), p[2]]
+            })
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        let before = strains(&s);
+        let n = s.fracture(fracture).unwrap().unsewn;
+        if strains(&s) == before {
+            skipped += 1;
+        } else {
+            computed += 1;
+        }
+        let mut fresh = new();
+        fresh.set_vertex_vec3("position", &x).unwrap();
+        let want = fresh.fracture(fracture).unwrap().unsewn;
+        assert_eq!(
+            n, want,
+            "call {k}: {n} faces opened, a new simulation opens {want}"
+        );
+        if n > 0 {
+            opened = n;
+            break;
+        }
+    }
+    assert!(opened > 0, "the slab never broke");
+    assert!(
+        skipped > 0 && computed > 1,
+        "{skipped} calls skipped, {computed} computed"
+    );
+}
