@@ -49,9 +49,7 @@ use crate::value::{binop_type, unop_type, BinOp, Ty, UnOp, Val};
 pub(crate) struct Unsupported(#[allow(dead_code)] pub String);
 
 // For the sibling crate (topomech-codegen) only.
-
 #[doc(hidden)]
-
 pub type R = usize;
 type F1Fn = fn(f64) -> f64;
 
@@ -3560,8 +3558,10 @@ fn matmul(x: &[f64], y: &[f64], z: &mut [f64], r: usize, k: usize, c: usize) {
 
 /// The flat built-ins; `Err` when the built-in would refuse its argument.
 #[inline]
-// For the sibling crate (topomech-codegen) only.
+// For the sibling crate (topomech-codegen) only; `()` is the whole error (the caller falls
+// back to the evaluator, which reports it precisely).
 #[doc(hidden)]
+#[allow(clippy::result_unit_err)]
 pub fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Result<(), ()> {
     match f {
         Fast::Dot => z[0] = builtins::dot(x, y.ok_or(())?),

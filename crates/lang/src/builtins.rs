@@ -862,9 +862,7 @@ fn to_i64(x: f64) -> Result<i64, EvalError> {
 }
 
 // For the sibling crates (topomech-engine, topomech-codegen) only.
-
 #[doc(hidden)]
-
 pub fn scalar1(name: &str, x: f64) -> f64 {
     match name {
         "abs" => x.abs(),
@@ -893,9 +891,7 @@ pub fn scalar1(name: &str, x: f64) -> f64 {
 }
 
 // For the sibling crates (topomech-engine, topomech-codegen) only.
-
 #[doc(hidden)]
-
 pub fn scalar2(name: &str, a: f64, b: f64) -> f64 {
     match name {
         "atan2" => a.atan2(b),
@@ -941,9 +937,7 @@ fn is_finite(x: &Val) -> bool {
 // Vector and matrix algebra.
 
 // For the sibling crates (topomech-engine, topomech-codegen) only.
-
 #[doc(hidden)]
-
 pub fn dot(x: &[f64], y: &[f64]) -> f64 {
     x.iter().zip(y).map(|(a, b)| a * b).sum()
 }
@@ -960,9 +954,7 @@ pub fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
 }
 
 // For the sibling crates (topomech-engine, topomech-codegen) only.
-
 #[doc(hidden)]
-
 pub fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     [
         diff_of_products(a[1], b[2], a[2], b[1]),
