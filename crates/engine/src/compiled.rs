@@ -2739,7 +2739,9 @@ impl Plan {
                         // computed from these arrays by `Plan::need` whenever they were set:
                         // in `compile_native`, and in `assemble` after a patch; it also
                         // checked their row lengths and CSR shape), fills at least as
-                        // wide as their registers, the output buffer of `n_chunks` blocks);
+                        // wide as their registers, the output buffer of `n_chunks` blocks,
+                        // `calls` and `helpers` `nat`'s own tables (`ArgTables::new`), which
+                        // `nat`, held by `self.native`, keeps valid for the run);
                         // rows `first..first + n` are one chunk inside `0..rows`, and each
                         // chunk is run by one call only, so concurrent calls write disjoint
                         // blocks of `out`, which nothing else touches meanwhile (`&mut self`).

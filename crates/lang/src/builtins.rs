@@ -11,8 +11,8 @@
 //! Indices are `i64`, counted from 0.
 //!
 //! ```
-//! use topomech_rules::builtins::{call, call_type};
-//! use topomech_rules::value::{Mat, Ty, Val};
+//! use topomech_lang::builtins::{call, call_type};
+//! use topomech_lang::value::{Mat, Ty, Val};
 //!
 //! assert_eq!(call_type("cross", &[Ty::Vec3, Ty::Vec3]), Ok(Ty::Vec3));
 //! assert!(call_type("crss", &[Ty::Vec3, Ty::Vec3]).unwrap_err().contains("`cross`"));
