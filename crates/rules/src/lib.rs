@@ -1,6 +1,22 @@
 //! The rule language of topomech: a small text format for graph-transformation rules on
 //! G-maps, a static checker that refuses any rule that could break a map, a matcher and a
-//! rewriter.
+//! rewriter, compiled plans and their native code.
+//!
+//! This crate is the facade over three rooms, each its own crate, whose doors go one way
+//! (language <- engine <- codegen):
+//!
+//! - `topomech-lang`: the language ([`ast`], [`lexer`], [`parser`], [`check`], [`model`],
+//!   [`value`], [`builtins`] with the [`mechanics`] math they serve, [`build`]); it depends on
+//!   neither other room;
+//! - `topomech-engine`: matching, rewriting, interpreting ([`engine`]) and compiled plans with
+//!   their evaluator; it depends on the language and defines the interface a code generator
+//!   implements (`topomech_engine::native::NativeBackend`), never naming one;
+//! - `topomech-codegen`: the Cranelift code generator ([`jit`]), implementing that interface.
+//!
+//! The facade re-exports their public paths and wires the backend in: every rule set it
+//! builds ([`load_sources`], [`load_sources_for`], [`load_files`], [`build::load`]), and every
+//! rule set built with [`RuleSet::new`] from rules checked through it ([`check`]), gets the
+//! Cranelift backend.
 //!
 //! ```
 //! use topomech_rules::{load_sources, Params};
@@ -22,35 +38,146 @@
 //! ```
 #![warn(missing_docs)]
 
-pub mod ast;
-pub mod build;
-pub mod builtins;
-pub mod check;
-mod compiled;
-mod dims;
-pub mod engine;
-pub mod jit;
-pub mod lexer;
-pub mod mechanics;
-pub mod model;
-pub mod parser;
-pub mod value;
-
 use std::path::Path;
+use std::sync::{Arc, Once};
+
+pub use topomech_codegen::jit;
+pub use topomech_engine::engine;
+pub use topomech_lang::{ast, builtins, lexer, mechanics, model, parser, value};
 
 pub use check::{Diagnostic, Severity};
 pub use engine::{ApplyError, ApplyReport, Params, Region, RuleSet};
 pub use model::Model;
 pub use value::{Ty, Val};
 
+/// Registers the Cranelift code generator as the engine's process-wide default backend
+/// (`topomech_engine::native::set_default_backend`), once; a default registered before (by
+/// another caller) is kept. Every entry point of this crate that gives checked rules or a
+/// rule set calls it, so a caller needs it only for rules checked with `topomech-lang`
+/// directly.
+///
+/// Why a process-wide default rather than a constructor of this crate's own: callers (the
+/// physics crate, its tests and benches) build rule sets with `RuleSet::new` on rules checked
+/// through [`check`]; `RuleSet` is the engine's type, which cannot name its code generator
+/// (the door goes the other way), so the engine takes its default backend from a `OnceLock`
+/// that this crate fills, and those callers keep native code without a change.
+pub fn install_backend() {
+    static INSTALL: Once = Once::new();
+    INSTALL.call_once(|| {
+        topomech_engine::native::set_default_backend(Arc::new(topomech_codegen::Cranelift));
+    });
+}
+
+/// The rule set of checked rules, with the Cranelift backend (unless another default backend
+/// was registered before, see [`install_backend`]).
+fn rule_set(checked: check::Checked) -> RuleSet {
+    install_backend();
+    RuleSet::new(checked)
+}
+
+/// The static checker (`topomech_lang::check`); its entry points also install the Cranelift
+/// backend (see [`install_backend`]), so that a [`RuleSet::new`] of what they check runs
+/// native code.
+pub mod check {
+    pub use topomech_lang::check::*;
+
+    use crate::ast::File;
+    use crate::install_backend;
+
+    /// Parses and checks rule sources `(file name, text)` that share their embeddings (see
+    /// `topomech_lang::check::check_sources`), after [`install_backend`].
+    pub fn check_sources(sources: &[(String, String)]) -> (Option<Checked>, Vec<Diagnostic>) {
+        install_backend();
+        topomech_lang::check::check_sources(sources)
+    }
+
+    /// Parses and checks rule sources for maps of dimension `dim`, or of the files'
+    /// dimension when `None` (see `topomech_lang::check::check_sources_for`), after
+    /// [`install_backend`].
+    pub fn check_sources_for(
+        dim: Option<usize>,
+        sources: &[(String, String)],
+    ) -> (Option<Checked>, Vec<Diagnostic>) {
+        install_backend();
+        topomech_lang::check::check_sources_for(dim, sources)
+    }
+
+    /// Checks rule files already parsed (see `topomech_lang::check::check_files`), after
+    /// [`install_backend`].
+    pub fn check_files(files: &[(String, File)]) -> (Option<Checked>, Vec<Diagnostic>) {
+        install_backend();
+        topomech_lang::check::check_files(files)
+    }
+
+    /// Checks rule files already parsed for maps of dimension `dim` (see
+    /// `topomech_lang::check::check_files_for`), after [`install_backend`].
+    pub fn check_files_for(
+        dim: Option<usize>,
+        files: &[(String, File)],
+    ) -> (Option<Checked>, Vec<Diagnostic>) {
+        install_backend();
+        topomech_lang::check::check_files_for(dim, files)
+    }
+}
+
+/// Rules built as syntax trees (`topomech_lang::build`), and [`build::load`], which checks
+/// and loads them into a rule set.
+///
+/// ```
+/// use topomech_rules::build::{self, parse_expression};
+///
+/// // where { let x = x(v.rest)  <the user's predicate> }
+/// let pred = parse_expression("fix[0].where", "x < 0.5").unwrap();
+/// let guard = build::let_block(
+///     vec![("x", build::call("x", vec![build::read("v", "rest")]))],
+///     pred,
+/// );
+/// let mut r = build::rule("fix_0", build::graph(vec![build::node("v", &[1, 2], true)]));
+/// r.guard = Some(guard);
+/// r.compute = vec![build::write("v", "fixed", build::boolean(true))];
+/// let text = "dimension 2
+///   embedding rest : vec3 on <1,2>
+///   embedding fixed : bool on <1,2>";
+/// let glue = build::file(&topomech_rules::parser::parse(text).unwrap(), vec![r]);
+/// let (rules, _) = build::load(&[("decl.tmr".into(), text.into())], vec![("glue".into(), glue)])
+///     .unwrap();
+/// assert_eq!(rules.rule("fix_0").unwrap().name, "fix_0");
+///
+/// // rule syntax in a predicate is refused, naming where
+/// let e = parse_expression("fix[0].where", "x < 0 } rule evil {").unwrap_err();
+/// assert_eq!((e.file.as_str(), e.pos.col), ("fix[0].where", 7));
+/// ```
+pub mod build {
+    pub use topomech_lang::build::*;
+
+    use crate::ast::File;
+    use crate::{Diagnostic, RuleSet};
+
+    /// Parses the text sources `(file name, text)` and checks them together with the files
+    /// `parsed` (already syntax trees, e.g. built with this module), sharing their embeddings,
+    /// with every check [`crate::load_sources`] makes (see [`check_built`]). Diagnostics of a
+    /// built file name it by its label and, for a parsed expression inside it, the line and
+    /// column in that expression's text.
+    ///
+    /// On success: the rule set (with the Cranelift backend, see
+    /// [`crate::install_backend`]) and its warnings; otherwise every diagnostic.
+    pub fn load(
+        sources: &[(String, String)],
+        parsed: Vec<(String, File)>,
+    ) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
+        let (checked, diags) = check_built(sources, parsed)?;
+        Ok((crate::rule_set(checked), diags))
+    }
+}
 /// Parses and checks rule sources `(file name, text)` that share their embeddings.
-/// On success: the rule set and its warnings; otherwise every diagnostic.
+/// On success: the rule set (with the Cranelift backend, see [`install_backend`]) and its
+/// warnings; otherwise every diagnostic.
 pub fn load_sources(
     sources: &[(String, String)],
 ) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
-    let (checked, diags) = check::check_sources(sources);
+    let (checked, diags) = topomech_lang::check::check_sources(sources);
     match checked {
-        Some(c) => Ok((RuleSet::new(c), diags)),
+        Some(c) => Ok((rule_set(c), diags)),
         None => Err(diags),
     }
 }
@@ -64,9 +191,9 @@ pub fn load_sources_for(
     dim: usize,
     sources: &[(String, String)],
 ) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
-    let (checked, diags) = check::check_sources_for(Some(dim), sources);
+    let (checked, diags) = topomech_lang::check::check_sources_for(Some(dim), sources);
     match checked {
-        Some(c) => Ok((RuleSet::new(c), diags)),
+        Some(c) => Ok((rule_set(c), diags)),
         None => Err(diags),
     }
 }

@@ -664,7 +664,7 @@ fn perpendicular(u: V3) -> V3 {
 }
 
 /// The rotation of the polar decomposition of `m`, by the algorithm of the engine's `polar`
-/// built-in (crates/rules/src/builtins.rs, `polar3_data`), written again for this file's
+/// built-in (crates/lang/src/builtins.rs, `polar3_data`), written again for this file's
 /// arrays with the same operations in the same order, so that both agree bit for bit where
 /// Newton applies: Newton's iteration with Frobenius-norm scaling (Higham 1986,
 /// doi:10.1137/0907079) from `m` normalized by a power of two, used when `det m > 0` and the

@@ -11,8 +11,8 @@
 //! Indices are `i64`, counted from 0.
 //!
 //! ```
-//! use topomech_rules::builtins::{call, call_type};
-//! use topomech_rules::value::{Mat, Ty, Val};
+//! use topomech_lang::builtins::{call, call_type};
+//! use topomech_lang::value::{Mat, Ty, Val};
 //!
 //! assert_eq!(call_type("cross", &[Ty::Vec3, Ty::Vec3]), Ok(Ty::Vec3));
 //! assert!(call_type("crss", &[Ty::Vec3, Ty::Vec3]).unwrap_err().contains("`cross`"));
@@ -861,7 +861,9 @@ fn to_i64(x: f64) -> Result<i64, EvalError> {
     }
 }
 
-pub(crate) fn scalar1(name: &str, x: f64) -> f64 {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn scalar1(name: &str, x: f64) -> f64 {
     match name {
         "abs" => x.abs(),
         "sign" => {
@@ -888,7 +890,9 @@ pub(crate) fn scalar1(name: &str, x: f64) -> f64 {
     }
 }
 
-pub(crate) fn scalar2(name: &str, a: f64, b: f64) -> f64 {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn scalar2(name: &str, a: f64, b: f64) -> f64 {
     match name {
         "atan2" => a.atan2(b),
         "pow" => a.powf(b),
@@ -932,20 +936,26 @@ fn is_finite(x: &Val) -> bool {
 // ---------------------------------------------------------------------------------------------
 // Vector and matrix algebra.
 
-pub(crate) fn dot(x: &[f64], y: &[f64]) -> f64 {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn dot(x: &[f64], y: &[f64]) -> f64 {
     x.iter().zip(y).map(|(a, b)| a * b).sum()
 }
 
 /// `a * b - c * d` with one rounding error instead of two (Kahan's algorithm with a fused
 /// multiply-add).
-pub(crate) fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
     let w = c * d;
     let e = (-c).mul_add(d, w);
     let f = a.mul_add(b, -w);
     f + e
 }
 
-pub(crate) fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
     [
         diff_of_products(a[1], b[2], a[2], b[1]),
         diff_of_products(a[2], b[0], a[0], b[2]),
@@ -968,7 +978,9 @@ fn max_abs(x: &[f64]) -> f64 {
 /// it, a square that underflowed (below `2^-1022`, so off by at most `2^-1075`) changes the
 /// sum by less than `2^-115` of it, far below the sum's own rounding.
 // 2^-960: biased exponent 1023 - 960 = 63, mantissa 0
-pub(crate) const NORM_DIRECT_MIN: f64 = f64::from_bits(63 << 52);
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub const NORM_DIRECT_MIN: f64 = f64::from_bits(63 << 52);
 
 /// The Euclidean norm of the built-in `norm`: `sqrt(x0^2 + x1^2 + ...)` (the squares summed
 /// in order, as `Iterator::sum` does) where that sum is finite and at least
@@ -977,7 +989,9 @@ pub(crate) const NORM_DIRECT_MIN: f64 = f64::from_bits(63 << 52);
 /// about `(n/2 + 1)` ulps, like the scaled form. Elsewhere (huge, tiny, zero, non-finite
 /// entries) it is [`norm_scaled`]. Direct, it costs a square root; scaled, a division per
 /// entry more.
-pub(crate) fn norm(x: &[f64]) -> f64 {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn norm(x: &[f64]) -> f64 {
     let s = x.iter().map(|v| v * v).sum::<f64>();
     if (NORM_DIRECT_MIN..=f64::MAX).contains(&s) {
         return s.sqrt();
@@ -986,7 +1000,9 @@ pub(crate) fn norm(x: &[f64]) -> f64 {
 }
 
 /// Euclidean norm, scaled by the largest entry so that it neither overflows nor underflows.
-pub(crate) fn norm_scaled(x: &[f64]) -> f64 {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn norm_scaled(x: &[f64]) -> f64 {
     let m = max_abs(x);
     if m == 0.0 || !m.is_finite() {
         return m;
@@ -1007,7 +1023,9 @@ pub(crate) fn normalize(x: &[f64]) -> Vec<f64> {
 }
 
 /// [`normalize`] into `z` (of `x`'s length), without allocating.
-pub(crate) fn normalize_into(x: &[f64], z: &mut [f64]) {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn normalize_into(x: &[f64], z: &mut [f64]) {
     let m = max_abs(x);
     if m == 0.0 {
         z.fill(0.0);
@@ -1182,7 +1200,9 @@ fn polar2(m: &Mat) -> Result<Mat, EvalError> {
 }
 
 /// [`polar2`] on the 4 row-major entries of a 2x2 matrix, without allocating.
-pub(crate) fn polar2_data(a: &[f64]) -> Result<[f64; 4], EvalError> {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn polar2_data(a: &[f64]) -> Result<[f64; 4], EvalError> {
     require_finite_data("polar", 2, 2, a)?;
     // Scale first: the sums below must not overflow.
     let s = max_abs(a);
@@ -1217,7 +1237,9 @@ fn polar3(m: &Mat) -> Result<Mat, EvalError> {
 }
 
 /// [`polar3`] on the 9 row-major entries of a 3x3 matrix, without allocating.
-pub(crate) fn polar3_data(m: &[f64]) -> Result<[f64; 9], EvalError> {
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn polar3_data(m: &[f64]) -> Result<[f64; 9], EvalError> {
     require_finite_data("polar", 3, 3, m)?;
     if max_abs(m) == 0.0 {
         return Ok([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
@@ -1447,7 +1469,9 @@ fn polar3_jacobi(m: &[f64]) -> [f64; 9] {
 /// plane is on neither side, and the faces on both sides of it stay. A segment parallel to
 /// the plane (within `1e-12` of the product of the lengths), a zero-length segment, a flat
 /// triangle and any non-finite coordinate give false.
-pub(crate) fn segment_hits_triangle(
+// For the sibling crates (topomech-engine, topomech-codegen) only.
+#[doc(hidden)]
+pub fn segment_hits_triangle(
     a: &[f64; 3],
     b: &[f64; 3],
     p: &[f64; 3],

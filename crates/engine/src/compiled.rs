@@ -19,9 +19,10 @@
 //! short lists: its parameters and columns). The plan is a cache derived
 //! from the map: it is rebuilt when the topology version changes (see [`crate::RuleSet`]).
 //!
-//! The program can also be compiled to native code (see [`crate::jit`]), which the plan then
-//! runs per chunk instead of the evaluator here: the same results, bit for bit; the evaluator
-//! stays the reference and the fallback.
+//! The program can also be compiled to native code by a backend (see [`crate::native`];
+//! `topomech-codegen` generates it with Cranelift), which the plan then runs per chunk
+//! instead of the evaluator here: the same results, bit for bit; the evaluator stays the
+//! reference and the fallback.
 //!
 //! Nothing here knows any model: any rule compiles the same way. A rule using what the plan
 //! machinery does not cover (integer arithmetic, reads of integer embeddings) is run by the
@@ -31,6 +32,7 @@
 
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 use topomech_gmap::{ColumnMut, ColumnRef, Dart, EmbeddingId, GMap, Marks, OrbitType};
@@ -39,19 +41,23 @@ use crate::ast::AggKind;
 use crate::builtins;
 use crate::check::{EmbDecl, Rule, TExpr, TStmt};
 use crate::engine::Match;
-use crate::jit;
+use crate::native::{self, ColKind, JitArgs, NativeBackend, NativeFn, OutLayout};
 use crate::value::{binop_type, unop_type, BinOp, Ty, UnOp, Val};
 
 /// Why a rule or an application is left to the interpreter.
 #[derive(Debug)]
 pub(crate) struct Unsupported(#[allow(dead_code)] pub String);
 
-pub(crate) type R = usize;
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub type R = usize;
 type F1Fn = fn(f64) -> f64;
 
 /// Binary element-wise operations.
 #[derive(Clone, Copy, Debug)]
-pub(crate) enum Ew {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub enum Ew {
     Add,
     Sub,
     Mul,
@@ -61,7 +67,7 @@ pub(crate) enum Ew {
 
 impl Ew {
     #[inline]
-    pub(crate) fn apply(self, x: f64, y: f64) -> f64 {
+    pub fn apply(self, x: f64, y: f64) -> f64 {
         match self {
             Ew::Add => x + y,
             Ew::Sub => x - y,
@@ -73,7 +79,9 @@ impl Ew {
 }
 
 #[derive(Clone, Copy, Debug)]
-pub(crate) enum Cmp {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub enum Cmp {
     Lt,
     Le,
     Gt,
@@ -82,7 +90,9 @@ pub(crate) enum Cmp {
 
 /// Built-ins with a flat implementation (the same arithmetic as [`builtins::call`]).
 #[derive(Clone, Copy, Debug)]
-pub(crate) enum Fast {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub enum Fast {
     Dot,
     Norm,
     Norm2,
@@ -96,7 +106,9 @@ pub(crate) enum Fast {
 }
 
 #[derive(Clone, Debug)]
-pub(crate) enum Op {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub enum Op {
     /// [`Op::MatMul`] whose left matrix has zeros by construction (a block-diagonal matrix, its
     /// transpose): row `i` sums only over the columns `terms[offs[i]..offs[i + 1]]`, in
     /// increasing order. The same bits as the dense product for finite values: the skipped
@@ -235,10 +247,12 @@ pub(crate) enum Op {
 }
 
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Reg {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub struct Reg {
     /// Offset, in floats per row, of the register in a row's scratch.
-    pub(crate) off: usize,
-    pub(crate) width: usize,
+    pub off: usize,
+    pub width: usize,
 }
 
 /// A gather: the node and embedding read.
@@ -258,19 +272,23 @@ struct AggKey {
 
 /// What a fill register holds.
 #[derive(Clone, Debug)]
-pub(crate) enum FillSrc {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub enum FillSrc {
     Const(Vec<f64>),
     Param(usize),
 }
 
 /// The compiled program of a rule: independent of any map.
 #[derive(Clone, Debug)]
-pub(crate) struct Program {
-    pub(crate) ops: Vec<Op>,
-    pub(crate) regs: Vec<Reg>,
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub struct Program {
+    pub ops: Vec<Op>,
+    pub regs: Vec<Reg>,
     /// Floats per row of scratch.
     stride: usize,
-    pub(crate) fills: Vec<FillSrc>,
+    pub fills: Vec<FillSrc>,
     /// Reads: (node, rule embedding).
     reads: Vec<ReadKey>,
     /// Aggregates (sum, mean, count).
@@ -280,7 +298,7 @@ pub(crate) struct Program {
     /// Writes, in program order: (node, rule embedding, register, uniform positions). A
     /// guard program ([`compile_guard`]) has one, whose embedding is [`GUARD_OUT`]: its
     /// value stays in the plan's output, one per match (see [`Plan::run_guard`]).
-    pub(crate) writes: Vec<(usize, usize, R, Vec<usize>)>,
+    pub writes: Vec<(usize, usize, R, Vec<usize>)>,
     /// Whether this is a guard program: one domain row per match (its row 0, where the
     /// interpreter evaluates a guard), nothing scattered into the map.
     guard: bool,
@@ -1087,8 +1105,8 @@ pub(crate) struct Plan {
     /// each write's rows contiguous from `offset * chunk` (see [`Plan::out_index`]).
     out: Vec<f64>,
     evaluations: usize,
-    /// Native code for the program (see [`crate::jit`]), compiled at the first run when the
-    /// plan was built with the switch on.
+    /// Native code for the program (see [`crate::native`]), compiled at the first run when
+    /// the plan was built with the switch on and a backend.
     native: NativeState,
     /// Per domain row, the number of its match (see [`Plan::patch`]).
     row_match: Vec<u32>,
@@ -1149,19 +1167,21 @@ impl PlanBuilder {
         self.matches += ms.len();
     }
 
-    /// The plan, with native code compiled at its first run when `jit_on`.
-    pub(crate) fn finish(self, g: &GMap, ids: &[EmbeddingId], jit_on: bool) -> Plan {
+    /// The plan, with native code compiled by `backend` at its first run when there is one
+    /// (the rule set's switch on and a backend installed).
+    pub(crate) fn finish(
+        self,
+        g: &GMap,
+        ids: &[EmbeddingId],
+        backend: Option<Arc<dyn NativeBackend>>,
+    ) -> Plan {
         Plan::assemble(
             self.prog,
             g,
             ids,
             self.rows,
             self.matches,
-            if jit_on {
-                NativeState::Untried
-            } else {
-                NativeState::Off
-            },
+            backend.map_or(NativeState::Off, NativeState::Untried),
             None,
         )
     }
@@ -1172,13 +1192,13 @@ impl PlanBuilder {
 enum NativeState {
     /// The switch was off when the plan was built: the evaluator runs.
     Off,
-    /// To compile at the first run (the column kinds are known then).
-    Untried,
+    /// To compile at the first run (the column kinds are known then), with this backend.
+    Untried(Arc<dyn NativeBackend>),
     /// Not covered (the reason): the evaluator runs.
     Failed(#[allow(dead_code)] String),
     /// Compiled, with per program column the length it must have at least (in elements):
     /// one more than the largest slot the index arrays hold, times the width read.
-    Ready(std::sync::Arc<jit::Native>, Vec<usize>),
+    Ready(Arc<dyn NativeFn>, Vec<usize>),
 }
 
 /// Partition of the rows: rows joined through the orbit positions `uniform` share a class.
@@ -1588,7 +1608,7 @@ impl Plan {
         g: &GMap,
         ids: &[EmbeddingId],
         matches: &[Match],
-        jit_on: bool,
+        backend: Option<Arc<dyn NativeBackend>>,
     ) -> Plan {
         let numbers: Vec<u32> = (0..matches.len() as u32).collect();
         let rows = Rows::of(&prog, rule, g, ids, matches, &numbers, 0);
@@ -1598,11 +1618,7 @@ impl Plan {
             ids,
             rows,
             matches.len(),
-            if jit_on {
-                NativeState::Untried
-            } else {
-                NativeState::Off
-            },
+            backend.map_or(NativeState::Off, NativeState::Untried),
             None,
         )
     }
@@ -1725,8 +1741,8 @@ impl Plan {
         plan.native = match native {
             NativeState::Ready(nat, old) => {
                 let need = match appended_from {
-                    Some(from) => plan.need_grown(&nat.kinds, &old, from),
-                    None => plan.need(&nat.kinds),
+                    Some(from) => plan.need_grown(nat.kinds(), &old, from),
+                    None => plan.need(nat.kinds()),
                 };
                 match need {
                     Ok(need) => NativeState::Ready(nat, need),
@@ -2074,8 +2090,8 @@ impl Plan {
     /// the native code may index, computed again over the appended rows only.
     fn regrow_need(&mut self, base: usize) {
         if let NativeState::Ready(nat, old) = &self.native {
-            self.native = match self.need_grown(&nat.kinds, old, base) {
-                Ok(need) => NativeState::Ready(std::sync::Arc::clone(nat), need),
+            self.native = match self.need_grown(nat.kinds(), old, base) {
+                Ok(need) => NativeState::Ready(Arc::clone(nat), need),
                 Err(why) => NativeState::Failed(why),
             };
         }
@@ -2146,13 +2162,13 @@ impl Plan {
     /// Generates the plan's native code now, for the column kinds of `g` (`ids` are the
     /// rule's embeddings), when it was to be generated at the first run.
     pub(crate) fn compile_now(&mut self, g: &GMap, ids: &[EmbeddingId]) {
-        if matches!(self.native, NativeState::Untried) {
+        if matches!(self.native, NativeState::Untried(_)) {
             self.native = self.compile_native(&self.col_kinds(g, ids));
         }
     }
 
     /// The kinds of the program's columns on `g` (`ids` are the rule's embeddings).
-    fn col_kinds(&self, g: &GMap, ids: &[EmbeddingId]) -> Vec<jit::ColKind> {
+    fn col_kinds(&self, g: &GMap, ids: &[EmbeddingId]) -> Vec<ColKind> {
         self.prog
             .cols
             .iter()
@@ -2207,9 +2223,7 @@ impl Plan {
         let native = match &self.native {
             // the sub-plan's index entries are some of this plan's: what this plan's columns
             // must hold (`need`) bounds what the sub-plan's need
-            NativeState::Ready(nat, need) => {
-                NativeState::Ready(std::sync::Arc::clone(nat), need.clone())
-            }
+            NativeState::Ready(nat, need) => NativeState::Ready(Arc::clone(nat), need.clone()),
             NativeState::Off => NativeState::Off,
             _ => NativeState::Failed("not compiled".into()),
         };
@@ -2252,7 +2266,7 @@ impl Plan {
     /// arrays to stay in it: one more than the largest slot they hold, times the width read;
     /// `Err` when the arrays are out of shape (rows, CSR offsets). Computed whenever the
     /// arrays change (built or patched), so that a native run only compares lengths.
-    fn need(&self, kinds: &[jit::ColKind]) -> Result<Vec<usize>, String> {
+    fn need(&self, kinds: &[ColKind]) -> Result<Vec<usize>, String> {
         self.need_grown(kinds, &vec![0; kinds.len()], 0)
     }
 
@@ -2262,7 +2276,7 @@ impl Plan {
     /// there, the largest slots taken over the appended rows only.
     fn need_grown(
         &self,
-        kinds: &[jit::ColKind],
+        kinds: &[ColKind],
         old: &[usize],
         from: usize,
     ) -> Result<Vec<usize>, String> {
@@ -2279,7 +2293,7 @@ impl Plan {
                     if g.len() != rows {
                         return Err("a gather of another length".into());
                     }
-                    let w = if kinds[*col] == jit::ColKind::Real {
+                    let w = if kinds[*col] == ColKind::Real {
                         self.prog.regs[*dst].width
                     } else {
                         1
@@ -2317,7 +2331,7 @@ impl Plan {
     }
 
     /// Compiles the program to native code for columns of `kinds`.
-    fn compile_native(&self, kinds: &[jit::ColKind]) -> NativeState {
+    fn compile_native(&self, kinds: &[ColKind]) -> NativeState {
         // what the code will index: checked here and whenever the arrays change (`need`),
         // so that a run only compares column lengths with `need`
         let need = match self.need(kinds) {
@@ -2325,13 +2339,16 @@ impl Plan {
             Err(why) => return NativeState::Failed(why),
         };
         let offsets: Vec<usize> = self.targets.iter().map(|t| t.1).collect();
-        let layout = jit::OutLayout {
+        let NativeState::Untried(backend) = &self.native else {
+            return NativeState::Failed("no backend".into());
+        };
+        let layout = OutLayout {
             chunk: self.chunk,
             out_width: self.out_width,
             offsets: &offsets,
         };
-        match jit::compile(&self.prog, kinds, self.csr.len(), &layout) {
-            Ok(n) => NativeState::Ready(std::sync::Arc::new(n), need),
+        match backend.compile(&self.prog, kinds, self.csr.len(), &layout) {
+            Ok(n) => NativeState::Ready(n, need),
             Err(e) => NativeState::Failed(e),
         }
     }
@@ -2590,7 +2607,7 @@ impl Plan {
         self.chunk_starts.as_ref()?;
         let pvals = param_values(params)?;
         let kinds = self.col_kinds(g, ids);
-        if matches!(self.native, NativeState::Untried) {
+        if matches!(self.native, NativeState::Untried(_)) {
             self.native = self.compile_native(&kinds);
         }
         let NativeState::Ready(nat, need) = &self.native else {
@@ -2598,10 +2615,10 @@ impl Plan {
         };
         // owned, so that the read-only gathers can be packed now (`&mut self`; each copy
         // checks its slots inside its column)
-        let (nat, need) = (std::sync::Arc::clone(nat), need.clone());
+        let (nat, need) = (Arc::clone(nat), need.clone());
         self.pack_read_only(g, ids);
         let fills = self.prog.fill_values(&pvals);
-        if nat.kinds != kinds || !self.prog.fills_fit(&fills) {
+        if nat.kinds() != kinds || !self.prog.fills_fit(&fills) {
             return None;
         }
         // the written embeddings: distinct columns of reals or booleans
@@ -2613,7 +2630,7 @@ impl Plan {
         }
         for (k, &e) in written.iter().enumerate() {
             let kind = col_kind(&g.embedding(ids[e]).column());
-            if kind == jit::ColKind::Int
+            if kind == ColKind::Int
                 || written[..k].iter().any(|&f| ids[f] == ids[e])
                 || g.embedding(ids[e]).derived().is_some()
             {
@@ -2677,7 +2694,7 @@ impl Plan {
         }
         let out = SyncPtr(self.out.as_mut_ptr());
         let mut tables =
-            ArgTables::new(&self.gathers, &self.csr, &self.counts, &nat, col_p, &fills);
+            ArgTables::new(&self.gathers, &self.csr, &self.counts, &*nat, col_p, &fills);
         for p in self.packed.iter().filter(|p| !p.values.is_empty()) {
             tables.gathers[p.idx] = self.identity.as_ptr();
         }
@@ -2736,7 +2753,7 @@ impl Plan {
             // no early exit, so that it vectorizes
             !blk.iter().fold(false, |bad, x| bad | !x.is_finite())
         };
-        jit::CHUNKED.fetch_add(1, Ordering::Relaxed);
+        native::CHUNKED.fetch_add(1, Ordering::Relaxed);
         let parallel = n_chunks >= 4 && rayon::current_num_threads() > 1;
         let ok = if parallel {
             (0..n_chunks).into_par_iter().all(one)
@@ -2814,19 +2831,25 @@ impl Plan {
                 out_offsets: &self.targets,
             };
             let rows = self.rows;
-            let kinds: Vec<jit::ColKind> = cols.iter().map(col_kind).collect();
-            if matches!(self.native, NativeState::Untried) {
+            let kinds: Vec<ColKind> = cols.iter().map(col_kind).collect();
+            if matches!(self.native, NativeState::Untried(_)) {
                 self.native = self.compile_native(&kinds);
             }
             if let NativeState::Ready(nat, need) = &self.native {
-                let fits = nat.kinds == kinds
+                let fits = nat.kinds() == kinds
                     && self.prog.fills_fit(&fills)
                     && cols.iter().zip(need).all(|(c, &m)| col_ptr(c).1 >= m)
                     && self.out.len() == need_out;
                 if fits {
                     let col_p: Vec<*const u8> = cols.iter().map(|c| col_ptr(c).0).collect();
-                    let tables =
-                        ArgTables::new(&self.gathers, &self.csr, &self.counts, nat, col_p, &fills);
+                    let tables = ArgTables::new(
+                        &self.gathers,
+                        &self.csr,
+                        &self.counts,
+                        &**nat,
+                        col_p,
+                        &fills,
+                    );
                     let args = tables.args(self.out.as_mut_ptr());
                     let one = |c: usize| {
                         let (first, n) = (c * ch, (rows - c * ch).min(ch));
@@ -2836,7 +2859,9 @@ impl Plan {
                         // computed from these arrays by `Plan::need` whenever they were set:
                         // in `compile_native`, and in `assemble` after a patch; it also
                         // checked their row lengths and CSR shape), fills at least as
-                        // wide as their registers, the output buffer of `n_chunks` blocks);
+                        // wide as their registers, the output buffer of `n_chunks` blocks,
+                        // `calls` and `helpers` `nat`'s own tables (`ArgTables::new`), which
+                        // `nat`, held by `self.native`, keeps valid for the run);
                         // rows `first..first + n` are one chunk inside `0..rows`, and each
                         // chunk is run by one call only, so concurrent calls write disjoint
                         // blocks of `out`, which nothing else touches meanwhile (`&mut self`).
@@ -2955,11 +2980,11 @@ impl Program {
 }
 
 /// The element type of a column.
-fn col_kind(c: &ColumnRef) -> jit::ColKind {
+fn col_kind(c: &ColumnRef) -> ColKind {
     match c {
-        ColumnRef::Real(_) => jit::ColKind::Real,
-        ColumnRef::Bool(_) => jit::ColKind::Bool,
-        ColumnRef::Int(_) => jit::ColKind::Int,
+        ColumnRef::Real(_) => ColKind::Real,
+        ColumnRef::Bool(_) => ColKind::Bool,
+        ColumnRef::Int(_) => ColKind::Int,
     }
 }
 
@@ -3037,7 +3062,7 @@ unsafe impl Send for SyncPtr {}
 #[allow(unsafe_code)]
 unsafe impl Sync for SyncPtr {}
 
-/// The arrays of addresses a native call's table ([`jit::JitArgs`]) points into, kept alive
+/// The arrays of addresses a native call's table ([`JitArgs`]) points into, kept alive
 /// for the calls of one run.
 struct ArgTables {
     cols: Vec<*const u8>,
@@ -3046,8 +3071,8 @@ struct ArgTables {
     slots: Vec<*const u32>,
     counts: Vec<*const f64>,
     fills: Vec<*const f64>,
-    calls: Vec<*const jit::Call>,
-    helpers: [*const u8; 2],
+    calls: Vec<*const u8>,
+    helpers: Vec<*const u8>,
 }
 
 impl ArgTables {
@@ -3055,7 +3080,7 @@ impl ArgTables {
         gathers: &[Vec<u32>],
         csr: &[(Vec<u32>, Vec<u32>)],
         counts: &[Vec<f64>],
-        nat: &jit::Native,
+        nat: &dyn NativeFn,
         cols: Vec<*const u8>,
         fills: &[&[f64]],
     ) -> Self {
@@ -3066,14 +3091,14 @@ impl ArgTables {
             slots: csr.iter().map(|x| x.1.as_ptr()).collect(),
             counts: counts.iter().map(Vec::as_ptr).collect(),
             fills: fills.iter().map(|x| x.as_ptr()).collect(),
-            calls: nat.calls.iter().map(|c| &raw const *c).collect(),
-            helpers: jit::helper_table(),
+            calls: nat.call_table(),
+            helpers: nat.helper_table(),
         }
     }
 
     /// The table of a run writing its outputs at `out`.
-    fn args(&self, out: *mut f64) -> jit::JitArgs {
-        jit::JitArgs {
+    fn args(&self, out: *mut f64) -> JitArgs {
+        JitArgs {
             cols: self.cols.as_ptr(),
             gathers: self.gathers.as_ptr(),
             offs: self.offs.as_ptr(),
@@ -3494,7 +3519,9 @@ impl Ctx<'_> {
 /// boolean: 1 or 0) has one, the built-in's own function without values built per call: a
 /// blade's guard calls it twice per face side, every step. Used by the evaluator and by the
 /// native code's helper alike.
-pub(crate) fn generic_flat(name: &str, x: &[f64], z: &mut [f64]) -> bool {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub fn generic_flat(name: &str, x: &[f64], z: &mut [f64]) -> bool {
     if name != "segment_hits_triangle" || x.len() != 15 || z.len() != 1 {
         return false;
     }
@@ -3653,7 +3680,11 @@ fn matmul(x: &[f64], y: &[f64], z: &mut [f64], r: usize, k: usize, c: usize) {
 
 /// The flat built-ins; `Err` when the built-in would refuse its argument.
 #[inline]
-pub(crate) fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Result<(), ()> {
+// For the sibling crate (topomech-codegen) only; `()` is the whole error (the caller falls
+// back to the evaluator, which reports it precisely).
+#[doc(hidden)]
+#[allow(clippy::result_unit_err)]
+pub fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Result<(), ()> {
     match f {
         Fast::Dot => z[0] = builtins::dot(x, y.ok_or(())?),
         Fast::Norm => z[0] = builtins::norm(x),
@@ -3688,7 +3719,9 @@ pub(crate) fn fast(f: Fast, x: &[f64], y: Option<&[f64]>, z: &mut [f64]) -> Resu
 
 /// A register's floats as the value of type `t` they hold (an integer or a boolean is one
 /// float: `0.0` is false), for a built-in called through [`builtins::call`].
-pub(crate) fn register_val(t: Ty, x: &[f64]) -> Val {
+// For the sibling crate (topomech-codegen) only.
+#[doc(hidden)]
+pub fn register_val(t: Ty, x: &[f64]) -> Val {
     match t {
         Ty::I64 => Val::I(x[0] as i64),
         Ty::Bool => Val::B(x[0] != 0.0),

@@ -4,7 +4,8 @@
 //! `compile` turns a plan's register `Program` into one native function
 //! `extern "C" fn(args: *const JitArgs, first: u64, n: u64) -> u32` that evaluates rows
 //! `first..first + n` (all in one chunk) and stores each write's values into the plan's output
-//! buffer exactly where `crate::compiled`'s evaluator (`Ctx::chunk`) stores them, in the same
+//! buffer exactly where the engine's evaluator (`Ctx::chunk` in `topomech_engine`'s
+//! `compiled.rs`) stores them, in the same
 //! layout. Inside a row, registers are SSA values (one `f64` value per float of a register's
 //! width): the intermediates stay in machine registers instead of going through scratch.
 //!
@@ -27,15 +28,21 @@
 //! An operation not covered here makes `compile` fail: the plan then keeps using the
 //! evaluator, which stays the reference and the fallback.
 //!
-//! **The switch.** A plan built while its rule set's switch is on ([`crate::RuleSet::set_jit`];
-//! default: on, unless the environment variable `TOPOMECH_JIT` is `0`, `false`, `off` or `no`) generates its code at
-//! its first run, once (a few milliseconds), and runs it per chunk with the evaluator's
-//! chunking and rayon parallelism. `compiled_count` counts the programs compiled, and
-//! [`crate::RuleSet::plan_native`] tells which plans run native code.
+//! **The switch.** A plan built while its rule set's switch is on ([`RuleSet::set_jit`];
+//! default: on, unless the environment variable `TOPOMECH_JIT` is `0`, `false`, `off` or `no`)
+//! and [`Cranelift`] is its backend ([`RuleSet::set_backend`]; the facade `topomech-rules`
+//! installs it) generates its code at its first run, once (a few milliseconds), and runs it
+//! per chunk with the evaluator's chunking and rayon parallelism. `compiled_count` counts the
+//! programs compiled, and [`RuleSet::plan_native`] tells which plans run native code.
+//!
+//! **The door.** This module implements the engine's interface
+//! ([`topomech_engine::native`]): [`Cranelift`] is a [`NativeBackend`], and what it compiles
+//! a [`NativeFn`] called with the engine's [`JitArgs`] table.
 //!
 //! **Lifetime.** The function pointer points into memory owned by the `JITModule` kept in
 //! `Native`; `Native` never hands the pointer out and frees the module's memory only when
-//! it is dropped, so no call can outlive the code.
+//! it is dropped, so no call can outlive the code (the engine holds a plan's code as an
+//! `Arc<dyn NativeFn>` for as long as it may call it).
 #![allow(unsafe_code)]
 
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -50,51 +57,36 @@ use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, Linkage, Module};
 
-use crate::builtins;
-use crate::compiled::{Cmp, Ew, Fast, Op, Program};
-use crate::value::Ty;
+use std::sync::Arc;
 
-/// The run-time table of a native plan function: addresses of arrays of addresses, one entry
-/// per column, gather, aggregate, count array, fill, helper call. The generated code reads
-/// field `k` at byte offset `8 * k` (64-bit targets only).
-#[repr(C)]
-pub(crate) struct JitArgs {
-    /// Per program column: the base of its values (`f64`, `bool` or `i64`, see [`ColKind`]).
-    pub(crate) cols: *const *const u8,
-    /// Per gather: its slot per domain row.
-    pub(crate) gathers: *const *const u32,
-    /// Per aggregate: CSR offsets (rows + 1).
-    pub(crate) offs: *const *const u32,
-    /// Per aggregate: CSR slots.
-    pub(crate) slots: *const *const u32,
-    /// Per aggregate: per-row counts.
-    pub(crate) counts: *const *const f64,
-    /// Per fill: its values.
-    pub(crate) fills: *const *const f64,
-    /// The plan's output buffer.
-    pub(crate) out: *mut f64,
-    /// Per helper call site: its descriptor.
-    pub(crate) calls: *const *const Call,
-    /// `[jit_call, fma]`.
-    pub(crate) helpers: *const *const u8,
-}
+use topomech_engine::compiled::{Cmp, Ew, Fast, Op, Program};
+use topomech_engine::native::{ColKind, JitArgs, NativeBackend, NativeFn, OutLayout};
+#[cfg(doc)]
+use topomech_engine::RuleSet;
+use topomech_lang::builtins;
+use topomech_lang::value::Ty;
 
-// SAFETY: the table is only read by the generated code, and each call writes only the output
-// rows of its own chunk, so several threads may run calls with one table at once (on
-// distinct chunks, as `Plan::run` does).
-unsafe impl Sync for JitArgs {}
+pub use topomech_engine::native::chunked_runs;
 
-/// The element type of a column.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum ColKind {
-    Real,
-    Bool,
-    Int,
+/// The Cranelift code generator, as the engine's backend for compiled plans' native code.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Cranelift;
+
+impl NativeBackend for Cranelift {
+    fn compile(
+        &self,
+        prog: &Program,
+        kinds: &[ColKind],
+        n_aggs: usize,
+        layout: &OutLayout,
+    ) -> Result<Arc<dyn NativeFn>, String> {
+        Ok(Arc::new(compile(prog, kinds, n_aggs, layout)?))
+    }
 }
 
 /// What a helper call site computes (through [`jit_call`], with the evaluator's code).
 #[derive(Debug)]
-pub(crate) enum Call {
+enum Call {
     F1(fn(f64) -> f64),
     F2(fn(f64, f64) -> f64),
     Rem,
@@ -113,14 +105,14 @@ pub(crate) enum Call {
 type Func = unsafe extern "C" fn(*const JitArgs, u64, u64) -> u32;
 
 /// A program compiled to native code.
-pub(crate) struct Native {
+struct Native {
     module: Option<JITModule>,
     func: Func,
     /// Per helper call site, its descriptor (never changed after `compile`: the table holds
     /// their addresses).
-    pub(crate) calls: Vec<Call>,
+    calls: Vec<Call>,
     /// The column kinds the code was generated for.
-    pub(crate) kinds: Vec<ColKind>,
+    kinds: Vec<ColKind>,
 }
 
 impl std::fmt::Debug for Native {
@@ -174,49 +166,38 @@ pub fn compiled_count() -> u64 {
     COMPILED.load(Ordering::Relaxed)
 }
 
-/// Runs of native code that checked and scattered their values chunk by chunk (see
-/// `Plan::run_chunked` in `compiled.rs`), failed ones included, in this process.
-pub(crate) static CHUNKED: AtomicU64 = AtomicU64::new(0);
+impl NativeFn for Native {
+    fn kinds(&self) -> &[ColKind] {
+        &self.kinds
+    }
 
-/// The number of plan runs so far in this process whose native code checked each chunk's
-/// values as soon as the chunk was evaluated and then scattered them chunk by chunk (in
-/// parallel where the plan runs in parallel), failed ones included: what tests check to
-/// know that path ran.
-pub fn chunked_runs() -> u64 {
-    CHUNKED.load(Ordering::Relaxed)
-}
+    /// The descriptors' addresses: `calls` is never changed after `compile` and lives as
+    /// long as `self`.
+    fn call_table(&self) -> Vec<*const u8> {
+        self.calls
+            .iter()
+            .map(|c| (&raw const *c).cast::<u8>())
+            .collect()
+    }
 
-/// Whether compiled plans run native code by default: the environment variable
-/// `TOPOMECH_JIT` (`0`, `false`, `off`, `no`, in any case: off; unset or anything else: on), read once per process.
-///
-/// On by default: on every shipped model and integrator the native code gives the
-/// evaluator's bits (tests `physics/tests/jit.rs`, `rules/tests/jit.rs`), compiles in a few
-/// milliseconds per plan, and steps faster (see the crate's `engine` bench).
-pub(crate) fn enabled_by_env() -> bool {
-    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| {
-        std::env::var("TOPOMECH_JIT").map_or(true, |v| {
-            !matches!(
-                v.trim().to_ascii_lowercase().as_str(),
-                "0" | "false" | "off" | "no"
-            )
-        })
-    })
-}
+    /// `[jit_call, fma]`.
+    fn helper_table(&self) -> Vec<*const u8> {
+        vec![jit_call as *const u8, jit_fma as *const u8]
+    }
 
-impl Native {
     /// Runs rows `first..first + n`.
     ///
     /// # Safety
-    /// `args` must describe arrays for which the code was generated: the column kinds
-    /// [`Native::kinds`], every index array covering rows `first..first + n`, every slot they
-    /// hold inside its column, fills of their registers' widths, an output buffer covering
-    /// the chunk of these rows, and `calls` the descriptors of [`Native::calls`]; and no other
-    /// thread may write the same rows' output at the same time.
-    pub(crate) unsafe fn call(&self, args: &JitArgs, first: usize, n: usize) -> u32 {
+    /// The contract of [`NativeFn::call`]: `args` describes arrays for which the code was
+    /// generated (the column kinds `self.kinds`, index arrays covering the rows, slots inside
+    /// their columns, fills of their registers' widths, an output buffer covering the
+    /// rows' chunk, `calls` and `helpers` this function's `call_table` and `helper_table`),
+    /// and no other thread writes the same rows' output at the same time.
+    unsafe fn call(&self, args: &JitArgs, first: usize, n: usize) -> u32 {
         // SAFETY: the caller's contract above is exactly what the generated code reads and
         // writes (see `compile`: it reads each array at the row's index or at slots read from
-        // the index arrays, and writes the output at `Plan::out_index` of these rows).
+        // the index arrays, calls the helpers of `helper_table` with the descriptors of
+        // `call_table`, and writes the output at `Plan::out_index` of these rows).
         unsafe { (self.func)(args, first as u64, n as u64) }
     }
 }
@@ -225,9 +206,10 @@ impl Native {
 /// the floats at `args` into `out`, with the evaluator's own code. Returns 0, or 1 where the
 /// evaluator would fail (a built-in refusing its argument), 2 on a panic.
 extern "C" fn jit_call(c: *const Call, args: *const f64, out: *mut f64) -> u32 {
-    // SAFETY: the generated code passes the descriptor from the table (a live `Call` of
-    // the `Native` being run, in its never-changed `calls`) and two stack buffers of the lengths `arg_len` and `out_len`
-    // give for this descriptor.
+    // SAFETY: the generated code passes the descriptor from the table (an address of
+    // `Native::call_table`, which the engine must put in `JitArgs::calls`: a live `Call` of
+    // the `Native` being run, in its never-changed `calls`) and two stack buffers of the
+    // lengths `arg_len` and `out_len` give for this descriptor.
     let c = unsafe { &*c };
     let (na, nw) = (arg_len(c), out_len(c));
     // SAFETY: see above: `args` holds `na` floats, `out` `nw`, and they do not overlap.
@@ -276,10 +258,10 @@ fn helper(c: &Call, x: &[f64], z: &mut [f64]) -> Result<(), ()> {
         Call::Rem => z[0] = Ew::Rem.apply(x[0], x[1]),
         Call::Fast { f, wa, two } => {
             let (a, b) = x.split_at(*wa);
-            crate::compiled::fast(*f, a, two.then_some(b), z)?;
+            topomech_engine::compiled::fast(*f, a, two.then_some(b), z)?;
         }
         Call::Generic { name, args, ty } => {
-            if crate::compiled::generic_flat(name, x, z) {
+            if topomech_engine::compiled::generic_flat(name, x, z) {
                 return Ok(());
             }
             let mut vals = Vec::with_capacity(args.len());
@@ -287,7 +269,7 @@ fn helper(c: &Call, x: &[f64], z: &mut [f64]) -> Result<(), ()> {
             for &(w, t) in args {
                 let v = &x[at..at + w];
                 at += w;
-                vals.push(crate::compiled::register_val(t, v));
+                vals.push(topomech_engine::compiled::register_val(t, v));
             }
             let v = builtins::call(name, &vals).map_err(|_| ())?;
             if v.ty() != *ty {
@@ -464,17 +446,9 @@ impl Gen<'_, '_> {
     }
 }
 
-/// The layout of a plan's output buffer (see `Plan::out_index`).
-pub(crate) struct OutLayout<'a> {
-    pub(crate) chunk: usize,
-    pub(crate) out_width: usize,
-    /// Per write, its offset in an output row.
-    pub(crate) offsets: &'a [usize],
-}
-
 /// Compiles `prog` for columns of the kinds `kinds`; `Err` names what is not covered.
 #[allow(clippy::too_many_lines)]
-pub(crate) fn compile(
+fn compile(
     prog: &Program,
     kinds: &[ColKind],
     n_aggs: usize,
@@ -1015,11 +989,6 @@ pub(crate) fn compile(
     })
 }
 
-/// The helper addresses of the table (`JitArgs::helpers`).
-pub(crate) fn helper_table() -> [*const u8; 2] {
-    [jit_call as *const u8, jit_fma as *const u8]
-}
-
 fn dst_of(op: &Op) -> usize {
     match op {
         Op::MatMulSparse { dst, .. }
@@ -1048,11 +1017,14 @@ fn dst_of(op: &Op) -> usize {
 
 #[cfg(test)]
 mod tests {
-    use super::PORTABLE;
-    use crate::{load_sources, Params, Val};
+    use super::{Cranelift, PORTABLE};
     use std::sync::atomic::Ordering;
+    use std::sync::Arc;
+    use topomech_engine::{Params, RuleSet};
     use topomech_gmap::generators::{grid, GridElement};
     use topomech_gmap::mesh::{build, BuildOptions};
+    use topomech_lang::check::check_sources;
+    use topomech_lang::Val;
 
     const SRC: &str = "dimension 2
 embedding position : vec3 on <1,2>
@@ -1078,7 +1050,10 @@ rule r(q: vec3) {
         )
         .unwrap();
         let run = |jit: bool| {
-            let (mut rules, _) = load_sources(&[("t.tmr".to_string(), SRC.to_string())]).unwrap();
+            // this crate's own backend (under test: the copy that reads `PORTABLE`)
+            let (checked, _) = check_sources(&[("t.tmr".to_string(), SRC.to_string())]);
+            let mut rules = RuleSet::new(checked.unwrap());
+            rules.set_backend(Some(Arc::new(Cranelift)));
             rules.set_jit(jit);
             let mut g = g0.clone();
             rules.prepare(&mut g).unwrap();

@@ -13,7 +13,7 @@
 //! converted to `f64`, so `2 * v`, `x + 1` and `m / 2` work; `i64` with `i64` stays integer.
 //!
 //! ```
-//! use topomech_rules::value::{binop, binop_type, BinOp, Ty, Val};
+//! use topomech_lang::value::{binop, binop_type, BinOp, Ty, Val};
 //!
 //! assert_eq!(binop_type(BinOp::Mul, Ty::I64, Ty::Vec3), Ok(Ty::Vec3));
 //! assert_eq!(binop_type(BinOp::Mul, Ty::Mat(12, 3), Ty::Vec3), Ok(Ty::Mat(12, 1)));

@@ -1,13 +1,14 @@
 //! Rules built as syntax trees, not as text: parse one expression given by a user (a scene's
-//! predicate), build rule declarations around it, and check and load them with the ordinary
-//! checker beside rule files given as text.
+//! predicate), build rule declarations around it, and check them with the ordinary checker
+//! beside rule files given as text ([`check_built`]; `topomech_rules::build::load` also
+//! wraps the checked rules in a rule set).
 //!
 //! A program that makes rules from user input builds them here, so the input can only ever be
 //! the one expression it is meant to be: a predicate containing `}` or `rule` is refused by
 //! [`parse_expression`], never read as more rules.
 //!
 //! ```
-//! use topomech_rules::build::{self, parse_expression};
+//! use topomech_lang::build::{self, parse_expression};
 //!
 //! // where { let x = x(v.rest)  <the user's predicate> }
 //! let pred = parse_expression("fix[0].where", "x < 0.5").unwrap();
@@ -21,10 +22,11 @@
 //! let text = "dimension 2
 //!   embedding rest : vec3 on <1,2>
 //!   embedding fixed : bool on <1,2>";
-//! let glue = build::file(&topomech_rules::parser::parse(text).unwrap(), vec![r]);
-//! let (rules, _) = build::load(&[("decl.tmr".into(), text.into())], vec![("glue".into(), glue)])
-//!     .unwrap();
-//! assert_eq!(rules.rule("fix_0").unwrap().name, "fix_0");
+//! let glue = build::file(&topomech_lang::parser::parse(text).unwrap(), vec![r]);
+//! let (checked, _) =
+//!     build::check_built(&[("decl.tmr".into(), text.into())], vec![("glue".into(), glue)])
+//!         .unwrap();
+//! assert!(checked.rules.iter().any(|r| r.name == "fix_0"));
 //!
 //! // rule syntax in a predicate is refused, naming where
 //! let e = parse_expression("fix[0].where", "x < 0 } rule evil {").unwrap_err();
@@ -34,8 +36,7 @@
 use crate::ast::{
     AggKind, ArcDecl, Expr, ExprKind, File, Graph, NodeDecl, Param, Pos, RuleDecl, Stmt,
 };
-use crate::check::{self, Diagnostic, Severity};
-use crate::engine::RuleSet;
+use crate::check::{self, Checked, Diagnostic, Severity};
 use crate::value::BinOp;
 
 /// Parses `text` as one expression of the rule language, optionally preceded by `let`
@@ -220,15 +221,16 @@ pub fn file(like: &File, rules: Vec<RuleDecl>) -> File {
 
 /// Parses the text sources `(file name, text)` and checks them together with the files
 /// `parsed` (already syntax trees, e.g. built with this module), sharing their embeddings,
-/// with every check [`crate::load_sources`] makes. Diagnostics of a built file name it by
-/// its label and, for a parsed expression inside it, the line and column in that
-/// expression's text.
+/// with every check [`check::check_sources`] makes (what `topomech_rules::load_sources`
+/// checks). Diagnostics of a built file name it by its label and, for a parsed expression
+/// inside it, the line and column in that expression's text.
 ///
-/// On success: the rule set and its warnings; otherwise every diagnostic.
-pub fn load(
+/// On success: the checked rules (what the engine's rule set wraps, see
+/// `topomech_rules::build::load`) and their warnings; otherwise every diagnostic.
+pub fn check_built(
     sources: &[(String, String)],
     parsed: Vec<(String, File)>,
-) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
+) -> Result<(Checked, Vec<Diagnostic>), Vec<Diagnostic>> {
     let mut files = Vec::with_capacity(sources.len() + parsed.len());
     let mut errs = Vec::new();
     for (name, src) in sources {
@@ -249,7 +251,7 @@ pub fn load(
     files.extend(parsed);
     let (checked, diags) = check::check_files(&files);
     match checked {
-        Some(c) => Ok((RuleSet::new(c), diags)),
+        Some(c) => Ok((c, diags)),
         None => Err(diags),
     }
 }

@@ -144,7 +144,7 @@ impl Model {
 impl Call {
     /// The rule's parameters for this call, given the model's parameter values (from
     /// [`Model::values`], which has every parameter).
-    pub fn params(&self, values: &HashMap<String, Val>) -> crate::Params {
+    pub fn params(&self, values: &HashMap<String, Val>) -> HashMap<String, Val> {
         self.args
             .iter()
             .map(|(name, a)| {

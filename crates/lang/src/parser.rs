@@ -848,7 +848,7 @@ mod tests {
     use super::*;
 
     /// The example of the language's specification, as written there.
-    const EXAMPLE: &str = include_str!("../tests/it/spec_example.tmr");
+    const EXAMPLE: &str = include_str!("../../rules/tests/it/spec_example.tmr");
 
     #[test]
     fn the_issue_example_parses() {

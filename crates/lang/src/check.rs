@@ -1717,7 +1717,9 @@ impl ExprCheck<'_, '_> {
 }
 
 /// Calls `f` on `e` and on every expression inside it, parents before their operands.
-pub(crate) fn visit(e: &TExpr, f: &mut dyn FnMut(&TExpr)) {
+// For the sibling crate (topomech-engine) only.
+#[doc(hidden)]
+pub fn visit(e: &TExpr, f: &mut dyn FnMut(&TExpr)) {
     f(e);
     match e {
         TExpr::Const(_)
@@ -1750,7 +1752,9 @@ pub(crate) fn visit(e: &TExpr, f: &mut dyn FnMut(&TExpr)) {
 }
 
 /// The embeddings an expression reads, sorted, without repeats.
-pub(crate) fn reads_of(e: &TExpr) -> Vec<usize> {
+// For the sibling crate (topomech-engine) only.
+#[doc(hidden)]
+pub fn reads_of(e: &TExpr) -> Vec<usize> {
     let mut out = Vec::new();
     visit(e, &mut |x| match x {
         TExpr::Read { emb, .. } => out.push(*emb),
