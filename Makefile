@@ -22,7 +22,8 @@
 #   make clean    remove build outputs and the venv
 #
 # Stamp files under .venv make the targets idempotent: `make test` twice rebuilds nothing
-# unless a Rust source, a Cargo manifest or pyproject.toml changed.
+# unless a Rust source, a rule file (.tmr, compiled into the crates), a Cargo manifest or
+# pyproject.toml changed.
 
 SHELL := /bin/bash
 PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
@@ -30,7 +31,7 @@ VENV := .venv
 VPY := $(VENV)/bin/python
 CARGO ?= cargo
 
-RUST_SOURCES := $(shell find crates -name '*.rs' -o -name Cargo.toml) Cargo.toml Cargo.lock
+RUST_SOURCES := $(shell find crates -name '*.rs' -o -name '*.tmr' -o -name Cargo.toml) Cargo.toml Cargo.lock
 VENV_STAMP := $(VENV)/.stamp-venv
 DEVELOP_STAMP := $(VENV)/.stamp-develop
 # Linters are pinned to a minor (ruff) or major (mypy) version: new releases add checks.
