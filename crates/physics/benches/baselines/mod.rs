@@ -535,23 +535,20 @@ impl NeoHookean {
     /// From a simulation of `neohookean` on tetrahedra.
     pub fn from_sim(sim: &Simulation) -> Self {
         let g = sim.gmap();
-        let label = vertex_labels(g);
-        let tv = tet_vertices(g, &label);
-        let mut b = NeoHookean {
+        let tv = tet_vertices(g, &vertex_labels(g));
+        let scalar = |name: &str, d: Dart| read::<1>(g, name, d)[0];
+        NeoHookean {
             s: State::from_sim(sim),
-            tets: Vec::with_capacity(tv.len()),
-            dm_inv: Vec::with_capacity(tv.len()),
-            material: Vec::with_capacity(tv.len()),
-        };
-        for (n0, verts) in tv {
-            b.tets.push(verts);
-            b.dm_inv.push(m3(read(g, "hyper_dm_inv", n0)));
-            let [v] = read(g, "hyper_volume", n0);
-            let [mu] = read(g, "nh_mu", n0);
-            let [lambda] = read(g, "nh_lambda", n0);
-            b.material.push([v, mu, lambda]);
+            tets: tv.iter().map(|t| t.1).collect(),
+            dm_inv: tv
+                .iter()
+                .map(|&(n0, _)| m3(read(g, "hyper_dm_inv", n0)))
+                .collect(),
+            material: tv
+                .iter()
+                .map(|&(n0, _)| ["hyper_volume", "nh_mu", "nh_lambda"].map(|e| scalar(e, n0)))
+                .collect(),
         }
-        b
     }
 
     fn forces(&mut self) {

@@ -266,6 +266,30 @@ fn mesh() -> GMap {
     .0
 }
 
+/// The rule `r(p: f64, q: vec3)` on faces with the compute body `body` (after the header's
+/// embeddings and init rules), loaded, and a copy of `g0` prepared and initialised for it.
+fn rule_r(body: &str, g0: &GMap) -> (RuleSet, GMap) {
+    let src = format!(
+        "{HEADER}
+rule r(p: f64, q: vec3) {{
+  left {{ f : <0,1> hook }}
+  compute {{
+    {body}
+  }}
+}}
+"
+    );
+    let (rules, _) = load_sources(&[("r.tmr".to_string(), src)]).unwrap();
+    let mut g = g0.clone();
+    rules.prepare(&mut g).unwrap();
+    for init in ["init_v", "init_f"] {
+        rules
+            .apply_everywhere(&mut g, init, &Params::new())
+            .unwrap();
+    }
+    (rules, g)
+}
+
 fn check(seed: u64, g0: &GMap) -> Result<(), TestCaseError> {
     let src = source(seed);
     let (mut rules, _) = load_sources(&[("jit.tmr".to_string(), src.clone())])
@@ -338,24 +362,7 @@ fn each_operation_runs_natively_with_the_same_bits() {
     f.out_m = outer(q, q)",
     ];
     for (k, body) in cases.iter().enumerate() {
-        let src = format!(
-            "{HEADER}
-rule r(p: f64, q: vec3) {{
-  left {{ f : <0,1> hook }}
-  compute {{
-    {body}
-  }}
-}}
-"
-        );
-        let (mut rules, _) = load_sources(&[("jit.tmr".to_string(), src.clone())]).unwrap();
-        let mut g = g0.clone();
-        rules.prepare(&mut g).unwrap();
-        for init in ["init_v", "init_f"] {
-            rules
-                .apply_everywhere(&mut g, init, &Params::new())
-                .unwrap();
-        }
+        let (mut rules, g) = rule_r(body, &g0);
         let before = topomech_rules::jit::compiled_count();
         let (slow, _) = run(&mut rules, &g, false, 1);
         let fell_back = rules.plan_fallbacks();
@@ -449,24 +456,7 @@ fn selections_at_constant_indices_give_the_interpreters_bits_and_errors() {
         "f.out_s = p\n    f.out_v = row3(outer(f.fvel, q), 3)\n    f.out_m = outer(q, q)",
     ];
     for (k, body) in std::iter::once(ok).chain(out_of_range).enumerate() {
-        let src = format!(
-            "{HEADER}
-rule r(p: f64, q: vec3) {{
-  left {{ f : <0,1> hook }}
-  compute {{
-    {body}
-  }}
-}}
-"
-        );
-        let (mut rules, _) = load_sources(&[("sel.tmr".to_string(), src.clone())]).unwrap();
-        let mut g = g0.clone();
-        rules.prepare(&mut g).unwrap();
-        for init in ["init_v", "init_f"] {
-            rules
-                .apply_everywhere(&mut g, init, &Params::new())
-                .unwrap();
-        }
+        let (mut rules, g) = rule_r(body, &g0);
         rules.set_compiled(false);
         let (interpreted, _) = run(&mut rules, &g, false, 1);
         rules.set_compiled(true);
