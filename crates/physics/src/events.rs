@@ -248,8 +248,10 @@ fn criterion_rules(c: Criterion) -> (&'static str, &'static str, &'static str) {
 /// `max_strain + 2 delta max_inv`. The mean over a face's edges that the fracture rule
 /// compares is at most the largest strain: while that bound, with a margin of 1e-9 of it
 /// (far above the few roundings of a strain, a distance and the sums), is at most the
-/// threshold's bound, no face can open, and the strains are not computed. The strain
-/// column then holds the strains of the last step that computed them.
+/// threshold's bound, no face can open, and the strains are not computed. `delta` is twice
+/// the largest coordinate difference, which bounds every move without squaring it (a square
+/// underflows below about 1e-162 and would call a move of 1e-170 none). The strain column
+/// then holds the strains of the last step that computed them.
 #[derive(Clone, Debug)]
 pub(crate) struct StrainBound {
     positions: Vec<f64>,
@@ -499,7 +501,7 @@ impl Simulation {
         let (measure, column, rule) = criterion_rules(f.criterion);
         if self.rules.rule(measure).is_err() {
             return Err(PhysicsError::Config(if self.g.dimension() == 3 {
-                "the stress criterion needs the FEM rules: give the simulation a stress fracture (or an FEM model such as corotational) when it is built"
+                "the stress criterion needs the FEM rules (fem3d.tmr), which this simulation's models do not load (neohookean and stvk do not either): declare the stress fracture in its configuration when it is built, which loads them (or use an FEM model such as corotational)"
                     .into()
             } else {
                 "the stress criterion of fracture needs tetrahedra (3D); surfaces tear by strain"
@@ -772,18 +774,16 @@ impl Simulation {
         {
             return false;
         }
-        // the largest distance a vertex moved since (NaN where a position is not finite)
-        let mut delta2 = 0.0_f64;
-        for (p, q) in x.chunks_exact(3).zip(b.positions.chunks_exact(3)) {
-            let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-            let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-            delta2 = if d2.is_nan() {
-                f64::NAN
-            } else {
-                delta2.max(d2)
-            };
+        // a bound on the distance any vertex moved since: twice its largest coordinate
+        // difference (the distance is at most sqrt(3) times it; no square, which would
+        // underflow for tiny moves; the doubling is exact; NaN where a position is not finite)
+        let mut most = 0.0_f64;
+        for (p, q) in x.iter().zip(&b.positions) {
+            let d = (p - q).abs();
+            most = if d.is_nan() { f64::NAN } else { most.max(d) };
         }
-        let reach = b.max_strain + 2.0 * delta2.sqrt() * b.max_inv;
+        let delta = 2.0 * most;
+        let reach = b.max_strain + 2.0 * delta * b.max_inv;
         reach + 1e-9 * (1.0 + reach.abs()) <= bound
     }
 

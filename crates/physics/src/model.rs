@@ -167,7 +167,10 @@ impl RunModel {
     /// Binds a checked declaration to the scene's parameter values (`given`, over the
     /// declaration's defaults).
     pub(crate) fn bind(m: &Model, given: &HashMap<String, Val>) -> Result<Self, PhysicsError> {
-        for k in given.keys() {
+        // in name order, so that the parameter named is the same from run to run
+        let mut names: Vec<&String> = given.keys().collect();
+        names.sort();
+        for k in names {
             if !m.params.iter().any(|p| &p.name == k) {
                 let known: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
                 return Err(PhysicsError::Config(format!(

@@ -690,13 +690,13 @@ impl Simulation {
         }
         if !bad_type.is_empty() {
             return Err(PhysicsError::Config(format!(
-                "'{name}' is a {ty}: the values of vertices {} are not",
+                "'{name}' is a {ty}: not so at vertices {}",
                 list_some(&bad_type, 20)
             )));
         }
         if !non_finite.is_empty() {
             return Err(PhysicsError::Config(format!(
-                "'{name}' must be finite: vertices {} are not",
+                "'{name}' must be finite: not so at vertices {}",
                 list_some(&non_finite, 20)
             )));
         }

@@ -94,7 +94,8 @@ fn bad_external_loads_are_refused() {
     bad[3][2] = f64::INFINITY;
     let e = s.set_external_forces(&bad).unwrap_err();
     assert!(
-        e.to_string().contains("must be finite: vertices 3 are not"),
+        e.to_string()
+            .contains("must be finite: not so at vertices 3"),
         "{e}"
     );
 }

@@ -974,3 +974,43 @@ fn the_strain_criterion_skips_only_calls_where_nothing_can_open() {
         "{skipped} calls skipped, {computed} computed"
     );
 }
+
+/// The skip's bound on how far vertices moved must not underflow: on a sheet scaled down to
+/// 1e-170 (its squared moves would be 0), stretched by half after a first test that opened
+/// nothing, the next test opens what a new simulation at the same state opens (found by
+/// QA, 2026-12-05: it skipped and opened none).
+#[test]
+fn the_strain_skip_sees_moves_too_small_to_square() {
+    let mesh = grid([4, 4], [1.0, 1.0], GridElement::Triangle);
+    let fracture = Fracture {
+        criterion: Criterion::Strain,
+        threshold: 0.1,
+    };
+    let scale = 1e-170;
+    let new = |stretch: f64| {
+        let mut s = sim(
+            &mesh,
+            vec![model("stretch_cumulated", &[("stiffness", 1e4)])],
+            |c| c.gravity = [0.0; 3],
+        );
+        let rest: Vec<[f64; 3]> = s
+            .vertex_vec3("rest")
+            .unwrap()
+            .iter()
+            .map(|p| p.map(|x| x * scale))
+            .collect();
+        s.set_vertex_vec3("rest", &rest).unwrap();
+        let x: Vec<[f64; 3]> = rest.iter().map(|p| [p[0] * stretch, p[1], p[2]]).collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        (s, rest)
+    };
+    let (mut a, rest) = new(1.0);
+    assert_eq!(a.fracture(fracture).unwrap().unsewn, 0);
+    let x: Vec<[f64; 3]> = rest.iter().map(|p| [p[0] * 1.5, p[1], p[2]]).collect();
+    a.set_vertex_vec3("position", &x).unwrap();
+    let opened = a.fracture(fracture).unwrap().unsewn;
+    let (mut b, _) = new(1.5);
+    let want = b.fracture(fracture).unwrap().unsewn;
+    assert!(want > 0, "the stretched sheet tears");
+    assert_eq!(opened, want);
+}
