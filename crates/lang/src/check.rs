@@ -1608,7 +1608,13 @@ impl ExprCheck<'_, '_> {
                     ts.push(ta);
                 }
                 match builtins::call_type(name, &ts) {
-                    Ok(t) => (TExpr::Call(name.clone(), es), t),
+                    Ok(t) => {
+                        if let Some(m) = constant_index_problem(name, &es, &ts) {
+                            self.err(pos, "type", m);
+                            return None;
+                        }
+                        (TExpr::Call(name.clone(), es), t)
+                    }
                     Err(m) => {
                         self.err(
                             pos,
@@ -1774,4 +1780,49 @@ fn unify(a: TExpr, ta: Ty, b: TExpr, tb: Ty) -> Option<(TExpr, TExpr, Ty)> {
         (Ty::F64, Ty::I64) => Some((a, TExpr::ToReal(Box::new(b)), Ty::F64)),
         _ => None,
     }
+}
+
+/// The built-ins that take an entry, row, column or block of a matrix (or vector) at integer
+/// indices.
+const INDEXED: &[&str] = &[
+    "get",
+    "set",
+    "elem",
+    "row2",
+    "row3",
+    "col2",
+    "col3",
+    "block2",
+    "block3",
+    "set_block2",
+    "set_block3",
+    "vecn_get2",
+    "vecn_get3",
+];
+
+/// An integer constant, negated ones included.
+fn const_int(e: &TExpr) -> Option<i64> {
+    match e {
+        TExpr::Const(Val::I(i)) => Some(*i),
+        TExpr::Un(UnOp::Neg, a) => const_int(a)?.checked_neg(),
+        _ => None,
+    }
+}
+
+/// Where every index of a call of [`INDEXED`] is a constant: the built-in's own error when
+/// one lies outside the matrix (found by calling it on a zero matrix of the argument's type),
+/// so that the checker refuses what every application would.
+fn constant_index_problem(name: &str, args: &[TExpr], ts: &[Ty]) -> Option<String> {
+    if !INDEXED.contains(&name) {
+        return None;
+    }
+    let mut vals = Vec::with_capacity(args.len());
+    for (e, &t) in args.iter().zip(ts) {
+        vals.push(if t == Ty::I64 {
+            Val::I(const_int(e)?)
+        } else {
+            Val::zero(t)
+        });
+    }
+    builtins::call(name, &vals).err().map(|e| e.0)
 }

@@ -440,8 +440,9 @@ rule r {{
 
 /// `get`, `row2`/`row3` and `col2`/`col3` at constant indices compile to moves of the
 /// matrix's entries (no call to the built-in): the interpreter's bits with the evaluator and
-/// with native code; at a constant index outside the matrix, the built-in's own error from
-/// all three.
+/// with native code. At an index outside the matrix known only when the rule runs (a count),
+/// the built-in's own error from all three; at a constant one, the checker's refusal, at the
+/// call, with the built-in's message.
 #[test]
 fn selections_at_constant_indices_give_the_interpreters_bits_and_errors() {
     let g0 = mesh();
@@ -450,12 +451,12 @@ fn selections_at_constant_indices_give_the_interpreters_bits_and_errors() {
     f.out_s = get(m, 1, 2) + get(f.fvel, 2, 0) + x(row2(m2, 1)) + y(col2(m2, 0))
     f.out_v = col3(m, 0) + 2.0 * row3(m, 2) - col3(transpose(m), 1)
     f.out_m = mat_from_cols3(col3(m, 2), row3(m, 1), col3(m, 1))";
-    let out_of_range = [
-        "f.out_s = get(outer(f.fvel, q), 3, 0)\n    f.out_v = q\n    f.out_m = outer(q, q)",
-        "f.out_s = p\n    f.out_v = col3(outer(f.fvel, q), -1)\n    f.out_m = outer(q, q)",
-        "f.out_s = p\n    f.out_v = row3(outer(f.fvel, q), 3)\n    f.out_m = outer(q, q)",
+    // a quad face has 4 vertices: index 4 lies outside a mat3
+    let at_run_time = [
+        "f.out_s = get(outer(f.fvel, q), count<0,1>(f.position), 0)\n    f.out_v = q\n    f.out_m = outer(q, q)",
+        "f.out_s = p\n    f.out_v = col3(outer(f.fvel, q), count<0,1>(f.position))\n    f.out_m = outer(q, q)",
     ];
-    for (k, body) in std::iter::once(ok).chain(out_of_range).enumerate() {
+    for (k, body) in std::iter::once(ok).chain(at_run_time).enumerate() {
         let (mut rules, g) = rule_r(body, &g0);
         rules.set_compiled(false);
         let (interpreted, _) = run(&mut rules, &g, false, 1);
@@ -468,6 +469,46 @@ fn selections_at_constant_indices_give_the_interpreters_bits_and_errors() {
         if k == 0 {
             assert_eq!(plans, vec![("r".to_string(), true)], "case {k}");
         }
+    }
+    for (call, col, says) in [
+        (
+            "get(outer(f.fvel, q), 3, 0)",
+            15,
+            "get: entry (3, 0) outside a mat3",
+        ),
+        ("get(f.fvel, 0, 1)", 15, "get: entry (0, 1) outside a vec3"),
+        (
+            "col3(outer(f.fvel, q), -1)",
+            15,
+            "col3: column -1 out of range 0..3",
+        ),
+        (
+            "row3(outer(f.fvel, q), 3)",
+            15,
+            "row3: row 3 out of range 0..3",
+        ),
+    ] {
+        let body = format!("f.out_s = x(vec3(1.0, 1.0, 1.0) * 0.0) + z(vec3(0.0, 0.0, 0.0))\n    f.out_v = q\n    f.out_m = outer(q, q)\n    let bad = {call}");
+        let src = format!(
+            "{HEADER}
+rule r(p: f64, q: vec3) {{
+  left {{ f : <0,1> hook }}
+  compute {{
+    {body}
+  }}
+}}
+"
+        );
+        let Err(diags) = load_sources(&[("bad.tmr".to_string(), src)]) else {
+            panic!("{call}: the checker accepts it");
+        };
+        let line = HEADER.lines().count() as u32 + 8;
+        assert!(
+            diags.iter().any(|d| d.condition == "type"
+                && d.message.contains(says)
+                && (d.pos.line, d.pos.col) == (line, col)),
+            "{call}: {diags:?}"
+        );
     }
 }
 
