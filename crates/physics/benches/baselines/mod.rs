@@ -49,10 +49,21 @@ pub type M3 = [[f64; 3]; 3];
 
 /// A baseline: one step, and what to compare.
 pub trait Baseline {
+    /// The vertex state (positions, velocities, forces, masses).
+    fn state(&self) -> &State;
+    /// Every force of the step, accumulated per vertex into the state's forces.
+    fn forces(&mut self);
+    /// The state, to integrate.
+    fn state_mut(&mut self) -> &mut State;
     /// One full step: forces, accumulation, symplectic Euler.
-    fn step(&mut self);
+    fn step(&mut self) {
+        self.forces();
+        self.state_mut().integrate();
+    }
     /// Positions in the engine's vertex order.
-    fn positions(&self) -> &[V3];
+    fn positions(&self) -> &[V3] {
+        &self.state().x
+    }
     /// Bytes of every array the baseline keeps.
     fn memory_bytes(&self) -> usize;
     /// What one step must do at least (see [`Work`]).
@@ -252,7 +263,7 @@ impl Cloth {
         }
     }
 
-    fn forces(&mut self) {
+    fn compute_forces(&mut self) {
         self.s.clear_forces();
         let (x, v, f) = (&self.s.x, &self.s.v, &mut self.s.f);
         for (&[a, b], &[k, c, l0]) in self.edges.iter().zip(&self.params) {
@@ -271,12 +282,14 @@ impl Cloth {
 }
 
 impl Baseline for Cloth {
-    fn step(&mut self) {
-        self.forces();
-        self.s.integrate();
+    fn state(&self) -> &State {
+        &self.s
     }
-    fn positions(&self) -> &[V3] {
-        &self.s.x
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
+        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.edges.len() * (8 + 24)
@@ -346,7 +359,7 @@ impl Corotational {
         b
     }
 
-    fn forces(&mut self) {
+    fn compute_forces(&mut self) {
         self.s.clear_forces();
         let (x, f) = (&self.s.x, &mut self.s.f);
         for (((t, dm), xr), k) in self
@@ -396,12 +409,14 @@ impl Corotational {
 }
 
 impl Baseline for Corotational {
-    fn step(&mut self) {
-        self.forces();
-        self.s.integrate();
+    fn state(&self) -> &State {
+        &self.s
     }
-    fn positions(&self) -> &[V3] {
-        &self.s.x
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
+        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.tets.len() * (16 + 72 + 96 + 1152)
@@ -464,7 +479,7 @@ impl MassTensor {
         }
     }
 
-    fn forces(&mut self) {
+    fn compute_forces(&mut self) {
         let s = &mut self.s;
         for (((u, x), r), (f, t)) in self
             .u
@@ -491,12 +506,14 @@ impl MassTensor {
 }
 
 impl Baseline for MassTensor {
-    fn step(&mut self) {
-        self.forces();
-        self.s.integrate();
+    fn state(&self) -> &State {
+        &self.s
     }
-    fn positions(&self) -> &[V3] {
-        &self.s.x
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
+        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.u.len() * (24 + 72) + self.edges.len() * (8 + 72)
@@ -551,7 +568,7 @@ impl NeoHookean {
         }
     }
 
-    fn forces(&mut self) {
+    fn compute_forces(&mut self) {
         self.s.clear_forces();
         let (x, f) = (&self.s.x, &mut self.s.f);
         for ((t, dm), &[vol, mu, lambda]) in self.tets.iter().zip(&self.dm_inv).zip(&self.material)
@@ -602,12 +619,14 @@ impl NeoHookean {
 }
 
 impl Baseline for NeoHookean {
-    fn step(&mut self) {
-        self.forces();
-        self.s.integrate();
+    fn state(&self) -> &State {
+        &self.s
     }
-    fn positions(&self) -> &[V3] {
-        &self.s.x
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
+        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.tets.len() * (16 + 72 + 24)
