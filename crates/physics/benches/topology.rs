@@ -194,6 +194,19 @@ fn fracture_idle(n: [usize; 3], dt: f64) {
         .ok()
         .and_then(|x| x.parse().ok())
         .unwrap_or(100);
+    let (pm, bm) = idle_step_medians(n, dt, pairs);
+    println!(
+        "idle: fracture enabled {:.3} ms, without {:.3} ms: {:.3} steps (medians of {pairs})",
+        bm * 1e3,
+        pm * 1e3,
+        bm / pm
+    );
+}
+
+/// A step with fracture enabled where nothing breaks (strains stay far below 50%), against a
+/// step without: `pairs` alternated samples of two simulations at the time step `dt`, after
+/// both have built their plans; the medians (without, with), in seconds.
+fn idle_step_medians(n: [usize; 3], dt: f64, pairs: usize) -> (f64, f64) {
     let fracture = Fracture {
         criterion: Criterion::Strain,
         threshold: 0.5,
@@ -207,14 +220,11 @@ fn fracture_idle(n: [usize; 3], dt: f64) {
         p.push(seconds(|| black_box(plain.step()).expect("steps")));
         b.push(seconds(|| black_box(brittle.step()).expect("steps")));
     }
-    assert!(brittle.topology_changes().is_empty(), "nothing breaks");
-    let (pm, bm) = (median(&mut p), median(&mut b));
-    println!(
-        "idle: fracture enabled {:.3} ms, without {:.3} ms: {:.3} steps (medians of {pairs})",
-        bm * 1e3,
-        pm * 1e3,
-        bm / pm
+    assert!(
+        brittle.topology_changes().is_empty(),
+        "nothing breaks in the fracture-enabled run"
     );
+    (median(&mut p), median(&mut b))
 }
 
 /// The median (the upper one of an even count).
@@ -291,34 +301,11 @@ fn main() {
                 .unsewn;
         }));
     }
-    // a step with fracture enabled where nothing breaks (strains stay far below 50%), against
-    // a step without: alternated samples, after both have built their plans
-    // (at 0.1 ms, a time step the undamped box stays stable with for hundreds of steps: at
-    // the default 1 ms it goes unstable after about 8)
+    // a step with fracture enabled where nothing breaks, against a step without (at 0.1 ms,
+    // a time step the undamped box stays stable with for hundreds of steps: at the default
+    // 1 ms it goes unstable after about 8)
     let stable_dt = 1e-4;
-    let mut plain = simulation_dt(n, None, vec![], vec![], stable_dt);
-    let mut brittle = simulation_dt(
-        n,
-        Some(Fracture {
-            criterion: Criterion::Strain,
-            threshold: 0.5,
-        }),
-        vec![],
-        vec![],
-        stable_dt,
-    );
-    plain.step().expect("steps");
-    brittle.step().expect("steps");
-    let mut plain_steps = Vec::new();
-    let mut brittle_steps = Vec::new();
-    for _ in 0..9 {
-        plain_steps.push(seconds(|| black_box(plain.step()).expect("steps")));
-        brittle_steps.push(seconds(|| black_box(brittle.step()).expect("steps")));
-    }
-    assert!(
-        brittle.topology_changes().is_empty(),
-        "nothing breaks in the fracture-enabled run"
-    );
+    let (ps, bs) = idle_step_medians(n, stable_dt, 9);
     // a blade crossing the box (down through its middle, x = 1) during 100 steps, against
     // the same 100 steps without it (issue 16's measure): each of its steps tests the faces
     // near the quad it sweeps and, when it cut, patches the plans. At 0.1 ms, a time step the
@@ -409,6 +396,5 @@ fn main() {
     );
     println!("  a step cutting a face (predicate event), then the next (median of {single_cuts}) {:8.1} ms + {:.1} ms  = {:.2} + {:.2} plain steps of that run ({:.1} ms, median of {}; {single_faces} faces in all)", sc * 1e3, sn * 1e3, sc / single_plain, sn / single_plain, single_plain * 1e3, single_plains.len());
     println!("  the single-face cut (its step less a plain step) plus the next step  {:8.1} ms  = {:.2} plain steps of that run (median of {single_cuts} cuts)", single_cost * 1e3, single_cost / single_plain);
-    let (ps, bs) = (median(&mut plain_steps), median(&mut brittle_steps));
     println!("  a step with fracture enabled, nothing breaking (median of 9)    {:8.1} ms  = {:.2} steps without ({:.1} ms)", bs * 1e3, bs / ps, ps * 1e3);
 }
