@@ -262,8 +262,16 @@ impl Cloth {
             params,
         }
     }
+}
 
-    fn compute_forces(&mut self) {
+impl Baseline for Cloth {
+    fn state(&self) -> &State {
+        &self.s
+    }
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
         self.s.clear_forces();
         let (x, v, f) = (&self.s.x, &self.s.v, &mut self.s.f);
         for (&[a, b], &[k, c, l0]) in self.edges.iter().zip(&self.params) {
@@ -278,18 +286,6 @@ impl Cloth {
                 f[b][i] -= s * u[i];
             }
         }
-    }
-}
-
-impl Baseline for Cloth {
-    fn state(&self) -> &State {
-        &self.s
-    }
-    fn state_mut(&mut self) -> &mut State {
-        &mut self.s
-    }
-    fn forces(&mut self) {
-        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.edges.len() * (8 + 24)
@@ -358,8 +354,16 @@ impl Corotational {
         }
         b
     }
+}
 
-    fn compute_forces(&mut self) {
+impl Baseline for Corotational {
+    fn state(&self) -> &State {
+        &self.s
+    }
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
         self.s.clear_forces();
         let (x, f) = (&self.s.x, &mut self.s.f);
         for (((t, dm), xr), k) in self
@@ -405,18 +409,6 @@ impl Corotational {
                 }
             }
         }
-    }
-}
-
-impl Baseline for Corotational {
-    fn state(&self) -> &State {
-        &self.s
-    }
-    fn state_mut(&mut self) -> &mut State {
-        &mut self.s
-    }
-    fn forces(&mut self) {
-        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.tets.len() * (16 + 72 + 96 + 1152)
@@ -478,8 +470,16 @@ impl MassTensor {
             t_edge,
         }
     }
+}
 
-    fn compute_forces(&mut self) {
+impl Baseline for MassTensor {
+    fn state(&self) -> &State {
+        &self.s
+    }
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
         let s = &mut self.s;
         for (((u, x), r), (f, t)) in self
             .u
@@ -502,18 +502,6 @@ impl MassTensor {
                 f[j][r] -= fj[r];
             }
         }
-    }
-}
-
-impl Baseline for MassTensor {
-    fn state(&self) -> &State {
-        &self.s
-    }
-    fn state_mut(&mut self) -> &mut State {
-        &mut self.s
-    }
-    fn forces(&mut self) {
-        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.u.len() * (24 + 72) + self.edges.len() * (8 + 72)
@@ -567,8 +555,16 @@ impl NeoHookean {
                 .collect(),
         }
     }
+}
 
-    fn compute_forces(&mut self) {
+impl Baseline for NeoHookean {
+    fn state(&self) -> &State {
+        &self.s
+    }
+    fn state_mut(&mut self) -> &mut State {
+        &mut self.s
+    }
+    fn forces(&mut self) {
         self.s.clear_forces();
         let (x, f) = (&self.s.x, &mut self.s.f);
         for ((t, dm), &[vol, mu, lambda]) in self.tets.iter().zip(&self.dm_inv).zip(&self.material)
@@ -615,18 +611,6 @@ impl NeoHookean {
                 fv[r] += f0[r];
             }
         }
-    }
-}
-
-impl Baseline for NeoHookean {
-    fn state(&self) -> &State {
-        &self.s
-    }
-    fn state_mut(&mut self) -> &mut State {
-        &mut self.s
-    }
-    fn forces(&mut self) {
-        self.compute_forces();
     }
     fn memory_bytes(&self) -> usize {
         self.s.memory_bytes() + self.tets.len() * (16 + 72 + 24)
