@@ -652,14 +652,6 @@ impl<'a> Compiler<'a> {
         Ok((dst, ty))
     }
 
-    /// A constant integer argument, if the expression is one.
-    fn const_int(e: &TExpr) -> Option<i64> {
-        match e {
-            TExpr::Const(Val::I(i)) => Some(*i),
-            _ => None,
-        }
-    }
-
     fn call(&mut self, name: &str, args: &[TExpr]) -> Result<(R, Ty), Unsupported> {
         // constant folding: a call on constants only is evaluated now
         if args.iter().all(|a| matches!(a, TExpr::Const(_))) {
@@ -738,7 +730,7 @@ impl<'a> Compiler<'a> {
             }
             ("vecn_get2" | "vecn_get3", [Ty::Mat(r, 1), Ty::I64]) => {
                 let k = if name == "vecn_get2" { 2 } else { 3 };
-                match Self::const_int(&args[1]) {
+                match args[1].const_int() {
                     Some(i) if i >= 0 && (i as usize + 1) * k <= usize::from(*r) => {
                         let i = i as usize;
                         Some((i * k..(i + 1) * k).map(|x| x as u32).collect())
@@ -753,7 +745,7 @@ impl<'a> Compiler<'a> {
                     Ty::Mat(r, c) => (usize::from(*r), usize::from(*c)),
                     _ => (m.width(), 1),
                 };
-                match (Self::const_int(&args[1]), Self::const_int(&args[2])) {
+                match (args[1].const_int(), args[2].const_int()) {
                     (Some(i), Some(j))
                         if (0..r as i64).contains(&i) && (0..c as i64).contains(&j) =>
                     {
@@ -764,7 +756,7 @@ impl<'a> Compiler<'a> {
             }
             ("row2" | "row3", [Ty::Mat(r, c), Ty::I64]) if usize::from(*c) == ty.width() => {
                 let (r, c) = (usize::from(*r), usize::from(*c));
-                match Self::const_int(&args[1]) {
+                match args[1].const_int() {
                     Some(i) if (0..r as i64).contains(&i) => {
                         let i = i as usize;
                         Some((i * c..(i + 1) * c).map(|x| x as u32).collect())
@@ -774,7 +766,7 @@ impl<'a> Compiler<'a> {
             }
             ("col2" | "col3", [Ty::Mat(r, c), Ty::I64]) if usize::from(*r) == ty.width() => {
                 let (r, c) = (usize::from(*r), usize::from(*c));
-                match Self::const_int(&args[1]) {
+                match args[1].const_int() {
                     Some(j) if (0..c as i64).contains(&j) => {
                         let j = j as usize;
                         Some((0..r).map(|i| (i * c + j) as u32).collect())
@@ -785,7 +777,7 @@ impl<'a> Compiler<'a> {
             ("block2" | "block3", [Ty::Mat(r, c), Ty::I64, Ty::I64]) => {
                 let k = if name == "block2" { 2 } else { 3 };
                 let (r, c) = (usize::from(*r), usize::from(*c));
-                match (Self::const_int(&args[1]), Self::const_int(&args[2])) {
+                match (args[1].const_int(), args[2].const_int()) {
                     (Some(bi), Some(bj))
                         if bi >= 0
                             && bj >= 0

@@ -168,6 +168,18 @@ pub enum TExpr {
     ToReal(Box<TExpr>),
 }
 
+impl TExpr {
+    /// The value of an integer constant, negated ones included (`3`, `-1`); `None` for any
+    /// other expression.
+    pub fn const_int(&self) -> Option<i64> {
+        match self {
+            TExpr::Const(Val::I(i)) => Some(*i),
+            TExpr::Un(UnOp::Neg, a) => a.const_int()?.checked_neg(),
+            _ => None,
+        }
+    }
+}
+
 /// A checked statement.
 #[derive(Clone, Debug, PartialEq)]
 pub enum TStmt {
@@ -1800,15 +1812,6 @@ const INDEXED: &[&str] = &[
     "vecn_get3",
 ];
 
-/// An integer constant, negated ones included.
-fn const_int(e: &TExpr) -> Option<i64> {
-    match e {
-        TExpr::Const(Val::I(i)) => Some(*i),
-        TExpr::Un(UnOp::Neg, a) => const_int(a)?.checked_neg(),
-        _ => None,
-    }
-}
-
 /// Where every index of a call of [`INDEXED`] is a constant: the built-in's own error when
 /// one lies outside the matrix (found by calling it on a zero matrix of the argument's type),
 /// so that the checker refuses what every application would.
@@ -1819,7 +1822,7 @@ fn constant_index_problem(name: &str, args: &[TExpr], ts: &[Ty]) -> Option<Strin
     let mut vals = Vec::with_capacity(args.len());
     for (e, &t) in args.iter().zip(ts) {
         vals.push(if t == Ty::I64 {
-            Val::I(const_int(e)?)
+            Val::I(e.const_int()?)
         } else {
             Val::zero(t)
         });
