@@ -333,6 +333,28 @@ def _ms(row: dict[str, Any] | None) -> str:
     return f"{t:.3g}" if t < 100 else f"{t:.0f}"
 
 
+def _timed(doc: dict[str, Any], peer: str, case: str) -> dict[str, Any] | None:
+    """The timing row of ``peer`` on ``case`` that has a time per step, if any."""
+    return next(
+        (
+            r
+            for r in doc["timing"]
+            if r["peer"] == peer and r["case"] == case and "time_per_step_ms" in r
+        ),
+        None,
+    )
+
+
+def _variant_error(doc: dict[str, Any], peer: str, case: str | None, start: str) -> str:
+    """The tip error of the accuracy variant of ``peer`` on ``case`` whose name starts with
+    ``start``, as a percentage, or ``-``."""
+    a = next((x for x in doc["accuracy"] if x["peer"] == peer and x["case"] == case), None)
+    for v in (a or {}).get("variants", []):
+        if v["name"].startswith(start) and "rel_error" in v:
+            return _pct(v["rel_error"])
+    return "-"
+
+
 def markdown(doc: dict[str, Any], peers: list[str]) -> str:
     L: list[str] = []
     mach = doc["machine"]
@@ -359,28 +381,14 @@ def markdown(doc: dict[str, Any], peers: list[str]) -> str:
     L.append("| case | " + " | ".join(TITLES[p] for p in peers if p != "topomech") + " |")
     L.append("|---|" + "---|" * (len(peers) - 1))
     for name in doc["cases"]:
-        mine = next(
-            (
-                r
-                for r in doc["timing"]
-                if r["peer"] == "topomech" and r["case"] == name and "time_per_step_ms" in r
-            ),
-            None,
-        )
+        mine = _timed(doc, "topomech", name)
         if mine is None:
             continue
         cells = []
         for p in peers:
             if p == "topomech":
                 continue
-            row = next(
-                (
-                    r
-                    for r in doc["timing"]
-                    if r["peer"] == p and r["case"] == name and "time_per_step_ms" in r
-                ),
-                None,
-            )
+            row = _timed(doc, p, name)
             cells.append(
                 "-" if row is None else f"{mine['time_per_step_ms'] / row['time_per_step_ms']:.1f}x"
             )
@@ -478,32 +486,14 @@ def markdown(doc: dict[str, Any], peers: list[str]) -> str:
         )
         L.append("|---|---|---|---|---|---|")
         for r in nh:
-            new = next(
-                (
-                    x
-                    for x in doc["timing"]
-                    if x["peer"] == "newton" and x["case"] == r["case"] and "time_per_step_ms" in x
-                ),
-                None,
-            )
+            new = _timed(doc, "newton", r["case"])
             acc_case = SAME_MESH.get(r["case"])
-
-            def variant(peer: str, start: str, acc_case: str | None = acc_case) -> str:
-                a = next(
-                    (x for x in doc["accuracy"] if x["peer"] == peer and x["case"] == acc_case),
-                    None,
-                )
-                for v in (a or {}).get("variants", []):
-                    if v["name"].startswith(start) and "rel_error" in v:
-                        return _pct(v["rel_error"])
-                return "-"
-
             ms = r["time_per_step_ms_neohookean"]
             L.append(
                 f"| {r['case']} | {ms:.3g} | {_ms(new)} | "
                 + ("-" if new is None else f"{ms / new['time_per_step_ms']:.1f}x")
-                + f" | {variant('topomech', 'stable Neo-Hookean')} | "
-                f"{variant('newton', 'Smith reparametrisation')} |"
+                + f" | {_variant_error(doc, 'topomech', acc_case, 'stable Neo-Hookean')} | "
+                f"{_variant_error(doc, 'newton', acc_case, 'Smith reparametrisation')} |"
             )
         L.append(
             "\nBoth are the stable Neo-Hookean of Smith, de Goes & Kim 2018; Newton's in f32, "
