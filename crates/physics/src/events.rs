@@ -514,7 +514,7 @@ impl Simulation {
         if f.criterion == Criterion::Strain && self.strain_cannot_reach(bound) {
             return Ok(TopologyResult::default());
         }
-        self.strain_bound = None;
+        let previous = self.strain_bound.take();
         self.rules.apply_everywhere(&mut self.g, measure, &none)?;
         // The guards of the shipped criteria compare a mean of the measure with the threshold
         // (the mean spring strain of a face's edges; the mean of the two elements' largest
@@ -536,7 +536,7 @@ impl Simulation {
                 });
                 if max <= bound {
                     if f.criterion == Criterion::Strain {
-                        self.strain_bound = self.strain_state(max);
+                        self.strain_bound = self.strain_state(max, previous);
                     }
                     return Ok(TopologyResult::default());
                 }
@@ -789,22 +789,35 @@ impl Simulation {
 
     /// The state [`Simulation::strain_cannot_reach`] starts from, after an evaluation whose
     /// largest strain was `max_strain`; `None` where a column is missing or a value is not
-    /// finite.
-    fn strain_state(&self, max_strain: f64) -> Option<StrainBound> {
+    /// finite. `previous`, the state before that evaluation, lends its buffer, and its
+    /// largest inverse rest length where they were not written since (a topology change
+    /// only copies them to new slots, or gives a new dart 0: the largest stays a bound).
+    fn strain_state(&self, max_strain: f64, previous: Option<StrainBound>) -> Option<StrainBound> {
         let pos = self.g.embedding_id("position")?;
         let inv = self.g.embedding_id("spring_inv_l0")?;
-        let positions = self.g.embedding(pos).real_column()?.to_vec();
-        let invs = self.g.embedding(inv).real_column()?;
-        let max_inv = invs.iter().fold(0.0_f64, |m, &x| m.max(x.abs()));
-        if !(max_strain.is_finite() && max_inv.is_finite() && invs.iter().all(|x| x.is_finite())) {
+        let inv_writes = self.g.embedding(inv).writes();
+        let max_inv = match &previous {
+            Some(p) if p.inv_writes == inv_writes => p.max_inv,
+            _ => {
+                let invs = self.g.embedding(inv).real_column()?;
+                if !invs.iter().all(|x| x.is_finite()) {
+                    return None;
+                }
+                invs.iter().fold(0.0_f64, |m, &x| m.max(x.abs()))
+            }
+        };
+        if !max_strain.is_finite() {
             return None;
         }
+        let mut positions = previous.map(|p| p.positions).unwrap_or_default();
+        positions.clear();
+        positions.extend_from_slice(self.g.embedding(pos).real_column()?);
         Some(StrainBound {
             positions,
             max_strain,
             max_inv,
             version: self.g.version(),
-            inv_writes: self.g.embedding(inv).writes(),
+            inv_writes,
         })
     }
 
