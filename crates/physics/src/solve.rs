@@ -5,6 +5,10 @@ use topomech_rules::{ApplyError, Params};
 
 use crate::*;
 
+/// The volume ratio `J = V / V_rest` at or below which a static solve's balanced state is
+/// refused as degenerate (an element collapsed or inverted, see [`Simulation::solve_static`]).
+pub const DEGENERATE_J: f64 = 1e-6;
+
 /// What the solve of the last static or implicit Euler step did
 /// ([`Simulation::solver_report`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -424,8 +428,10 @@ impl Simulation {
     /// fraction, halving the increment on failure down to [`MIN_LOAD_INCREMENT`].
     /// [`Simulation::solver_report`] then says what happened.
     /// Errors: [`PhysicsError::Diverged`] (the positions before the solve restored) when no
-    /// increment converges, with the relative residual, the tolerance and what to try; a
-    /// rule's failure other than a non-finite value.
+    /// increment converges, or when the balanced state has an element (3D) collapsed or
+    /// inverted (volume ratio at most [`DEGENERATE_J`]: a stationary point of the energy
+    /// that a start with inverted elements reaches), with the relative residual, the
+    /// tolerance and what to try; a rule's failure other than a non-finite value.
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
         let n = self.rows.darts.len();
         self.set_vertex_vec3("velocity", &vec![[0.0; 3]; n])?;
@@ -556,6 +562,35 @@ impl Simulation {
         }
         let res = norm(&self.static_residual(&fixed, None, 1.0)?);
         self.set_vertex_vec3("position", &good)?;
+        if let Some((e, row, j)) = self.degenerate_element(&good)? {
+            // a stationary point of the energy, not an equilibrium a body can hold: every
+            // element collapsed to a point (F = 0) balances the Neo-Hookean forces of a start
+            // whose elements are inverted
+            self.set_vertex_vec3("position", &x0)?;
+            self.record(SolverReport {
+                integrator: "static",
+                iterations,
+                residual: res,
+                relative_residual: res / scale,
+                tolerance,
+                converged: false,
+                load_steps,
+                load_fraction: s,
+                worst_relative_residual: 0.0,
+                load_stepped_steps: 0,
+                not_converged_steps: 0,
+                linear_solver,
+                preconditioner,
+                linear_iterations,
+            });
+            return Err(PhysicsError::Diverged {
+                step: self.steps + 1,
+                vertex: Some(row),
+                why: format!(
+                    "the static solve reached a balance of the forces where element {e} (in the order of Simulation::elements) has a volume ratio J = {j:.3e} to its rest volume: a collapsed or inverted element (J at most {DEGENERATE_J:e} is refused) is a stationary point of the energy, not a state the body can hold; a start with inverted elements (mirrored positions) leads there. Start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held), or reduce the load. The element has its first vertex"
+                ),
+            });
+        }
         self.static_base = good;
         self.record(SolverReport {
             integrator: "static",
@@ -574,6 +609,31 @@ impl Simulation {
             linear_iterations,
         });
         Ok(())
+    }
+
+    /// The first element (3D: volume) whose volume ratio `J = V / V_rest` at `positions`
+    /// (rows) is at most [`DEGENERATE_J`], with its first vertex's row and `J`; `None` when
+    /// every element keeps at least that fraction of its rest volume with its orientation,
+    /// or in 2D (a surface's orientation has no sign). Volumes by
+    /// [`topomech_gmap::mesh::signed_volume`], the elements of [`Simulation::elements`]
+    /// (oriented positive at rest).
+    fn degenerate_element(
+        &self,
+        positions: &[[f64; 3]],
+    ) -> Result<Option<(usize, usize, f64)>, PhysicsError> {
+        if self.g.dimension() != 3 {
+            return Ok(None);
+        }
+        let rest = self.rest_points()?;
+        for (k, el) in self.elements()?.iter().enumerate() {
+            let v0 = topomech_gmap::mesh::signed_volume(el.kind, &el.rows, &rest);
+            let v = topomech_gmap::mesh::signed_volume(el.kind, &el.rows, positions);
+            // (a rest volume of zero: a degenerate mesh, refused at set-up; kept out here)
+            if v0 > 0.0 && v <= DEGENERATE_J * v0 {
+                return Ok(Some((k, el.rows[0], v / v0)));
+            }
+        }
+        Ok(None)
     }
 
     /// Keeps `r` as the last step's report, with the run's worst relative residual and count

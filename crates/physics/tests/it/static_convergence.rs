@@ -182,3 +182,46 @@ fn implicit_euler_step_reports_its_linear_solve() {
         assert_eq!((r.load_steps, r.load_stepped_steps), (0, 0));
     }
 }
+
+/// A start with every element inverted (the box mirrored through x = 0, one vertex held at
+/// the origin, no load): Newton balances the Neo-Hookean forces by collapsing the body to a
+/// point (F = 0 is a stationary point of the energy, where the forces vanish), which the
+/// static solve reported as converged. Now it fails with `Diverged` naming the degenerate
+/// element and its volume ratio, the positions are those before the solve (exactly), and
+/// the report says not converged. The same solve from the rest positions (nothing to
+/// balance) still succeeds: the check refuses only volumes at most 1e-6 of their rest.
+#[test]
+fn a_collapsed_balance_from_an_inverted_start_is_refused() {
+    let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("neohookean", &[])],
+        gravity: [0.0; 3],
+        fixed: vec!["x * x + y * y + z * z < 1e-12".into()],
+        integrator: Integrator::Static,
+        dt: 1.0,
+        ..Config::default()
+    };
+    let mut s = Simulation::new(g.clone(), cfg.clone()).unwrap();
+    let mirrored: Vec<[f64; 3]> = s
+        .vertex_vec3("rest")
+        .unwrap()
+        .iter()
+        .map(|p| [-p[0], p[1], p[2]])
+        .collect();
+    s.set_vertex_vec3("position", &mirrored).unwrap();
+    let err = s.step().unwrap_err();
+    let PhysicsError::Diverged { why, vertex, .. } = &err else {
+        panic!("expected Diverged, got {err}");
+    };
+    assert!(
+        why.contains("volume ratio J") && why.contains("collapsed or inverted"),
+        "{err}"
+    );
+    assert!(vertex.is_some(), "{err}");
+    assert_eq!(s.vertex_vec3("position").unwrap(), mirrored);
+    assert!(!s.solver_report().unwrap().converged);
+    let mut at_rest = Simulation::new(g, cfg).unwrap();
+    at_rest.step().unwrap();
+    assert!(at_rest.solver_report().unwrap().converged);
+}
