@@ -186,6 +186,16 @@ def test_prescribed_and_regions() -> None:
             topomech.SimulationError,
             "has no parameter 'stifness'",
         ),
+        (
+            {"models": [{"kind": "stretch_elementary", "young": 1e6}]},
+            topomech.SimulationError,
+            "has no parameter 'young': 'young' is the material's",
+        ),
+        (
+            {"models": [{"kind": "stretch_elementary", "params": {"stiffness": 1.0}}]},
+            TypeError,
+            "models[0]['params']: a model parameter is a real or 3 reals, got dict",
+        ),
         ({"dt": -1.0}, ValueError, "dt must be positive, got -1"),
         ({"dt": "big"}, TypeError, "dt must be a number, got str"),
         ({"dt": True}, TypeError, "dt must be a number, got bool"),

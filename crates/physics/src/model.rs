@@ -172,6 +172,12 @@ impl RunModel {
         names.sort();
         for k in names {
             if !m.params.iter().any(|p| &p.name == k) {
+                if ["young", "poisson", "density"].contains(&k.as_str()) {
+                    return Err(PhysicsError::Config(format!(
+                        "model '{}' has no parameter '{k}': '{k}' is the material's, shared by every model; give it to the simulation (Python: Simulation(..., {k}=...); a scene: [material] {k} = ..., or in [[model]], which sets the material's)",
+                        m.name
+                    )));
+                }
                 let known: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
                 return Err(PhysicsError::Config(format!(
                     "model '{}' has no parameter '{k}' (it has: {})",

@@ -282,6 +282,11 @@ fn model_arg(obj: &Bound<'_, PyAny>, k: usize) -> Result<ModelSpec> {
             )));
         } else {
             let at = format!("{what}['{key}']");
+            if v.is_instance_of::<PyDict>() {
+                return Err(type_error(format!(
+                    "{at}: a model parameter is a real or 3 reals, got dict; parameters go in the model's dict itself ({{\"kind\": ..., \"stiffness\": 1e3}}), not under a key of their own"
+                )));
+            }
             let x = if v.is_instance_of::<PyString>() || v.is_instance_of::<PyBool>() {
                 Val::F(real_arg(&v, &at)?)
             } else if v.try_iter().is_ok() {
