@@ -2052,9 +2052,23 @@ impl RuleSet {
     }
 }
 
+/// Whether every orbit of type `o` that meets a match's footprint lies in it: every node of
+/// the left graph has an orbit type without `_` whose labels include `o`'s. Then node `n`'s
+/// darts, closed under its labels (the orbit-type check of [`match_at`]: position `t` of
+/// row `r` leads to another row of the node), hold the whole `o`-orbit of each one.
+fn orbit_in_footprint(rule: &Rule, o: OrbitType) -> bool {
+    rule.nodes
+        .iter()
+        .filter_map(|n| n.left.as_ref())
+        .all(|labels| {
+            labels.iter().all(Option::is_some) && o.dims().all(|i| labels.contains(&Some(i as u8)))
+        })
+}
+
 /// The patching of a plan's matches after a topology change (see [`RuleSet::patch_plan`]):
 /// `C*`, the darts of `changed` with, for each chain of orbit types in `chains`, the orbits
-/// along it of the live darts of `changed`; every match of `ix` holding a dart of `C*` is
+/// along it of the live darts of `changed` (none for a chain of one orbit type that
+/// [`orbit_in_footprint`]: those orbits add no match to drop); every match of `ix` holding a dart of `C*` is
 /// dropped. Returns the marks of `C*`, the candidate hook darts of the new matches (walked
 /// back from every dart of `C*`, or, with `relinked`, from its marked darts only: see
 /// [`rebuild_unlinked`]) and the matches dropped; `None` when the index has seen too much
@@ -2080,6 +2094,13 @@ fn drop_changed(
         }
     }
     for chain in chains {
+        if let [o] = chain[..] {
+            if orbit_in_footprint(rule, o) {
+                // every orbit of type `o` meeting a footprint lies in it: a footprint meets
+                // the orbit of a changed dart only where it holds that dart, so C is enough
+                continue;
+            }
+        }
         let mut from: Vec<Dart> = changed.iter().copied().filter(|&d| g.is_alive(d)).collect();
         for &o in chain {
             let mut seen = Marks::with_capacity(cap);
