@@ -213,14 +213,25 @@ fn never() -> bool {
 /// Rows of the orbit of `d` with the given labels, breadth-first; `next` as in [`Match`].
 fn rows_of(g: &GMap, d: Dart, labels: &[u8]) -> (Vec<Dart>, Vec<u32>) {
     let k = labels.len();
-    let mut darts = Vec::with_capacity(8);
+    // sized as the last orbit walked on this thread (a search walks orbits of one type in
+    // turn): no regrowth, and a large one goes to the table at once
+    let hint = LAST_ROWS.with(std::cell::Cell::get).max(1);
+    let mut darts = Vec::with_capacity(hint);
     darts.push(d);
-    let mut next = Vec::with_capacity(8 * k);
+    let mut next = Vec::with_capacity(hint * k);
     let mut r = 0;
+    if hint > 32 {
+        let out = ROW_OF.with(|t| rows_of_large(g, labels, darts, next, r, &mut t.borrow_mut()));
+        LAST_ROWS.with(|c| c.set(out.0.len()));
+        return out;
+    }
     // small orbits (the usual case) are searched linearly
     while r < darts.len() {
         if darts.len() > 32 {
-            return ROW_OF.with(|t| rows_of_large(g, labels, darts, next, r, &mut t.borrow_mut()));
+            let out =
+                ROW_OF.with(|t| rows_of_large(g, labels, darts, next, r, &mut t.borrow_mut()));
+            LAST_ROWS.with(|c| c.set(out.0.len()));
+            return out;
         }
         let x = darts[r];
         for &l in labels {
@@ -236,10 +247,13 @@ fn rows_of(g: &GMap, d: Dart, labels: &[u8]) -> (Vec<Dart>, Vec<u32>) {
         r += 1;
     }
     debug_assert_eq!(next.len(), darts.len() * k);
+    LAST_ROWS.with(|c| c.set(darts.len()));
     (darts, next)
 }
 
 thread_local! {
+    /// The number of rows of the last orbit [`rows_of`] walked on this thread.
+    static LAST_ROWS: std::cell::Cell<usize> = const { std::cell::Cell::new(8) };
     /// Per dart, its row plus one in the orbit [`rows_of`] is walking (0: not in it): a
     /// table the size of the map, per thread, reset after each walk (for the darts it set).
     static ROW_OF: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
@@ -259,9 +273,12 @@ fn rows_of_large(
     if row_of.len() < g.capacity() {
         row_of.resize(g.capacity(), 0);
     }
-    // a large orbit: a vertex of a tetrahedral mesh has a few hundred darts
-    darts.reserve(256);
-    next.reserve(256 * labels.len());
+    // a large orbit: a vertex of a tetrahedral mesh has a few hundred darts (the caller
+    // reserved as many as the last orbit had)
+    if darts.capacity() < 64 {
+        darts.reserve(256);
+        next.reserve(256 * labels.len());
+    }
     for (i, z) in darts.iter().enumerate() {
         row_of[z.index()] = i as u32 + 1;
     }
@@ -397,9 +414,17 @@ fn match_explained(g: &GMap, rule: &Rule, hooks: &[Dart], explain: bool) -> Resu
             }
         }
     }
-    // orbit types
+    // orbit types (a hook's holds by construction: its rows were walked, or checked above,
+    // through its own labels, which are the hook orbit's)
     for (k, nd) in rule.nodes.iter().enumerate() {
         let Some(labels) = &nd.left else { continue };
+        if rule.hooks.contains(&k) {
+            debug_assert!(labels
+                .iter()
+                .map(|l| l.expect("a hook's labels"))
+                .eq(rule.hook_orbit.iter().copied()));
+            continue;
+        }
         for (t, l) in labels.iter().enumerate() {
             let Some(i) = l else { continue };
             for r in 0..rows {
@@ -3187,8 +3212,12 @@ fn apply_matches(
         node_darts = ms.iter().map(|m| m.darts.clone()).collect();
     }
     // 3. one value per orbit of the result: checked on the planned topology, before any change
-    let mut overlay: HashMap<(usize, Dart), Dart> = HashMap::with_capacity(changes.len());
-    for chunk in changes.chunks(INTERRUPT_EVERY) {
+    // (needed only to place values written or filled in: a cut that only unsews has none)
+    let needs_overlay = rule.changes_topology
+        && (!fresh.is_empty() || pending.iter().flatten().any(|p| !p.values.is_empty()));
+    let mut overlay: HashMap<(usize, Dart), Dart> =
+        HashMap::with_capacity(if needs_overlay { changes.len() } else { 0 });
+    for chunk in changes.chunks(INTERRUPT_EVERY).filter(|_| needs_overlay) {
         if poll.tick(chunk.len()) {
             undo_fresh(g, &fresh);
             return Err(interrupted("planning the new topology"));

@@ -60,10 +60,14 @@ pub(crate) struct ChangeLog {
     /// (tag, dart, whether its links changed or it was created or removed: else only its
     /// slot in some embedding changed)
     entries: Vec<(u64, u32, bool)>,
-    /// Per dart, twice one more than the tag of its last entry, plus one when that entry
-    /// was a link change (0: none), so that a dart is listed once per tag and kind (a
-    /// re-slotting touches it once per embedding).
-    last: Vec<u64>,
+    /// The tag of the last entry, and the darts listed at that tag as link changes and as
+    /// slot changes, so that a dart is listed once per tag and kind (a re-slotting touches
+    /// it once per embedding). Bit sets, cleared in time proportional to what they hold
+    /// when the tag changes: a change touches a few pages of them, not a table of a word
+    /// per dart that its first use would fault in.
+    tag: u64,
+    links_at_tag: Marks,
+    slots_at_tag: Marks,
     /// Entries recorded since recording started (those dropped included).
     recorded: u64,
 }
@@ -90,16 +94,21 @@ pub(crate) fn note_slot(log: &mut Option<ChangeLog>, version: u64, d: u32, capac
 #[inline]
 fn note_kind(log: &mut Option<ChangeLog>, version: u64, d: u32, capacity: usize, links: bool) {
     let Some(l) = log else { return };
-    let i = d as usize;
-    if i >= l.last.len() {
-        l.last.resize((i + 1).max(capacity), 0);
+    if l.tag != version {
+        l.tag = version;
+        l.links_at_tag.clear();
+        l.slots_at_tag.clear();
     }
-    let tag = (version + 1) << 1;
     // listed at this tag already as a link change, or as a slot change and this is one
-    if l.last[i] == tag | 1 || (l.last[i] == tag && !links) {
+    let x = Dart(d);
+    if l.links_at_tag.is_marked(x) || (!links && l.slots_at_tag.is_marked(x)) {
         return;
     }
-    l.last[i] = tag | u64::from(links);
+    if links {
+        l.links_at_tag.mark(x);
+    } else {
+        l.slots_at_tag.mark(x);
+    }
     l.entries.push((version, d, links));
     l.recorded += 1;
     if l.entries.len() > LOG_MIN_LIMIT.max(capacity) {
@@ -209,7 +218,9 @@ impl GMap {
             self.log = Some(ChangeLog {
                 from: self.version,
                 entries: Vec::new(),
-                last: vec![0; self.capacity()],
+                tag: self.version,
+                links_at_tag: Marks::default(),
+                slots_at_tag: Marks::default(),
                 recorded: 0,
             });
         }
