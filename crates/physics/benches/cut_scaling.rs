@@ -14,6 +14,11 @@
 //! available (about 7 KB per tetrahedron: the simulation, and the two cut guards at about
 //! 0.6 KB each, estimated) is skipped and recorded as such.
 
+/// The allocator of the Python extension (see `crates/topomech-py`), so that what is timed
+/// here is what a user runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::time::Instant;

@@ -34,6 +34,11 @@ mod baselines;
 #[path = "../tests/it/common/renamed.rs"]
 mod renamed;
 
+/// The allocator of the Python extension (see `crates/topomech-py`), so that what is timed
+/// here is what a user runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::time::Instant;

@@ -9,6 +9,11 @@
 //! (`TOPOMECH_TOPOLOGY_THREADS` sets another count; see `main`).
 
 use std::hint::black_box;
+
+/// The allocator of the Python extension (see `crates/topomech-py`), so that what is timed
+/// here is what a user runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use std::time::Instant;
 
 use topomech_gmap::generators::{cuboid, BoxElement};

