@@ -190,7 +190,7 @@ fn implicit_euler_step_reports_its_linear_solve() {
 /// element and how far it shrank, the positions are those before the solve (exactly), and
 /// the report says not converged. The same solve from the rest positions (nothing to
 /// balance) still succeeds: the check refuses only elements shrunk to 1e-3 of their rest size
-/// (tests/test_hardening_static.py: linear FEM far beyond small strains, elements inverted
+/// (`tests/test_hardening_static.py`: linear FEM far beyond small strains, elements inverted
 /// and flattened but of a size, is still the scaled answer).
 #[test]
 fn a_collapsed_balance_from_an_inverted_start_is_refused() {
