@@ -2394,12 +2394,18 @@ impl Plan {
                     // a gather that reads its slots in increasing order over a range at
                     // most 1.5 times the rows already streams the column: a copy would
                     // cost memory for nothing (a co-rotational plan's 144 floats per tet);
-                    // such a gather is recorded as not worth a copy (`values` empty)
+                    // such a gather is recorded as not worth a copy (`values` empty). So
+                    // does one in increasing order but for a few breaks (at most one per 16
+                    // rows): a patched plan's, whose dead rows read the slot of one live row
+                    // (one cache line for all) and whose new rows, appended, read the slots
+                    // a topology change appended, in order too (copying it after every cut
+                    // cost most of a step, for steps no faster)
                     let (lo, hi) = slots
                         .iter()
                         .fold((u32::MAX, 0), |(lo, hi), &s| (lo.min(s), hi.max(s)));
                     let span = (hi as usize + 1).saturating_sub(lo as usize);
-                    let streams = slots.is_sorted() && 2 * span <= 3 * self.rows;
+                    let breaks = slots.windows(2).filter(|w| w[1] < w[0]).count();
+                    let streams = 16 * breaks <= self.rows && 2 * span <= 3 * self.rows;
                     let mut values = Vec::new();
                     let inside = streams
                         || slots.iter().all(|&s| {
