@@ -1,7 +1,7 @@
 //! Building a simulation: the rules of its models and the glue of a step (accumulation,
 //! fixed and prescribed vertices, material regions, ground), and the set-up they run.
 
-use topomech_gmap::{Dart, GMap, OrbitType, Value};
+use topomech_gmap::{ColumnMut, GMap, OrbitType};
 use topomech_rules::value::BinOp;
 use topomech_rules::{ast, build, parser, Params, Val};
 
@@ -619,12 +619,24 @@ fn mark_vertex0(g: &mut GMap) -> Result<(), PhysicsError> {
 fn mark_one_per_orbit(g: &mut GMap, name: &str, o: OrbitType) -> Result<(), PhysicsError> {
     let err = |e: topomech_gmap::EmbeddingError| PhysicsError::Config(e.to_string());
     let id = g.require(name).map_err(err)?;
-    let all: Vec<Dart> = g.darts().collect();
-    for d in all {
-        g.set_value(id, d, &Value::Bool(false)).map_err(err)?;
-    }
-    for d in g.orbit_representatives(o) {
-        g.set_value(id, d, &Value::Bool(true)).map_err(err)?;
+    // the column written at once: a value set per dart cost 40 ms at 10^5 tets
+    let reps: Vec<usize> = g
+        .orbit_representatives(o)
+        .into_iter()
+        .map(|d| g.embedding(id).slot(d))
+        .collect();
+    match g.column_mut(id).map_err(err)? {
+        ColumnMut::Bool(col) => {
+            col.fill(false);
+            for s in reps {
+                col[s] = true;
+            }
+        }
+        _ => {
+            return Err(PhysicsError::Config(format!(
+                "the map's embedding '{name}' is not a bool"
+            )))
+        }
     }
     Ok(())
 }
