@@ -2020,6 +2020,121 @@ impl Plan {
         true
     }
 
+    /// Reads again the slots of rows of a guard plan ([`compile_guard`]) whose matches have
+    /// the same darts as when the rows were built but some of whose slots changed (a
+    /// topology change split a vertex the row reads): `rows[i] = (row, darts)`, `darts[n]`
+    /// node `n`'s dart at the match's row 0, where a guard row reads. Each gather reads its
+    /// node's slot now, each aggregate the slots of its orbit now (as [`Rows::of`] does, the
+    /// same sorted lists; one walk per orbit, shared by the rows that read it). Returns, per
+    /// entry of `rows`, whether its row was read again: not where an aggregate's slot list
+    /// or count would change length (the caller appends a new row instead), that row left
+    /// as it was; none for a plan that is not a guard's.
+    pub(crate) fn reslot_guard_rows(
+        &mut self,
+        g: &GMap,
+        emb_ids: &[EmbeddingId],
+        rows: &[(usize, Vec<Dart>)],
+    ) -> Vec<bool> {
+        if !self.prog.guard {
+            return vec![false; rows.len()];
+        }
+        let mut ok: Vec<bool> = rows.iter().map(|(r, _)| *r < self.rows).collect();
+        let mut marks = Marks::with_capacity(g.capacity());
+        let mut darts: Vec<Dart> = Vec::new();
+        // per aggregate, the new slot lists of the rows (flat, `starts`), then written where
+        // every aggregate of the row fits
+        let mut lists: Vec<(Vec<u32>, Vec<u32>)> = Vec::with_capacity(self.prog.aggs.len());
+        ORBIT_ROW.with(|t| {
+            let mut table = OrbitRows {
+                row_of: t.borrow_mut(),
+                walked: Vec::new(),
+            };
+            if table.row_of.len() < g.capacity() {
+                table.row_of.resize(g.capacity(), 0);
+            }
+            for (a, ak) in self.prog.aggs.iter().enumerate() {
+                let (offs, _) = &self.csr[a];
+                let mut starts: Vec<u32> = vec![0];
+                let mut slots: Vec<u32> = Vec::new();
+                // the entry (plus one) whose list a walked orbit's darts gave
+                for (i, (row, nd)) in rows.iter().enumerate() {
+                    let d = nd[ak.node];
+                    let first = table.row_of[d.index()];
+                    let n = if first != 0 {
+                        let e = (first - 1) as usize;
+                        let (lo, hi) = (starts[e] as usize, starts[e + 1] as usize);
+                        slots.extend_from_within(lo..hi);
+                        hi - lo
+                    } else {
+                        darts.clear();
+                        g.visit_orbit(d, ak.orbit, &mut marks, |x| darts.push(x));
+                        marks.clear();
+                        for &x in &darts {
+                            table.row_of[x.index()] = i as u32 + 1;
+                        }
+                        table.walked.extend_from_slice(&darts);
+                        match ak.emb {
+                            None => {
+                                // a count: the number of darts (kept as the list's length)
+                                slots.extend(std::iter::repeat_n(0, darts.len()));
+                                darts.len()
+                            }
+                            Some(emb) => {
+                                let e = g.embedding(emb_ids[emb]);
+                                let start = slots.len();
+                                slots.extend(darts.iter().map(|&x| e.slot(x) as u32));
+                                slots[start..].sort_unstable();
+                                let mut k = start;
+                                for j in start..slots.len() {
+                                    if j == start || slots[j] != slots[k - 1] {
+                                        slots[k] = slots[j];
+                                        k += 1;
+                                    }
+                                }
+                                slots.truncate(k);
+                                k - start
+                            }
+                        }
+                    };
+                    starts.push(slots.len() as u32);
+                    if !ok[i] {
+                        continue;
+                    }
+                    ok[i] = match ak.emb {
+                        None => self.counts[a].get(*row).copied() == Some(n as f64),
+                        Some(_) => {
+                            offs.len() == self.rows + 1
+                                && n == (offs[*row + 1] - offs[*row]) as usize
+                        }
+                    };
+                }
+                table.reset();
+                lists.push((starts, slots));
+            }
+        });
+        for (i, (row, nd)) in rows.iter().enumerate() {
+            if !ok[i] {
+                continue;
+            }
+            for (a, (starts, sl)) in lists.iter().enumerate() {
+                if self.prog.aggs[a].emb.is_some() {
+                    let (offs, slots) = &mut self.csr[a];
+                    let (lo, hi) = (offs[*row] as usize, offs[*row + 1] as usize);
+                    slots[lo..hi].copy_from_slice(&sl[starts[i] as usize..starts[i + 1] as usize]);
+                }
+            }
+            for (k, rk) in self.prog.reads.iter().enumerate() {
+                let e = g.embedding(emb_ids[rk.emb]);
+                if let Some(x) = self.gathers.get_mut(k).and_then(|v| v.get_mut(*row)) {
+                    *x = e.slot(nd[rk.node]) as u32;
+                }
+            }
+        }
+        // (a packed copy would hold the old slots' values)
+        self.packed.clear();
+        ok
+    }
+
     /// A guard plan ([`compile_guard`]) with the rows of `new` (numbered `numbers`)
     /// appended in place, its other rows kept as they are, the dropped ones included: a
     /// guard writes nothing to the map, so a dropped row costs an evaluation whose value the

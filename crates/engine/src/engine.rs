@@ -596,6 +596,10 @@ struct Cull {
     tail: Vec<(u32, u32)>,
     /// Rows that read no value of the embedding.
     always: Vec<u32>,
+    /// Rows indexed before whose slots a patch read again in place: placed again, as rows
+    /// appended since are, at the next lookup (their entries under their old first slots
+    /// stay, giving them twice at most: the lookup's answer is deduplicated).
+    moved: Vec<u32>,
 }
 
 /// The matches of the patterns planned on one map state, by [`pattern_key`].
@@ -2187,6 +2191,38 @@ fn drop_changed(
 /// freeness) reads links that did not change. The first relinked dart such a walk reaches
 /// is one of the old footprint's (every link read before it is unchanged): that match is
 /// left out, as it should (its footprint changed; [`rematch`] finds what is there now).
+/// Node `n`'s dart at row 0 of the match whose hook orbit is `hd` (its darts in row order),
+/// per node (`Dart(u32::MAX)` for a node not in the left graph), when no dart of its hook
+/// orbit nor of the arc paths from row 0's hook dart is in `relinked`: then it is the match
+/// [`rebuild_unlinked`] would rebuild, with the same darts (`paths`: [`node_paths`]).
+fn unlinked_row0(
+    g: &GMap,
+    rule: &Rule,
+    paths: &[Option<Vec<u8>>],
+    hd: &[u32],
+    relinked: &Marks,
+) -> Option<Vec<Dart>> {
+    if hd.iter().any(|&d| relinked.is_marked(Dart(d))) {
+        return None;
+    }
+    let h = Dart(*hd.first()?);
+    let mut out = vec![Dart(u32::MAX); rule.nodes.len()];
+    for (n, nd) in rule.nodes.iter().enumerate() {
+        if nd.left.is_none() {
+            continue;
+        }
+        let mut x = h;
+        for &l in paths[n].as_ref()? {
+            x = g.alpha(usize::from(l), x);
+            if relinked.is_marked(x) {
+                return None;
+            }
+        }
+        out[n] = x;
+    }
+    Some(out)
+}
+
 fn rebuild_unlinked(
     g: &GMap,
     rule: &Rule,
@@ -2267,13 +2303,15 @@ impl GuardPlan {
     /// values now and `X` those when the rows were indexed ([`Cull`]), `d` the largest change
     /// `|x_s - X_s|` of the coordinate over the slots then, and `E` the largest distance then
     /// between that coordinate of a row's first slot's value and of another value it read. A
-    /// row's slots are the same now (a patch keeps a row's slots or drops the row), so every
-    /// value it reads is within `E + 2d` of its first slot's value now. If the box of those
-    /// values meets the region at a point `q`, each coordinate of `q` lies between two of
-    /// them, so the first slot's value is within `E + 2d` of `q`: inside the region grown
-    /// by `E + 2d`. The rows whose first slot's value is
-    /// there are taken (the growth has a margin for rounding), and so are the rows appended
-    /// since the index was built and those reading no value of `emb`.
+    /// row indexed then reads the same slots now (a patch keeps a row's slots, drops the row,
+    /// or reads them again in place and lists the row in [`Cull::moved`], placed again below
+    /// as an appended row), so every value it reads is within `E + 2d` of its first slot's
+    /// value now. If the box of those values meets the region at a point `q`, each
+    /// coordinate of `q` lies between two of them, so the first slot's value is within
+    /// `E + 2d` of `q`: inside the region grown by `E + 2d`. The rows whose first slot's
+    /// value is there are taken (the growth has a margin for rounding), and so are the rows
+    /// appended or moved since the index was built (by their slots now) and those reading no
+    /// value of `emb`.
     fn candidates(
         &mut self,
         g: &GMap,
@@ -2326,7 +2364,12 @@ impl GuardPlan {
         // the rows appended since: their first slots, and their extents now, grown by what
         // the values moved since they joined the snapshot (see above)
         let mut buf = Vec::new();
-        for r in c.rows..rows {
+        let moved_rows = std::mem::take(&mut c.moved);
+        for r in moved_rows
+            .into_iter()
+            .map(|r| r as usize)
+            .chain(c.rows..rows)
+        {
             buf.clear();
             self.plan.row_slots(&cols, r, &mut buf);
             if buf.is_empty() {
@@ -2364,6 +2407,7 @@ impl GuardPlan {
         }
         out.extend(c.tail.iter().filter(|t| inside(t.0)).map(|t| t.1));
         out.sort_unstable();
+        out.dedup();
         self.cull = Some(c);
         Some(out)
     }
@@ -2426,6 +2470,7 @@ impl GuardPlan {
             by_slot,
             tail: Vec::new(),
             always,
+            moved: Vec::new(),
         })
     }
 }
@@ -2499,7 +2544,8 @@ const GUARD_BATCH: usize = 4096;
 /// `gp` patched for the map's new topology, as [`RuleSet::patch_plan`] patches a compiled
 /// plan (the same proof, with one row per hook orbit instead of one per footprint, and no
 /// guard evaluated: the plan evaluates it when it runs, so dropped rows whose footprint kept
-/// its links are rebuilt as without a guard); `None` when it cannot be (another
+/// its links are rebuilt as without a guard: in place, the same match reading its slots
+/// again, where its slot lists keep their lengths); `None` when it cannot be (another
 /// map, a change record that does not cover its version, too much churn).
 fn patch_guard_plan(
     g: &GMap,
@@ -2525,9 +2571,38 @@ fn patch_guard_plan(
     let (_, candidates, dropped) =
         drop_changed(g, rule, &mut index, changed, &chains, Some(&relinked))?;
     let hook = rule.hooks[0];
-    // the dropped rows whose footprint kept its links, rebuilt (see `RuleSet::patch_plan`),
-    // then one row per new hook orbit: no guard evaluated (the plan does), no footprint
-    // merged
+    // the dropped rows whose footprint kept its links are the same matches (see
+    // `rebuild_unlinked`): their rows read their slots again in place, under their own
+    // numbers (a vertex split re-slots the faces around it: a plane cut's next cut rebuilt
+    // some 20,000 rows); the rows the cull index must place again
+    let paths = node_paths(rule);
+    let mut in_place: Vec<u32> = Vec::new();
+    let mut dropped_still: Vec<u32> = Vec::with_capacity(dropped.len());
+    let mut rows: Vec<(usize, Vec<Dart>)> = Vec::new();
+    for &k in &dropped {
+        let hd = &index.hook_darts
+            [index.hook_start[k as usize] as usize..index.hook_start[k as usize + 1] as usize];
+        match unlinked_row0(g, rule, &paths, hd, &relinked) {
+            Some(darts) => rows.push((k as usize, darts)),
+            None => dropped_still.push(k),
+        }
+    }
+    for ((k, _), done) in rows.iter().zip(plan.reslot_guard_rows(g, &b.ids, &rows)) {
+        if done {
+            index.alive[*k] = true;
+            index.live += 1;
+            in_place.push(*k as u32);
+        } else {
+            dropped_still.push(*k as u32);
+        }
+    }
+    let dropped = dropped_still;
+    let mut cull = cull;
+    if let Some(c) = &mut cull {
+        c.moved.extend_from_slice(&in_place);
+    }
+    // the others rebuilt, then one row per new hook orbit: no guard evaluated (the plan
+    // does), no footprint merged
     let mut new = rebuild_unlinked(g, rule, &index, &dropped, &relinked)?;
     let mut push = |m: &Match, index: &mut Index| {
         first.push(m.darts[hook].iter().map(|d| d.0).min().expect("a row"));
