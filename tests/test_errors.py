@@ -260,3 +260,16 @@ def test_panics_become_internal_errors() -> None:
         _core._panic_for_tests("boom")
     # the module still works afterwards
     assert _core.grid(1, 1, 1.0, 1.0, "quad")[1] == ["polygon"]
+
+
+def test_import_turns_glibc_fast_bins_off() -> None:
+    """Importing the extension turns glibc malloc's fast bins off (a topology change stalled
+    in their consolidation: the README's "Memory allocator"), except where the environment's
+    GLIBC_TUNABLES sets mxfast itself, and nowhere but Linux with glibc."""
+    import os
+    import platform
+
+    tuned = topomech._core._malloc_tuned
+    glibc = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
+    by_env = "mxfast" in os.environ.get("GLIBC_TUNABLES", "")
+    assert tuned is (glibc and not by_env)

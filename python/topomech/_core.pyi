@@ -25,6 +25,7 @@ __all__ = [
     "TopologyError",
     "TopomechError",
     "__version__",
+    "_malloc_tuned",
     "_panic_for_tests",
     "box",
     "check_predicate",
@@ -33,6 +34,9 @@ __all__ = [
 ]
 
 __version__: str
+#: Whether importing the module turned glibc malloc's fast bins off (Linux with glibc, unless
+#: ``GLIBC_TUNABLES`` sets ``mxfast``): see the README's "Memory allocator".
+_malloc_tuned: bool
 
 _Path = str | os.PathLike[str]
 _FlatMesh = tuple[npt.NDArray[np.float64], list[str], npt.NDArray[np.int64], npt.NDArray[np.int64]]

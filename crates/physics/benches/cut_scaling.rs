@@ -14,11 +14,6 @@
 //! available (about 7 KB per tetrahedron: the simulation, and the two cut guards at about
 //! 0.6 KB each, estimated) is skipped and recorded as such.
 
-/// The allocator of the Python extension (see `crates/topomech-py`), so that what is timed
-/// here is what a user runs.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::time::Instant;
@@ -76,6 +71,8 @@ fn cells(target: usize) -> [usize; 3] {
 }
 
 fn main() {
+    // as the Python extension does when it is imported: what is timed is what a user runs
+    topomech_physics::tune_malloc();
     let sizes: Vec<usize> = std::env::var("TOPOMECH_CUT_SIZES")
         .unwrap_or_else(|_| "1e4,1e5,1e6".into())
         .split(',')

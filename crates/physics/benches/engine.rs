@@ -34,11 +34,6 @@ mod baselines;
 #[path = "../tests/it/common/renamed.rs"]
 mod renamed;
 
-/// The allocator of the Python extension (see `crates/topomech-py`), so that what is timed
-/// here is what a user runs.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::time::Instant;
@@ -1375,6 +1370,8 @@ fn solvers() -> J {
 }
 
 fn main() {
+    // as the Python extension does when it is imported: what is timed is what a user runs
+    topomech_physics::tune_malloc();
     if let Ok(spec) = std::env::var("TOPOMECH_BENCH_PROFILE") {
         profile(&spec);
         return;

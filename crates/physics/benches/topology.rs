@@ -9,11 +9,6 @@
 //! (`TOPOMECH_TOPOLOGY_THREADS` sets another count; see `main`).
 
 use std::hint::black_box;
-
-/// The allocator of the Python extension (see `crates/topomech-py`), so that what is timed
-/// here is what a user runs.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use std::time::Instant;
 
 use topomech_gmap::generators::{cuboid, BoxElement};
@@ -239,6 +234,8 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn main() {
+    // as the Python extension does when it is imported: what is timed is what a user runs
+    topomech_physics::tune_malloc();
     // one thread unless TOPOMECH_TOPOLOGY_THREADS says otherwise: on a 2-vCPU machine the
     // 2 ms step of this box on two threads swings between 1.7 and 5.6 ms from step to step
     // (one thread: 2.0-2.3 ms), which no ratio to a step survives

@@ -19,19 +19,14 @@ mod sim;
 
 use pyo3::prelude::*;
 
-/// mimalloc (<https://github.com/microsoft/mimalloc>) for the kernel's allocations: a
-/// topology change or a set-up frees and allocates millions of small match and row vectors,
-/// and glibc's malloc then spends tens of milliseconds consolidating its free lists inside
-/// a single cut (measured: a plane cut of 1,300 faces at 10^5 tets, and set-ups 30% faster).
-/// Only Rust's allocations use it; Python and numpy keep their own.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 /// The topomech kernel: generalized maps, the meshes they are built from, rules and
 /// simulations.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // glibc's fast bins off for the process (see `topomech_physics::tune_malloc`: a topology
+    // change stalled in malloc's consolidation of them); whether it was done
+    m.add("_malloc_tuned", topomech_physics::tune_malloc())?;
     errors::register(m)?;
     m.add_class::<gmap::PyGMap>()?;
     m.add_class::<rules::PyRuleSet>()?;
