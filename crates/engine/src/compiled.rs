@@ -1223,6 +1223,23 @@ fn class_reps(
     }
 }
 
+/// Appends to `slots` the distinct slots of embedding `e` at `darts`, in increasing order
+/// (what the interpreter sums an aggregate in, see `Eval::aggregate`); returns how many.
+fn push_orbit_slots(slots: &mut Vec<u32>, e: &topomech_gmap::Embedding, darts: &[Dart]) -> usize {
+    let start = slots.len();
+    slots.extend(darts.iter().map(|&x| e.slot(x) as u32));
+    slots[start..].sort_unstable();
+    let mut k = start;
+    for j in start..slots.len() {
+        if j == start || slots[j] != slots[k - 1] {
+            slots[k] = slots[j];
+            k += 1;
+        }
+    }
+    slots.truncate(k);
+    k - start
+}
+
 /// The per-row arrays of some matches (a plan's, or those a patch appends).
 #[derive(Debug, Default)]
 struct Rows {
@@ -1249,7 +1266,41 @@ struct OrbitRows<'a> {
     walked: Vec<Dart>,
 }
 
+/// Runs `f` with this thread's [`ORBIT_ROW`] table, sized for `g` (reset when `f` ends).
+fn with_orbit_rows<R>(g: &GMap, f: impl FnOnce(&mut OrbitRows<'_>) -> R) -> R {
+    ORBIT_ROW.with(|t| {
+        let mut table = OrbitRows {
+            row_of: t.borrow_mut(),
+            walked: Vec::new(),
+        };
+        if table.row_of.len() < g.capacity() {
+            table.row_of.resize(g.capacity(), 0);
+        }
+        f(&mut table)
+    })
+}
+
 impl OrbitRows<'_> {
+    /// Walks the `orbit` of `d` into `darts` (cleared first), and enters `entry` for each of
+    /// its darts (`marks`: scratch, left empty).
+    fn walk(
+        &mut self,
+        g: &GMap,
+        d: Dart,
+        orbit: OrbitType,
+        marks: &mut Marks,
+        darts: &mut Vec<Dart>,
+        entry: u32,
+    ) {
+        darts.clear();
+        g.visit_orbit(d, orbit, marks, |x| darts.push(x));
+        marks.clear();
+        for &x in darts.iter() {
+            self.row_of[x.index()] = entry;
+        }
+        self.walked.extend_from_slice(darts);
+    }
+
     /// Clears the entries of the darts set.
     fn reset(&mut self) {
         for x in self.walked.drain(..) {
@@ -1352,14 +1403,7 @@ impl Rows {
         // orbit (a table the size of the map, per thread, reset for the darts set).
         let mut marks = Marks::with_capacity(g.capacity());
         let mut darts: Vec<Dart> = Vec::new();
-        ORBIT_ROW.with(|t| {
-            let mut table = OrbitRows {
-                row_of: t.borrow_mut(),
-                walked: Vec::new(),
-            };
-            if table.row_of.len() < g.capacity() {
-                table.row_of.resize(g.capacity(), 0);
-            }
+        with_orbit_rows(g, |table| {
             for ak in &prog.aggs {
                 let mut offs = Vec::with_capacity(n + 1);
                 let mut slots: Vec<u32> = Vec::new();
@@ -1377,29 +1421,12 @@ impl Rows {
                         }
                         continue;
                     }
-                    darts.clear();
-                    g.visit_orbit(d, ak.orbit, &mut marks, |x| darts.push(x));
-                    marks.clear();
-                    for &x in &darts {
-                        table.row_of[x.index()] = row as u32 + 1;
-                    }
-                    table.walked.extend_from_slice(&darts);
+                    table.walk(g, d, ak.orbit, &mut marks, &mut darts, row as u32 + 1);
                     match ak.emb {
                         None => cnt.push(darts.len() as f64),
                         Some(emb) => {
-                            let e = g.embedding(emb_ids[emb]);
-                            let start = slots.len();
-                            slots.extend(darts.iter().map(|&x| e.slot(x) as u32));
-                            slots[start..].sort_unstable();
-                            let mut k = start;
-                            for j in start..slots.len() {
-                                if j == start || slots[j] != slots[k - 1] {
-                                    slots[k] = slots[j];
-                                    k += 1;
-                                }
-                            }
-                            slots.truncate(k);
-                            cnt.push((slots.len() - start) as f64);
+                            let n = push_orbit_slots(&mut slots, g.embedding(emb_ids[emb]), &darts);
+                            cnt.push(n as f64);
                             offs.push(slots.len() as u32);
                         }
                     }
@@ -2044,14 +2071,7 @@ impl Plan {
         // per aggregate, the new slot lists of the rows (flat, `starts`), then written where
         // every aggregate of the row fits
         let mut lists: Vec<(Vec<u32>, Vec<u32>)> = Vec::with_capacity(self.prog.aggs.len());
-        ORBIT_ROW.with(|t| {
-            let mut table = OrbitRows {
-                row_of: t.borrow_mut(),
-                walked: Vec::new(),
-            };
-            if table.row_of.len() < g.capacity() {
-                table.row_of.resize(g.capacity(), 0);
-            }
+        with_orbit_rows(g, |table| {
             for (a, ak) in self.prog.aggs.iter().enumerate() {
                 let (offs, _) = &self.csr[a];
                 let mut starts: Vec<u32> = vec![0];
@@ -2066,13 +2086,7 @@ impl Plan {
                         slots.extend_from_within(lo..hi);
                         hi - lo
                     } else {
-                        darts.clear();
-                        g.visit_orbit(d, ak.orbit, &mut marks, |x| darts.push(x));
-                        marks.clear();
-                        for &x in &darts {
-                            table.row_of[x.index()] = i as u32 + 1;
-                        }
-                        table.walked.extend_from_slice(&darts);
+                        table.walk(g, d, ak.orbit, &mut marks, &mut darts, i as u32 + 1);
                         match ak.emb {
                             None => {
                                 // a count: the number of darts (kept as the list's length)
@@ -2080,19 +2094,7 @@ impl Plan {
                                 darts.len()
                             }
                             Some(emb) => {
-                                let e = g.embedding(emb_ids[emb]);
-                                let start = slots.len();
-                                slots.extend(darts.iter().map(|&x| e.slot(x) as u32));
-                                slots[start..].sort_unstable();
-                                let mut k = start;
-                                for j in start..slots.len() {
-                                    if j == start || slots[j] != slots[k - 1] {
-                                        slots[k] = slots[j];
-                                        k += 1;
-                                    }
-                                }
-                                slots.truncate(k);
-                                k - start
+                                push_orbit_slots(&mut slots, g.embedding(emb_ids[emb]), &darts)
                             }
                         }
                     };

@@ -488,6 +488,26 @@ impl Simulation {
         let free = 3 * fixed.iter().filter(|f| !**f).count();
         let choice = self.linear_choice(true, free);
         let (linear_solver, preconditioner) = self.solver_names(choice);
+        // the report of this solve: (iterations, load steps, linear iterations) as counted
+        let report =
+            |residual: f64, converged: bool, load_fraction: f64, n: (usize, usize, usize)| {
+                SolverReport {
+                    integrator: "static",
+                    iterations: n.0,
+                    residual,
+                    relative_residual: residual / scale,
+                    tolerance,
+                    converged,
+                    load_steps: n.1,
+                    load_fraction,
+                    worst_relative_residual: 0.0,
+                    load_stepped_steps: 0,
+                    not_converged_steps: 0,
+                    linear_solver,
+                    preconditioner,
+                    linear_iterations: n.2,
+                }
+            };
         let mut linear_iterations = 0;
         let mut why: Option<String> = None;
         // the rounding level of the forces: the stiffness applied to the positions is the
@@ -530,22 +550,12 @@ impl Simulation {
                 if ds < MIN_LOAD_INCREMENT {
                     self.set_vertex_vec3("position", &x0)?;
                     let rel = best / scale;
-                    self.record(SolverReport {
-                        integrator: "static",
-                        iterations,
-                        residual: best,
-                        relative_residual: rel,
-                        tolerance,
-                        converged: false,
-                        load_steps,
-                        load_fraction: s,
-                        worst_relative_residual: 0.0,
-                        load_stepped_steps: 0,
-                        not_converged_steps: 0,
-                        linear_solver,
-                        preconditioner,
-                        linear_iterations,
-                    });
+                    self.record(report(
+                        best,
+                        false,
+                        s,
+                        (iterations, load_steps, linear_iterations),
+                    ));
                     let cause = why.as_ref().map_or(String::new(), |w| {
                         format!("; the last linear solve that failed: {w}")
                     });
@@ -568,22 +578,12 @@ impl Simulation {
             // element collapsed to a point (F = 0) balances the Neo-Hookean forces of a start
             // whose elements are inverted
             self.set_vertex_vec3("position", &x0)?;
-            self.record(SolverReport {
-                integrator: "static",
-                iterations,
-                residual: res,
-                relative_residual: res / scale,
-                tolerance,
-                converged: false,
-                load_steps,
-                load_fraction: s,
-                worst_relative_residual: 0.0,
-                load_stepped_steps: 0,
-                not_converged_steps: 0,
-                linear_solver,
-                preconditioner,
-                linear_iterations,
-            });
+            self.record(report(
+                res,
+                false,
+                s,
+                (iterations, load_steps, linear_iterations),
+            ));
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
                 vertex: Some(row),
@@ -593,22 +593,12 @@ impl Simulation {
             });
         }
         self.static_base = good;
-        self.record(SolverReport {
-            integrator: "static",
-            iterations,
-            residual: res,
-            relative_residual: res / scale,
-            tolerance,
-            converged: true,
-            load_steps,
-            load_fraction: 1.0,
-            worst_relative_residual: 0.0,
-            load_stepped_steps: 0,
-            not_converged_steps: 0,
-            linear_solver,
-            preconditioner,
-            linear_iterations,
-        });
+        self.record(report(
+            res,
+            true,
+            1.0,
+            (iterations, load_steps, linear_iterations),
+        ));
         Ok(())
     }
 
