@@ -271,5 +271,8 @@ def test_import_turns_glibc_fast_bins_off() -> None:
 
     tuned = topomech._core._malloc_tuned
     glibc = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
-    by_env = "mxfast" in os.environ.get("GLIBC_TUNABLES", "")
+    by_env = any(
+        e.split("=", 1)[0] == "glibc.malloc.mxfast" and "=" in e
+        for e in os.environ.get("GLIBC_TUNABLES", "").split(":")
+    )
     assert tuned is (glibc and not by_env)

@@ -196,6 +196,11 @@ def test_prescribed_and_regions() -> None:
             TypeError,
             "models[0]['params']: a model parameter is a real or 3 reals, got dict",
         ),
+        (
+            {"fixed": ["x < 4/3"]},
+            topomech.SimulationError,
+            "a quotient of two integer literals is an integer (4/3 is 1",
+        ),
         ({"dt": -1.0}, ValueError, "dt must be positive, got -1"),
         ({"dt": "big"}, TypeError, "dt must be a number, got str"),
         ({"dt": True}, TypeError, "dt must be a number, got bool"),
@@ -274,3 +279,10 @@ def test_available_models() -> None:
     ]
     assert any(m["kind"] == "corotational" and 3 in m["dims"] for m in models)
     assert all(m["per_element"] for m in models if m["kind"] in ("corotational", "linear_fem"))
+
+
+def test_a_real_quotient_in_a_predicate_is_accepted() -> None:
+    """`x < 4.0/3` is the real quotient (every vertex of the plate, x <= 1); `x < 4/3` is
+    refused (above) rather than read as `x < 1`."""
+    sim = springs(fixed=["x < 4.0/3 && y < -1 / 3.0 + 1"])
+    assert sim.fixed().sum() > 0

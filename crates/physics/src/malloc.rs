@@ -17,7 +17,7 @@
 pub fn tune_malloc() -> bool {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     {
-        if std::env::var("GLIBC_TUNABLES").is_ok_and(|t| t.contains("mxfast")) {
+        if std::env::var("GLIBC_TUNABLES").is_ok_and(|t| sets_mxfast(&t)) {
             return false;
         }
         // SAFETY: `mallopt` takes two integers by value and sets a parameter of the
@@ -38,13 +38,33 @@ pub fn tune_malloc() -> bool {
     }
 }
 
+/// Whether a `GLIBC_TUNABLES` value sets `glibc.malloc.mxfast` (its entries are
+/// `name=value`, separated by colons).
+#[cfg_attr(not(all(target_os = "linux", target_env = "gnu")), allow(dead_code))]
+fn sets_mxfast(tunables: &str) -> bool {
+    tunables.split(':').any(|e| {
+        e.split_once('=')
+            .is_some_and(|(k, _)| k == "glibc.malloc.mxfast")
+    })
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn only_an_mxfast_entry_counts() {
+        use super::sets_mxfast;
+        assert!(sets_mxfast("glibc.malloc.mxfast=0"));
+        assert!(sets_mxfast("glibc.malloc.check=3:glibc.malloc.mxfast=64"));
+        assert!(!sets_mxfast("glibc.malloc.mxfastx=1"));
+        assert!(!sets_mxfast("glibc.malloc.mxfast"));
+        assert!(!sets_mxfast("glibc.malloc.check=3"));
+    }
+
     /// On glibc (unless the environment tunes `mxfast`) the call succeeds, and allocating
     /// and freeing afterwards works as before; elsewhere it reports that it did nothing.
     #[test]
     fn tune_malloc_turns_the_fast_bins_off() {
-        let tuned_by_env = std::env::var("GLIBC_TUNABLES").is_ok_and(|t| t.contains("mxfast"));
+        let tuned_by_env = std::env::var("GLIBC_TUNABLES").is_ok_and(|t| super::sets_mxfast(&t));
         let done = super::tune_malloc();
         if cfg!(all(target_os = "linux", target_env = "gnu")) && !tuned_by_env {
             assert!(done, "mallopt(M_MXFAST, 0) refused");

@@ -174,7 +174,7 @@ impl RunModel {
             if !m.params.iter().any(|p| &p.name == k) {
                 if ["young", "poisson", "density"].contains(&k.as_str()) {
                     return Err(PhysicsError::Config(format!(
-                        "model '{}' has no parameter '{k}': '{k}' is the material's, shared by every model; give it to the simulation (Python: Simulation(..., {k}=...); a scene: [material] {k} = ..., or in [[model]], which sets the material's)",
+                        "model '{}' has no parameter '{k}': '{k}' is the material's, shared by every model; give it to the simulation (Python: Simulation(..., {k}=...); a scene: [material] {k} = ...)",
                         m.name
                     )));
                 }

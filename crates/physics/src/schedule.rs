@@ -2,7 +2,7 @@
 //! fixed and prescribed vertices, material regions, ground), and the set-up they run.
 
 use topomech_gmap::{ColumnMut, GMap, OrbitType};
-use topomech_rules::value::BinOp;
+use topomech_rules::value::{BinOp, UnOp};
 use topomech_rules::{ast, build, parser, Params, Val};
 
 use crate::*;
@@ -168,6 +168,16 @@ fn predicate_guard(
     point: &ast::Expr,
 ) -> Result<ast::Expr, topomech_rules::Diagnostic> {
     let pred = build::parse_expression(label, text)?;
+    if let Some(at) = integer_division(&pred) {
+        // the rule language divides integers as integers: `x < 4/3` would read `x < 1`
+        return Err(topomech_rules::Diagnostic {
+            file: label.to_string(),
+            pos: at,
+            severity: topomech_rules::Severity::Error,
+            condition: "integer-division",
+            message: "a quotient of two integer literals is an integer (4/3 is 1, 1/3 is 0): write a real literal, e.g. 4.0/3, for the real quotient".into(),
+        });
+    }
     let pos = pred.pos;
     for c in ["x", "y", "z"] {
         lets.push((c, build::call(c, vec![point.clone()])));
@@ -175,6 +185,34 @@ fn predicate_guard(
     let mut g = build::let_block(lets, pred);
     g.pos = pos;
     Ok(g)
+}
+
+/// Where `e` divides an integer literal by an integer literal (either one negated), if it
+/// does anywhere: in a predicate on coordinates that is a mistake (`x < 4/3` reads `x < 1`).
+fn integer_division(e: &ast::Expr) -> Option<topomech_rules::ast::Pos> {
+    use ast::ExprKind as K;
+    let int = |x: &ast::Expr| match &x.kind {
+        K::Int(_) => true,
+        K::Unary(UnOp::Neg, a) => matches!(a.kind, K::Int(_)),
+        _ => false,
+    };
+    match &e.kind {
+        K::Binary(BinOp::Div, a, b) if int(a) && int(b) => Some(e.pos),
+        K::Binary(_, a, b) => integer_division(a).or_else(|| integer_division(b)),
+        K::Unary(_, a) => integer_division(a),
+        K::If(c, a, b) => integer_division(c)
+            .or_else(|| integer_division(a))
+            .or_else(|| integer_division(b)),
+        K::Call { args, .. } => args.iter().find_map(integer_division),
+        K::Block(stmts, r) => stmts
+            .iter()
+            .find_map(|st| match st {
+                ast::Stmt::Let { value, .. } => integer_division(value),
+                _ => None,
+            })
+            .or_else(|| integer_division(r)),
+        _ => None,
+    }
 }
 
 /// [`predicate_guard`], a refusal being the configuration error naming the key.

@@ -10,6 +10,17 @@ use crate::*;
 /// the element shrunk to a point (see [`Simulation::solve_static`]).
 pub const DEGENERATE_SIZE: f64 = 1e-3;
 
+/// A static balance refused ([`Simulation::solve_static`]): the vertex to name and why.
+struct Degenerate {
+    row: usize,
+    why: String,
+}
+
+/// The signed volume of 3D element `el` at positions `p` (rows; positive at rest).
+fn signed(el: &Element, p: &[[f64; 3]]) -> f64 {
+    topomech_gmap::mesh::signed_volume(el.kind, &el.rows, p)
+}
+
 /// What the solve of the last static or implicit Euler step did
 /// ([`Simulation::solver_report`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -429,9 +440,10 @@ impl Simulation {
     /// fraction, halving the increment on failure down to [`MIN_LOAD_INCREMENT`].
     /// [`Simulation::solver_report`] then says what happened.
     /// Errors: [`PhysicsError::Diverged`] (the positions before the solve restored) when no
-    /// increment converges, or when the balanced state has an element shrunk to a point
-    /// (its size at most [`DEGENERATE_SIZE`] of its rest size: F = 0, a stationary point of
-    /// the Neo-Hookean energy that a start with inverted elements reaches), with the relative residual, the
+    /// increment converges, or when the balanced state is degenerate: an element shrunk to a
+    /// point (its size at most [`DEGENERATE_SIZE`] of its rest size: F = 0, a stationary
+    /// point of the hyperelastic energies), or (3D) elements inverted at the balance of a
+    /// start that had inverted elements (a mirrored start's fold or mirror image), with the relative residual, the
     /// tolerance and what to try; a rule's failure other than a non-finite value.
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
         let n = self.rows.darts.len();
@@ -573,10 +585,8 @@ impl Simulation {
         }
         let res = norm(&self.static_residual(&fixed, None, 1.0)?);
         self.set_vertex_vec3("position", &good)?;
-        if let Some((e, row, ratio)) = self.degenerate_element(&good)? {
-            // a stationary point of the energy, not an equilibrium a body can hold: every
-            // element collapsed to a point (F = 0) balances the Neo-Hookean forces of a start
-            // whose elements are inverted
+        if let Some(d) = self.degenerate_balance(&x0, &good)? {
+            // a stationary point of the energy, not an equilibrium a body can hold
             self.set_vertex_vec3("position", &x0)?;
             self.record(report(
                 res,
@@ -586,10 +596,8 @@ impl Simulation {
             ));
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
-                vertex: Some(row),
-                why: format!(
-                    "the static solve reached a balance of the forces where element {e} (in the order of Simulation::elements) has shrunk to {ratio:.3e} of its rest size (the largest distance between two of its vertices; at most {DEGENERATE_SIZE:e} is refused): an element collapsed to a point (deformation gradient F = 0) is a stationary point of the energy, not a state the body can hold; a start with inverted elements (mirrored positions) leads there. Start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held), or reduce the load. The element has its first vertex"
-                ),
+                vertex: Some(d.row),
+                why: d.why,
             });
         }
         self.static_base = good;
@@ -602,13 +610,23 @@ impl Simulation {
         Ok(())
     }
 
-    /// The first element whose size at `positions` (rows), the largest distance between
-    /// two of its vertices, is at most [`DEGENERATE_SIZE`] of its size at rest: with its
-    /// first vertex's row and that ratio; `None` when there is none.
-    fn degenerate_element(
+    /// Why the balance a static solve reached at `positions` (rows) from `start` is refused,
+    /// if it is; `None` when it stands. Two cases, elements as [`Simulation::elements`]
+    /// gives them (oriented positive at rest):
+    /// - an element shrunk to a point: its size (the largest distance between two of its
+    ///   vertices) at most [`DEGENERATE_SIZE`] of its rest size. F = 0 balances the forces of
+    ///   the hyperelastic models, a stationary point of their energy.
+    /// - (3D) elements inverted at the balance when elements of the start were inverted:
+    ///   from a mirrored start, Newton balances the forces on stationary points that are no
+    ///   minimum (a Neo-Hookean body folded onto a line, half its elements inverted; St.
+    ///   Venant-Kirchhoff's mirror image, of zero energy). Elements inverted at the balance of
+    ///   a start that had none are kept: linear FEM far beyond small strains gives them, the
+    ///   exact answer of its equations.
+    fn degenerate_balance(
         &self,
+        start: &[[f64; 3]],
         positions: &[[f64; 3]],
-    ) -> Result<Option<(usize, usize, f64)>, PhysicsError> {
+    ) -> Result<Option<Degenerate>, PhysicsError> {
         let rest = self.rest_points()?;
         let size = |rows: &[usize], p: &[[f64; 3]]| {
             let mut m = 0.0_f64;
@@ -619,14 +637,47 @@ impl Simulation {
             }
             m
         };
-        for (k, el) in self.elements()?.iter().enumerate() {
+        let elements = self.elements()?;
+        for (k, el) in elements.iter().enumerate() {
             let (s0, s) = (size(&el.rows, &rest), size(&el.rows, positions));
             // (an element of size zero at rest: a degenerate mesh, refused at set-up)
             if s0 > 0.0 && s <= DEGENERATE_SIZE * s0 {
-                return Ok(Some((k, el.rows[0], s / s0)));
+                let inverted_start =
+                    self.g.dimension() == 3 && elements.iter().any(|el| signed(el, start) < 0.0);
+                let cause = if inverted_start {
+                    "a start with inverted elements (mirrored positions) leads there; start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held)"
+                } else {
+                    "Newton went there from this start instead of to an equilibrium (a start far from one, compressed or stretched a lot, can); start nearer (the rest positions, or the last state a solve held), or apply the load in smaller steps"
+                };
+                return Ok(Some(Degenerate {
+                    row: el.rows[0],
+                    why: format!(
+                        "the static solve reached a balance of the forces where element {k} (in the order of Simulation::elements) has shrunk to {:.3e} of its rest size (the largest distance between two of its vertices; at most {DEGENERATE_SIZE:e} is refused): an element collapsed to a point (deformation gradient F = 0) is a stationary point of the energy, not a state the body can hold; {cause}. The element has its first vertex",
+                        s / s0
+                    ),
+                }));
             }
         }
-        Ok(None)
+        if self.g.dimension() != 3 {
+            return Ok(None);
+        }
+        let count = |p: &[[f64; 3]]| elements.iter().filter(|el| signed(el, p) < 0.0).count();
+        let (before, after) = (count(start), count(positions));
+        if before == 0 || after == 0 {
+            return Ok(None);
+        }
+        let (k, el) = elements
+            .iter()
+            .enumerate()
+            .find(|(_, el)| signed(el, positions) < 0.0)
+            .expect("counted");
+        Ok(Some(Degenerate {
+            row: el.rows[0],
+            why: format!(
+                "the static solve reached a balance of the forces with {after} of {} elements inverted (the first: element {k} in the order of Simulation::elements), from a start with {before} inverted: from a mirrored start Newton finds stationary points of the energy that are not a state the body holds (folded, or the model's mirror image); start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held). The element has its first vertex",
+                elements.len()
+            ),
+        }))
     }
 
     /// Keeps `r` as the last step's report, with the run's worst relative residual and count

@@ -217,7 +217,9 @@ fn a_collapsed_balance_from_an_inverted_start_is_refused() {
         panic!("expected Diverged, got {err}");
     };
     assert!(
-        why.contains("of its rest size") && why.contains("collapsed to a point"),
+        why.contains("of its rest size")
+            && why.contains("collapsed to a point")
+            && why.contains("a start with inverted elements"),
         "{err}"
     );
     assert!(vertex.is_some(), "{err}");
@@ -226,4 +228,56 @@ fn a_collapsed_balance_from_an_inverted_start_is_refused() {
     let mut at_rest = Simulation::new(g, cfg).unwrap();
     at_rest.step().unwrap();
     assert!(at_rest.solver_report().unwrap().converged);
+}
+
+/// A Neo-Hookean static solve from a start that is the rest shape mirrored through x = 0,
+/// held on the edge x = y = 0 (which the mirror keeps, so the rest shape balances the forces),
+/// no load: Newton stopped on a stationary point folded onto the held line, 20 of the 48
+/// elements inverted and none shrunk to a point, and reported it converged (a saddle: QA
+/// found 11 negative stiffness eigenvalues there). Elements inverted at the balance of a start
+/// with inverted elements are refused now, naming how many. A start compressed to half size
+/// (no element inverted) that collapses to a point is refused without blaming an inverted
+/// start; and linear FEM from the rest shape keeps an inverted answer (see the test above).
+#[test]
+fn a_folded_balance_from_a_mirrored_start_and_a_collapse_from_a_compressed_one_are_refused() {
+    let mesh = cuboid([2, 2, 2], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let run = |fixed: &str, map: &dyn Fn([f64; 3]) -> [f64; 3]| {
+        let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![model("neohookean", &[])],
+            gravity: [0.0; 3],
+            young: 1e5,
+            fixed: vec![fixed.into()],
+            integrator: Integrator::Static,
+            dt: 1.0,
+            ..Config::default()
+        };
+        let mut s = Simulation::new(g, cfg).unwrap();
+        let x: Vec<[f64; 3]> = s
+            .vertex_vec3("rest")
+            .unwrap()
+            .into_iter()
+            .map(map)
+            .collect();
+        s.set_vertex_vec3("position", &x).unwrap();
+        let out = s.step();
+        assert_eq!(s.vertex_vec3("position").unwrap(), x, "positions kept");
+        out
+    };
+    let folded = run("x * x + y * y < 1e-12", &|p| [-p[0], p[1], p[2]]).unwrap_err();
+    let PhysicsError::Diverged { why, .. } = &folded else {
+        panic!("expected Diverged, got {folded}");
+    };
+    assert!(
+        why.contains("elements inverted") && why.contains("from a start with"),
+        "{folded}"
+    );
+    let collapsed = run("x * x + y * y + z * z < 1e-12", &|p| p.map(|v| 0.5 * v)).unwrap_err();
+    let PhysicsError::Diverged { why, .. } = &collapsed else {
+        panic!("expected Diverged, got {collapsed}");
+    };
+    assert!(
+        why.contains("collapsed to a point") && !why.contains("inverted elements"),
+        "{collapsed}"
+    );
 }
