@@ -208,7 +208,7 @@ fn integer_division(e: &ast::Expr) -> Option<topomech_rules::ast::Pos> {
             .iter()
             .find_map(|st| match st {
                 ast::Stmt::Let { value, .. } => integer_division(value),
-                _ => None,
+                ast::Stmt::Write { .. } => None,
             })
             .or_else(|| integer_division(r)),
         _ => None,
