@@ -2176,6 +2176,42 @@ fn drop_changed(
     Some((star, candidates, dropped))
 }
 
+/// Node `n`'s dart at row 0 of the match whose hook orbit is `hd` (its darts in row order),
+/// per node (`Dart(u32::MAX)` for a node not in the left graph), when no dart of its
+/// footprint is in `relinked`: no dart of its hook orbit, nor of any node's arc path from
+/// any row's hook dart (the walks [`rebuild_unlinked`] makes). Then it is the match
+/// [`rebuild_unlinked`] would rebuild, with the same darts (`paths`: [`node_paths`]).
+fn unlinked_row0(
+    g: &GMap,
+    rule: &Rule,
+    paths: &[Option<Vec<u8>>],
+    hd: &[u32],
+    relinked: &Marks,
+) -> Option<Vec<Dart>> {
+    if hd.iter().any(|&d| relinked.is_marked(Dart(d))) {
+        return None;
+    }
+    let mut out = vec![Dart(u32::MAX); rule.nodes.len()];
+    for (r, &h) in hd.iter().enumerate() {
+        for (n, nd) in rule.nodes.iter().enumerate() {
+            if nd.left.is_none() {
+                continue;
+            }
+            let mut x = Dart(h);
+            for &l in paths[n].as_ref()? {
+                x = g.alpha(usize::from(l), x);
+                if relinked.is_marked(x) {
+                    return None;
+                }
+            }
+            if r == 0 {
+                out[n] = x;
+            }
+        }
+    }
+    Some(out)
+}
+
 /// The matches among `dropped` (matches of `ix`, dropped by [`drop_changed`]) whose
 /// footprint holds no dart of `relinked` (the darts whose links changed, or that were
 /// created or removed, since `ix` was current), rebuilt from their hook darts without a
@@ -2191,38 +2227,6 @@ fn drop_changed(
 /// freeness) reads links that did not change. The first relinked dart such a walk reaches
 /// is one of the old footprint's (every link read before it is unchanged): that match is
 /// left out, as it should (its footprint changed; [`rematch`] finds what is there now).
-/// Node `n`'s dart at row 0 of the match whose hook orbit is `hd` (its darts in row order),
-/// per node (`Dart(u32::MAX)` for a node not in the left graph), when no dart of its hook
-/// orbit nor of the arc paths from row 0's hook dart is in `relinked`: then it is the match
-/// [`rebuild_unlinked`] would rebuild, with the same darts (`paths`: [`node_paths`]).
-fn unlinked_row0(
-    g: &GMap,
-    rule: &Rule,
-    paths: &[Option<Vec<u8>>],
-    hd: &[u32],
-    relinked: &Marks,
-) -> Option<Vec<Dart>> {
-    if hd.iter().any(|&d| relinked.is_marked(Dart(d))) {
-        return None;
-    }
-    let h = Dart(*hd.first()?);
-    let mut out = vec![Dart(u32::MAX); rule.nodes.len()];
-    for (n, nd) in rule.nodes.iter().enumerate() {
-        if nd.left.is_none() {
-            continue;
-        }
-        let mut x = h;
-        for &l in paths[n].as_ref()? {
-            x = g.alpha(usize::from(l), x);
-            if relinked.is_marked(x) {
-                return None;
-            }
-        }
-        out[n] = x;
-    }
-    Some(out)
-}
-
 fn rebuild_unlinked(
     g: &GMap,
     rule: &Rule,
