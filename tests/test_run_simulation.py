@@ -189,7 +189,7 @@ def test_prescribed_and_regions() -> None:
         (
             {"models": [{"kind": "stretch_elementary", "young": 1e6}]},
             topomech.SimulationError,
-            "has no parameter 'young': 'young' is the material's",
+            "has no parameter 'young' (it has: stiffness, damping): 'young' is the material's",
         ),
         (
             {"models": [{"kind": "stretch_elementary", "params": {"stiffness": 1.0}}]},
@@ -199,7 +199,7 @@ def test_prescribed_and_regions() -> None:
         (
             {"fixed": ["x < 4/3"]},
             topomech.SimulationError,
-            "a quotient of two integer literals is an integer (4/3 is 1",
+            "a quotient of two integers is an integer in the rule language (4/3 is 1",
         ),
         ({"dt": -1.0}, ValueError, "dt must be positive, got -1"),
         ({"dt": "big"}, TypeError, "dt must be a number, got str"),
@@ -286,3 +286,20 @@ def test_a_real_quotient_in_a_predicate_is_accepted() -> None:
     refused (above) rather than read as `x < 1`."""
     sim = springs(fixed=["x < 4.0/3 && y < -1 / 3.0 + 1"])
     assert sim.fixed().sum() > 0
+
+
+@pytest.mark.parametrize(
+    "pred", ["x < 2*2/3", "x < (1+3)/3", "x < abs(-4)/3", "x < 4/--3", "let k = 3; x < 1/k"]
+)
+def test_an_integer_quotient_in_a_predicate_is_refused(pred: str) -> None:
+    """Integer operands built of literals, integer `let` names, arithmetic and abs/min/max:
+    their quotient is an integer (read as `x < 1` or `x < 0`), so the predicate is refused."""
+    with pytest.raises(topomech.SimulationError, match="a quotient of two integers"):
+        springs(fixed=[pred])
+
+
+def test_a_quotient_by_a_real_let_is_accepted() -> None:
+    """`let k = 3.0` is a real: `1/k` is the real quotient; a real binding shadows an
+    integer one of the same name."""
+    springs(fixed=["let k = 3.0; x < 1/k + 0.5"])
+    springs(fixed=["let k = 3; let k = 3.0; x < 1/k + 0.5"])

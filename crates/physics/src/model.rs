@@ -172,13 +172,14 @@ impl RunModel {
         names.sort();
         for k in names {
             if !m.params.iter().any(|p| &p.name == k) {
+                let known: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
                 if ["young", "poisson", "density"].contains(&k.as_str()) {
                     return Err(PhysicsError::Config(format!(
-                        "model '{}' has no parameter '{k}': '{k}' is the material's, shared by every model; give it to the simulation (Python: Simulation(..., {k}=...); a scene: [material] {k} = ...)",
-                        m.name
+                        "model '{}' has no parameter '{k}' (it has: {}): '{k}' is the material's, shared by the models that use it; give it to the simulation (Python: Simulation(..., {k}=...); a scene: [material] {k} = ...)",
+                        m.name,
+                        if known.is_empty() { "none".to_string() } else { known.join(", ") }
                     )));
                 }
-                let known: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
                 return Err(PhysicsError::Config(format!(
                     "model '{}' has no parameter '{k}' (it has: {})",
                     m.name,

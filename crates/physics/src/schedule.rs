@@ -175,7 +175,7 @@ fn predicate_guard(
             pos: at,
             severity: topomech_rules::Severity::Error,
             condition: "integer-division",
-            message: "a quotient of two integer literals is an integer (4/3 is 1, 1/3 is 0): write a real literal, e.g. 4.0/3, for the real quotient".into(),
+            message: "a quotient of two integers is an integer in the rule language (4/3 is 1, 1/3 is 0): write a real literal, e.g. 4.0/3, for the real quotient".into(),
         });
     }
     let pos = pred.pos;
@@ -187,31 +187,69 @@ fn predicate_guard(
     Ok(g)
 }
 
-/// Where `e` divides an integer literal by an integer literal (either one negated), if it
-/// does anywhere: in a predicate on coordinates that is a mistake (`x < 4/3` reads `x < 1`).
+/// Where `e` divides an integer by an integer, if it does anywhere: in a predicate on
+/// coordinates that is a mistake (`x < 4/3` reads `x < 1`). An operand is known to be an
+/// integer when it is built of integer literals, `let` names bound to such, `+ - * / %`,
+/// negation and `abs`/`min`/`max` of them (what the rule language types `i64` without a
+/// read; the coordinates `x`, `y`, `z` are reals).
 fn integer_division(e: &ast::Expr) -> Option<topomech_rules::ast::Pos> {
+    integer_division_in(e, &mut Vec::new())
+}
+
+/// [`integer_division`] with the `let` names bound so far to integer expressions (`ints`).
+fn integer_division_in(e: &ast::Expr, ints: &mut Vec<String>) -> Option<topomech_rules::ast::Pos> {
     use ast::ExprKind as K;
-    let int = |x: &ast::Expr| match &x.kind {
-        K::Int(_) => true,
-        K::Unary(UnOp::Neg, a) => matches!(a.kind, K::Int(_)),
-        _ => false,
-    };
     match &e.kind {
-        K::Binary(BinOp::Div, a, b) if int(a) && int(b) => Some(e.pos),
-        K::Binary(_, a, b) => integer_division(a).or_else(|| integer_division(b)),
-        K::Unary(_, a) => integer_division(a),
-        K::If(c, a, b) => integer_division(c)
-            .or_else(|| integer_division(a))
-            .or_else(|| integer_division(b)),
-        K::Call { args, .. } => args.iter().find_map(integer_division),
-        K::Block(stmts, r) => stmts
-            .iter()
-            .find_map(|st| match st {
-                ast::Stmt::Let { value, .. } => integer_division(value),
-                ast::Stmt::Write { .. } => None,
-            })
-            .or_else(|| integer_division(r)),
+        K::Binary(BinOp::Div, a, b) if is_integer(a, ints) && is_integer(b, ints) => Some(e.pos),
+        K::Binary(_, a, b) => integer_division_in(a, ints).or_else(|| integer_division_in(b, ints)),
+        K::Unary(_, a) => integer_division_in(a, ints),
+        K::If(c, a, b) => integer_division_in(c, ints)
+            .or_else(|| integer_division_in(a, ints))
+            .or_else(|| integer_division_in(b, ints)),
+        K::Call { args, .. } => args.iter().find_map(|a| integer_division_in(a, ints)),
+        K::Block(stmts, r) => {
+            let bound = ints.len();
+            let mut found = None;
+            for st in stmts {
+                if let ast::Stmt::Let { name, value, .. } = st {
+                    found = found.or_else(|| integer_division_in(value, ints));
+                    if is_integer(value, ints) {
+                        ints.push(name.clone());
+                    } else {
+                        // a real binding shadows an integer one of the same name
+                        ints.retain(|n| n != name);
+                    }
+                }
+            }
+            let out = found.or_else(|| integer_division_in(r, ints));
+            ints.truncate(bound.min(ints.len()));
+            out
+        }
         _ => None,
+    }
+}
+
+/// Whether `e` is an integer by its form (see [`integer_division`]).
+fn is_integer(e: &ast::Expr, ints: &[String]) -> bool {
+    use ast::ExprKind as K;
+    match &e.kind {
+        K::Int(_) => true,
+        K::Name(n) => ints.contains(n),
+        K::Unary(UnOp::Neg, a) => is_integer(a, ints),
+        K::Binary(op, a, b) => {
+            matches!(
+                op,
+                BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div | BinOp::Rem
+            ) && is_integer(a, ints)
+                && is_integer(b, ints)
+        }
+        K::Call { name, args } => {
+            matches!(name.as_str(), "abs" | "min" | "max")
+                && !args.is_empty()
+                && args.iter().all(|a| is_integer(a, ints))
+        }
+        K::If(_, a, b) => is_integer(a, ints) && is_integer(b, ints),
+        _ => false,
     }
 }
 

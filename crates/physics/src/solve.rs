@@ -532,7 +532,7 @@ impl Simulation {
         let mut iterations = 0;
         let mut load_steps = 0;
         let (mut s, mut ds) = (0.0f64, 1.0f64);
-        let mut good = start;
+        let mut good = start.clone();
         // the closest the whole load came to balance (the first attempt is the whole load)
         let (mut best, mut worst) = (f64::INFINITY, 0);
         loop {
@@ -585,7 +585,7 @@ impl Simulation {
         }
         let res = norm(&self.static_residual(&fixed, None, 1.0)?);
         self.set_vertex_vec3("position", &good)?;
-        if let Some(d) = self.degenerate_balance(&x0, &good)? {
+        if let Some(d) = self.degenerate_balance(&base, &start, &good)? {
             // a stationary point of the energy, not an equilibrium a body can hold
             self.set_vertex_vec3("position", &x0)?;
             self.record(report(
@@ -616,14 +616,17 @@ impl Simulation {
     /// - an element shrunk to a point: its size (the largest distance between two of its
     ///   vertices) at most [`DEGENERATE_SIZE`] of its rest size. F = 0 balances the forces of
     ///   the hyperelastic models, a stationary point of their energy.
-    /// - (3D) elements inverted at the balance when elements of the start were inverted:
-    ///   from a mirrored start, Newton balances the forces on stationary points that are no
-    ///   minimum (a Neo-Hookean body folded onto a line, half its elements inverted; St.
-    ///   Venant-Kirchhoff's mirror image, of zero energy). Elements inverted at the balance of
-    ///   a start that had none are kept: linear FEM far beyond small strains gives them, the
-    ///   exact answer of its equations.
+    /// - (3D, a model other than linear FEM) elements inverted at the balance when the start
+    ///   (`start`: the held vertices where `base`, the last state a solve held or the rest
+    ///   shape, had them) inverted elements that `base` had not: from a mirrored start,
+    ///   Newton balances the forces on stationary points that are no minimum (a Neo-Hookean
+    ///   body folded onto a line, half its elements inverted; St. Venant-Kirchhoff's mirror
+    ///   image, of zero energy). Elements inverted at the balance of a start that inverted
+    ///   none are kept (a load can invert elements), and so is every balance of linear FEM,
+    ///   whose answer does not depend on the start.
     fn degenerate_balance(
         &self,
+        base: &[[f64; 3]],
         start: &[[f64; 3]],
         positions: &[[f64; 3]],
     ) -> Result<Option<Degenerate>, PhysicsError> {
@@ -642,8 +645,10 @@ impl Simulation {
             let (s0, s) = (size(&el.rows, &rest), size(&el.rows, positions));
             // (an element of size zero at rest: a degenerate mesh, refused at set-up)
             if s0 > 0.0 && s <= DEGENERATE_SIZE * s0 {
-                let inverted_start =
-                    self.g.dimension() == 3 && elements.iter().any(|el| signed(el, start) < 0.0);
+                let inverted_start = self.g.dimension() == 3
+                    && elements
+                        .iter()
+                        .any(|el| signed(el, start) < 0.0 && signed(el, base) >= 0.0);
                 let cause = if inverted_start {
                     "a start with inverted elements (mirrored positions) leads there; start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held)"
                 } else {
@@ -658,11 +663,22 @@ impl Simulation {
                 }));
             }
         }
-        if self.g.dimension() != 3 {
+        // linear FEM's balance does not depend on the start (its stiffness is constant): an
+        // inverted element in it is the answer of its equations
+        let linear = self.cfg.models.iter().all(|m| m.kind == "linear_fem");
+        if self.g.dimension() != 3 || linear {
             return Ok(None);
         }
-        let count = |p: &[[f64; 3]]| elements.iter().filter(|el| signed(el, p) < 0.0).count();
-        let (before, after) = (count(start), count(positions));
+        // inverted at the start but not in the last state a solve held (the rest shape before
+        // the first): what the caller's positions inverted (a mirror), not the load
+        let before = elements
+            .iter()
+            .filter(|el| signed(el, start) < 0.0 && signed(el, base) >= 0.0)
+            .count();
+        let after = elements
+            .iter()
+            .filter(|el| signed(el, positions) < 0.0)
+            .count();
         if before == 0 || after == 0 {
             return Ok(None);
         }
@@ -674,7 +690,7 @@ impl Simulation {
         Ok(Some(Degenerate {
             row: el.rows[0],
             why: format!(
-                "the static solve reached a balance of the forces with {after} of {} elements inverted (the first: element {k} in the order of Simulation::elements), from a start with {before} inverted: from a mirrored start Newton finds stationary points of the energy that are not a state the body holds (folded, or the model's mirror image); start from positions where every element keeps its rest orientation (the rest positions, or the last state a solve held). The element has its first vertex",
+                "the static solve reached a balance of the forces with {after} of {} elements inverted (the first: element {k} in the order of Simulation::elements), from a start where {before} elements were inverted that the last state a solve held (the rest shape before the first) had not: from such a start (a mirror) Newton finds stationary points of the energy that are not a state the body holds (folded, or the model's mirror image); start from positions where every element keeps the orientation it had (the rest positions, or the last state a solve held). The element has its first vertex",
                 elements.len()
             ),
         }))
