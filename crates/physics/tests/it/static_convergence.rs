@@ -46,6 +46,19 @@ fn tip_load(s: &Simulation, tip: [f64; 3], fraction: f64) -> Vec<[f64; 3]> {
         .collect()
 }
 
+/// A static configuration of one model with default parameters, no gravity, the vertices
+/// where `fixed` holds held.
+fn static_config(kind: &str, fixed: &str) -> Config {
+    Config {
+        models: vec![model(kind, &[])],
+        gravity: [0.0; 3],
+        fixed: vec![fixed.into()],
+        integrator: Integrator::Static,
+        dt: 1.0,
+        ..Config::default()
+    }
+}
+
 /// The largest difference of two position sets, relative to the largest displacement.
 fn relative_difference(a: &[[f64; 3]], b: &[[f64; 3]], rest: &[[f64; 3]]) -> f64 {
     let mut diff = 0.0f64;
@@ -196,14 +209,7 @@ fn implicit_euler_step_reports_its_linear_solve() {
 fn a_collapsed_balance_from_an_inverted_start_is_refused() {
     let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
     let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
-    let cfg = Config {
-        models: vec![model("neohookean", &[])],
-        gravity: [0.0; 3],
-        fixed: vec!["x * x + y * y + z * z < 1e-12".into()],
-        integrator: Integrator::Static,
-        dt: 1.0,
-        ..Config::default()
-    };
+    let cfg = static_config("neohookean", "x * x + y * y + z * z < 1e-12");
     let mut s = Simulation::new(g.clone(), cfg.clone()).unwrap();
     let mirrored: Vec<[f64; 3]> = s
         .vertex_vec3("rest")
@@ -244,13 +250,8 @@ fn a_folded_balance_from_a_mirrored_start_and_a_collapse_from_a_compressed_one_a
     let run = |fixed: &str, map: &dyn Fn([f64; 3]) -> [f64; 3]| {
         let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
         let cfg = Config {
-            models: vec![model("neohookean", &[])],
-            gravity: [0.0; 3],
             young: 1e5,
-            fixed: vec![fixed.into()],
-            integrator: Integrator::Static,
-            dt: 1.0,
-            ..Config::default()
+            ..static_config("neohookean", fixed)
         };
         let mut s = Simulation::new(g, cfg).unwrap();
         let x: Vec<[f64; 3]> = s
@@ -290,15 +291,7 @@ fn a_folded_balance_from_a_mirrored_start_and_a_collapse_from_a_compressed_one_a
 fn a_static_run_continues_from_an_accepted_inverted_answer() {
     let mesh = cuboid([6, 1, 1], [2.0, 0.25, 0.25], BoxElement::Tetra);
     let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
-    let cfg = Config {
-        models: vec![model("linear_fem", &[])],
-        gravity: [0.0; 3],
-        fixed: vec!["x < 1e-9".into()],
-        integrator: Integrator::Static,
-        dt: 1.0,
-        ..Config::default()
-    };
-    let mut s = Simulation::new(g, cfg).unwrap();
+    let mut s = Simulation::new(g, static_config("linear_fem", "x < 1e-9")).unwrap();
     let load = tip_load(&s, [0.0, -1e9, 0.0], 1.0);
     s.set_external_forces(&load).unwrap();
     s.step().unwrap();
