@@ -568,14 +568,16 @@ impl Simulation {
                         s,
                         (iterations, load_steps, linear_iterations),
                     ));
-                    let cause = why.as_ref().map_or(String::new(), |w| {
-                        format!("; the last linear solve that failed: {w}")
-                    });
+                    // the linear solve's failure says what to try; otherwise, the general advice
+                    let cause = why.as_ref().map_or_else(
+                        || "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
+                        |w| format!("; the last linear solve that failed: {w}"),
+                    );
                     return Err(PhysicsError::Diverged {
                         step: self.steps + 1,
                         vertex: Some(worst),
                         why: format!(
-                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load ({:.1}% of the load reached){cause}; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path; the largest residual force is",
+                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load ({:.1}% of the load reached){cause}; the largest residual force is",
                             (1.0 / MIN_LOAD_INCREMENT).round(),
                             100.0 * s
                         ),
