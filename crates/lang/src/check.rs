@@ -514,6 +514,9 @@ pub fn check_files_for(
                         r.name, p.line, p.col
                     ),
                 );
+                // its body is checked all the same, so that its own problems are reported
+                // now rather than once the name is fixed (the rule is not kept)
+                check_rule(&mut c, r, dim, &embs);
                 continue;
             }
             rule_pos.insert(r.name.clone(), (name.clone(), r.pos));
@@ -721,18 +724,24 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
     // node names, unique per graph
     let mut nodes: Vec<Node> = Vec::new();
     let mut index: HashMap<&str, usize> = HashMap::new();
+    // a rule without a right graph keeps its left one: its problems are reported once, for
+    // the left graph
+    let explicit_right = r.right.is_some();
     for (side, g) in [("left", left), ("right", right)] {
+        let report = side == "left" || explicit_right;
         let mut seen = HashSet::new();
         for nd in &g.nodes {
             if !seen.insert(nd.name.as_str()) {
-                c.error(
-                    nd.pos,
-                    "name",
-                    format!(
-                        "rule '{rn}': node '{}' is declared twice in the {side} graph",
-                        nd.name
-                    ),
-                );
+                if report {
+                    c.error(
+                        nd.pos,
+                        "name",
+                        format!(
+                            "rule '{rn}': node '{}' is declared twice in the {side} graph",
+                            nd.name
+                        ),
+                    );
+                }
                 continue;
             }
             let k = *index.entry(nd.name.as_str()).or_insert_with(|| {
@@ -757,11 +766,11 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         }
         for a in &g.arcs {
             for end in [&a.a, &a.b] {
-                if !g.nodes.iter().any(|n| &n.name == end) {
+                if report && !g.nodes.iter().any(|n| &n.name == end) {
                     c.error(a.pos, "name", format!("rule '{rn}': arc {} -{}- {} names node '{end}', which is not in the {side} graph", a.a, a.dim, a.b));
                 }
             }
-            if a.dim > dim as u64 {
+            if report && a.dim > dim as u64 {
                 c.error(
                     a.pos,
                     "dimension",
@@ -774,7 +783,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         }
         for nd in &g.nodes {
             for l in nd.orbit.iter().flatten() {
-                if *l > dim as u64 {
+                if report && *l > dim as u64 {
                     c.error(nd.orbit_pos, "dimension", format!("rule '{rn}': node '{}' has label {l} outside 0..={dim} in the {side} graph", nd.name));
                 }
             }
@@ -784,6 +793,9 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
     let reference = left.nodes.iter().find(|n| n.hook).or(left.nodes.first());
     let arity = reference.map_or(0, |n| n.orbit.len());
     for (side, g) in [("left", left), ("right", right)] {
+        if side == "right" && !explicit_right {
+            continue;
+        }
         for nd in &g.nodes {
             if nd.orbit.len() != arity {
                 c.error(

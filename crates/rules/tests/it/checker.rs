@@ -363,3 +363,36 @@ fn mirror_write() {
     );
     assert!(mirror(&asym).is_empty());
 }
+
+/// A rule defined twice: the second one's body is checked all the same, so its own problems
+/// (here a type error) are reported with the name's, not only once the name is fixed.
+#[test]
+fn a_duplicated_rule_body_is_checked_too() {
+    let errs = check(&with_head(
+        "rule r {\n  left { a : <0> hook }\n}\nrule r {\n  left { a : <0> hook }\n  compute { a.weight = 1.0 + true }\n}",
+    ))
+    .expect_err("refused");
+    assert!(
+        errs.iter()
+            .any(|d| d.condition == "name" && d.message.contains("already defined")),
+        "{errs:#?}"
+    );
+    assert!(
+        errs.iter()
+            .any(|d| d.condition == "type" && d.pos.line == 9),
+        "{errs:#?}"
+    );
+}
+
+/// A compute-only rule (no right graph) keeps its left graph: a problem of it is reported
+/// once, for the left graph, not again for a right graph the rule does not have.
+#[test]
+fn a_compute_only_rule_reports_a_label_once() {
+    let errs = check(&with_head(
+        "rule r {\n  left { a : <0,7> hook }\n  compute { a.weight = 1.0 }\n}",
+    ))
+    .expect_err("refused");
+    let dims: Vec<&Diagnostic> = errs.iter().filter(|d| d.condition == "dimension").collect();
+    assert_eq!(dims.len(), 1, "{errs:#?}");
+    assert!(dims[0].message.contains("in the left graph"), "{}", dims[0]);
+}
