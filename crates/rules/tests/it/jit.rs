@@ -266,10 +266,10 @@ fn mesh() -> GMap {
     .0
 }
 
-/// The rule `r(p: f64, q: vec3)` on faces with the compute body `body` (after the header's
-/// embeddings and init rules), loaded, and a copy of `g0` prepared and initialised for it.
-fn rule_r(body: &str, g0: &GMap) -> (RuleSet, GMap) {
-    let src = format!(
+/// The source of the rule `r(p: f64, q: vec3)` on faces with the compute body `body`, after
+/// the header's embeddings and init rules.
+fn rule_r_source(body: &str) -> String {
+    format!(
         "{HEADER}
 rule r(p: f64, q: vec3) {{
   left {{ f : <0,1> hook }}
@@ -278,8 +278,12 @@ rule r(p: f64, q: vec3) {{
   }}
 }}
 "
-    );
-    let (rules, _) = load_sources(&[("r.tmr".to_string(), src)]).unwrap();
+    )
+}
+
+/// The rule of [`rule_r_source`], loaded, and a copy of `g0` prepared and initialised for it.
+fn rule_r(body: &str, g0: &GMap) -> (RuleSet, GMap) {
+    let (rules, _) = load_sources(&[("r.tmr".to_string(), rule_r_source(body))]).unwrap();
     let mut g = g0.clone();
     rules.prepare(&mut g).unwrap();
     for init in ["init_v", "init_f"] {
@@ -489,17 +493,7 @@ fn selections_at_constant_indices_give_the_interpreters_bits_and_errors() {
         ),
     ] {
         let body = format!("f.out_s = x(vec3(1.0, 1.0, 1.0) * 0.0) + z(vec3(0.0, 0.0, 0.0))\n    f.out_v = q\n    f.out_m = outer(q, q)\n    let bad = {call}");
-        let src = format!(
-            "{HEADER}
-rule r(p: f64, q: vec3) {{
-  left {{ f : <0,1> hook }}
-  compute {{
-    {body}
-  }}
-}}
-"
-        );
-        let Err(diags) = load_sources(&[("bad.tmr".to_string(), src)]) else {
+        let Err(diags) = load_sources(&[("bad.tmr".to_string(), rule_r_source(&body))]) else {
             panic!("{call}: the checker accepts it");
         };
         let line = HEADER.lines().count() as u32 + 8;
