@@ -284,6 +284,12 @@ rule r(p: f64, q: vec3) {{
 /// The rule of [`rule_r_source`], loaded, and a copy of `g0` prepared and initialised for it.
 fn rule_r(body: &str, g0: &GMap) -> (RuleSet, GMap) {
     let (rules, _) = load_sources(&[("r.tmr".to_string(), rule_r_source(body))]).unwrap();
+    let g = initialised(&rules, g0);
+    (rules, g)
+}
+
+/// A copy of `g0` prepared for `rules` and initialised by the header's init rules.
+fn initialised(rules: &RuleSet, g0: &GMap) -> GMap {
     let mut g = g0.clone();
     rules.prepare(&mut g).unwrap();
     for init in ["init_v", "init_f"] {
@@ -291,20 +297,14 @@ fn rule_r(body: &str, g0: &GMap) -> (RuleSet, GMap) {
             .apply_everywhere(&mut g, init, &Params::new())
             .unwrap();
     }
-    (rules, g)
+    g
 }
 
 fn check(seed: u64, g0: &GMap) -> Result<(), TestCaseError> {
     let src = source(seed);
     let (mut rules, _) = load_sources(&[("jit.tmr".to_string(), src.clone())])
         .map_err(|e| TestCaseError::fail(format!("{e:?}\n{src}")))?;
-    let mut g = g0.clone();
-    rules.prepare(&mut g).unwrap();
-    for init in ["init_v", "init_f"] {
-        rules
-            .apply_everywhere(&mut g, init, &Params::new())
-            .unwrap();
-    }
+    let g = initialised(&rules, g0);
     let (slow, _) = run(&mut rules, &g, false, 1);
     for threads in [1, 3] {
         let (fast, native) = run(&mut rules, &g, true, threads);
