@@ -1127,6 +1127,12 @@ pub(crate) struct Plan {
     identity: Vec<u32>,
 }
 
+/// A test of the values a plan is about to write, by embedding, before any is written:
+/// `check(embedding, values)` gets a write's values for the rows of one chunk (`width`
+/// floats each, in row order); a `false` from any call and the plan writes nothing (see
+/// [`crate::engine::RuleSet::apply_everywhere_checked`]).
+pub(crate) type ValueCheck<'a> = dyn Fn(EmbeddingId, &[f64]) -> bool + Sync + 'a;
+
 /// A gather's values in row order: what the plan's only gather of program column `col`
 /// (gather `idx`) reads on each row, copied when the column's write count was `writes`;
 /// empty for a gather that reads the column in order already (not worth a copy).
@@ -2597,12 +2603,45 @@ impl Plan {
         g: &mut GMap,
         ids: &[EmbeddingId],
         params: &[Val],
+        check: Option<&ValueCheck<'_>>,
     ) -> Result<(), Unsupported> {
-        if let Some(done) = self.run_chunked(g, ids, params) {
+        if let Some(done) = self.run_chunked(g, ids, params, check) {
             return done;
         }
         self.evaluate(g, ids, params)?;
+        if let Some(check) = check {
+            if !self.values_pass(ids, check, 0, self.rows.div_ceil(self.chunk), &self.out) {
+                return unsupported("the values failed the caller's check");
+            }
+        }
         self.scatter(g, ids)
+    }
+
+    /// Whether the values of every write of chunks `from..to` in `out` (the output buffer,
+    /// or from chunk `from` on a part of it starting at that chunk's block) pass `check`.
+    fn values_pass(
+        &self,
+        ids: &[EmbeddingId],
+        check: &ValueCheck<'_>,
+        from: usize,
+        to: usize,
+        out: &[f64],
+    ) -> bool {
+        let (ch, block) = (self.chunk, self.chunk * self.out_width.max(1));
+        (from..to).all(|c| {
+            let n = (self.rows - c * ch).min(ch);
+            let blk = &out[(c - from) * block..][..block];
+            self.prog
+                .writes
+                .iter()
+                .zip(&self.targets)
+                .all(|((_, emb, reg, _), (_, off))| {
+                    *emb == GUARD_OUT || {
+                        let width = self.prog.regs[*reg].width;
+                        check(ids[*emb], &blk[off * ch..][..n * width])
+                    }
+                })
+        })
     }
 
     /// Whether the chunks' values may be scattered chunk by chunk in parallel, and where each
@@ -2718,6 +2757,7 @@ impl Plan {
         g: &mut GMap,
         ids: &[EmbeddingId],
         params: &[Val],
+        check: Option<&ValueCheck<'_>>,
     ) -> Option<Result<(), Unsupported>> {
         self.chunk_starts.as_ref()?;
         let pvals = param_values(params)?;
@@ -2867,6 +2907,7 @@ impl Plan {
             let blk = unsafe { std::slice::from_raw_parts(out.at(c * block), block) };
             // no early exit, so that it vectorizes
             !blk.iter().fold(false, |bad, x| bad | !x.is_finite())
+                && check.is_none_or(|check| self.values_pass(ids, check, c, c + 1, blk))
         };
         native::CHUNKED.fetch_add(1, Ordering::Relaxed);
         let parallel = n_chunks >= 4 && rayon::current_num_threads() > 1;

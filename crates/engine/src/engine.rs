@@ -1182,6 +1182,35 @@ impl RuleSet {
         self.apply_with(g, name, params, interrupt, None)
     }
 
+    /// [`RuleSet::apply_everywhere`] for a computation rule whose values are to be tested
+    /// before any is written: `check(embedding, values)` is called with the values of each
+    /// embedding the rule writes (`width` floats per orbit, for a part of the orbits at a
+    /// time; every value written is in one call, and all are finite), and the rule writes
+    /// them only when every call returns true. A caller that would otherwise save what the
+    /// rule overwrites, to restore it when the result is refused, needs no copy.
+    ///
+    /// `Some(report)`: applied, every value passed. `None`: nothing written, because a call
+    /// returned false, or because the values could not be tested before being written (a
+    /// rule that changes the topology, one without a compiled plan, plans switched off, or a
+    /// plan run that failed, whose error [`RuleSet::apply_everywhere`] would report): the
+    /// caller applies the rule another way.
+    ///
+    /// # Errors
+    /// Those of [`RuleSet::apply_everywhere`] raised before anything is written (binding,
+    /// matching); the map is then unchanged.
+    pub fn apply_everywhere_checked(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        check: &(dyn Fn(EmbeddingId, &[f64]) -> bool + Sync),
+    ) -> Result<Option<ApplyReport>, ApplyError> {
+        if self.bind_for(g, name, params, true)?.rule.changes_topology {
+            return Ok(None);
+        }
+        self.apply_inner(g, name, params, &never, None, Some(check))
+    }
+
     fn apply_with(
         &self,
         g: &mut GMap,
@@ -1190,6 +1219,21 @@ impl RuleSet {
         interrupt: &dyn Fn() -> bool,
         region: Option<&Region>,
     ) -> Result<ApplyReport, ApplyError> {
+        self.apply_inner(g, name, params, interrupt, region, None)
+            .map(Option::unwrap_or_default)
+    }
+
+    /// The application of [`RuleSet::apply_with`], with the `check` of
+    /// [`RuleSet::apply_everywhere_checked`] (`None` only with a check).
+    fn apply_inner(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        interrupt: &dyn Fn() -> bool,
+        region: Option<&Region>,
+        check: Option<&crate::compiled::ValueCheck<'_>>,
+    ) -> Result<Option<ApplyReport>, ApplyError> {
         let poll = &mut Poll::new(interrupt);
         let b = self.bind_for(g, name, params, true)?;
         if b.rule.changes_topology {
@@ -1198,10 +1242,10 @@ impl RuleSet {
                 None => find_all(g, &b, poll)?,
             };
             if ms.is_empty() {
-                return Ok(ApplyReport::default());
+                return Ok(Some(ApplyReport::default()));
             }
             let b = self.bind(g, name, params)?;
-            return apply_matches(g, &b, &ms, poll);
+            return apply_matches(g, &b, &ms, poll).map(Some);
         }
         // a computation rule: reuse its plan while the topology and the guard's inputs stay
         let index = self
@@ -1283,7 +1327,7 @@ impl RuleSet {
         }
         let plan = plans.get_mut(&index).expect("inserted above");
         if matches!(&plan.kind, PlanKind::Matches(ms) if ms.is_empty()) {
-            return Ok(ApplyReport::default());
+            return Ok(Some(ApplyReport::default()));
         }
         let b = self.bind(g, name, params)?;
         match &mut plan.kind {
@@ -1296,21 +1340,26 @@ impl RuleSet {
                         applied: 0,
                     });
                 }
-                if p.run(g, &b.ids, &b.params).is_ok() {
-                    return Ok(ApplyReport {
+                if p.run(g, &b.ids, &b.params, check).is_ok() {
+                    return Ok(Some(ApplyReport {
                         matches: p.matches(),
                         evaluations: p.evaluations(),
                         ..ApplyReport::default()
-                    });
+                    }));
+                }
+                if check.is_some() {
+                    // nothing written: the caller applies it another way
+                    return Ok(None);
                 }
                 // the interpreter reports what failed, with the dart (or applies the rule
                 // where a failure was in a branch the interpreter does not take)
                 self.fallbacks
                     .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 let ms = find_all(g, &b, poll)?;
-                apply_matches(g, &b, &ms, poll)
+                apply_matches(g, &b, &ms, poll).map(Some)
             }
-            PlanKind::Matches(ms) => apply_matches(g, &b, ms, poll),
+            PlanKind::Matches(_) if check.is_some() => Ok(None),
+            PlanKind::Matches(ms) => apply_matches(g, &b, ms, poll).map(Some),
         }
     }
 
@@ -1871,6 +1920,11 @@ impl RuleSet {
             shared.by_pattern.insert(key, Arc::clone(&ms));
         }
         Ok(ms)
+    }
+
+    /// Whether computation rules run through compiled plans (see [`RuleSet::set_compiled`]).
+    pub fn compiled(&self) -> bool {
+        self.compile
     }
 
     /// Whether computation rules, and the guards of rules that change the topology, run

@@ -12,21 +12,34 @@ impl Simulation {
     pub fn step(&mut self) -> Result<(), PhysicsError> {
         let pos = self.id("position")?;
         let vel = self.id("velocity")?;
-        // the state before the step: the whole position and velocity columns (kept to restore
-        // them on divergence; a step changes values only, never the slots)
-        for (id, saved) in [pos, vel].into_iter().zip(&mut self.saved) {
-            let column =
-                self.g.embedding(id).real_column().ok_or_else(|| {
+        // An explicit step without ground contact writes positions and velocities in one
+        // rule, the integrator, whose values are tested before they are written
+        // (`explicit_checked`): nothing to save, nothing to scan after. Where that cannot
+        // be done, the state before the step is saved and tested after.
+        let checked = match self.cfg.integrator {
+            Integrator::ExplicitEuler => self.explicit_checked("explicit_euler", vel),
+            Integrator::SymplecticEuler => self.explicit_checked("symplectic_euler", vel),
+            Integrator::ImplicitEuler | Integrator::Static => None,
+        };
+        let (result, saved) = if let Some(result) = checked {
+            (result, false)
+        } else {
+            // the state before the step: the whole position and velocity columns (kept to
+            // restore them on divergence; a step changes values only, never the slots)
+            for (id, saved) in [pos, vel].into_iter().zip(&mut self.saved) {
+                let column = self.g.embedding(id).real_column().ok_or_else(|| {
                     PhysicsError::Config("position and velocity must be vec3".into())
                 })?;
-            saved.clear();
-            saved.extend_from_slice(column);
-        }
-        let result = match self.cfg.integrator {
-            Integrator::ExplicitEuler => self.explicit("explicit_euler"),
-            Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
-            Integrator::ImplicitEuler => self.implicit_euler(),
-            Integrator::Static => self.solve_static(),
+                saved.clear();
+                saved.extend_from_slice(column);
+            }
+            let result = match self.cfg.integrator {
+                Integrator::ExplicitEuler => self.explicit("explicit_euler"),
+                Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
+                Integrator::ImplicitEuler => self.implicit_euler(),
+                Integrator::Static => self.solve_static(),
+            };
+            (result, true)
         };
         let bad = match &result {
             // a rule computed a non-finite value (and wrote nothing): name its vertex
@@ -45,6 +58,8 @@ impl Simulation {
                 Some((Some(self.vertex_of(*dart, pos)), e.to_string()))
             }
             Err(e) => Some((None, e.to_string())),
+            // tested before they were written (`explicit_checked`)
+            Ok(()) if !saved => None,
             // every slot scanned in order first (dead slots included: they hold old, finite
             // values), the vertices searched one by one only to name the one that fails
             Ok(()) if self.columns_sane(pos, vel) => None,
@@ -62,10 +77,14 @@ impl Simulation {
             }),
         };
         if let Some((vertex, why)) = bad {
-            for (id, saved) in [pos, vel].into_iter().zip(&self.saved) {
+            // (without the copy, the step failed before writing any position or velocity)
+            for (id, copy) in [pos, vel].into_iter().zip(&self.saved) {
+                if !saved {
+                    break;
+                }
                 if let Ok(ColumnMut::Real(v)) = self.g.column_mut(id) {
-                    if v.len() == saved.len() {
-                        v.copy_from_slice(saved);
+                    if v.len() == copy.len() {
+                        v.copy_from_slice(copy);
                     }
                 }
             }
@@ -136,6 +155,47 @@ impl Simulation {
             ok & (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] <= limit)
         });
         finite && slow
+    }
+
+    /// The explicit step of [`Simulation::explicit`] with the integrator's values tested
+    /// before they are written ([`RuleSet::apply_everywhere_checked`]): every velocity
+    /// written must move its vertex at most the object's size in one step (the test of
+    /// [`Simulation::columns_sane`], with its margin), every value finite. `None` where the
+    /// step must go the other way, with nothing written to positions or velocities: ground
+    /// contact configured (a second rule writes them), plans off, or the integrator's values
+    /// refused or not testable (then the other way takes the step again and names the
+    /// vertex). `Some(Err)`: an error before the integrator wrote anything.
+    ///
+    /// [`RuleSet::apply_everywhere_checked`]: topomech_rules::RuleSet::apply_everywhere_checked
+    fn explicit_checked(
+        &mut self,
+        rule: &str,
+        vel: EmbeddingId,
+    ) -> Option<Result<(), PhysicsError>> {
+        if self.cfg.ground.is_some() || !self.rules.compiled() {
+            return None;
+        }
+        if let Err(e) = self.forces().and_then(|()| self.share_welded_forces()) {
+            return Some(Err(e));
+        }
+        let limit = self.size / self.cfg.dt;
+        let limit = (limit * limit * (1.0 - 1e-9)).min(f64::MAX);
+        let check = |id: EmbeddingId, v: &[f64]| {
+            // `&`, not `&&`: no early exit, so that the loop vectorizes
+            #[allow(clippy::needless_bitwise_bool)]
+            let slow = v.chunks_exact(3).fold(true, |ok, u| {
+                ok & (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] <= limit)
+            });
+            id != vel || (v.len() % 3 == 0 && slow)
+        };
+        match self
+            .rules
+            .apply_everywhere_checked(&mut self.g, rule, &self.step_params, &check)
+        {
+            Ok(Some(_)) => Some(Ok(())),
+            Ok(None) => None,
+            Err(e) => Some(Err(e.into())),
+        }
     }
 
     pub(crate) fn explicit(&mut self, rule: &str) -> Result<(), PhysicsError> {

@@ -265,3 +265,66 @@ fn apply_at_refuses_a_non_finite_write() {
     rules.apply_at(&mut g, "kick", &[good], &at(0.5)).unwrap();
     assert_ne!(snapshot(&g), before);
 }
+
+/// [`RuleSet::apply_everywhere_checked`]: the caller's test sees every value before any is
+/// written. Refused, or where the values cannot be tested first (plans off, a non-finite
+/// value), the map is unchanged bit for bit and `None` comes back; passed, the map is the one
+/// [`RuleSet::apply_everywhere`] gives, bit for bit. On 1 and 3 threads, over a grid large
+/// enough for chunks run in parallel, refusing one vertex's velocity only.
+#[test]
+fn a_checked_application_writes_only_values_that_pass() {
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            for compiled in [true, false] {
+                let (mut g, rules) = setup_on([64, 64], [1.0, 1.0], compiled);
+                let (mut want, _) = setup_on([64, 64], [1.0, 1.0], compiled);
+                let vel = g.embedding_id("velocity").unwrap();
+                let p: Params = [("at".to_string(), Val::F(-0.5))].into();
+                let before = snapshot(&g);
+                // 1 / (x + 0.5) is 2 at x = 0 and 2/3 at x = 1: refuse the speeds at x = 0
+                let refuse = |id: topomech_gmap::EmbeddingId, v: &[f64]| {
+                    id != vel || v.chunks_exact(3).all(|u| u[0] < 1.999)
+                };
+                let got = rules
+                    .apply_everywhere_checked(&mut g, "kick", &p, &refuse)
+                    .unwrap();
+                assert!(got.is_none(), "{threads} threads, compiled {compiled}");
+                assert_eq!(snapshot(&g), before, "refused: nothing written");
+                let pass =
+                    |_: topomech_gmap::EmbeddingId, v: &[f64]| v.iter().all(|x| x.is_finite());
+                let got = rules
+                    .apply_everywhere_checked(&mut g, "kick", &p, &pass)
+                    .unwrap();
+                if compiled {
+                    assert!(got.is_some_and(|r| r.matches > 0));
+                    rules.apply_everywhere(&mut want, "kick", &p).unwrap();
+                    assert_eq!(
+                        snapshot(&g),
+                        snapshot(&want),
+                        "passed: what applying writes"
+                    );
+                } else {
+                    assert!(got.is_none(), "plans off: not testable first");
+                    assert_eq!(snapshot(&g), before);
+                }
+                // a non-finite value (x = 0.5 is a vertex): nothing written, and the plain
+                // application reports it
+                let inf: Params = [("at".to_string(), Val::F(0.5))].into();
+                let now = snapshot(&g);
+                assert!(rules
+                    .apply_everywhere_checked(&mut g, "kick", &inf, &pass)
+                    .unwrap()
+                    .is_none());
+                assert_eq!(snapshot(&g), now);
+                assert!(matches!(
+                    rules.apply_everywhere(&mut g, "kick", &inf),
+                    Err(ApplyError::NonFinite { .. })
+                ));
+            }
+        });
+    }
+}
