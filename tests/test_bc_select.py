@@ -191,31 +191,49 @@ def test_bad_selection_keys_are_named(table: str, key: str, words: str) -> None:
 
 
 def test_predicate_language_in_python_matches_the_kernel() -> None:
-    """Face selections evaluate the rule language's predicates in Python: the vertices it
-    selects are those the kernel's fix rule selects, for predicates using &&, ||, !, abs,
-    min, max and arithmetic."""
+    """Vertex and face selections evaluate their predicates with the kernel
+    (``_core.eval_predicate``), so the vertices they select are those the kernel's fix rule
+    selects, including where Python's own operators would read the text otherwise: ``%`` of
+    a negative number (the rule language keeps the dividend's sign: -0.75 % 0.5 is -0.25,
+    Python's 0.25), comparisons of comparisons (``a < b == c < d`` compares two booleans;
+    Python chains them), ``let``, ``if``, ``#`` comments, vector functions. Each predicate
+    selects some vertices and not all (so a wrong reading would show)."""
     for pred in (
         "x < 1e-9 || abs(z - 1.0) < 1e-9",
         "!(y > 0.25) && max(x, z) >= 0.5",
         "min(x, y) * 2.0 + 1.0 > 1.5 && true",
+        "(x - 0.75) % 0.5 < 0.0",
+        "x < 0.75 == y < 0.25",
+        "let s = x + y  # the sum of two coordinates\ns <= 1.0",
+        "if z > 0.75 { x < 0.25 } else { y > 0.75 }",
+        "norm(vec3(x, y, z)) < 0.8",
     ):
-        sim = parse_scene(BOX + f'[[fix]]\nwhere = "{pred}"\n').build()
+        toml = pred.replace("\n", "\\n")
+        sim = parse_scene(BOX + f'[[fix]]\nwhere = "{toml}"\n').build()
+        want = sim.fixed()
+        assert 0 < want.sum() < len(want), pred
         mine = loads.select_vertices(sim, where=pred)
-        np.testing.assert_array_equal(mine, sim.fixed(), err_msg=pred)
+        np.testing.assert_array_equal(mine, want, err_msg=pred)
 
 
-def test_fix_predicates_keep_the_whole_rule_language() -> None:
-    """A fix's predicate is compiled by the kernel, so it may use vector functions; a load's
-    predicate is evaluated on face centroids in Python, which reads the scalar functions
-    only: a vector function there is refused naming the key and the name."""
+def test_load_predicates_keep_the_whole_rule_language() -> None:
+    """A load's predicate is the kernel's rule language too: vector functions are read, and
+    what the kernel refuses (an unknown name, ``4/3.``, a quotient of two integers) is a
+    SceneError naming the load's key and the kernel's reason."""
     sim = parse_scene(BOX + '[[fix]]\nwhere = "norm(vec3(x, y, z)) < 0.1"\n').build()
     assert sim.fixed().sum() == 1
-    with pytest.raises(topomech.SceneError) as e:
-        parse_scene(
-            BOX + '[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "norm(vec3(x, y, z)) < 2"\n'
-        )
-    assert e.value.key == "load[0].where"
-    assert "unknown name 'norm'" in str(e.value)
+    ok = BOX + '[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "norm(vec3(x, y, z)) < 2"\n'
+    parse_scene(ok)
+    for pred, words in (
+        ("norm(vec3(q, y, z)) < 2", "unknown variable or parameter 'q'"),
+        ("x < 4/3.", "expected the end of the expression"),
+        ("x < 4/3", "quotient of two integers"),
+    ):
+        with pytest.raises(topomech.SceneError) as e:
+            parse_scene(BOX + f'[[load]]\nkind = "pressure"\npressure = 1.0\nwhere = "{pred}"\n')
+        assert e.value.key == "load[0].where", pred
+        assert words in str(e.value), (pred, str(e.value))
+        assert "rule '" not in str(e.value), pred
 
 
 # ------------------------------------------------------------------ a Gmsh file with groups

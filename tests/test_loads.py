@@ -161,7 +161,8 @@ def test_hydrostatic_pressure_in_a_scene() -> None:
     with pytest.raises(topomech.SceneError) as e:
         parse_scene(text.replace("(0.3 - z)", "(0.3 - depth)"))
     assert e.value.key == "load[0].pressure"
-    assert "unknown name 'depth'" in str(e.value)
+    assert "unknown variable or parameter 'depth'" in str(e.value)
+    assert "rule '" not in str(e.value)  # the user wrote no rule
     with pytest.raises(topomech.SceneError) as e:
         parse_scene(text.replace('pressure = "1e3 * (0.3 - z)"', 'traction = ["x", "y"]'))
     assert e.value.key == "load[0].traction"

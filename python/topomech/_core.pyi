@@ -29,6 +29,8 @@ __all__ = [
     "_panic_for_tests",
     "box",
     "check_predicate",
+    "eval_expression",
+    "eval_predicate",
     "grid",
     "models",
 ]
@@ -262,6 +264,23 @@ def check_predicate(text: str, label: str = "predicate") -> None:
     one expression of the rule language, of type bool (no rule syntax). Raises
     :class:`RuleError` whose ``diagnostics`` name ``label`` and the line and column in
     ``text``."""
+
+def eval_predicate(
+    text: str, points: npt.NDArray[np.float64], label: str = "predicate"
+) -> npt.NDArray[np.bool_]:
+    """Evaluates a predicate on ``x``, ``y``, ``z`` at each row of ``points`` (float64
+    ``(N, 3)``) with the kernel's own parser, checker and evaluator, as a scene's ``where``
+    is: returns a bool array ``(N,)``. Raises :class:`RuleError` (diagnostics naming
+    ``label``) for a refused text, ``ValueError`` naming the first point where it cannot be
+    evaluated, ``TypeError``/``ValueError`` for points of another dtype or shape."""
+
+def eval_expression(
+    text: str, points: npt.NDArray[np.float64], label: str = "expression"
+) -> npt.NDArray[np.float64]:
+    """Evaluates a number-valued expression of the rule language (``f64``, or ``i64``
+    converted; no quotient of two integers) on ``x``, ``y``, ``z`` at each row of ``points``
+    with the kernel: returns a float64 array ``(N,)``. Raises as :func:`eval_predicate`, and
+    ``ValueError`` naming a point where the value is not finite."""
 
 def grid(
     nx: int, ny: int, sx: float = 1.0, sy: float = 1.0, element: str = "quad"

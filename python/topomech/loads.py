@@ -31,7 +31,6 @@ Boundary faces (edges in 2D) are the faces of the elements that belong to exactl
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
@@ -39,6 +38,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 import numpy.typing as npt
 
+from topomech import _core
 from topomech._cells import CELL_FACES, KIND_BY_SIZE
 
 if TYPE_CHECKING:
@@ -86,96 +86,33 @@ def _listed(items: Sequence[Any]) -> str:
 
 # ---------------------------------------------------------------------------- predicates
 
-_TOKEN = re.compile(
-    r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)|(?P<name>[A-Za-z_]\w*)"
-    r"|(?P<op>&&|\|\||==|!=|<=|>=|[-+*/%(),<>!]))"
-)
-_FUNCTIONS: dict[str, Callable[..., Any]] = {
-    "abs": abs,
-    "sign": lambda v: float(np.sign(v)),
-    "sqrt": lambda v: math.sqrt(v) if v >= 0 else math.nan,
-    "exp": math.exp,
-    "log": lambda v: math.log(v) if v > 0 else math.nan,
-    "sin": math.sin,
-    "cos": math.cos,
-    "tan": math.tan,
-    "asin": math.asin,
-    "acos": math.acos,
-    "atan": math.atan,
-    "atan2": math.atan2,
-    "pow": math.pow,
-    "floor": math.floor,
-    "ceil": math.ceil,
-    "min": min,
-    "max": max,
-    "clamp": lambda v, lo, hi: min(max(v, lo), hi),
-    "to_f64": float,
-}
 
-
-def _translate(text: str, what: str) -> Any:
-    """Compiles an expression of the rule language over ``x``, ``y``, ``z`` to Python code;
-    ``what`` names it in errors ("predicate", "expression")."""
-    out: list[str] = []
-    pos = 0
-    src_text = text.strip()
-    while pos < len(src_text):
-        m = _TOKEN.match(src_text, pos)
-        if m is None or m.end() == pos:
-            rest = src_text[pos:].lstrip()
-            if not rest:
-                break
-            raise LoadError(f"bad {what} {text!r}: cannot read {rest[:10]!r}")
-        pos = m.end()
-        if m.group("num") is not None:
-            out.append(m.group("num"))
-        elif m.group("name") is not None:
-            name = m.group("name")
-            if name in ("x", "y", "z"):
-                out.append(name)
-            elif name in ("true", "false"):
-                out.append(name.capitalize())
-            elif name in _FUNCTIONS:
-                out.append(f"_f_{name}")
-            else:
-                raise LoadError(
-                    f"bad {what} {text!r}: unknown name '{name}' (this {what} reads "
-                    f"x, y, z, true, false and {', '.join(sorted(_FUNCTIONS))})"
-                )
-        else:
-            op = m.group("op")
-            out.append({"&&": " and ", "||": " or ", "!": " not "}.get(op, op))
-    src = " ".join(out).strip()
+def _kernel(text: str, what: str, points: npt.NDArray[np.float64]) -> Any:
+    """``text`` evaluated by the kernel at ``points`` (a predicate or an expression, as
+    ``what`` says), its refusals as :class:`LoadError`."""
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    run = _core.eval_predicate if what == "predicate" else _core.eval_expression
     try:
-        return compile(src, f"<{what}>", "eval")
-    except SyntaxError:
-        raise LoadError(f"bad {what} {text!r}: not an expression") from None
-
-
-_NAMESPACE: dict[str, Any] = {f"_f_{k}": v for k, v in _FUNCTIONS.items()}
-_NAMESPACE["__builtins__"] = {}
+        return run(text, pts, what)
+    except _core.RuleError as e:
+        raise LoadError(f"bad {what} {text!r}: {e}") from None
+    except ValueError as e:
+        raise LoadError(f"{what} {text!r}: {e}") from None
 
 
 def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.bool_]]:
     """A predicate of the rule language over ``x``, ``y``, ``z`` as a function of points
-    ``(n, 3)`` returning a bool mask ``(n,)``. It accepts what the kernel's ``where`` guards
-    accept over these names: numbers, ``+ - * / %``, comparisons, ``&&``, ``||``, ``!``,
-    parentheses, ``true``/``false`` and the scalar built-ins (``abs``, ``sqrt``, ``min``,
-    ``max``, ``clamp``, ``sin``, ...). Raises :class:`LoadError` naming the unknown name or
-    the unreadable character. A point where it cannot be evaluated (a division by zero) is
-    not selected."""
-    code = _translate(pred, "predicate")
+    ``(n, 3)`` returning a bool mask ``(n,)``, evaluated by the kernel
+    (:func:`topomech._core.eval_predicate`): the parser, checker and evaluator of a scene's
+    ``where``, so ``%``, comparisons, ``let``, ``if`` and comments mean here what they mean
+    there. Raises :class:`LoadError` with the checker's message (a name other than ``x``,
+    ``y``, ``z``, a syntax error, a quotient of two integers) when compiled, and naming the
+    point where a built-in refuses its argument when evaluated. A comparison with NaN (the
+    square root of a negative number) is false: that point is not selected."""
+    _kernel(pred, "predicate", np.zeros((0, 3)))
 
     def evaluate(points: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        mask = np.zeros(len(pts), dtype=bool)
-        for i, (x, y, z) in enumerate(pts.tolist()):
-            local = {"x": x, "y": y, "z": z}
-            try:
-                mask[i] = bool(eval(code, _NAMESPACE, local))  # a checked expression
-            except (ArithmeticError, ValueError, TypeError):
-                mask[i] = False
-        return mask
+        return np.asarray(_kernel(pred, "predicate", points), dtype=bool)
 
     return evaluate
 
@@ -183,23 +120,15 @@ def compile_predicate(pred: str) -> Callable[[npt.NDArray[np.float64]], npt.NDAr
 def compile_expression(expr: str) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]:
     """A number-valued expression of the rule language over ``x``, ``y``, ``z`` (the same
     syntax as :func:`compile_predicate`: ``"1e4 * (0.2 - z)"``) as a function of points
-    ``(n, 3)`` returning values ``(n,)``. Raises :class:`LoadError` naming an unknown name;
-    evaluating it where it is not a finite number raises :class:`LoadError` naming the
-    point."""
-    code = _translate(expr, "expression")
+    ``(n, 3)`` returning values ``(n,)``, evaluated by the kernel
+    (:func:`topomech._core.eval_expression`; an integer value is converted, a quotient of two
+    integers is refused as in a predicate). Raises :class:`LoadError` with the checker's
+    message when compiled; evaluating it where it is not a finite number raises
+    :class:`LoadError` naming the point."""
+    _kernel(expr, "expression", np.zeros((0, 3)))
 
     def evaluate(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        out = np.zeros(len(pts))
-        for i, (x, y, z) in enumerate(pts.tolist()):
-            try:
-                v = eval(code, _NAMESPACE, {"x": x, "y": y, "z": z})  # a checked expression
-                out[i] = float(v)
-            except (ArithmeticError, ValueError, TypeError) as e:
-                raise LoadError(f"expression {expr!r} at ({x:g}, {y:g}, {z:g}): {e}") from None
-            if not math.isfinite(out[i]):
-                raise LoadError(f"expression {expr!r} is {out[i]} at ({x:g}, {y:g}, {z:g})")
-        return out
+        return np.asarray(_kernel(expr, "expression", points), dtype=np.float64)
 
     return evaluate
 

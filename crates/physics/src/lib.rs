@@ -40,7 +40,7 @@ pub use events::*;
 pub use linear::Csr;
 pub use malloc::tune_malloc;
 pub use model::*;
-pub use schedule::check_predicate;
+pub use schedule::{check_predicate, eval_expression, eval_predicate, PointsError};
 pub use solve::*;
 pub use state::*;
 

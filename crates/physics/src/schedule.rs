@@ -1,9 +1,9 @@
 //! Building a simulation: the rules of its models and the glue of a step (accumulation,
 //! fixed and prescribed vertices, material regions, ground), and the set-up they run.
 
-use topomech_gmap::{ColumnMut, GMap, OrbitType};
+use topomech_gmap::{ColumnMut, Dart, GMap, OrbitType, Value};
 use topomech_rules::value::{BinOp, UnOp};
-use topomech_rules::{ast, build, parser, Params, Val};
+use topomech_rules::{ast, build, parser, ApplyError, Params, Val};
 
 use crate::*;
 
@@ -297,6 +297,167 @@ embedding fixed : bool on <1,2,3>
             .filter(|d| d.severity == topomech_rules::Severity::Error)
             .collect()
     })
+}
+
+/// `d` without the prefix naming the internal rule (`rule 'fix': `) that [`eval_predicate`]
+/// and [`eval_expression`] build around the text: the user wrote no rule.
+fn without_rule(mut d: Vec<topomech_rules::Diagnostic>) -> Vec<topomech_rules::Diagnostic> {
+    for x in &mut d {
+        for r in ["rule 'fix': ", "rule 'value': "] {
+            if let Some(rest) = x.message.strip_prefix(r) {
+                x.message = rest.to_string();
+            }
+        }
+    }
+    d
+}
+
+/// What [`eval_predicate`] and [`eval_expression`] may answer instead of values.
+#[derive(Debug)]
+pub enum PointsError {
+    /// The text is refused as [`check_predicate`] refuses it: every error diagnostic.
+    Refused(Vec<topomech_rules::Diagnostic>),
+    /// It could not be evaluated at a point (a built-in refusing its argument, an integer
+    /// overflow): the point's index and the kernel's message.
+    At(usize, String),
+}
+
+/// Evaluates the predicate `text` on the position `x`, `y`, `z` at each of `points` with the
+/// kernel itself: it is checked as [`check_predicate`] checks it (one expression, of type
+/// bool, reading `x`, `y`, `z` and its own `let` bindings, no quotient of two integers) and
+/// evaluated as the guard of a fixed-vertex rule is (the same parser, checker and
+/// evaluator, so `%`, comparisons, `let`, `if` and comments mean what they mean in a
+/// `where` of a scene), on a map of one free dart per point holding it as `rest`.
+/// `label` names the text in the diagnostics.
+///
+/// Errors: [`PointsError::Refused`] with the checker's diagnostics; [`PointsError::At`] for
+/// a point where the evaluation fails.
+pub fn eval_predicate(
+    label: &str,
+    text: &str,
+    points: &[[f64; 3]],
+) -> Result<Vec<bool>, PointsError> {
+    check_predicate(label, text).map_err(|d| PointsError::Refused(without_rule(d)))?;
+    let guard = predicate_guard(label, text, vec![], &build::read("v", "rest"))
+        .map_err(|d| PointsError::Refused(vec![d]))?;
+    let mut r = build::rule(
+        "fix",
+        build::graph(vec![build::node("v", &[1, 2, 3], true)]),
+    );
+    r.guard = Some(guard);
+    r.compute = vec![build::write("v", "fixed", build::boolean(true))];
+    let (g, fixed) = on_points(label, &r, "fixed : bool", points)?;
+    Ok((0..points.len())
+        .map(|k| matches!(g.value(fixed, Dart(k as u32)), Ok(Value::Bool(true))))
+        .collect())
+}
+
+/// Evaluates the number-valued expression `text` on `x`, `y`, `z` at each of `points` with
+/// the kernel, as [`eval_predicate`] evaluates a predicate: one expression of the rule
+/// language of type `f64` or `i64` (converted), reading `x`, `y`, `z` and its own `let`
+/// bindings, no quotient of two integers (`1/2` is 0 in the rule language).
+///
+/// Errors: as [`eval_predicate`]'s.
+pub fn eval_expression(
+    label: &str,
+    text: &str,
+    points: &[[f64; 3]],
+) -> Result<Vec<f64>, PointsError> {
+    let refused = |d| PointsError::Refused(vec![d]);
+    let e = build::parse_expression(label, text).map_err(refused)?;
+    if let Some(at) = integer_division(&e) {
+        return Err(refused(topomech_rules::Diagnostic {
+            file: label.to_string(),
+            pos: at,
+            severity: topomech_rules::Severity::Error,
+            condition: "integer-division",
+            message: "a quotient of two integers is an integer in the rule language (4/3 is 1, 1/3 is 0): write a real literal, e.g. 4.0/3, for the real quotient".into(),
+        }));
+    }
+    let pos = e.pos;
+    let lets = ["x", "y", "z"]
+        .into_iter()
+        .map(|c| (c, build::call(c, vec![build::read("v", "rest")])))
+        .collect();
+    // `to_f64` of an integer, the value itself of a real: one rule each, the checker says
+    // which type the expression has
+    let mut value = build::let_block(lets, e);
+    value.pos = pos;
+    let attempt = |v: ast::Expr| {
+        let mut r = build::rule(
+            "value",
+            build::graph(vec![build::node("v", &[1, 2, 3], true)]),
+        );
+        r.compute = vec![build::write("v", "value", v)];
+        on_points(label, &r, "value : f64", points)
+    };
+    let (g, id) = match attempt(value.clone()) {
+        Err(PointsError::Refused(first)) => {
+            attempt(build::call("to_f64", vec![value])).map_err(|_| PointsError::Refused(first))?
+        }
+        other => other?,
+    };
+    Ok((0..points.len())
+        .map(|k| match g.value(id, Dart(k as u32)) {
+            Ok(Value::Real(v)) => v.first().copied().unwrap_or(f64::NAN),
+            _ => f64::NAN,
+        })
+        .collect())
+}
+
+/// The map of one free dart per point (`rest` the point) after rule `r` (writing the
+/// embedding declared by `out`, e.g. `"fixed : bool"`, on `<1,2,3>`) was applied at every
+/// dart, and that embedding's id. Errors: the rule refused by the checker, or failing at
+/// a point.
+fn on_points(
+    label: &str,
+    r: &ast::RuleDecl,
+    out: &str,
+    points: &[[f64; 3]],
+) -> Result<(GMap, topomech_gmap::EmbeddingId), PointsError> {
+    let decls_text =
+        format!("dimension 3\nembedding rest : vec3 on <1,2,3>\nembedding {out} on <1,2,3>\n");
+    let decls = parser::parse(&decls_text).expect("static declarations parse");
+    let f = build::file(&decls, vec![r.clone()]);
+    let (rules, _) = build::load(
+        &[("decls".into(), decls_text.clone())],
+        vec![(label.to_string(), f)],
+    )
+    .map_err(|diags| {
+        PointsError::Refused(without_rule(
+            diags
+                .into_iter()
+                .filter(|d| d.severity == topomech_rules::Severity::Error)
+                .collect(),
+        ))
+    })?;
+    let at = |e: String| PointsError::At(0, e);
+    let mut g = GMap::new(3).map_err(|e| at(e.to_string()))?;
+    if !points.is_empty() {
+        g.add_darts(points.len());
+    }
+    rules.prepare(&mut g).map_err(|e| at(e.to_string()))?;
+    let rest = g.require("rest").map_err(|e| at(e.to_string()))?;
+    for (k, p) in points.iter().enumerate() {
+        g.set_real(rest, Dart(k as u32), p)
+            .map_err(|e| at(e.to_string()))?;
+    }
+    let name = out.split(':').next().unwrap_or(out).trim();
+    if !points.is_empty() {
+        if let Err(e) = rules.apply_everywhere(&mut g, &r.name, &Params::new()) {
+            // the dart of the failure is the point's index
+            return Err(match e {
+                ApplyError::Eval { dart, message, .. } => PointsError::At(dart.0 as usize, message),
+                ApplyError::NonFinite { dart, value, .. } => PointsError::At(
+                    dart.0 as usize,
+                    format!("the value is {value}, not a finite number"),
+                ),
+                e => PointsError::At(0, e.to_string()),
+            });
+        }
+    }
+    let id = g.require(name).map_err(|e| at(e.to_string()))?;
+    Ok((g, id))
 }
 
 /// The error for a refused predicate: `bad <kind> predicate <key> "<text>": <where>: <what>`,

@@ -33,6 +33,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<sim::PySimulation>()?;
     m.add_function(wrap_pyfunction!(sim::models, m)?)?;
     m.add_function(wrap_pyfunction!(rules::check_predicate, m)?)?;
+    m.add_function(wrap_pyfunction!(rules::eval_predicate, m)?)?;
+    m.add_function(wrap_pyfunction!(rules::eval_expression, m)?)?;
     m.add_function(wrap_pyfunction!(generators::grid, m)?)?;
     m.add_function(wrap_pyfunction!(generators::cuboid, m)?)?;
     m.add_function(wrap_pyfunction!(panic_for_tests, m)?)?;

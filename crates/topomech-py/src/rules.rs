@@ -624,3 +624,60 @@ impl PyRuleSet {
 pub(crate) fn check_predicate(text: &str, label: &str) -> PyResult<()> {
     guard(|| topomech_physics::check_predicate(label, text).map_err(Error::Rules))
 }
+
+/// The answer of [`topomech_physics::eval_predicate`] and `eval_expression` as the bindings'
+/// error: the checker's diagnostics as `RuleError`, a point where the evaluation failed as
+/// `ValueError` naming the point.
+fn points_error(e: topomech_physics::PointsError, points: &[[f64; 3]]) -> Error {
+    match e {
+        topomech_physics::PointsError::Refused(d) => Error::Rules(d),
+        topomech_physics::PointsError::At(k, why) => {
+            let p = points.get(k).copied().unwrap_or([f64::NAN; 3]);
+            value_error(format!(
+                "cannot be evaluated at point {k} ({}, {}, {}): {why}",
+                p[0], p[1], p[2]
+            ))
+        }
+    }
+}
+
+/// Evaluates a predicate on `x`, `y`, `z` at each row of `points` (float64 `(N, 3)`) with the
+/// kernel's own parser, checker and evaluator, as a scene's `where` is evaluated
+/// ([`topomech_physics::eval_predicate`]); returns a bool array `(N,)`. Raises `RuleError`
+/// with the diagnostics (`label` as their file) for a refused text, `ValueError` naming the
+/// first point where it cannot be evaluated, `TypeError`/`ValueError` for bad points.
+#[pyfunction]
+#[pyo3(signature = (text, points, label = "predicate"))]
+pub(crate) fn eval_predicate<'py>(
+    py: Python<'py>,
+    text: &str,
+    points: &Bound<'py, PyAny>,
+    label: &str,
+) -> PyResult<Bound<'py, numpy::PyArray1<bool>>> {
+    let pts = guard(|| crate::convert::points_arg(points))?;
+    let mask = guard(|| {
+        py.detach(|| topomech_physics::eval_predicate(label, text, &pts))
+            .map_err(|e| points_error(e, &pts))
+    })?;
+    Ok(numpy::IntoPyArray::into_pyarray(mask, py))
+}
+
+/// Evaluates a number-valued expression of the rule language on `x`, `y`, `z` at each row of
+/// `points` with the kernel ([`topomech_physics::eval_expression`]: `f64`, or `i64`
+/// converted; no quotient of two integers); returns a float64 array `(N,)`. Raises as
+/// [`eval_predicate`].
+#[pyfunction]
+#[pyo3(signature = (text, points, label = "expression"))]
+pub(crate) fn eval_expression<'py>(
+    py: Python<'py>,
+    text: &str,
+    points: &Bound<'py, PyAny>,
+    label: &str,
+) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+    let pts = guard(|| crate::convert::points_arg(points))?;
+    let values = guard(|| {
+        py.detach(|| topomech_physics::eval_expression(label, text, &pts))
+            .map_err(|e| points_error(e, &pts))
+    })?;
+    Ok(numpy::IntoPyArray::into_pyarray(values, py))
+}

@@ -265,3 +265,43 @@ fn a_predicate_cut_still_cuts() {
     // the 3 x 3 vertices of the plane x = 1 are doubled
     assert_eq!(after, before + 9, "{before} -> {after}");
 }
+
+/// `eval_predicate` selects at a list of points exactly the vertices a fixed-vertex
+/// predicate holds (the same kernel), and `eval_expression` gives the rule language's
+/// values: `%` keeps the dividend's sign (Rust's `%`: -0.75 % 0.5 is -0.25), an integer value
+/// is converted, a comparison with NaN is false, a quotient of two integers is refused, and
+/// a built-in refusing its argument names the point. Exact: the values are single
+/// operations on coordinates that are multiples of 0.5.
+#[test]
+fn predicates_and_expressions_at_points_are_the_kernels() {
+    use topomech_physics::{eval_expression, eval_predicate, PointsError};
+    let pred = "(x - 0.75) % 0.5 < 0.0 || sqrt(y - 0.75) > 0.0";
+    let s = sim(&mesh(), |c| c.fixed = vec![pred.into()]).unwrap();
+    let rest = s.vertex_vec3("rest").unwrap();
+    let got = eval_predicate("p", pred, &rest).unwrap();
+    let fixed = s.vertex_bool("fixed").unwrap();
+    assert_eq!(got, fixed);
+    assert!(got.iter().any(|b| *b) && !got.iter().all(|b| *b));
+    let pts = [[-3.0, 0.0, 0.0], [0.5, 1.0, 0.0]];
+    assert_eq!(
+        eval_expression("e", "x % 2.0", &pts).unwrap(),
+        vec![-1.0, 0.5]
+    );
+    assert_eq!(eval_expression("e", "3", &pts).unwrap(), vec![3.0, 3.0]);
+    assert_eq!(
+        eval_predicate("p", "sqrt(x) > -1.0", &pts).unwrap(),
+        vec![false, true]
+    );
+    match eval_expression("e", "1 / 2", &pts) {
+        Err(PointsError::Refused(d)) => assert_eq!(d[0].condition, "integer-division"),
+        other => panic!("{other:?}"),
+    }
+    match eval_expression("e", "log(x)", &pts) {
+        Err(PointsError::At(0, why)) => assert!(why.contains("not a finite number"), "{why}"),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(
+        eval_predicate("p", "x < 0.0", &[]).unwrap(),
+        Vec::<bool>::new()
+    );
+}
