@@ -33,6 +33,7 @@ COLUMNS = (
     "tolerance",
     "converged",
     "load_steps",
+    "jacobian",
 )
 
 
@@ -69,6 +70,7 @@ class SolverLog:
                 "tolerance": r["tolerance"],
                 "converged": bool(r["converged"]),
                 "load_steps": r["load_steps"],
+                "jacobian": r.get("jacobian", "rules"),
             }
         )
 

@@ -380,8 +380,11 @@ class Simulation:
         free vertices, or of the linear system), ``relative_residual`` (divided by the load),
         ``tolerance``, ``converged``, ``load_steps`` (the load increments the static solve
         took: more than 1 when automatic load stepping was needed), ``load_fraction`` (of
-        the load reached), ``worst_relative_residual`` (over every step so far) and
-        ``load_stepped_steps`` (how many steps needed load stepping). None before the first
+        the load reached), ``worst_relative_residual`` (over every step so far),
+        ``load_stepped_steps`` (how many steps needed load stepping), ``linear_solver``,
+        ``preconditioner``, ``linear_iterations`` and ``jacobian`` (``rules``, or
+        ``finite_differences`` for a static solve the models' ``jvp`` rules did not bring to
+        balance, taken again on central differences of the forces). None before the first
         such step and for the explicit integrators. After a step that raised
         :class:`DivergenceError` it describes that step."""
         return self._core.solver_report()

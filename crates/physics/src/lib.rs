@@ -115,6 +115,9 @@ pub struct Simulation {
     /// [`Simulation::forces`] ended: while both are unchanged and no step rule has a guard,
     /// the step rules write the same slots as last time, so the force columns need no reset.
     forces_written: Option<((u64, u64), Vec<u64>)>,
+    /// Whether [`Simulation::jvp`] takes finite differences of the forces instead of the
+    /// models' `jvp` rules (a static solve's fallback, see [`Simulation::solve_static`]).
+    fd_jacobian: bool,
 }
 
 /// Whether a vertex embedding holds a share of a row's quantity (masses and forces: `mass`,

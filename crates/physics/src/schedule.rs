@@ -808,6 +808,7 @@ impl Simulation {
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
             forces_written: None,
+            fd_jacobian: false,
             report: None,
             static_base: Vec::new(),
             solver: linear::SolverCache::default(),

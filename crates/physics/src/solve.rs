@@ -68,6 +68,11 @@ pub struct SolverReport {
     /// The iterations of the iterative linear solver over the whole step (every Newton
     /// iteration of a static solve); 0 for `direct`.
     pub linear_iterations: usize,
+    /// Where the Jacobian-vector products of the solve came from: `rules` (the models'
+    /// `jvp` rules) or `finite_differences` (central differences of the forces: a static
+    /// solve that the rules' products could not bring to balance is taken again with them,
+    /// see [`Simulation::solve_static`]).
+    pub jacobian: &'static str,
 }
 
 /// The smallest [`Config::tolerance`] accepted: a relative residual below it is within
@@ -103,6 +108,11 @@ pub const STALL_TOLERANCE: f64 = 1e-8;
 const ROUNDING_ULPS: f64 = 1e3;
 /// The smallest load increment automatic load stepping tries, as a fraction of the load.
 pub const MIN_LOAD_INCREMENT: f64 = 1.0 / 1024.0;
+
+/// The step of [`Simulation::jvp_finite_differences`] relative to the object's size: about
+/// the cube root of the machine epsilon, where the truncation of central differences
+/// (O(h^2)) meets the rounding of the forces (O(eps / h)).
+const FD_STEP: f64 = 6e-6;
 /// Newton iterations allowed for one load increment.
 const NEWTON_ITERATIONS: usize = 30;
 /// With the direct solver, a static Newton iteration reuses the last factorization (a chord
@@ -160,6 +170,9 @@ impl Simulation {
     /// `(df/dx) dx + (df/dv) dv` for vertex vectors in row order (a welded row's result is the
     /// sum over its orbits).
     pub fn jvp(&mut self, dx: &[[f64; 3]], dv: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        if self.fd_jacobian {
+            return self.jvp_finite_differences(dx, dv);
+        }
         self.set_vertex_vec3("dx", dx)?;
         self.set_vertex_vec3("dv", dv)?;
         let none = Params::new();
@@ -171,6 +184,54 @@ impl Simulation {
         self.rules
             .apply_everywhere(&mut self.g, "accumulate_jvp", &none)?;
         self.vertex_vec3_sum("df")
+    }
+
+    /// [`Simulation::jvp`] by central differences of the models' forces:
+    /// `(f(x + h dx, v + h dv) - f(x - h dx, v - h dv)) / 2h`, two force evaluations, with
+    /// `h = FD_STEP * size / max(|dx|, |dv|)` (`size` the rest bounding box's diagonal; the
+    /// step near the cube root of the machine epsilon balances the O(h^2) truncation against
+    /// the rounding of the forces over 2h). Positions and velocities are restored after.
+    /// Exact for forces linear in the positions up to rounding; for the others the
+    /// derivative every force rule implies, whatever its `jvp` rules approximate (the
+    /// co-rotational tetrahedra's omit dR/dx).
+    pub fn jvp_finite_differences(
+        &mut self,
+        dx: &[[f64; 3]],
+        dv: &[[f64; 3]],
+    ) -> Result<Vec<[f64; 3]>, PhysicsError> {
+        let x = self.vertex_vec3("position")?;
+        let v = self.vertex_vec3("velocity")?;
+        let big = dx
+            .iter()
+            .chain(dv)
+            .flatten()
+            .fold(0.0f64, |m, a| m.max(a.abs()));
+        if big == 0.0 {
+            return Ok(vec![[0.0; 3]; x.len()]);
+        }
+        let h = FD_STEP * self.size / big;
+        let mut at = |sign: f64| -> Result<Vec<[f64; 3]>, PhysicsError> {
+            let shift = |base: &[[f64; 3]], d: &[[f64; 3]]| -> Vec<[f64; 3]> {
+                base.iter()
+                    .zip(d)
+                    .map(|(b, d)| std::array::from_fn(|a| b[a] + sign * h * d[a]))
+                    .collect()
+            };
+            self.set_vertex_vec3("position", &shift(&x, dx))?;
+            self.set_vertex_vec3("velocity", &shift(&v, dv))?;
+            self.forces()?;
+            self.vertex_vec3_sum("force")
+        };
+        let plus = at(1.0);
+        let minus = plus.and_then(|p| at(-1.0).map(|m| (p, m)));
+        self.set_vertex_vec3("position", &x)?;
+        self.set_vertex_vec3("velocity", &v)?;
+        let (plus, minus) = minus?;
+        Ok(plus
+            .iter()
+            .zip(&minus)
+            .map(|(p, m)| std::array::from_fn(|a| (p[a] - m[a]) / (2.0 * h)))
+            .collect())
     }
 
     /// The total force on each vertex: the models' forces, gravity and viscous damping.
@@ -404,6 +465,7 @@ impl Simulation {
             linear_solver,
             preconditioner,
             linear_iterations: solve.iterations,
+            jacobian: "rules",
         });
         self.solver.last_dv.clone_from(&solve.x);
         let dvel = solve.x;
@@ -437,8 +499,13 @@ impl Simulation {
     /// (gravity and external loads, or the first residual when prescribed displacements drive
     /// it). When the whole load does not converge in 30 iterations, the load (gravity,
     /// `f_ext` and prescribed displacements) is applied in increments from the last converged
-    /// fraction, halving the increment on failure down to [`MIN_LOAD_INCREMENT`].
-    /// [`Simulation::solver_report`] then says what happened.
+    /// fraction, halving the increment on failure down to [`MIN_LOAD_INCREMENT`]. When even
+    /// that does not converge, the whole solve is taken again from the start with
+    /// Jacobian-vector products by central differences of the forces instead of the models'
+    /// `jvp` rules (two force evaluations a product): the derivative the force rules imply,
+    /// where the `jvp` rules approximate it (the co-rotational tetrahedra's warped
+    /// stiffness omits dR/dx, and Newton on it stalls at large rotations).
+    /// [`Simulation::solver_report`] then says what happened (`jacobian`).
     /// Errors: [`PhysicsError::Diverged`] (the positions before the solve restored) when no
     /// increment converges, or when the balanced state is degenerate: an element shrunk to a
     /// point (its size at most [`DEGENERATE_SIZE`] of its rest size: F = 0, a stationary
@@ -446,6 +513,16 @@ impl Simulation {
     /// start that had inverted elements (a mirrored start's fold or mirror image), with the relative residual, the
     /// tolerance and what to try; a rule's failure other than a non-finite value.
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
+        let result = self.solve_static_with_fallback();
+        self.fd_jacobian = false;
+        result
+    }
+
+    /// [`Simulation::solve_static`]: load-stepped Newton on the models' `jvp` rules, and,
+    /// where that does not reach balance, the same again from the start with
+    /// finite-difference products ([`Simulation::jvp_finite_differences`], set through
+    /// `fd_jacobian`, which the caller resets).
+    fn solve_static_with_fallback(&mut self) -> Result<(), PhysicsError> {
         let n = self.rows.darts.len();
         self.set_vertex_vec3("velocity", &vec![[0.0; 3]; n])?;
         let x0 = self.vertex_vec3("position")?;
@@ -501,25 +578,29 @@ impl Simulation {
         let choice = self.linear_choice(true, free);
         let (linear_solver, preconditioner) = self.solver_names(choice);
         // the report of this solve: (iterations, load steps, linear iterations) as counted
-        let report =
-            |residual: f64, converged: bool, load_fraction: f64, n: (usize, usize, usize)| {
-                SolverReport {
-                    integrator: "static",
-                    iterations: n.0,
-                    residual,
-                    relative_residual: residual / scale,
-                    tolerance,
-                    converged,
-                    load_steps: n.1,
-                    load_fraction,
-                    worst_relative_residual: 0.0,
-                    load_stepped_steps: 0,
-                    not_converged_steps: 0,
-                    linear_solver,
-                    preconditioner,
-                    linear_iterations: n.2,
-                }
-            };
+        let report = |residual: f64,
+                      converged: bool,
+                      load_fraction: f64,
+                      n: (usize, usize, usize),
+                      fd: bool| {
+            SolverReport {
+                integrator: "static",
+                iterations: n.0,
+                residual,
+                relative_residual: residual / scale,
+                tolerance,
+                converged,
+                load_steps: n.1,
+                load_fraction,
+                worst_relative_residual: 0.0,
+                load_stepped_steps: 0,
+                not_converged_steps: 0,
+                linear_solver,
+                preconditioner,
+                linear_iterations: n.2,
+                jacobian: if fd { "finite_differences" } else { "rules" },
+            }
+        };
         let mut linear_iterations = 0;
         let mut why: Option<String> = None;
         // the rounding level of the forces: the stiffness applied to the positions is the
@@ -559,6 +640,17 @@ impl Simulation {
                 ds = (2.0 * ds).min(1.0 - s);
             } else {
                 ds *= 0.5;
+                if ds < MIN_LOAD_INCREMENT && !self.fd_jacobian {
+                    // The models' Jacobian rules may approximate the derivative of their
+                    // forces (the co-rotational tetrahedra's omit dR/dx): Newton on them
+                    // converges linearly at best, and not at all at large rotations. Start
+                    // again with the derivative of the forces themselves.
+                    self.fd_jacobian = true;
+                    (s, ds) = (0.0, 1.0);
+                    good.clone_from(&start);
+                    (best, worst) = (f64::INFINITY, 0);
+                    continue;
+                }
                 if ds < MIN_LOAD_INCREMENT {
                     self.set_vertex_vec3("position", &x0)?;
                     let rel = best / scale;
@@ -567,6 +659,7 @@ impl Simulation {
                         false,
                         s,
                         (iterations, load_steps, linear_iterations),
+                        true,
                     ));
                     // the linear solve's failure says what to try; otherwise, the general advice
                     let cause = why.as_ref().map_or_else(
@@ -577,7 +670,7 @@ impl Simulation {
                         step: self.steps + 1,
                         vertex: Some(worst),
                         why: format!(
-                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load ({:.1}% of the load reached){cause}; the largest residual force is",
+                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load, on the models' Jacobian rules and then on finite differences of their forces ({:.1}% of the load reached){cause}; the largest residual force is",
                             (1.0 / MIN_LOAD_INCREMENT).round(),
                             100.0 * s
                         ),
@@ -595,6 +688,7 @@ impl Simulation {
                 false,
                 s,
                 (iterations, load_steps, linear_iterations),
+                self.fd_jacobian,
             ));
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
@@ -608,6 +702,7 @@ impl Simulation {
             true,
             1.0,
             (iterations, load_steps, linear_iterations),
+            self.fd_jacobian,
         ));
         Ok(())
     }

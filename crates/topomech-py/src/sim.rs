@@ -1004,8 +1004,10 @@ impl PySimulation {
     /// (steps so far that did not reach their tolerance) and `load_stepped_steps`
     /// (steps that needed more than one increment), `linear_solver` (`cg`, `pcg` or `direct`:
     /// what `auto` chose), `preconditioner` (`jacobi`, `block_jacobi`, or `none` for `cg` and
-    /// `direct`) and `linear_iterations` (iterations of the iterative linear solver over the
-    /// step, 0 for `direct`); None before the first such step and for the explicit
+    /// `direct`), `linear_iterations` (iterations of the iterative linear solver over the
+    /// step, 0 for `direct`) and `jacobian` (`rules`, or `finite_differences` for a static
+    /// solve that the models' `jvp` rules did not bring to balance and that was taken again
+    /// on central differences of the forces); None before the first such step and for the explicit
     /// integrators. After a failed step it describes the failure.
     fn solver_report<'py>(
         slf: &Bound<'_, Self>,
@@ -1029,6 +1031,7 @@ impl PySimulation {
         d.set_item("linear_solver", r.linear_solver)?;
         d.set_item("preconditioner", r.preconditioner)?;
         d.set_item("linear_iterations", r.linear_iterations)?;
+        d.set_item("jacobian", r.jacobian)?;
         Ok(Some(d))
     }
 
