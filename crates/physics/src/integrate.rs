@@ -19,11 +19,12 @@ impl Simulation {
         let checked = match self.cfg.integrator {
             Integrator::ExplicitEuler => self.explicit_checked("explicit_euler", vel),
             Integrator::SymplecticEuler => self.explicit_checked("symplectic_euler", vel),
-            Integrator::ImplicitEuler | Integrator::Static => None,
+            Integrator::ImplicitEuler | Integrator::Static => Checked::NotTested,
         };
-        let (result, saved) = if let Some(result) = checked {
+        let (result, saved) = if let Checked::Done(result) = checked {
             (result, false)
         } else {
+            let ready = matches!(checked, Checked::ForcesReady);
             // the state before the step: the whole position and velocity columns (kept to
             // restore them on divergence; a step changes values only, never the slots)
             for (id, saved) in [pos, vel].into_iter().zip(&mut self.saved) {
@@ -34,8 +35,8 @@ impl Simulation {
                 saved.extend_from_slice(column);
             }
             let result = match self.cfg.integrator {
-                Integrator::ExplicitEuler => self.explicit("explicit_euler"),
-                Integrator::SymplecticEuler => self.explicit("symplectic_euler"),
+                Integrator::ExplicitEuler => self.explicit("explicit_euler", ready),
+                Integrator::SymplecticEuler => self.explicit("symplectic_euler", ready),
                 Integrator::ImplicitEuler => self.implicit_euler(),
                 Integrator::Static => self.solve_static(),
             };
@@ -161,22 +162,18 @@ impl Simulation {
     /// before they are written ([`RuleSet::apply_everywhere_checked`]): every velocity
     /// written must move its vertex at most the object's size in one step (the test of
     /// [`Simulation::columns_sane`], with its margin), every value finite. `None` where the
-    /// step must go the other way, with nothing written to positions or velocities: ground
-    /// contact configured (a second rule writes them), plans off, or the integrator's values
-    /// refused or not testable (then the other way takes the step again and names the
-    /// vertex). `Some(Err)`: an error before the integrator wrote anything.
+    /// step must go the other way, with nothing written to positions or velocities
+    /// ([`Checked`]): ground contact configured (a second rule writes them), plans off, or
+    /// the integrator's values refused or not testable (then the other way takes the step
+    /// again, from the forces computed here, and names the vertex).
     ///
     /// [`RuleSet::apply_everywhere_checked`]: topomech_rules::RuleSet::apply_everywhere_checked
-    fn explicit_checked(
-        &mut self,
-        rule: &str,
-        vel: EmbeddingId,
-    ) -> Option<Result<(), PhysicsError>> {
+    fn explicit_checked(&mut self, rule: &str, vel: EmbeddingId) -> Checked {
         if self.cfg.ground.is_some() || !self.rules.compiled() {
-            return None;
+            return Checked::NotTested;
         }
         if let Err(e) = self.forces().and_then(|()| self.share_welded_forces()) {
-            return Some(Err(e));
+            return Checked::Done(Err(e));
         }
         let limit = self.size / self.cfg.dt;
         let limit = (limit * limit * (1.0 - 1e-9)).min(f64::MAX);
@@ -192,15 +189,19 @@ impl Simulation {
             .rules
             .apply_everywhere_checked(&mut self.g, rule, &self.step_params, &check)
         {
-            Ok(Some(_)) => Some(Ok(())),
-            Ok(None) => None,
-            Err(e) => Some(Err(e.into())),
+            Ok(Some(_)) => Checked::Done(Ok(())),
+            Ok(None) => Checked::ForcesReady,
+            Err(e) => Checked::Done(Err(e.into())),
         }
     }
 
-    pub(crate) fn explicit(&mut self, rule: &str) -> Result<(), PhysicsError> {
-        self.forces()?;
-        self.share_welded_forces()?;
+    /// An explicit step: forces (unless `forces_ready`: computed at these positions
+    /// already), the integrator `rule`, ground contact.
+    fn explicit(&mut self, rule: &str, forces_ready: bool) -> Result<(), PhysicsError> {
+        if !forces_ready {
+            self.forces()?;
+            self.share_welded_forces()?;
+        }
         self.rules
             .apply_everywhere(&mut self.g, rule, &self.step_params)?;
         self.contact()
@@ -315,4 +316,15 @@ impl Simulation {
     pub fn set_jit(&mut self, on: bool) {
         self.rules.set_jit(on);
     }
+}
+
+/// What [`Simulation::explicit_checked`] did.
+enum Checked {
+    /// The step is taken (`Ok`), or failed before writing any position or velocity.
+    Done(Result<(), PhysicsError>),
+    /// Nothing done: the step goes the way that saves the state.
+    NotTested,
+    /// The forces are computed at the positions of the step's start, nothing else is
+    /// written: the step goes the way that saves the state, from these forces.
+    ForcesReady,
 }
