@@ -587,3 +587,28 @@ def test_energy_of_a_loaded_run_counts_the_load_as_a_potential(tmp_path: Path) -
     assert last["elastic"] == pytest.approx(work / 2, rel=1e-9)
     assert last["gravitational"] == pytest.approx(-work, rel=1e-9)
     assert last["total"] == pytest.approx(-work / 2, rel=1e-9)
+
+
+def test_a_load_failing_when_evaluated_names_its_part_and_its_points() -> None:
+    """A load whose expression or ``where`` checks but cannot be evaluated at some point (a
+    NaN pressure, ``clamp`` with crossed bounds) is a SceneError whose key names the part at
+    fault (``load[0].pressure``, ``load[0].where``) and whose message says what the points
+    are (quadrature points, face centroids), with no rule name."""
+    base = BAR.format(element="tet", n=2)
+    for load, key, words in (
+        (
+            'pressure = "1e3 * sqrt(0.1 - z)"\nwhere = "y < 1e-9"\n',
+            "load[0].pressure",
+            "quadrature points",
+        ),
+        (
+            'pressure = 1.0\nwhere = "clamp(x, 1.0, 0.0) > 0.0"\n',
+            "load[0].where",
+            "rest centroids",
+        ),
+    ):
+        with pytest.raises(topomech.SceneError) as e:
+            parse_scene(base + '[[load]]\nkind = "pressure"\n' + load).build()
+        assert e.value.key == key, str(e.value)
+        assert words in str(e.value), str(e.value)
+        assert "rule '" not in str(e.value)

@@ -73,9 +73,27 @@ class LoadError(ValueError):
     (the first :data:`LIST_LIMIT`, then how many more); ``key`` is the scene key at fault
     when a scene's condition raised it (else None)."""
 
-    def __init__(self, message: str, key: str | None = None) -> None:
+    def __init__(self, message: str, key: str | None = None, subkey: str | None = None) -> None:
         super().__init__(message)
         self.key = key
+        #: The part of a condition at fault (``where``, ``pressure``, ``traction[1]``) when
+        #: the error came from evaluating it: the scene key is then ``key.subkey``.
+        self.subkey = subkey
+
+
+def _at(
+    evaluate: Callable[[npt.NDArray[np.float64]], Any], subkey: str, points: str
+) -> Callable[[npt.NDArray[np.float64]], Any]:
+    """``evaluate`` whose evaluation errors name the condition's part (``subkey``) and what
+    its points are (``points``: "vertices' rest positions", ...)."""
+
+    def run(q: npt.NDArray[np.float64]) -> Any:
+        try:
+            return evaluate(q)
+        except LoadError as e:
+            raise LoadError(f"{e} (the points are {points})", subkey=subkey) from None
+
+    return run
 
 
 def _listed(items: Sequence[Any]) -> str:
@@ -342,7 +360,9 @@ def select_vertices(
     groups that exist)."""
     _one_selection(where, points, group)
     if where is not None:
-        mask = compile_predicate(where)(sim.rest_positions())
+        mask = _at(compile_predicate(where), "where", "the vertices' rest positions")(
+            sim.rest_positions()
+        )
         what = f"predicate {where!r}"
     elif points is not None:
         pts = [_index(p, i) for i, p in enumerate(np.asarray(points).ravel().tolist())]
@@ -387,7 +407,7 @@ def select_faces(
     rest = sim.rest_positions()
     if where is not None:
         centres = np.array([rest[list(f.rows)].mean(axis=0) for f in faces]).reshape(-1, 3)
-        keep = compile_predicate(where)(centres)
+        keep = _at(compile_predicate(where), "where", "the boundary faces' rest centroids")(centres)
         chosen = [f for f, k in zip(faces, keep) if k]
         what = f"predicate {where!r}"
     elif points is not None:
@@ -520,9 +540,10 @@ def _density(value: Any, what: str, size: int) -> Density:
             return v
 
         return checked
+    quadrature = "quadrature points on the boundary faces, at rest"
     if size == 1:
         if isinstance(value, str):
-            return compile_expression(value)
+            return _at(compile_expression(value), what, quadrature)
         try:
             c = float(value)
         except (TypeError, ValueError):
@@ -534,9 +555,9 @@ def _density(value: Any, what: str, size: int) -> Density:
     if items is None or len(items) != 3:
         raise LoadError(f"{what}: expected 3 numbers or expressions, got {value!r}")
     parts: list[Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]] = []
-    for v in items:
+    for i, v in enumerate(items):
         if isinstance(v, str):
-            parts.append(compile_expression(v))
+            parts.append(_at(compile_expression(v), f"{what}[{i}]", quadrature))
         else:
             try:
                 c = float(v)
@@ -667,7 +688,7 @@ def apply_conditions(
         try:
             mask = select_vertices(sim, groups=groups, **sel)
         except LoadError as e:
-            raise LoadError(str(e), key) from e
+            raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
         held_positions(sim, mask, disp)
     loads = bc.get("loads", [])
     if loads:
@@ -682,7 +703,7 @@ def apply_conditions(
                 else:
                     total += surface_load(sim, pressure=load["pressure"], groups=groups, **sel)
             except LoadError as e:
-                raise LoadError(str(e), key) from e
+                raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
         sim.set_external_forces(total)
     for key, init in bc.get("initial", []):
         try:
@@ -692,7 +713,7 @@ def apply_conditions(
                 else select_vertices(sim, groups=groups, **init["select"])
             )
         except LoadError as e:
-            raise LoadError(str(e), key) from e
+            raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
         free = mask & ~sim.fixed()
         if init.get("displacement") is not None:
             x = sim.positions()

@@ -73,7 +73,7 @@ impl Simulation {
                 // speed without overflow: `norm3`)
                 let step = norm3([u[0], u[1], u[2]]) * self.cfg.dt;
                 (step > self.size).then(|| {
-                    (Some(v), format!("runaway motion: the vertex moved {step:.3e} in one step, more than the object's size {:.3e}", self.size))
+                    (Some(v), format!("runaway motion: the vertex's new velocity would carry it {step:.3e} in one step, more than the object's size ({:.3e})", self.size))
                 })
             }),
         };

@@ -391,10 +391,34 @@ pub fn eval_expression(
         r.compute = vec![build::write("v", "value", v)];
         on_points(label, &r, "value : f64", points)
     };
+    // the checker's type error for a value that is no f64: "... but the value has type T"
+    let typed = |d: &[topomech_rules::Diagnostic]| {
+        d.iter().find_map(|d| {
+            (d.condition == "type")
+                .then(|| {
+                    d.message
+                        .rsplit_once("but the value has type ")
+                        .map(|x| x.1.to_string())
+                })
+                .flatten()
+        })
+    };
     let (g, id) = match attempt(value.clone()) {
-        Err(PointsError::Refused(first)) => {
-            attempt(build::call("to_f64", vec![value])).map_err(|_| PointsError::Refused(first))?
-        }
+        Err(PointsError::Refused(first)) => match typed(&first).as_deref() {
+            Some("i64") => attempt(build::call("to_f64", vec![value]))?,
+            Some(ty) => {
+                return Err(PointsError::Refused(vec![topomech_rules::Diagnostic {
+                    file: label.to_string(),
+                    pos,
+                    severity: topomech_rules::Severity::Error,
+                    condition: "type",
+                    message: format!(
+                        "the expression has type {ty}, expected a number (f64, or i64, converted)"
+                    ),
+                }]))
+            }
+            None => return Err(PointsError::Refused(first)),
+        },
         other => other?,
     };
     Ok((0..points.len())
@@ -488,6 +512,33 @@ fn bad_predicate(label: &str, text: &str, diags: &[topomech_rules::Diagnostic]) 
         "bad {kind} predicate {label} {text:?}: {}",
         msgs.join("; ")
     ))
+}
+
+/// A glue predicate's rule (`label`: `fixed[k]`, `prescribed[k]`, `regions[k]`) that
+/// failed when applied: an evaluation error (a built-in refusing its argument, an integer
+/// overflow) names the key, the predicate and the rest position of the vertex where it
+/// failed, not the built rule and its dart; other errors pass as they are.
+fn predicate_failed(g: &GMap, label: &str, text: &str, e: ApplyError) -> PhysicsError {
+    let kind = PREDICATE_KINDS
+        .iter()
+        .find(|(prefix, _)| label.starts_with(prefix))
+        .map_or("glue", |k| k.1);
+    match e {
+        ApplyError::Eval { dart, message, .. } => {
+            let at = g
+                .embedding_id("rest")
+                .filter(|_| g.is_alive(dart))
+                .map(|id| g.real(id, dart))
+                .map_or_else(String::new, |p| {
+                    let p: Vec<String> = p.iter().map(|x| format!("{x}")).collect();
+                    format!(" at the vertex at rest position ({})", p.join(", "))
+                });
+            PhysicsError::Config(format!(
+                "{kind} predicate {label} {text:?} cannot be evaluated{at}: {message}"
+            ))
+        }
+        e => e.into(),
+    }
 }
 
 /// The text of the predicate a glue label (`fixed[k]`, ...) names.
@@ -694,7 +745,11 @@ impl Simulation {
         .into();
         rules.apply_everywhere(&mut g, "set_material", &material)?;
         for k in 0..cfg.regions.len() {
-            let rep = rules.apply_everywhere(&mut g, &format!("region_{k}"), &none)?;
+            let rep = rules
+                .apply_everywhere(&mut g, &format!("region_{k}"), &none)
+                .map_err(|e| {
+                    predicate_failed(&g, &format!("regions[{k}]"), &cfg.regions[k].predicate, e)
+                })?;
             if rep.matches == 0 {
                 return Err(PhysicsError::Config(format!(
                     "material region '{}' contains no element",
@@ -711,7 +766,9 @@ impl Simulation {
         rules.apply_everywhere(&mut g, elem, &none)?;
         rules.apply_everywhere(&mut g, "lump_mass", &none)?;
         for k in 0..cfg.fixed.len() {
-            let rep = rules.apply_everywhere(&mut g, &format!("fix_{k}"), &none)?;
+            let rep = rules
+                .apply_everywhere(&mut g, &format!("fix_{k}"), &none)
+                .map_err(|e| predicate_failed(&g, &format!("fixed[{k}]"), &cfg.fixed[k], e))?;
             if rep.matches == 0 {
                 return Err(PhysicsError::Config(format!(
                     "fix predicate '{}' selects no vertex",
@@ -721,7 +778,9 @@ impl Simulation {
         }
         for (k, (p, d)) in cfg.prescribed.iter().enumerate() {
             let params: Params = [("d".to_string(), Val::V3(*d))].into();
-            let rep = rules.apply_everywhere(&mut g, &format!("prescribe_{k}"), &params)?;
+            let rep = rules
+                .apply_everywhere(&mut g, &format!("prescribe_{k}"), &params)
+                .map_err(|e| predicate_failed(&g, &format!("prescribed[{k}]"), p, e))?;
             if rep.matches == 0 {
                 return Err(PhysicsError::Config(format!(
                     "prescribed-displacement predicate '{p}' selects no vertex"

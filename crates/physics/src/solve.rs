@@ -113,6 +113,12 @@ pub const MIN_LOAD_INCREMENT: f64 = 1.0 / 1024.0;
 /// the cube root of the machine epsilon, where the truncation of central differences
 /// (O(h^2)) meets the rounding of the forces (O(eps / h)).
 const FD_STEP: f64 = 6e-6;
+
+/// How far the models' `jvp` rules may differ from finite differences of the forces
+/// (relative) before a static solve whose Newton iterations failed on the rules goes on with
+/// finite differences (see [`Simulation::solve_static`]): far above the differences' own
+/// error (about 1e-8), far below the warped stiffness's omission at large rotations.
+const JACOBIAN_MISMATCH: f64 = 1e-4;
 /// Newton iterations allowed for one load increment.
 const NEWTON_ITERATIONS: usize = 30;
 /// With the direct solver, a static Newton iteration reuses the last factorization (a chord
@@ -232,6 +238,48 @@ impl Simulation {
             .zip(&minus)
             .map(|(p, m)| std::array::from_fn(|a| (p[a] - m[a]) / (2.0 * h)))
             .collect())
+    }
+
+    /// Whether the models' `jvp` rules differ from finite differences of their forces
+    /// ([`Simulation::jvp_finite_differences`]) at the current state by more than
+    /// [`JACOBIAN_MISMATCH`] relative, along one fixed direction on the free vertices (a
+    /// smooth function of the row, nonzero in every component). Exact rules agree to about
+    /// 1e-8 (the differences' truncation and rounding); the co-rotational tetrahedra's warped
+    /// stiffness, bent and rotated, differs by 1e-3 and more. False where either product
+    /// fails (a non-finite value): nothing to conclude.
+    fn jacobian_rules_approximate(&mut self, fixed: &[bool]) -> bool {
+        let n = fixed.len();
+        let dx: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let t = i as f64;
+                if fixed[i] {
+                    [0.0; 3]
+                } else {
+                    [
+                        (0.7 * t).sin() + 1.5,
+                        (1.3 * t).cos() - 1.5,
+                        (2.1 * t).sin() + 1.5,
+                    ]
+                }
+            })
+            .collect();
+        let zero = vec![[0.0; 3]; n];
+        let (Ok(rules), Ok(fd)) = (
+            self.jvp(&dx, &zero),
+            self.jvp_finite_differences(&dx, &zero),
+        ) else {
+            return false;
+        };
+        let (mut diff, mut size) = (0.0, 0.0);
+        for ((a, b), held) in rules.iter().zip(&fd).zip(fixed) {
+            if !held {
+                for k in 0..3 {
+                    diff += (a[k] - b[k]) * (a[k] - b[k]);
+                    size += b[k] * b[k];
+                }
+            }
+        }
+        diff.sqrt() > JACOBIAN_MISMATCH * size.sqrt()
     }
 
     /// The total force on each vertex: the models' forces, gravity and viscous damping.
@@ -499,12 +547,14 @@ impl Simulation {
     /// (gravity and external loads, or the first residual when prescribed displacements drive
     /// it). When the whole load does not converge in 30 iterations, the load (gravity,
     /// `f_ext` and prescribed displacements) is applied in increments from the last converged
-    /// fraction, halving the increment on failure down to [`MIN_LOAD_INCREMENT`]. When even
-    /// that does not converge, the whole solve is taken again from the start with
-    /// Jacobian-vector products by central differences of the forces instead of the models'
-    /// `jvp` rules (two force evaluations a product): the derivative the force rules imply,
-    /// where the `jvp` rules approximate it (the co-rotational tetrahedra's warped
-    /// stiffness omits dR/dx, and Newton on it stalls at large rotations).
+    /// fraction, halving the increment on failure down to [`MIN_LOAD_INCREMENT`]. Newton
+    /// on the rules' products that fails the first time compares them with central
+    /// differences of the forces (two force evaluations a product); where they differ by
+    /// more than [`JACOBIAN_MISMATCH`] (the co-rotational tetrahedra's warped stiffness omits
+    /// dR/dx, and Newton on it stalls at large rotations), the solve goes on with the
+    /// differences from that increment. When the rules' products reach no balance down to
+    /// the smallest increment, the whole solve is taken again from the start with the
+    /// differences.
     /// [`Simulation::solver_report`] then says what happened (`jacobian`).
     /// Errors: [`PhysicsError::Diverged`] (the positions before the solve restored) when no
     /// increment converges, or when the balanced state is degenerate: an element shrunk to a
@@ -616,6 +666,11 @@ impl Simulation {
         let mut good = start.clone();
         // the closest the whole load came to balance (the first attempt is the whole load)
         let (mut best, mut worst) = (f64::INFINITY, 0);
+        // whether the rules' products were compared with finite differences yet
+        let mut probed = false;
+        // A body held nowhere can move rigidly: its stiffness is singular, and a load it
+        // does not balance by itself has no static equilibrium; no Jacobian helps there.
+        let held = fixed.iter().any(|f| *f);
         loop {
             let t = (s + ds).min(1.0);
             let trial = at(t, &good);
@@ -639,8 +694,18 @@ impl Simulation {
                 }
                 ds = (2.0 * ds).min(1.0 - s);
             } else {
+                // The first failure on the rules' products: where they differ from the
+                // forces' derivative here (an approximate tangent), go on with finite
+                // differences from this increment, instead of halving it on the rules.
+                if !self.fd_jacobian && !probed && held {
+                    probed = true;
+                    if self.jacobian_rules_approximate(&fixed) {
+                        self.fd_jacobian = true;
+                        continue;
+                    }
+                }
                 ds *= 0.5;
-                if ds < MIN_LOAD_INCREMENT && !self.fd_jacobian {
+                if ds < MIN_LOAD_INCREMENT && !self.fd_jacobian && held {
                     // The models' Jacobian rules may approximate the derivative of their
                     // forces (the co-rotational tetrahedra's omit dR/dx): Newton on them
                     // converges linearly at best, and not at all at large rotations. Start
@@ -661,6 +726,16 @@ impl Simulation {
                         (iterations, load_steps, linear_iterations),
                         true,
                     ));
+                    if !held {
+                        return Err(PhysicsError::Diverged {
+                            step: self.steps + 1,
+                            vertex: None,
+                            why: format!(
+                                "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} ({:.1}% of the load reached), and no vertex is held (fixed or prescribed): the body can move rigidly, so a load it does not balance by itself has no static equilibrium; hold some vertices, or use the integrator implicit_euler for its motion",
+                                100.0 * s
+                            ),
+                        });
+                    }
                     // the linear solve's failure says what to try; otherwise, the general advice
                     let cause = why.as_ref().map_or_else(
                         || "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),

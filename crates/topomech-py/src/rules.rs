@@ -634,7 +634,7 @@ fn points_error(e: topomech_physics::PointsError, points: &[[f64; 3]]) -> Error 
         topomech_physics::PointsError::At(k, why) => {
             let p = points.get(k).copied().unwrap_or([f64::NAN; 3]);
             value_error(format!(
-                "cannot be evaluated at point {k} ({}, {}, {}): {why}",
+                "cannot be evaluated at ({}, {}, {}) (row {k} of the points): {why}",
                 p[0], p[1], p[2]
             ))
         }

@@ -305,3 +305,46 @@ fn predicates_and_expressions_at_points_are_the_kernels() {
         Vec::<bool>::new()
     );
 }
+
+/// A predicate that parses and checks but fails when evaluated (a built-in refusing its
+/// argument: `clamp` with its bounds crossed) names its key, the predicate and the rest
+/// position of the vertex, not the rule built around it and a dart; and a value expression
+/// of another type than a number (a bool, a vector) is refused saying which type it has.
+#[test]
+fn a_predicate_failing_at_a_vertex_names_its_key_and_the_vertex() {
+    for (set, key) in [(0, "fixed[0]"), (1, "prescribed[0]")] {
+        let e = sim(&mesh(), |c| {
+            if set == 0 {
+                c.fixed = vec!["clamp(x, 1.0, 0.0) > 0.0".into()];
+            } else {
+                c.prescribed = vec![("clamp(x, 1.0, 0.0) > 0.0".into(), [0.0; 3])];
+            }
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains(key), "{e}");
+        assert!(
+            e.contains("cannot be evaluated at the vertex at rest position ("),
+            "{e}"
+        );
+        assert!(e.contains("clamp"), "{e}");
+        assert!(!e.contains("rule '"), "{e}");
+    }
+    use topomech_physics::{eval_expression, PointsError};
+    for (text, ty) in [
+        ("x < 0.5", "bool"),
+        ("vec3(x, y, z)", "vec3"),
+        ("true", "bool"),
+    ] {
+        match eval_expression("e", text, &[[0.0; 3]]) {
+            Err(PointsError::Refused(d)) => {
+                assert!(
+                    d[0].message
+                        .contains(&format!("has type {ty}, expected a number")),
+                    "{d:?}"
+                );
+            }
+            other => panic!("{text}: {other:?}"),
+        }
+    }
+}

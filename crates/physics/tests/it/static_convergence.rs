@@ -129,8 +129,8 @@ fn light_load_converges_in_one_increment() {
 }
 
 /// A body held nowhere under gravity has no equilibrium: every load increment fails, the
-/// step raises `Diverged` naming the relative residual, the tolerance and what to try, and
-/// the positions are those before the step.
+/// step raises `Diverged` naming the relative residual, the tolerance, that no vertex is
+/// held and what to try (no vertex named), and the positions are those before the step.
 #[test]
 fn unbalanced_load_fails_with_the_residual() {
     let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
@@ -152,11 +152,16 @@ fn unbalanced_load_fails_with_the_residual() {
     for part in [
         "relative residual",
         "tolerance 1e-10",
-        "smaller load",
+        "no vertex is held",
         "implicit_euler",
     ] {
         assert!(msg.contains(part), "{part:?} missing from {msg}");
     }
+    // no vertex is to blame: none is named
+    assert!(
+        matches!(e, PhysicsError::Diverged { vertex: None, .. }),
+        "{e:?}"
+    );
     assert!(why.contains("did not converge"), "{why}");
     assert_eq!(s.vertex_vec3("position").unwrap(), before);
     assert_eq!(s.steps(), 0);
