@@ -1205,9 +1205,6 @@ impl RuleSet {
         params: &Params,
         check: &(dyn Fn(EmbeddingId, &[f64]) -> bool + Sync),
     ) -> Result<Option<ApplyReport>, ApplyError> {
-        if self.bind_for(g, name, params, true)?.rule.changes_topology {
-            return Ok(None);
-        }
         self.apply_inner(g, name, params, &never, None, Some(check))
     }
 
@@ -1236,6 +1233,10 @@ impl RuleSet {
     ) -> Result<Option<ApplyReport>, ApplyError> {
         let poll = &mut Poll::new(interrupt);
         let b = self.bind_for(g, name, params, true)?;
+        if b.rule.changes_topology && check.is_some() {
+            // its values cannot be tested before it changes the map
+            return Ok(None);
+        }
         if b.rule.changes_topology {
             let ms = match self.guarded_matches(g, &b, poll, region)? {
                 Some(ms) => ms,

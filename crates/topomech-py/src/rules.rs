@@ -641,6 +641,25 @@ fn points_error(e: topomech_physics::PointsError, points: &[[f64; 3]]) -> Error 
     }
 }
 
+/// `eval` (a kernel function of the label, the text and the points) over `points` (float64
+/// `(N, 3)`), its values as a numpy array `(N,)`, its refusals as [`points_error`] says.
+fn at_points<'py, T: numpy::Element>(
+    py: Python<'py>,
+    text: &str,
+    points: &Bound<'py, PyAny>,
+    label: &str,
+    eval: impl Fn(&str, &str, &[[f64; 3]]) -> std::result::Result<Vec<T>, topomech_physics::PointsError>
+        + Send
+        + Sync,
+) -> PyResult<Bound<'py, numpy::PyArray1<T>>> {
+    let pts = guard(|| crate::convert::points_arg(points))?;
+    let values = guard(|| {
+        py.detach(|| eval(label, text, &pts))
+            .map_err(|e| points_error(e, &pts))
+    })?;
+    Ok(numpy::IntoPyArray::into_pyarray(values, py))
+}
+
 /// Evaluates a predicate on `x`, `y`, `z` at each row of `points` (float64 `(N, 3)`) with the
 /// kernel's own parser, checker and evaluator, as a scene's `where` is evaluated
 /// ([`topomech_physics::eval_predicate`]); returns a bool array `(N,)`. Raises `RuleError`
@@ -654,12 +673,7 @@ pub(crate) fn eval_predicate<'py>(
     points: &Bound<'py, PyAny>,
     label: &str,
 ) -> PyResult<Bound<'py, numpy::PyArray1<bool>>> {
-    let pts = guard(|| crate::convert::points_arg(points))?;
-    let mask = guard(|| {
-        py.detach(|| topomech_physics::eval_predicate(label, text, &pts))
-            .map_err(|e| points_error(e, &pts))
-    })?;
-    Ok(numpy::IntoPyArray::into_pyarray(mask, py))
+    at_points(py, text, points, label, topomech_physics::eval_predicate)
 }
 
 /// Evaluates a number-valued expression of the rule language on `x`, `y`, `z` at each row of
@@ -674,10 +688,5 @@ pub(crate) fn eval_expression<'py>(
     points: &Bound<'py, PyAny>,
     label: &str,
 ) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
-    let pts = guard(|| crate::convert::points_arg(points))?;
-    let values = guard(|| {
-        py.detach(|| topomech_physics::eval_expression(label, text, &pts))
-            .map_err(|e| points_error(e, &pts))
-    })?;
-    Ok(numpy::IntoPyArray::into_pyarray(values, py))
+    at_points(py, text, points, label, topomech_physics::eval_expression)
 }

@@ -11,7 +11,10 @@ use crate::common;
 use common::model;
 use topomech_gmap::generators::{cuboid, BoxElement};
 use topomech_gmap::mesh::{build, BuildOptions, Mesh};
-use topomech_physics::{Config, Cut, MaterialRegion, PhysicsError, Simulation, TimedEvent};
+use topomech_physics::{
+    eval_expression, eval_predicate, Config, Cut, MaterialRegion, PhysicsError, PointsError,
+    Simulation, TimedEvent,
+};
 
 fn sim(mesh: &Mesh, f: impl FnOnce(&mut Config)) -> Result<Simulation, PhysicsError> {
     let (g, _) = build(mesh, &BuildOptions::default()).unwrap();
@@ -274,7 +277,6 @@ fn a_predicate_cut_still_cuts() {
 /// operations on coordinates that are multiples of 0.5.
 #[test]
 fn predicates_and_expressions_at_points_are_the_kernels() {
-    use topomech_physics::{eval_expression, eval_predicate, PointsError};
     let pred = "(x - 0.75) % 0.5 < 0.0 || sqrt(y - 0.75) > 0.0";
     let s = sim(&mesh(), |c| c.fixed = vec![pred.into()]).unwrap();
     let rest = s.vertex_vec3("rest").unwrap();
@@ -330,7 +332,6 @@ fn a_predicate_failing_at_a_vertex_names_its_key_and_the_vertex() {
         assert!(e.contains("clamp"), "{e}");
         assert!(!e.contains("rule '"), "{e}");
     }
-    use topomech_physics::{eval_expression, PointsError};
     for (text, ty) in [
         ("x < 0.5", "bool"),
         ("vec3(x, y, z)", "vec3"),

@@ -64,6 +64,15 @@ fn setup(compiled: bool) -> (GMap, RuleSet) {
     setup_on([4, 2], [1.0, 0.5], compiled)
 }
 
+/// Runs `f` on a rayon pool of `threads` threads.
+fn on_threads(threads: usize, f: impl FnOnce() + Send) {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f);
+}
+
 /// A quad grid of `cells` over `size`, with the rules loaded and their embeddings created.
 fn setup_on(cells: [usize; 2], size: [f64; 2], compiled: bool) -> (GMap, RuleSet) {
     let (mut g, _) = build(
@@ -151,11 +160,7 @@ fn a_failure_in_any_chunk_writes_nothing() {
     let (mut g, mut rules) = setup_on([120, 60], [12.0, 6.0], true);
     rules.set_jit(true);
     for threads in [1, 3] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        on_threads(threads, || {
             for (ax, ay) in [(0.0, 0.0), (12.0, 6.0)] {
                 let before = snapshot(&g);
                 let runs = topomech_rules::jit::chunked_runs();
@@ -270,15 +275,11 @@ fn apply_at_refuses_a_non_finite_write() {
 /// written. Refused, or where the values cannot be tested first (plans off, a non-finite
 /// value), the map is unchanged bit for bit and `None` comes back; passed, the map is the one
 /// [`RuleSet::apply_everywhere`] gives, bit for bit. On 1 and 3 threads, over a grid large
-/// enough for chunks run in parallel, refusing one vertex's velocity only.
+/// enough for chunks run in parallel, refusing the velocities of the vertices at x = 0.
 #[test]
 fn a_checked_application_writes_only_values_that_pass() {
     for threads in [1, 3] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        on_threads(threads, || {
             for compiled in [true, false] {
                 let (mut g, rules) = setup_on([64, 64], [1.0, 1.0], compiled);
                 let (mut want, _) = setup_on([64, 64], [1.0, 1.0], compiled);
