@@ -612,3 +612,44 @@ def test_a_load_failing_when_evaluated_names_its_part_and_its_points() -> None:
         assert e.value.key == key, str(e.value)
         assert words in str(e.value), str(e.value)
         assert "rule '" not in str(e.value)
+
+
+def test_a_fix_or_region_failing_when_evaluated_is_keyed_by_its_scene_key() -> None:
+    """A ``[[fix]]`` (held, or with a displacement) or ``[[material.region]]`` predicate that
+    checks but fails when the kernel evaluates it (``clamp`` with crossed bounds) is a
+    SceneError keyed by the table's ``where`` (not the kernel's own list index), naming the
+    point it was evaluated at, with no rule name."""
+    base = BAR.format(element="tet", n=2)
+    bad = "clamp(x, 1.0, 0.0) > 0.0"
+    for extra, key, words in (
+        (f'[[fix]]\nwhere = "{bad}"\n', "fix[1].where", "vertex at rest position"),
+        (
+            f'[[fix]]\nwhere = "{bad}"\ndisplacement = [0.01, 0.0, 0.0]\n',
+            "fix[1].where",
+            "vertex at rest position",
+        ),
+        (
+            f'[[material.region]]\nwhere = "x > 0.3 && {bad}"\ndensity = 2000.0\n',
+            "material.region[0].where",
+            "element whose rest centroid is",
+        ),
+    ):
+        with pytest.raises(topomech.SceneError) as e:
+            parse_scene(base + extra).build()
+        assert e.value.key == key, str(e.value)
+        assert words in str(e.value), str(e.value)
+        assert "rule '" not in str(e.value)
+
+
+def test_a_load_function_returning_nan_names_the_point() -> None:
+    """A traction given as a Python function that returns NaN somewhere: the LoadError says
+    the values are not finite and where, and a wrong shape says the shape it must have."""
+    sim = parse_scene(BAR.format(element="tet", n=2)).build()
+    with pytest.raises(loads.LoadError) as e:
+        loads.surface_load(
+            sim, pressure=lambda p: np.where(p[:, 2] < 0.1, 1.0, np.nan), where="y < 1e-9"
+        )
+    assert "not finite" in str(e.value)
+    with pytest.raises(loads.LoadError) as e:
+        loads.surface_load(sim, pressure=lambda p: np.zeros((len(p), 3)), where="y < 1e-9")
+    assert "it must return (n,) values" in str(e.value)

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -81,13 +81,16 @@ class LoadError(ValueError):
         self.subkey = subkey
 
 
+_T = TypeVar("_T")
+
+
 def _at(
-    evaluate: Callable[[npt.NDArray[np.float64]], Any], subkey: str, points: str
-) -> Callable[[npt.NDArray[np.float64]], Any]:
+    evaluate: Callable[[npt.NDArray[np.float64]], _T], subkey: str, points: str
+) -> Callable[[npt.NDArray[np.float64]], _T]:
     """``evaluate`` whose evaluation errors name the condition's part (``subkey``) and what
     its points are (``points``: "vertices' rest positions", ...)."""
 
-    def run(q: npt.NDArray[np.float64]) -> Any:
+    def run(q: npt.NDArray[np.float64]) -> _T:
         try:
             return evaluate(q)
         except LoadError as e:
@@ -534,9 +537,19 @@ def _density(value: Any, what: str, size: int) -> Density:
 
         def checked(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
             v = np.asarray(fn(q), dtype=np.float64)
-            want = (len(q), 3) if size == 3 else (len(q),)
-            if v.shape != want or not np.all(np.isfinite(v)):
-                raise LoadError(f"{what}: the function must return finite values of shape {want}")
+            want = "(n, 3)" if size == 3 else "(n,)"
+            if v.shape != ((len(q), 3) if size == 3 else (len(q),)):
+                raise LoadError(
+                    f"{what}: the function returned shape {v.shape} for {len(q)} points "
+                    f"(n = {len(q)}); it must return {want} values, one per point"
+                )
+            if not np.all(np.isfinite(v)):
+                bad = int(np.argwhere(~np.isfinite(v.reshape(len(q), -1)))[0][0])
+                p = ", ".join(f"{c:g}" for c in q[bad])
+                raise LoadError(
+                    f"{what}: the function returned {v[bad]} at ({p}), not finite "
+                    "(the points are quadrature points on the boundary faces, at rest)"
+                )
             return v
 
         return checked

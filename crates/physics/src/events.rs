@@ -602,8 +602,8 @@ impl Simulation {
                 (format!("cut_where_{k}"), Params::new(), region)
             }
         };
-        let n = match region {
-            Some((lo, hi)) if (0..3).any(|i| lo[i] > hi[i]) => 0,
+        let applied = match region {
+            Some((lo, hi)) if (0..3).any(|i| lo[i] > hi[i]) => Ok(0),
             Some((lo, hi)) => {
                 let region = topomech_rules::Region {
                     embedding: "position".into(),
@@ -611,15 +611,25 @@ impl Simulation {
                     hi,
                 };
                 self.rules
-                    .apply_everywhere_within(&mut self.g, &name, &params, &region)?
-                    .matches
+                    .apply_everywhere_within(&mut self.g, &name, &params, &region)
+                    .map(|r| r.matches)
             }
-            None => {
-                self.rules
-                    .apply_everywhere(&mut self.g, &name, &params)?
-                    .matches
-            }
+            None => self
+                .rules
+                .apply_everywhere(&mut self.g, &name, &params)
+                .map(|r| r.matches),
         };
+        // a predicate that fails at a face names the predicate and the face, not the rule
+        let n = applied.map_err(|e| match &cut {
+            Cut::Where(text) => crate::schedule::predicate_failed(
+                &self.g,
+                "cut predicate",
+                text,
+                crate::schedule::PredicateAt::Side,
+                e,
+            ),
+            Cut::Plane { .. } => e.into(),
+        })?;
         self.record_change("cut", n)
     }
 

@@ -514,27 +514,99 @@ fn bad_predicate(label: &str, text: &str, diags: &[topomech_rules::Diagnostic]) 
     ))
 }
 
-/// A glue predicate's rule (`label`: `fixed[k]`, `prescribed[k]`, `regions[k]`) that
-/// failed when applied: an evaluation error (a built-in refusing its argument, an integer
-/// overflow) names the key, the predicate and the rest position of the vertex where it
-/// failed, not the built rule and its dart; other errors pass as they are.
-fn predicate_failed(g: &GMap, label: &str, text: &str, e: ApplyError) -> PhysicsError {
-    let kind = PREDICATE_KINDS
-        .iter()
-        .find(|(prefix, _)| label.starts_with(prefix))
-        .map_or("glue", |k| k.1);
+/// Where a glue predicate is evaluated: at a vertex's rest position, at an element's rest
+/// centroid, or at a face's (3D) or edge's (2D) current centroid.
+#[derive(Clone, Copy)]
+pub(crate) enum PredicateAt {
+    Vertex,
+    Element,
+    Side,
+}
+
+/// The mean of the distinct values of the vec3 embedding `name` over the orbit `orbit` of
+/// `d` (what `mean` of the rule language gives); `None` where the map lacks it.
+fn orbit_mean(g: &GMap, d: Dart, orbit: OrbitType, name: &str) -> Option<[f64; 3]> {
+    let id = g.embedding_id(name)?;
+    if !g.is_alive(d) {
+        return None;
+    }
+    let e = g.embedding(id);
+    let mut marks = topomech_gmap::Marks::with_capacity(g.capacity());
+    let mut slots: Vec<usize> = Vec::new();
+    let mut sum = [0.0; 3];
+    g.visit_orbit(d, orbit, &mut marks, |x| {
+        let s = e.slot(x);
+        if !slots.contains(&s) {
+            slots.push(s);
+            let p = g.real(id, x);
+            for k in 0..3 {
+                sum[k] += p[k];
+            }
+        }
+    });
+    (!slots.is_empty()).then(|| sum.map(|v| v / slots.len() as f64))
+}
+
+/// A glue predicate's rule that failed when applied: an evaluation error (a built-in
+/// refusing its argument, an integer overflow) becomes `<subject> '<text>' cannot be
+/// evaluated at <where>: <why>`, `subject` as the other messages about it quote it (`fix
+/// predicate`, `prescribed-displacement predicate`, `material region`, `cut predicate`: a
+/// scene finds its key by that quote), `where` the point it was evaluated at, not the rule
+/// built around it and a dart; other errors pass as they are.
+pub(crate) fn predicate_failed(
+    g: &GMap,
+    subject: &str,
+    text: &str,
+    at: PredicateAt,
+    e: ApplyError,
+) -> PhysicsError {
     match e {
         ApplyError::Eval { dart, message, .. } => {
-            let at = g
-                .embedding_id("rest")
-                .filter(|_| g.is_alive(dart))
-                .map(|id| g.real(id, dart))
-                .map_or_else(String::new, |p| {
-                    let p: Vec<String> = p.iter().map(|x| format!("{x}")).collect();
-                    format!(" at the vertex at rest position ({})", p.join(", "))
-                });
+            let dim = g.dimension();
+            let (what, point) = match at {
+                PredicateAt::Vertex => (
+                    "the vertex at rest position",
+                    g.embedding_id("rest")
+                        .filter(|_| g.is_alive(dart))
+                        .map(|id| std::array::from_fn(|k| g.real(id, dart)[k])),
+                ),
+                PredicateAt::Element => (
+                    "the element whose rest centroid is",
+                    orbit_mean(
+                        g,
+                        dart,
+                        if dim == 3 {
+                            OrbitType::volume()
+                        } else {
+                            OrbitType::face(2)
+                        },
+                        "rest",
+                    ),
+                ),
+                PredicateAt::Side => (
+                    if dim == 3 {
+                        "the face whose centroid is"
+                    } else {
+                        "the edge whose midpoint is"
+                    },
+                    orbit_mean(
+                        g,
+                        dart,
+                        if dim == 3 {
+                            OrbitType::face(3)
+                        } else {
+                            OrbitType::edge(2)
+                        },
+                        "position",
+                    ),
+                ),
+            };
+            let place = point.map_or_else(
+                || "one of its points".to_string(),
+                |p: [f64; 3]| format!("{what} ({}, {}, {})", p[0], p[1], p[2]),
+            );
             PhysicsError::Config(format!(
-                "{kind} predicate {label} {text:?} cannot be evaluated{at}: {message}"
+                "{subject} '{text}' cannot be evaluated at {place}: {message}"
             ))
         }
         e => e.into(),
@@ -748,7 +820,8 @@ impl Simulation {
             let rep = rules
                 .apply_everywhere(&mut g, &format!("region_{k}"), &none)
                 .map_err(|e| {
-                    predicate_failed(&g, &format!("regions[{k}]"), &cfg.regions[k].predicate, e)
+                    let text = &cfg.regions[k].predicate;
+                    predicate_failed(&g, "material region", text, PredicateAt::Element, e)
                 })?;
             if rep.matches == 0 {
                 return Err(PhysicsError::Config(format!(
@@ -768,7 +841,9 @@ impl Simulation {
         for k in 0..cfg.fixed.len() {
             let rep = rules
                 .apply_everywhere(&mut g, &format!("fix_{k}"), &none)
-                .map_err(|e| predicate_failed(&g, &format!("fixed[{k}]"), &cfg.fixed[k], e))?;
+                .map_err(|e| {
+                    predicate_failed(&g, "fix predicate", &cfg.fixed[k], PredicateAt::Vertex, e)
+                })?;
             if rep.matches == 0 {
                 return Err(PhysicsError::Config(format!(
                     "fix predicate '{}' selects no vertex",
@@ -780,7 +855,10 @@ impl Simulation {
             let params: Params = [("d".to_string(), Val::V3(*d))].into();
             let rep = rules
                 .apply_everywhere(&mut g, &format!("prescribe_{k}"), &params)
-                .map_err(|e| predicate_failed(&g, &format!("prescribed[{k}]"), p, e))?;
+                .map_err(|e| {
+                    let what = "prescribed-displacement predicate";
+                    predicate_failed(&g, what, p, PredicateAt::Vertex, e)
+                })?;
             if rep.matches == 0 {
                 return Err(PhysicsError::Config(format!(
                     "prescribed-displacement predicate '{p}' selects no vertex"

@@ -731,7 +731,7 @@ impl Simulation {
                             step: self.steps + 1,
                             vertex: None,
                             why: format!(
-                                "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} ({:.1}% of the load reached), and no vertex is held (fixed or prescribed): the body can move rigidly, so a load it does not balance by itself has no static equilibrium; hold some vertices, or use the integrator implicit_euler for its motion",
+                                "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} ({:.1}% of the load reached), and no vertex is held (fixed or prescribed): the body can move rigidly, so its stiffness is singular (a load it does not balance by itself has no static equilibrium at all, and a balanced one leaves the rigid motion undetermined); hold some vertices, or use the integrator implicit_euler for its motion",
                                 100.0 * s
                             ),
                         });

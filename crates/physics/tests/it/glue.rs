@@ -309,28 +309,62 @@ fn predicates_and_expressions_at_points_are_the_kernels() {
 }
 
 /// A predicate that parses and checks but fails when evaluated (a built-in refusing its
-/// argument: `clamp` with its bounds crossed) names its key, the predicate and the rest
-/// position of the vertex, not the rule built around it and a dart; and a value expression
-/// of another type than a number (a bool, a vector) is refused saying which type it has.
+/// argument: `clamp` with its bounds crossed) is quoted as the other messages about it quote
+/// it (a scene finds its key by that), with the point it was evaluated at: a vertex's rest
+/// position, or an element's rest centroid (a region's `&&` stops before the `clamp` at
+/// x <= 0.1, so the centroid named is one beyond, not a corner at x = 0); not the rule built
+/// around it and a dart. A value expression of another type than a number (a bool, a
+/// vector) is refused saying which type it has.
 #[test]
 fn a_predicate_failing_at_a_vertex_names_its_key_and_the_vertex() {
-    for (set, key) in [(0, "fixed[0]"), (1, "prescribed[0]")] {
-        let e = sim(&mesh(), |c| {
-            if set == 0 {
-                c.fixed = vec!["clamp(x, 1.0, 0.0) > 0.0".into()];
-            } else {
-                c.prescribed = vec![("clamp(x, 1.0, 0.0) > 0.0".into(), [0.0; 3])];
+    let bad = "clamp(x, 1.0, 0.0) > 0.0";
+    for (set, quoted, place) in [
+        (0, "fix predicate 'clamp", "the vertex at rest position ("),
+        (
+            1,
+            "prescribed-displacement predicate 'clamp",
+            "the vertex at rest position (",
+        ),
+        (
+            2,
+            "material region 'x > 0.1 && clamp",
+            "the element whose rest centroid is (",
+        ),
+    ] {
+        let e = sim(&mesh(), |c| match set {
+            0 => c.fixed = vec![bad.into()],
+            1 => c.prescribed = vec![(bad.into(), [0.0; 3])],
+            _ => {
+                c.regions = vec![MaterialRegion {
+                    predicate: format!("x > 0.1 && {bad}"),
+                    density: Some(2000.0),
+                    young: None,
+                    poisson: None,
+                }];
             }
         })
         .unwrap_err()
         .to_string();
-        assert!(e.contains(key), "{e}");
+        assert!(e.contains(quoted), "{e}");
         assert!(
-            e.contains("cannot be evaluated at the vertex at rest position ("),
+            e.contains(&format!("cannot be evaluated at {place}")),
             "{e}"
         );
         assert!(e.contains("clamp"), "{e}");
-        assert!(!e.contains("rule '"), "{e}");
+        assert!(!e.contains("rule '") && !e.contains("dart"), "{e}");
+        if set == 2 {
+            // the centroid named has x > 0.1
+            let x: f64 = e
+                .split(place)
+                .nth(1)
+                .unwrap()
+                .split(',')
+                .next()
+                .unwrap()
+                .parse()
+                .unwrap();
+            assert!(x > 0.1, "{e}");
+        }
     }
     for (text, ty) in [
         ("x < 0.5", "bool"),
