@@ -269,6 +269,31 @@ fn a_predicate_cut_still_cuts() {
     assert_eq!(after, before + 9, "{before} -> {after}");
 }
 
+/// A predicate cut whose predicate fails when evaluated at its time (`clamp` with crossed
+/// bounds) fails the step naming the predicate and the face it failed at (a current
+/// centroid), not the rule built around it and a dart.
+#[test]
+fn a_predicate_cut_failing_at_a_face_names_the_predicate_and_the_face() {
+    let mut s = sim(&mesh(), |c| {
+        c.gravity = [0.0, 0.0, 0.0];
+        c.events = vec![TimedEvent {
+            time: 0.0,
+            cut: Cut::Where("clamp(x, 1.0, 0.0) > 0.0".into()),
+        }];
+    })
+    .unwrap();
+    let e = s.step().unwrap_err().to_string();
+    assert!(
+        e.contains("cut predicate 'clamp(x, 1.0, 0.0) > 0.0'"),
+        "{e}"
+    );
+    assert!(
+        e.contains("cannot be evaluated at the face whose centroid is ("),
+        "{e}"
+    );
+    assert!(!e.contains("rule '") && !e.contains("dart"), "{e}");
+}
+
 /// `eval_predicate` selects at a list of points exactly the vertices a fixed-vertex
 /// predicate holds (the same kernel), and `eval_expression` gives the rule language's
 /// values: `%` keeps the dividend's sign (Rust's `%`: -0.75 % 0.5 is -0.25), an integer value
