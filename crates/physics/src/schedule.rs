@@ -3,7 +3,7 @@
 
 use topomech_gmap::{ColumnMut, Dart, GMap, OrbitType, Value};
 use topomech_rules::value::{BinOp, UnOp};
-use topomech_rules::{ast, build, parser, ApplyError, Params, Val};
+use topomech_rules::{ast, build, parser, ApplyError, Params, RuleSet, Val};
 
 use crate::*;
 
@@ -337,16 +337,19 @@ pub fn eval_predicate(
     text: &str,
     points: &[[f64; 3]],
 ) -> Result<Vec<bool>, PointsError> {
-    check_predicate(label, text).map_err(|d| PointsError::Refused(without_rule(d)))?;
-    let guard = predicate_guard(label, text, vec![], &build::read("v", "rest"))
-        .map_err(|d| PointsError::Refused(vec![d]))?;
-    let mut r = build::rule(
-        "fix",
-        build::graph(vec![build::node("v", &[1, 2, 3], true)]),
-    );
-    r.guard = Some(guard);
-    r.compute = vec![build::write("v", "fixed", build::boolean(true))];
-    let (g, fixed) = on_points(label, &r, "fixed : bool", points)?;
+    let rules = compiled(true, label, text, || {
+        check_predicate(label, text).map_err(|d| PointsError::Refused(without_rule(d)))?;
+        let guard = predicate_guard(label, text, vec![], &build::read("v", "rest"))
+            .map_err(|d| PointsError::Refused(vec![d]))?;
+        let mut r = build::rule(
+            "fix",
+            build::graph(vec![build::node("v", &[1, 2, 3], true)]),
+        );
+        r.guard = Some(guard);
+        r.compute = vec![build::write("v", "fixed", build::boolean(true))];
+        load_for_points(label, &r, "fixed : bool")
+    })?;
+    let (g, fixed) = on_points(&rules, "fix", "fixed", points)?;
     Ok((0..points.len())
         .map(|k| matches!(g.value(fixed, Dart(k as u32)), Ok(Value::Bool(true))))
         .collect())
@@ -363,6 +366,19 @@ pub fn eval_expression(
     text: &str,
     points: &[[f64; 3]],
 ) -> Result<Vec<f64>, PointsError> {
+    let rules = compiled(false, label, text, || expression_rules(label, text))?;
+    let (g, id) = on_points(&rules, "value", "value", points)?;
+    Ok((0..points.len())
+        .map(|k| match g.value(id, Dart(k as u32)) {
+            Ok(Value::Real(v)) => v.first().copied().unwrap_or(f64::NAN),
+            _ => f64::NAN,
+        })
+        .collect())
+}
+
+/// The rules [`eval_expression`] runs for `text`: its value written to `value`, converted
+/// to f64 when it is an integer; refused as that function says.
+fn expression_rules(label: &str, text: &str) -> Result<RuleSet, PointsError> {
     let refused = |d| PointsError::Refused(vec![d]);
     let e = build::parse_expression(label, text).map_err(refused)?;
     if let Some(at) = integer_division(&e) {
@@ -389,7 +405,7 @@ pub fn eval_expression(
             build::graph(vec![build::node("v", &[1, 2, 3], true)]),
         );
         r.compute = vec![build::write("v", "value", v)];
-        on_points(label, &r, "value : f64", points)
+        load_for_points(label, &r, "value : f64")
     };
     // the checker's type error for a value that is no f64: "... but the value has type T"
     let typed = |d: &[topomech_rules::Diagnostic]| {
@@ -403,47 +419,34 @@ pub fn eval_expression(
                 .flatten()
         })
     };
-    let (g, id) = match attempt(value.clone()) {
+    match attempt(value.clone()) {
         Err(PointsError::Refused(first)) => match typed(&first).as_deref() {
-            Some("i64") => attempt(build::call("to_f64", vec![value]))?,
-            Some(ty) => {
-                return Err(PointsError::Refused(vec![topomech_rules::Diagnostic {
-                    file: label.to_string(),
-                    pos,
-                    severity: topomech_rules::Severity::Error,
-                    condition: "type",
-                    message: format!(
-                        "the expression has type {ty}, expected a number (f64, or i64, converted)"
-                    ),
-                }]))
-            }
-            None => return Err(PointsError::Refused(first)),
+            Some("i64") => attempt(build::call("to_f64", vec![value])),
+            Some(ty) => Err(PointsError::Refused(vec![topomech_rules::Diagnostic {
+                file: label.to_string(),
+                pos,
+                severity: topomech_rules::Severity::Error,
+                condition: "type",
+                message: format!(
+                    "the expression has type {ty}, expected a number (f64, or i64, converted)"
+                ),
+            }])),
+            None => Err(PointsError::Refused(first)),
         },
-        other => other?,
-    };
-    Ok((0..points.len())
-        .map(|k| match g.value(id, Dart(k as u32)) {
-            Ok(Value::Real(v)) => v.first().copied().unwrap_or(f64::NAN),
-            _ => f64::NAN,
-        })
-        .collect())
+        other => other,
+    }
 }
 
-/// The map of one free dart per point (`rest` the point) after rule `r` (writing the
-/// embedding declared by `out`, e.g. `"fixed : bool"`, on `<1,2,3>`) was applied at every
-/// dart, and that embedding's id. Errors: the rule refused by the checker, or failing at
-/// a point.
-fn on_points(
-    label: &str,
-    r: &ast::RuleDecl,
-    out: &str,
-    points: &[[f64; 3]],
-) -> Result<(GMap, topomech_gmap::EmbeddingId), PointsError> {
+/// The checked rules of one predicate or expression (`r`, writing the embedding declared
+/// by `out`, e.g. `"fixed : bool"`, on `<1,2,3>`, reading `rest`), run by the evaluator
+/// (no native code: each run is on a new map, whose plan native code would compile again).
+/// Errors: the checker's diagnostics.
+fn load_for_points(label: &str, r: &ast::RuleDecl, out: &str) -> Result<RuleSet, PointsError> {
     let decls_text =
         format!("dimension 3\nembedding rest : vec3 on <1,2,3>\nembedding {out} on <1,2,3>\n");
     let decls = parser::parse(&decls_text).expect("static declarations parse");
     let f = build::file(&decls, vec![r.clone()]);
-    let (rules, _) = build::load(
+    let (mut rules, _) = build::load(
         &[("decls".into(), decls_text.clone())],
         vec![(label.to_string(), f)],
     )
@@ -455,6 +458,52 @@ fn on_points(
                 .collect(),
         ))
     })?;
+    rules.set_jit(false);
+    Ok(rules)
+}
+
+/// The checked rules of [`eval_predicate`] (`predicate`) or [`eval_expression`] for `text`
+/// (labelled `label`), from a cache of the last few, or `build` and kept: a load's density
+/// is evaluated face by face, a handful of points at a time, and checking the text each
+/// time cost more than evaluating it. Refusals are not kept (they end the caller's work).
+fn compiled(
+    predicate: bool,
+    label: &str,
+    text: &str,
+    build: impl FnOnce() -> Result<RuleSet, PointsError>,
+) -> Result<std::sync::Arc<RuleSet>, PointsError> {
+    type Cache = Vec<((bool, String, String), std::sync::Arc<RuleSet>)>;
+    static CACHE: std::sync::Mutex<Cache> = std::sync::Mutex::new(Vec::new());
+    const KEPT: usize = 16;
+    let key = (predicate, label.to_string(), text.to_string());
+    {
+        let cache = CACHE
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, r)) = cache.iter().find(|(k, _)| *k == key) {
+            return Ok(std::sync::Arc::clone(r));
+        }
+    }
+    let rules = std::sync::Arc::new(build()?);
+    let mut cache = CACHE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if cache.len() >= KEPT {
+        cache.remove(0);
+    }
+    cache.push((key, std::sync::Arc::clone(&rules)));
+    Ok(rules)
+}
+
+/// The map of one free dart per point (`rest` the point) after the rule `rule` of `rules`
+/// was applied at every dart, and the id of the embedding `out` it writes. Errors: the rule
+/// failing at a point (its index).
+fn on_points(
+    rules: &RuleSet,
+    rule: &str,
+    out: &str,
+    points: &[[f64; 3]],
+) -> Result<(GMap, topomech_gmap::EmbeddingId), PointsError> {
     let at = |e: String| PointsError::At(0, e);
     let mut g = GMap::new(3).map_err(|e| at(e.to_string()))?;
     if !points.is_empty() {
@@ -466,9 +515,11 @@ fn on_points(
         g.set_real(rest, Dart(k as u32), p)
             .map_err(|e| at(e.to_string()))?;
     }
-    let name = out.split(':').next().unwrap_or(out).trim();
     if !points.is_empty() {
-        if let Err(e) = rules.apply_everywhere(&mut g, &r.name, &Params::new()) {
+        let applied = rules.apply_everywhere(&mut g, rule, &Params::new());
+        // the plan is of this map only: not kept
+        rules.clear_plans();
+        if let Err(e) = applied {
             // the dart of the failure is the point's index
             return Err(match e {
                 ApplyError::Eval { dart, message, .. } => PointsError::At(dart.0 as usize, message),
@@ -480,7 +531,7 @@ fn on_points(
             });
         }
     }
-    let id = g.require(name).map_err(|e| at(e.to_string()))?;
+    let id = g.require(out).map_err(|e| at(e.to_string()))?;
     Ok((g, id))
 }
 
