@@ -79,13 +79,12 @@ impl Simulation {
         };
         if let Some((vertex, why)) = bad {
             // (without the copy, the step failed before writing any position or velocity)
-            for (id, copy) in [pos, vel].into_iter().zip(&self.saved) {
-                if !saved {
-                    break;
-                }
-                if let Ok(ColumnMut::Real(v)) = self.g.column_mut(id) {
-                    if v.len() == copy.len() {
-                        v.copy_from_slice(copy);
+            if saved {
+                for (id, copy) in [pos, vel].into_iter().zip(&self.saved) {
+                    if let Ok(ColumnMut::Real(v)) = self.g.column_mut(id) {
+                        if v.len() == copy.len() {
+                            v.copy_from_slice(copy);
+                        }
                     }
                 }
             }
@@ -137,7 +136,7 @@ impl Simulation {
     /// exit or square root, so that it vectorizes; it errs on the safe side: it passes only
     /// where the vertex test of `step` (`|v| dt <= size`, with the square root) passes for
     /// every vertex, and where it fails, that test looks for the vertex (and may find none
-    /// within the margin of 1e-9 relative below).
+    /// within the margin of 1e-9 relative of [`speed_limit`]).
     pub(crate) fn columns_sane(&self, pos: EmbeddingId, vel: EmbeddingId) -> bool {
         let (Some(p), Some(v)) = (
             self.g.embedding(pos).real_column(),
@@ -145,27 +144,18 @@ impl Simulation {
         ) else {
             return false;
         };
-        // |v|^2 <= (size / dt)^2 (1 - 1e-9) implies |v| dt <= size despite rounding; at most
-        // f64::MAX, so that passing it also says |v|^2 is finite
-        let limit = self.size / self.cfg.dt;
-        let limit = (limit * limit * (1.0 - 1e-9)).min(f64::MAX);
         let finite = !p.iter().fold(false, |bad, x| bad | !x.is_finite());
-        // `&`, not `&&`: no early exit, so that the loop vectorizes
-        #[allow(clippy::needless_bitwise_bool)]
-        let slow = v.chunks_exact(3).fold(true, |ok, u| {
-            ok & (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] <= limit)
-        });
-        finite && slow
+        finite && velocities_slow(v, speed_limit(self.size, self.cfg.dt))
     }
 
     /// The explicit step of [`Simulation::explicit`] with the integrator's values tested
     /// before they are written ([`RuleSet::apply_everywhere_checked`]): every velocity
     /// written must move its vertex at most the object's size in one step (the test of
-    /// [`Simulation::columns_sane`], with its margin), every value finite. `None` where the
-    /// step must go the other way, with nothing written to positions or velocities
-    /// ([`Checked`]): ground contact configured (a second rule writes them), plans off, or
-    /// the integrator's values refused or not testable (then the other way takes the step
-    /// again, from the forces computed here, and names the vertex).
+    /// [`Simulation::columns_sane`], with its margin), every value finite. [`Checked`] says
+    /// where the step must go the other way, with nothing written to positions or
+    /// velocities: ground contact configured (a second rule writes them), plans off, or the
+    /// integrator's values refused or not testable (then the other way takes the step again,
+    /// from the forces computed here, and names the vertex).
     ///
     /// [`RuleSet::apply_everywhere_checked`]: topomech_rules::RuleSet::apply_everywhere_checked
     fn explicit_checked(&mut self, rule: &str, vel: EmbeddingId) -> Checked {
@@ -175,16 +165,8 @@ impl Simulation {
         if let Err(e) = self.forces().and_then(|()| self.share_welded_forces()) {
             return Checked::Done(Err(e));
         }
-        let limit = self.size / self.cfg.dt;
-        let limit = (limit * limit * (1.0 - 1e-9)).min(f64::MAX);
-        let check = |id: EmbeddingId, v: &[f64]| {
-            // `&`, not `&&`: no early exit, so that the loop vectorizes
-            #[allow(clippy::needless_bitwise_bool)]
-            let slow = v.chunks_exact(3).fold(true, |ok, u| {
-                ok & (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] <= limit)
-            });
-            id != vel || (v.len() % 3 == 0 && slow)
-        };
+        let limit = speed_limit(self.size, self.cfg.dt);
+        let check = |id: EmbeddingId, v: &[f64]| id != vel || velocities_slow(v, limit);
         match self
             .rules
             .apply_everywhere_checked(&mut self.g, rule, &self.step_params, &check)
@@ -327,4 +309,23 @@ enum Checked {
     /// The forces are computed at the positions of the step's start, nothing else is
     /// written: the step goes the way that saves the state, from these forces.
     ForcesReady,
+}
+
+/// The bound on a velocity's squared length for a step of `dt` on an object of `size`:
+/// `(size / dt)^2 (1 - 1e-9)`, so that `|v|^2` below it implies `|v| dt <= size` despite
+/// rounding; at most `f64::MAX`, so that passing it also says `|v|^2` is finite.
+fn speed_limit(size: f64, dt: f64) -> f64 {
+    let limit = size / dt;
+    (limit * limit * (1.0 - 1e-9)).min(f64::MAX)
+}
+
+/// Whether every velocity of `v` (vec3s, flat) has a squared length at most `limit`
+/// ([`speed_limit`]): one pass without early exit or square root, so that it vectorizes.
+fn velocities_slow(v: &[f64], limit: f64) -> bool {
+    // `&`, not `&&`: no early exit, so that the loop vectorizes
+    #[allow(clippy::needless_bitwise_bool)]
+    let slow = v.chunks_exact(3).fold(true, |ok, u| {
+        ok & (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] <= limit)
+    });
+    v.len() % 3 == 0 && slow
 }

@@ -168,15 +168,8 @@ fn predicate_guard(
     point: &ast::Expr,
 ) -> Result<ast::Expr, topomech_rules::Diagnostic> {
     let pred = build::parse_expression(label, text)?;
-    if let Some(at) = integer_division(&pred) {
-        // the rule language divides integers as integers: `x < 4/3` would read `x < 1`
-        return Err(topomech_rules::Diagnostic {
-            file: label.to_string(),
-            pos: at,
-            severity: topomech_rules::Severity::Error,
-            condition: "integer-division",
-            message: "a quotient of two integers is an integer in the rule language (4/3 is 1, 1/3 is 0): write a real literal, e.g. 4.0/3, for the real quotient".into(),
-        });
+    if let Some(d) = integer_division_refused(label, &pred) {
+        return Err(d);
     }
     let pos = pred.pos;
     for c in ["x", "y", "z"] {
@@ -185,6 +178,19 @@ fn predicate_guard(
     let mut g = build::let_block(lets, pred);
     g.pos = pos;
     Ok(g)
+}
+
+/// The refusal of an expression of `label` that divides an integer by an integer
+/// ([`integer_division`]): the rule language divides integers as integers, so `x < 4/3`
+/// would read `x < 1`.
+fn integer_division_refused(label: &str, e: &ast::Expr) -> Option<topomech_rules::Diagnostic> {
+    integer_division(e).map(|at| topomech_rules::Diagnostic {
+        file: label.to_string(),
+        pos: at,
+        severity: topomech_rules::Severity::Error,
+        condition: "integer-division",
+        message: "a quotient of two integers is an integer in the rule language (4/3 is 1, 1/3 is 0): write a real literal, e.g. 4.0/3, for the real quotient".into(),
+    })
 }
 
 /// Where `e` divides an integer by an integer, if it does anywhere: in a predicate on
@@ -272,44 +278,40 @@ fn glue_guard(
 /// Errors: every error diagnostic, its `file` being `label` and its line and column the place
 /// in `text` (e.g. rule syntax after the expression: "expected the end of the expression").
 pub fn check_predicate(label: &str, text: &str) -> Result<(), Vec<topomech_rules::Diagnostic>> {
-    const DECLS: &str = "dimension 3
-embedding rest : vec3 on <1,2,3>
-embedding fixed : bool on <1,2,3>
-";
-    let decls = parser::parse(DECLS).expect("static declarations parse");
-    let guard =
-        predicate_guard(label, text, vec![], &build::read("v", "rest")).map_err(|d| vec![d])?;
+    let r = fix_rule(label, text).map_err(|d| vec![d])?;
+    load_points_rule(label, &r, "fixed : bool").map(|_| ())
+}
+
+/// The fixed-vertex rule around the predicate `text` (labelled `label`): on each vertex
+/// orbit whose rest position satisfies it, `fixed` set. Errors: the text refused as one
+/// expression ([`predicate_guard`]).
+fn fix_rule(label: &str, text: &str) -> Result<ast::RuleDecl, topomech_rules::Diagnostic> {
+    let guard = predicate_guard(label, text, vec![], &build::read("v", "rest"))?;
     let mut r = build::rule(
         "fix",
         build::graph(vec![build::node("v", &[1, 2, 3], true)]),
     );
     r.guard = Some(guard);
     r.compute = vec![build::write("v", "fixed", build::boolean(true))];
-    let f = build::file(&decls, vec![r]);
-    build::load(
-        &[("decls".into(), DECLS.into())],
-        vec![(label.to_string(), f)],
-    )
-    .map(|_| ())
-    .map_err(|diags| {
-        diags
-            .into_iter()
-            .filter(|d| d.severity == topomech_rules::Severity::Error)
-            .collect()
-    })
+    Ok(r)
 }
 
 /// `d` without the prefix naming the internal rule (`rule 'fix': `) that [`eval_predicate`]
 /// and [`eval_expression`] build around the text: the user wrote no rule.
 fn without_rule(mut d: Vec<topomech_rules::Diagnostic>) -> Vec<topomech_rules::Diagnostic> {
     for x in &mut d {
-        for r in ["rule 'fix': ", "rule 'value': "] {
-            if let Some(rest) = x.message.strip_prefix(r) {
-                x.message = rest.to_string();
-            }
-        }
+        x.message = without_rule_name(&x.message).to_string();
     }
     d
+}
+
+/// A checker message without its leading `rule '<name>': `, the built rule's name, which
+/// means nothing to the user.
+fn without_rule_name(message: &str) -> &str {
+    match message.strip_prefix("rule '") {
+        Some(rest) => rest.split_once("': ").map_or(message, |x| x.1),
+        None => message,
+    }
 }
 
 /// What [`eval_predicate`] and [`eval_expression`] may answer instead of values.
@@ -338,15 +340,7 @@ pub fn eval_predicate(
     points: &[[f64; 3]],
 ) -> Result<Vec<bool>, PointsError> {
     let rules = compiled(true, label, text, || {
-        check_predicate(label, text).map_err(|d| PointsError::Refused(without_rule(d)))?;
-        let guard = predicate_guard(label, text, vec![], &build::read("v", "rest"))
-            .map_err(|d| PointsError::Refused(vec![d]))?;
-        let mut r = build::rule(
-            "fix",
-            build::graph(vec![build::node("v", &[1, 2, 3], true)]),
-        );
-        r.guard = Some(guard);
-        r.compute = vec![build::write("v", "fixed", build::boolean(true))];
+        let r = fix_rule(label, text).map_err(|d| PointsError::Refused(vec![d]))?;
         load_for_points(label, &r, "fixed : bool")
     })?;
     let (g, fixed) = on_points(&rules, "fix", "fixed", points)?;
@@ -381,14 +375,8 @@ pub fn eval_expression(
 fn expression_rules(label: &str, text: &str) -> Result<RuleSet, PointsError> {
     let refused = |d| PointsError::Refused(vec![d]);
     let e = build::parse_expression(label, text).map_err(refused)?;
-    if let Some(at) = integer_division(&e) {
-        return Err(refused(topomech_rules::Diagnostic {
-            file: label.to_string(),
-            pos: at,
-            severity: topomech_rules::Severity::Error,
-            condition: "integer-division",
-            message: "a quotient of two integers is an integer in the rule language (4/3 is 1, 1/3 is 0): write a real literal, e.g. 4.0/3, for the real quotient".into(),
-        }));
+    if let Some(d) = integer_division_refused(label, &e) {
+        return Err(refused(d));
     }
     let pos = e.pos;
     let lets = ["x", "y", "z"]
@@ -442,24 +430,35 @@ fn expression_rules(label: &str, text: &str) -> Result<RuleSet, PointsError> {
 /// (no native code: each run is on a new map, whose plan native code would compile again).
 /// Errors: the checker's diagnostics.
 fn load_for_points(label: &str, r: &ast::RuleDecl, out: &str) -> Result<RuleSet, PointsError> {
+    let mut rules =
+        load_points_rule(label, r, out).map_err(|d| PointsError::Refused(without_rule(d)))?;
+    rules.set_jit(false);
+    Ok(rules)
+}
+
+/// Rule `r` (labelled `label`) loaded and checked with the declarations of the points' map:
+/// `rest` and `out` (e.g. `"fixed : bool"`), vertex embeddings of a 3D map. Errors: every
+/// error diagnostic, as the checker words it.
+fn load_points_rule(
+    label: &str,
+    r: &ast::RuleDecl,
+    out: &str,
+) -> Result<RuleSet, Vec<topomech_rules::Diagnostic>> {
     let decls_text =
         format!("dimension 3\nembedding rest : vec3 on <1,2,3>\nembedding {out} on <1,2,3>\n");
     let decls = parser::parse(&decls_text).expect("static declarations parse");
     let f = build::file(&decls, vec![r.clone()]);
-    let (mut rules, _) = build::load(
+    build::load(
         &[("decls".into(), decls_text.clone())],
         vec![(label.to_string(), f)],
     )
+    .map(|(rules, _)| rules)
     .map_err(|diags| {
-        PointsError::Refused(without_rule(
-            diags
-                .into_iter()
-                .filter(|d| d.severity == topomech_rules::Severity::Error)
-                .collect(),
-        ))
-    })?;
-    rules.set_jit(false);
-    Ok(rules)
+        diags
+            .into_iter()
+            .filter(|d| d.severity == topomech_rules::Severity::Error)
+            .collect()
+    })
 }
 
 /// The checked rules of [`eval_predicate`] (`predicate`) or [`eval_expression`] for `text`
@@ -552,10 +551,7 @@ fn bad_predicate(label: &str, text: &str, diags: &[topomech_rules::Diagnostic]) 
                 format!("column {}", d.pos.col.max(1))
             };
             // the built rule's name means nothing to the user: the key names it
-            let msg = match d.message.strip_prefix("rule '") {
-                Some(rest) => rest.split_once("': ").map_or(d.message.as_str(), |x| x.1),
-                None => d.message.as_str(),
-            };
+            let msg = without_rule_name(&d.message);
             format!("{at}: {msg}")
         })
         .collect();

@@ -724,7 +724,7 @@ impl Simulation {
                         false,
                         s,
                         (iterations, load_steps, linear_iterations),
-                        true,
+                        self.fd_jacobian,
                     ));
                     if !held {
                         return Err(PhysicsError::Diverged {

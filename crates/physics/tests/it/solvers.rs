@@ -399,6 +399,8 @@ fn static_solve_that_cannot_converge_is_diverged_with_the_residual() {
         assert_eq!(s.vertex_vec3("position").unwrap(), before);
         let r = s.solver_report().unwrap();
         assert!(!r.converged && r.residual > 0.0, "{r:?}");
+        // held nowhere: no finite-difference retry, and the report says so
+        assert_eq!(r.jacobian, "rules", "{r:?}");
     }
 }
 
