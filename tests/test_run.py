@@ -193,7 +193,7 @@ def test_divergence_exits_1_and_keeps_what_was_written(
     assert e["type"] == "divergence"
     assert summary["steps"] == e["step"] - 1 < 1000
     assert f"diverged at step {e['step']}" in err
-    assert f"at vertex {e['vertex']}" in err
+    assert f"at vertex row {e['vertex']} (input point {e['point']})" in err
     assert "summary.json has the error" in err
     final = meshio.read(out / "final.vtu")
     assert np.isfinite(final.points).all()

@@ -254,9 +254,32 @@ def test_divergence_keeps_the_last_good_state() -> None:
     assert 0 <= e.vertex < sim.n_vertices
     assert e.why
     assert f"diverged at step {e.step}" in str(e)
-    assert f"at vertex {e.vertex}" in str(e)
+    assert f"at vertex row {e.vertex} (input point {e.point})" in str(e)
+    assert e.point == sim.point_ids()[e.vertex]
     assert np.isfinite(sim.positions()).all()
     assert np.isfinite(sim.velocities()).all()
+
+
+def test_divergence_names_the_input_point_where_it_differs_from_the_row() -> None:
+    # the plate's points after two points no cell uses: every row is its input point plus
+    # two, and the message names both (the row indexes positions(); the point, the mesh)
+    points, kinds, offsets, connectivity = _core.grid(4, 2, 1.0, 0.5, "triangle")
+    points = np.asarray(points)
+    points = np.vstack([np.full((2, points.shape[1]), 9.0), points])
+    g = topomech.GMap.from_flat(points, kinds, offsets, np.asarray(connectivity) + 2)
+    assert g.report.unused_points == [0, 1]
+    sim = springs(
+        g,
+        models=[{"kind": "stretch_elementary", "stiffness": 1e6}],
+        integrator="explicit_euler",
+        dt=0.1,
+    )
+    assert (sim.point_ids() == np.arange(sim.n_vertices) + 2).all()
+    with pytest.raises(topomech.DivergenceError) as info:
+        sim.step(1000)
+    e = info.value
+    assert e.vertex is not None and e.point == e.vertex + 2
+    assert f"at vertex row {e.vertex} (input point {e.point})" in str(e)
 
 
 def test_repr() -> None:

@@ -87,6 +87,10 @@ class DivergenceError(SimulationError):
     #: The vertex (its row in the per-vertex arrays) where it was found, or None when the
     #: failure is a global linear solve's (no vertex means anything).
     vertex: int | None
+    #: That row's input point (its index in the imported mesh's points, which differs from
+    #: the row where the mesh has points no cell uses), or None where unknown (no vertex, a
+    #: map without input numbering, a vertex a rule created).
+    point: int | None
     #: What happened.
     why: str
 

@@ -695,6 +695,7 @@ def run_scene(
                 "message": str(e),
                 "step": int(e.step),
                 "vertex": None if e.vertex is None else int(e.vertex),
+                "point": None if e.point is None else int(e.point),
             }
         except SimulationError as e:
             missed = _missed_event(sc, sim, str(e))

@@ -28,8 +28,9 @@ the vertices it splits off are appended (:class:`TopologyResult`)::
     ((4, 3), 10)
 
 A simulation that cannot be built raises :class:`SimulationError`; a step that diverges
-raises :class:`DivergenceError` (with ``step`` and ``vertex``) and leaves the state as it was
-before that step.
+raises :class:`DivergenceError` (with ``step``, ``vertex``: the row in the per-vertex arrays,
+and ``point``: that row's input point, which differs from the row where the mesh has points no
+cell uses) and leaves the state as it was before that step.
 """
 
 from __future__ import annotations

@@ -88,22 +88,25 @@ impl Simulation {
                     }
                 }
             }
-            return Err(match result {
+            let e = match result {
                 // the step's own finding, or a rule's non-finite value (its why says which)
                 Ok(()) | Err(PhysicsError::Apply(ApplyError::NonFinite { .. })) => {
                     PhysicsError::Diverged {
                         step: self.steps + 1,
+                        point: None,
                         vertex,
                         why,
                     }
                 }
                 Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
                     step: self.steps + 1,
+                    point: None,
                     vertex,
                     why: e.to_string(),
                 },
                 Err(e) => e,
-            });
+            };
+            return Err(self.with_input_point(e));
         }
         self.steps += 1;
         self.time += self.cfg.dt;
@@ -112,6 +115,34 @@ impl Simulation {
         // hold what they need
         self.rules.clear_shared_matches();
         events
+    }
+
+    /// `e` with the input point of its vertex row filled in (a [`PhysicsError::Diverged`]
+    /// naming a row, on a map with `point_id`); other errors as they are.
+    pub(crate) fn with_input_point(&self, e: PhysicsError) -> PhysicsError {
+        match e {
+            PhysicsError::Diverged {
+                step,
+                vertex: Some(v),
+                point: None,
+                why,
+            } => {
+                let point = self.g.embedding_id("point_id").and_then(|id| {
+                    let d = *self.rows.darts.get(v)?;
+                    match self.g.value(id, d) {
+                        Ok(topomech_gmap::Value::Int(p)) if p >= 0 => Some(p),
+                        _ => None,
+                    }
+                });
+                PhysicsError::Diverged {
+                    step,
+                    vertex: Some(v),
+                    point,
+                    why,
+                }
+            }
+            e => e,
+        }
     }
 
     /// The row of the vertex whose orbit holds `dart`, by the slot of the vertex

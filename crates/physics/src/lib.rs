@@ -60,7 +60,7 @@ pub enum PhysicsError {
     #[error(transparent)]
     Apply(#[from] ApplyError),
     /// The simulation diverged; the last good state was kept.
-    #[error("diverged at step {step}: {why}{} (the last good state is kept)", .vertex.map_or(String::new(), |v| format!(" at vertex {v}")))]
+    #[error("diverged at step {step}: {why}{} (the last good state is kept)", vertex_at(*.vertex, *.point))]
     Diverged {
         /// The step that failed.
         step: u64,
@@ -68,9 +68,23 @@ pub enum PhysicsError {
         /// (the largest residual force, the first non-finite value); None for a failure of
         /// a global linear solve.
         vertex: Option<usize>,
+        /// That row's input point (its `point_id`: the index of the point in the mesh the
+        /// map was imported from, which differs from the row where the mesh has unused
+        /// points), where the map has one; filled in by [`Simulation::step`] and
+        /// [`Simulation::solve_static`] (None elsewhere, and for a vertex a rule created).
+        point: Option<i64>,
         /// What happened.
         why: String,
     },
+}
+
+/// How a divergence message names its vertex: its row, and its input point where known.
+fn vertex_at(vertex: Option<usize>, point: Option<i64>) -> String {
+    match (vertex, point) {
+        (None, _) => String::new(),
+        (Some(v), Some(p)) if p >= 0 => format!(" at vertex row {v} (input point {p})"),
+        (Some(v), _) => format!(" at vertex row {v}"),
+    }
 }
 
 /// A running simulation: a G-map with its embeddings, and the rules that move it.

@@ -662,6 +662,7 @@ impl Simulation {
         let step = self.steps + 1;
         let fail = |why: String| PhysicsError::Diverged {
             step,
+            point: None,
             vertex: None,
             why,
         };
@@ -928,6 +929,7 @@ impl Simulation {
         let step = self.steps + 1;
         let fail = |why: String| PhysicsError::Diverged {
             step,
+            point: None,
             vertex: None,
             why,
         };
@@ -1074,6 +1076,7 @@ impl Simulation {
         )
         .map_err(|e| PhysicsError::Diverged {
             step,
+            point: None,
             vertex: None,
             why: format!("the sparse factorization could not be set up: {e:?}"),
         })?;

@@ -489,6 +489,7 @@ impl Simulation {
             let vertex = (0..rhs.len()).max_by(|&a, &b| norm3(rhs[a]).total_cmp(&norm3(rhs[b])));
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
+                point: None,
                 vertex,
                 why: format!(
                     "the implicit step's linear solve has no finite result (relative residual {:e}): the forces or velocities are beyond what f64 arithmetic can solve for (the largest at this vertex); scale the problem (units) or the load down, or take a smaller dt",
@@ -565,7 +566,7 @@ impl Simulation {
     pub fn solve_static(&mut self) -> Result<(), PhysicsError> {
         let result = self.solve_static_with_fallback();
         self.fd_jacobian = false;
-        result
+        result.map_err(|e| self.with_input_point(e))
     }
 
     /// [`Simulation::solve_static`]: load-stepped Newton on the models' `jvp` rules, and,
@@ -616,6 +617,7 @@ impl Simulation {
         if !scale.is_finite() {
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
+                point: None,
                 vertex: None,
                 why: format!(
                     "the static solve's load overflows: its size is {scale:e} (gravity times mass plus the external loads), beyond what f64 arithmetic can balance; scale the problem (units) or the load down"
@@ -729,6 +731,7 @@ impl Simulation {
                     if !held {
                         return Err(PhysicsError::Diverged {
                             step: self.steps + 1,
+                            point: None,
                             vertex: None,
                             why: format!(
                                 "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} ({:.1}% of the load reached), and no vertex is held (fixed or prescribed): the body can move rigidly, so its stiffness is singular (a load it does not balance by itself has no static equilibrium at all, and a balanced one leaves the rigid motion undetermined); hold some vertices, or use the integrator implicit_euler for its motion",
@@ -743,6 +746,7 @@ impl Simulation {
                     );
                     return Err(PhysicsError::Diverged {
                         step: self.steps + 1,
+                        point: None,
                         vertex: Some(worst),
                         why: format!(
                             "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load, on the models' Jacobian rules and then on finite differences of their forces ({:.1}% of the load reached){cause}; the largest residual force is",
@@ -767,6 +771,7 @@ impl Simulation {
             ));
             return Err(PhysicsError::Diverged {
                 step: self.steps + 1,
+                point: None,
                 vertex: Some(d.row),
                 why: d.why,
             });
@@ -1115,6 +1120,7 @@ impl Simulation {
             if pap <= 0.0 || !pap.is_finite() || rz <= 0.0 || rz.is_nan() {
                 return Err(PhysicsError::Diverged {
                     step: self.steps + 1,
+                    point: None,
                     vertex: None,
                     why: format!(
                         "{} is not positive definite for conjugate gradients (p^T A p = {pap:.3e} at iteration {iterations}): {}",

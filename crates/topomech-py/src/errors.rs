@@ -301,11 +301,17 @@ fn mesh_error(msg: String, option: Option<(&'static str, &'static str)>) -> PyEr
     })
 }
 
-/// A `DivergenceError` with `step`, `vertex` (None for a failure of a global linear solve)
-/// and `why` for a divergence, else a
+/// A `DivergenceError` with `step`, `vertex` (None for a failure of a global linear solve),
+/// `point` (that row's input point, None where unknown) and `why` for a divergence, else a
 /// `SimulationError` with the kernel's message.
 fn physics_error(e: &PhysicsError) -> PyErr {
-    let PhysicsError::Diverged { step, vertex, why } = e else {
+    let PhysicsError::Diverged {
+        step,
+        vertex,
+        point,
+        why,
+    } = e
+    else {
         return SimulationError::new_err(e.to_string());
     };
     let err = DivergenceError::new_err(e.to_string());
@@ -314,6 +320,7 @@ fn physics_error(e: &PhysicsError) -> PyErr {
         match value
             .setattr("step", *step)
             .and_then(|()| value.setattr("vertex", *vertex))
+            .and_then(|()| value.setattr("point", *point))
             .and_then(|()| value.setattr("why", why.as_str()))
         {
             Ok(()) => err,
