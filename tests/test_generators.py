@@ -33,6 +33,15 @@ def test_defaults() -> None:
     assert _core.box(1, 1, 1)[1] == ["hexahedron"]
 
 
+def test_scene_spellings_of_elements() -> None:
+    # the names a scene's `element` takes (tet, hex, tri) give the kernel names' meshes
+    for short, long in [("tet", "tetra"), ("hex", "hexahedron")]:
+        a, b = _core.box(2, 1, 1, element=short), _core.box(2, 1, 1, element=long)
+        assert a[1] == b[1] and (a[3] == b[3]).all()
+    a, b = _core.grid(2, 1, element="tri"), _core.grid(2, 1, element="triangle")
+    assert a[1] == b[1] and (a[3] == b[3]).all()
+
+
 @pytest.mark.parametrize(
     ("call", "match"),
     [
@@ -43,7 +52,7 @@ def test_defaults() -> None:
         (lambda: _core.grid(1, 1, element="hexagon"), r"unknown grid element \"hexagon\""),
         (lambda: _core.box(1, 1, 0), r"nz must be at least 1"),
         (lambda: _core.box(1, 1, 1, sz=float("inf")), r"sz must be finite and positive"),
-        (lambda: _core.box(1, 1, 1, element="tet"), r"unknown box element \"tet\""),
+        (lambda: _core.box(1, 1, 1, element="tets"), r"unknown box element \"tets\""),
         (lambda: _core.box(10**6, 10**6, 10**6), r"too many"),
         (lambda: _core.grid(2**40, 2**40), r"too many"),
     ],

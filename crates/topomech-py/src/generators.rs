@@ -44,12 +44,12 @@ pub(crate) fn grid<'py>(
         let n = [count_arg(nx, "nx")?, count_arg(ny, "ny")?];
         let size = [size_arg(sx, "sx")?, size_arg(sy, "sy")?];
         let element = match element {
-            "triangle" => GridElement::Triangle,
+            "triangle" | "tri" => GridElement::Triangle,
             "quad" => GridElement::Quad,
             "mixed" => GridElement::Mixed,
             other => {
                 return Err(value_error(format!(
-                    "unknown grid element {other:?}: expected 'triangle', 'quad' or 'mixed'"
+                    "unknown grid element {other:?}: expected 'triangle' (or 'tri'), 'quad' or 'mixed'"
                 )))
             }
         };
@@ -64,7 +64,7 @@ pub(crate) fn grid<'py>(
 
 /// A box `sx x sy x sz` with `nx x ny x nz` cubes, corner at the origin, as a flat mesh.
 /// `element`: `tetra` (6 per cube), `hexahedron`, `wedge` (2 per cube), `pyramid` (6 per cube)
-/// or `mixed` (hexahedra, pyramids and tetrahedra).
+/// or `mixed` (hexahedra, pyramids and tetrahedra); `tet` and `hex` too, as scenes spell them.
 #[pyfunction(name = "box")]
 #[pyo3(signature = (nx, ny, nz, sx = 1.0, sy = 1.0, sz = 1.0, element = "hexahedron"))]
 #[allow(clippy::too_many_arguments)]
@@ -82,14 +82,14 @@ pub(crate) fn cuboid<'py>(
         let n = [count_arg(nx, "nx")?, count_arg(ny, "ny")?, count_arg(nz, "nz")?];
         let size = [size_arg(sx, "sx")?, size_arg(sy, "sy")?, size_arg(sz, "sz")?];
         let element = match element {
-            "tetra" => BoxElement::Tetra,
-            "hexahedron" => BoxElement::Hexa,
+            "tetra" | "tet" => BoxElement::Tetra,
+            "hexahedron" | "hex" => BoxElement::Hexa,
             "wedge" => BoxElement::Wedge,
             "pyramid" => BoxElement::Pyramid,
             "mixed" => BoxElement::Mixed,
             other => {
                 return Err(value_error(format!(
-                    "unknown box element {other:?}: expected 'tetra', 'hexahedron', 'wedge', 'pyramid' or 'mixed'"
+                    "unknown box element {other:?}: expected 'tetra' (or 'tet'), 'hexahedron' (or 'hex'), 'wedge', 'pyramid' or 'mixed'"
                 )))
             }
         };
