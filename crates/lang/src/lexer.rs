@@ -9,6 +9,9 @@ pub enum Tok {
     Ident(String),
     /// An integer literal.
     Int(i64),
+    /// The literal `9223372036854775808` (2^63, one past the largest i64): only valid after
+    /// a unary minus, where it is the smallest i64 (the parser checks).
+    IntMinMagnitude,
     /// A real literal (has a `.` or an exponent).
     Real(f64),
     /// A string literal `"..."` (no escapes; it ends at the next `"` on its line).
@@ -25,6 +28,7 @@ impl Tok {
         match self {
             Tok::Ident(s) => format!("'{s}'"),
             Tok::Int(i) => format!("'{i}'"),
+            Tok::IntMinMagnitude => "'9223372036854775808'".into(),
             Tok::Real(x) => format!("'{x}'"),
             Tok::Str(s) => format!("\"{s}\""),
             Tok::Punct(p) => format!("'{p}'"),
@@ -131,10 +135,20 @@ pub fn lex(src: &str) -> Result<Vec<(Tok, Pos)>, LexError> {
                 }
                 Tok::Real(x)
             } else {
-                Tok::Int(s.parse().map_err(|_| LexError {
-                    pos,
-                    message: format!("integer '{s}' is too large"),
-                })?)
+                match s.parse() {
+                    Ok(i) => Tok::Int(i),
+                    Err(_) if s.trim_start_matches('0') == "9223372036854775808" => {
+                        Tok::IntMinMagnitude
+                    }
+                    Err(_) => {
+                        return Err(LexError {
+                            pos,
+                            message: format!(
+                                "integer '{s}' is too large (integers are i64: from -9223372036854775808 to 9223372036854775807)"
+                            ),
+                        })
+                    }
+                }
             };
             out.push((tok, pos));
             continue;

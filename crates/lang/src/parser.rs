@@ -682,6 +682,11 @@ impl Parser {
     fn unary_inner(&mut self) -> R<(Expr, u32)> {
         let pos = self.pos();
         let op = if self.eat_punct("-") {
+            // `-9223372036854775808`: the smallest i64, whose magnitude no i64 holds
+            if *self.peek() == Tok::IntMinMagnitude {
+                self.bump();
+                return Self::node(pos, ExprKind::Int(i64::MIN), 1);
+            }
             UnOp::Neg
         } else if self.eat_punct("!") {
             UnOp::Not
@@ -697,6 +702,12 @@ impl Parser {
         let (tok, _) = self.bump();
         let (kind, h) = match tok {
             Tok::Int(i) => (ExprKind::Int(i), 1),
+            Tok::IntMinMagnitude => {
+                return Err(SyntaxError {
+                    pos,
+                    message: "integer '9223372036854775808' is too large (integers are i64: from -9223372036854775808 to 9223372036854775807; only the smallest may be written, with its minus sign)".into(),
+                })
+            }
             Tok::Real(x) => (ExprKind::Real(x), 1),
             Tok::Punct("(") => {
                 let e = self.expr_h()?;

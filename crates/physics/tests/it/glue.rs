@@ -333,6 +333,49 @@ fn predicates_and_expressions_at_points_are_the_kernels() {
     );
 }
 
+/// The smallest i64 can be written (`-9223372036854775808`: its magnitude is no i64, so the
+/// minus and the literal are read together), and is that integer: converted, it is -2^63
+/// exactly, and one less overflows (the evaluator's checked arithmetic). The literal alone,
+/// or after a binary minus, is refused at its position.
+#[test]
+fn the_smallest_integer_can_be_written() {
+    let pts = [[0.0, 0.0, 0.0]];
+    assert_eq!(
+        eval_expression("e", "to_f64(-9223372036854775808)", &pts).unwrap(),
+        vec![-(2f64.powi(63))]
+    );
+    assert_eq!(
+        eval_predicate("p", "-9223372036854775808 < -9223372036854775807", &pts).unwrap(),
+        vec![true]
+    );
+    match eval_expression("e", "to_f64(-9223372036854775808 - 1)", &pts) {
+        Err(PointsError::At(0, why)) => assert!(why.contains("overflow"), "{why}"),
+        other => panic!("{other:?}"),
+    }
+    for (text, col) in [
+        ("to_f64(9223372036854775808)", 8),
+        ("to_f64(1 - 9223372036854775808)", 12),
+    ] {
+        match eval_expression("e", text, &pts) {
+            Err(PointsError::Refused(d)) => {
+                assert!(
+                    d[0].message.contains("'9223372036854775808' is too large"),
+                    "{}",
+                    d[0].message
+                );
+                assert_eq!(d[0].pos.col, col, "{text}: {d:?}");
+            }
+            other => panic!("{text}: {other:?}"),
+        }
+    }
+    match eval_expression("e", "to_f64(-9223372036854775809)", &pts) {
+        Err(PointsError::Refused(d)) => {
+            assert!(d[0].message.contains("'9223372036854775809' is too large"), "{d:?}")
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
 /// A predicate that parses and checks but fails when evaluated (a built-in refusing its
 /// argument: `clamp` with its bounds crossed) is quoted as the other messages about it quote
 /// it (a scene finds its key by that), with the point it was evaluated at: a vertex's rest
