@@ -739,11 +739,20 @@ impl Simulation {
                             ),
                         });
                     }
-                    // the linear solve's failure says what to try; otherwise, the general advice
-                    let cause = why.as_ref().map_or_else(
-                        || "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
-                        |w| format!("; the last linear solve that failed: {w}"),
-                    );
+                    // the linear solve's failure says what to try; then a held set that
+                    // leaves rotations free; otherwise, the general advice
+                    let pivot = if self.cfg.ground.is_none() {
+                        held_on_a_line(&start, &fixed)
+                    } else {
+                        None
+                    };
+                    let cause = match (&why, pivot) {
+                        (Some(w), _) => format!("; the last linear solve that failed: {w}"),
+                        (None, Some(what)) => format!(
+                            "; the held vertices (fixed or prescribed) all lie {what}, so the body can still rotate rigidly about it: its stiffness is singular there, and a load with a moment about it has no nearby balance; hold vertices that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion"
+                        ),
+                        (None, None) => "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
+                    };
                     return Err(PhysicsError::Diverged {
                         step: self.steps + 1,
                         point: None,
@@ -1219,3 +1228,50 @@ impl Simulation {
 
 /// Per vertex: total force, mass, fixed.
 pub(crate) type VertexForces = (Vec<[f64; 3]>, Vec<f64>, Vec<bool>);
+
+/// Where the held vertices (`fixed`, positions `x`) all lie when they leave rigid rotations
+/// free: "at one point" (all within 1e-9 of the spread of the whole body of the first), or
+/// "on one line" (the largest distance of any from the line through the two farthest apart
+/// within 1e-9 of the body's size); `None` when they span a plane (or none is held). A body
+/// held so can turn about that point or line: its stiffness matrix is singular there.
+fn held_on_a_line(x: &[[f64; 3]], fixed: &[bool]) -> Option<&'static str> {
+    let held: Vec<[f64; 3]> = x
+        .iter()
+        .zip(fixed)
+        .filter_map(|(p, f)| f.then_some(*p))
+        .collect();
+    let first = *held.first()?;
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    // the body's size: the diagonal of its bounding box
+    let (lo, hi) = x.iter().fold(
+        ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+        |(lo, hi), p| {
+            (
+                std::array::from_fn(|a| lo[a].min(p[a])),
+                std::array::from_fn(|a| hi[a].max(p[a])),
+            )
+        },
+    );
+    let size = norm3(sub(hi, lo));
+    if !(size.is_finite() && size > 0.0) {
+        return None;
+    }
+    let eps = 1e-9 * size;
+    // the held vertex farthest from the first, then the farthest from the line through both
+    let far = held
+        .iter()
+        .copied()
+        .max_by(|a, b| norm3(sub(*a, first)).total_cmp(&norm3(sub(*b, first))))?;
+    let axis = sub(far, first);
+    let length = norm3(axis);
+    if length <= eps {
+        return Some("at one point");
+    }
+    let u = axis.map(|c| c / length);
+    let off_line = held.iter().map(|p| {
+        let d = sub(*p, first);
+        let along = d[0] * u[0] + d[1] * u[1] + d[2] * u[2];
+        norm3([d[0] - along * u[0], d[1] - along * u[1], d[2] - along * u[2]])
+    });
+    (off_line.fold(0.0, f64::max) <= eps).then_some("on one line")
+}

@@ -128,6 +128,37 @@ fn light_load_converges_in_one_increment() {
     assert!(r.relative_residual <= STALL_TOLERANCE);
 }
 
+/// A body held at one point, or along one line, with a load that has a moment about it,
+/// fails with advice saying so (where the held vertices lie, that the body can rotate about
+/// them, how to hold it) instead of the general advice; held along a line the load has no
+/// moment about (gravity along it), the same body balances. Gravity -z on a 1 x 0.2 x 0.2
+/// box: the weight acts at (0.5, 0.1, 0.1), off the x = y = z = 0 corner and the y = z = 0
+/// edge, and on the x = y = 0 edge's line.
+#[test]
+fn a_body_held_at_a_point_or_on_a_line_is_told_so() {
+    let mesh = cuboid([4, 1, 1], [1.0, 0.2, 0.2], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let with = |fixed: &str| Config {
+        gravity: [0.0, 0.0, -9.81],
+        ..static_config("corotational", fixed)
+    };
+    for (fixed, lies) in [
+        ("x < 1e-9 && y < 1e-9 && z < 1e-9", "all lie at one point"),
+        ("y < 1e-9 && z < 1e-9", "all lie on one line"),
+    ] {
+        let mut s = Simulation::new(g.clone(), with(fixed)).unwrap();
+        let e = s.step().unwrap_err();
+        let msg = e.to_string();
+        for part in [lies, "rotate rigidly", "not all on one line"] {
+            assert!(msg.contains(part), "{fixed}: {part:?} missing from {msg}");
+        }
+        assert!(!msg.contains("try a smaller load"), "{msg}");
+    }
+    let mut s = Simulation::new(g, with("x < 1e-9 && y < 1e-9")).unwrap();
+    s.step().unwrap();
+    assert!(s.solver_report().unwrap().converged);
+}
+
 /// A body held nowhere under gravity has no equilibrium: every load increment fails, the
 /// step raises `Diverged` naming the relative residual, the tolerance, that no vertex is
 /// held and what to try (no vertex named), and the positions are those before the step.
