@@ -1271,7 +1271,11 @@ fn held_on_a_line(x: &[[f64; 3]], fixed: &[bool]) -> Option<&'static str> {
     let off_line = held.iter().map(|p| {
         let d = sub(*p, first);
         let along = d[0] * u[0] + d[1] * u[1] + d[2] * u[2];
-        norm3([d[0] - along * u[0], d[1] - along * u[1], d[2] - along * u[2]])
+        norm3([
+            d[0] - along * u[0],
+            d[1] - along * u[1],
+            d[2] - along * u[2],
+        ])
     });
     (off_line.fold(0.0, f64::max) <= eps).then_some("on one line")
 }

@@ -47,11 +47,9 @@ pub(crate) fn grid<'py>(
             "triangle" | "tri" => GridElement::Triangle,
             "quad" => GridElement::Quad,
             "mixed" => GridElement::Mixed,
-            other => {
-                return Err(value_error(format!(
-                    "unknown grid element {other:?}: expected 'triangle' (or 'tri'), 'quad' or 'mixed'"
-                )))
-            }
+            other => return Err(value_error(format!(
+                "unknown grid element {other:?}: expected 'triangle' (or 'tri'), 'quad' or 'mixed'"
+            ))),
         };
         check_size(&n)?;
         Ok((n, size, element))

@@ -370,7 +370,10 @@ fn the_smallest_integer_can_be_written() {
     }
     match eval_expression("e", "to_f64(-9223372036854775809)", &pts) {
         Err(PointsError::Refused(d)) => {
-            assert!(d[0].message.contains("'9223372036854775809' is too large"), "{d:?}")
+            assert!(
+                d[0].message.contains("'9223372036854775809' is too large"),
+                "{d:?}"
+            )
         }
         other => panic!("{other:?}"),
     }
