@@ -47,9 +47,12 @@ pub(crate) fn grid<'py>(
             "triangle" | "tri" => GridElement::Triangle,
             "quad" => GridElement::Quad,
             "mixed" => GridElement::Mixed,
-            other => return Err(value_error(format!(
-                "unknown grid element {other:?}: expected 'triangle' (or 'tri'), 'quad' or 'mixed'"
-            ))),
+            other => {
+                let expected = "'triangle' (or 'tri'), 'quad' or 'mixed'";
+                return Err(value_error(format!(
+                    "unknown grid element {other:?}: expected {expected}"
+                )));
+            }
         };
         check_size(&n)?;
         Ok((n, size, element))
