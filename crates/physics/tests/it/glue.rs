@@ -373,7 +373,7 @@ fn the_smallest_integer_can_be_written() {
             assert!(
                 d[0].message.contains("'9223372036854775809' is too large"),
                 "{d:?}"
-            )
+            );
         }
         other => panic!("{other:?}"),
     }
