@@ -472,6 +472,8 @@ def test_initial_displacement_moves_positions_not_rest() -> None:
             "world.ground.up",
             "unknown key",
         ),
+        # the bar is solved statically, which would balance it as if the plane were not there
+        ("[world]\nground = -1.0\n", "world.ground", "does not model contact"),
     ],
 )
 def test_bad_keys_are_named(extra: str, key: str, words: str) -> None:

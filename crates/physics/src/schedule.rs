@@ -7,6 +7,9 @@ use topomech_rules::{ast, build, parser, ApplyError, Params, RuleSet, Val};
 
 use crate::*;
 
+/// Why a ground plane is refused with the static integrator.
+const STATIC_GROUND: &str = "ground: the static integrator does not model contact with the ground (it would balance the body as if the plane were not there); hold the vertices the ground supports (fixed or prescribed), or use implicit_euler, which puts vertices that go below the plane back onto it";
+
 /// The glue of a step that reads no user input: the ground rule, shipped as a rule file that
 /// serves both dimensions (`dimension 2 3`).
 fn glue_source() -> (String, String) {
@@ -839,6 +842,9 @@ impl Simulation {
         }
         if let Some(ground) = &cfg.ground {
             ground.plane(cfg.gravity)?;
+            if cfg.integrator == Integrator::Static {
+                return Err(PhysicsError::Config(STATIC_GROUND.into()));
+            }
         }
         if g.embedding_id("position").is_none() {
             return Err(PhysicsError::Config(

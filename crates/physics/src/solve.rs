@@ -741,11 +741,8 @@ impl Simulation {
                     }
                     // the linear solve's failure says what to try; then a held set that
                     // leaves rotations free; otherwise, the general advice
-                    let pivot = if self.cfg.ground.is_none() {
-                        held_on_a_line(&start, &fixed)
-                    } else {
-                        None
-                    };
+                    // (a static solve has no ground: `Simulation::new` refuses one)
+                    let pivot = held_on_a_line(&start, &fixed);
                     let cause = match (&why, pivot) {
                         (Some(w), _) => format!("; the last linear solve that failed: {w}"),
                         (None, Some(what)) => format!(

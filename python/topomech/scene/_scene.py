@@ -328,6 +328,13 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     steps = integ.integer("steps", 100, minimum=0)
     solver = _solver(integ, kind, fail)
     integ.done(SOLVER_KEYS)
+    if kind == "static" and ground is not None:
+        raise fail(
+            "world.ground",
+            "the static integrator does not model contact with the ground (it would balance"
+            " the body as if the plane were not there): hold the vertices the ground supports"
+            " ([[fix]]), or use integrator.kind = \"implicit_euler\"",
+        )
 
     out = top.table("output")
     every_v = out.integer("every", None, minimum=0)

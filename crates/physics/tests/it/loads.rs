@@ -149,6 +149,17 @@ fn ground_normal_defaults_to_the_opposite_of_gravity() {
     })
     .unwrap_err();
     assert!(e.to_string().contains("ground: the normal"), "{e}");
+    // a static solve would balance the box as if the plane were not there: refused
+    let e = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.integrator = Integrator::Static;
+        c.ground = Some(Ground::Height(-1.0));
+    })
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("ground: the static integrator does not model contact"),
+        "{e}"
+    );
     assert_eq!(Ground::up([0.0, 0.0, -9.81]), [0.0, 0.0, 1.0]);
     assert_eq!(Ground::up([0.0; 3]), [0.0, 1.0, 0.0]);
 }
