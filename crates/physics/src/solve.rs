@@ -739,23 +739,48 @@ impl Simulation {
                             ),
                         });
                     }
-                    // the linear solve's failure says what to try; then a held set that
-                    // leaves rotations free; otherwise, the general advice
-                    // (a static solve has no ground: `Simulation::new` refuses one)
-                    let pivot = held_on_a_line(&start, &fixed);
-                    let cause = match (&why, pivot) {
-                        (Some(w), _) => format!("; the last linear solve that failed: {w}"),
-                        (None, Some(what)) => format!(
-                            "; the held vertices (fixed or prescribed) all lie {what}, so the body can still rotate rigidly about it: its stiffness is singular there, and a load with a moment about it has no nearby balance; hold vertices that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion"
+                    // the linear solve's failure says what to try; then a part of the body
+                    // whose held vertices leave it a rigid motion; otherwise, the general
+                    // advice (a static solve has no ground: `Simulation::new` refuses one)
+                    let support = match &why {
+                        Some(_) => None,
+                        // (a map whose elements cannot be listed gets the general advice)
+                        None => self.support_problem(&start, &fixed).ok().flatten(),
+                    };
+                    let (cause, vertex, named) = match (&why, support) {
+                        (Some(w), _) => (
+                            format!("; the last linear solve that failed: {w}"),
+                            worst,
+                            "the largest residual force is",
                         ),
-                        (None, None) => "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
+                        (None, Some(p)) => {
+                            let (what, named) = match (p.parts, p.held) {
+                                (1, Held::Point | Held::Line) => (format!(
+                                    "; the held vertices (fixed or prescribed) all lie {}, so the body can still rotate rigidly about it: its stiffness is singular there, and a load with a moment about it has no nearby balance; hold vertices that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion",
+                                    p.held.where_()
+                                ), "the largest residual force is"),
+                                (n, Held::Nowhere) => (format!(
+                                    "; the body is {n} parts (elements connected to each other), and one has no held vertex (fixed or prescribed): it can move rigidly, so the stiffness is singular; hold some of its vertices, or use the integrator implicit_euler for its motion"
+                                ), "the part held nowhere is the one"),
+                                (n, _) => (format!(
+                                    "; the body is {n} parts (elements connected to each other), and the held vertices (fixed or prescribed) of one all lie {}, so that part can still rotate rigidly about it: the stiffness is singular there; hold vertices of it that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion",
+                                    p.held.where_()
+                                ), "that part is the one"),
+                            };
+                            (what, p.row, named)
+                        }
+                        (None, None) => (
+                            "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
+                            worst,
+                            "the largest residual force is",
+                        ),
                     };
                     return Err(PhysicsError::Diverged {
                         step: self.steps + 1,
                         point: None,
-                        vertex: Some(worst),
+                        vertex: Some(vertex),
                         why: format!(
-                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load, on the models' Jacobian rules and then on finite differences of their forces ({:.1}% of the load reached){cause}; the largest residual force is",
+                            "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load, on the models' Jacobian rules and then on finite differences of their forces ({:.1}% of the load reached){cause}; {named}",
                             (1.0 / MIN_LOAD_INCREMENT).round(),
                             100.0 * s
                         ),
@@ -1226,20 +1251,105 @@ impl Simulation {
 /// Per vertex: total force, mass, fixed.
 pub(crate) type VertexForces = (Vec<[f64; 3]>, Vec<f64>, Vec<bool>);
 
-/// Where the held vertices (`fixed`, positions `x`) all lie when they leave rigid rotations
-/// free: "at one point" (all within 1e-9 of the spread of the whole body of the first), or
-/// "on one line" (the largest distance of any from the line through the two farthest apart
-/// within 1e-9 of the body's size); `None` when they span a plane (or none is held). A body
-/// held so can turn about that point or line: its stiffness matrix is singular there.
-fn held_on_a_line(x: &[[f64; 3]], fixed: &[bool]) -> Option<&'static str> {
-    let held: Vec<[f64; 3]> = x
-        .iter()
-        .zip(fixed)
-        .filter_map(|(p, f)| f.then_some(*p))
-        .collect();
-    let first = *held.first()?;
-    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    // the body's size: the diagonal of its bounding box
+/// How the held vertices of a part of a body leave it a rigid motion (see
+/// [`Simulation::support_problem`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Held {
+    /// None is held: it can move rigidly.
+    Nowhere,
+    /// All lie at one point: it can rotate about it.
+    Point,
+    /// All lie on one line: it can rotate about it.
+    Line,
+}
+
+impl Held {
+    /// Where the held vertices lie, for a message.
+    fn where_(self) -> &'static str {
+        match self {
+            Held::Nowhere => "nowhere",
+            Held::Point => "at one point",
+            Held::Line => "on one line",
+        }
+    }
+}
+
+/// A part of a body whose held vertices leave it a rigid motion.
+struct Support {
+    /// The number of parts of the body.
+    parts: usize,
+    /// The smallest vertex row of the part.
+    row: usize,
+    /// How its held vertices lie.
+    held: Held,
+}
+
+impl Simulation {
+    /// The first part of the body (its elements connected through shared vertex rows, in
+    /// order of their smallest row) whose held vertices (`fixed`, at positions `x`, by row)
+    /// leave it a rigid motion: none held (looked for first, in every part), or all at one
+    /// point or on one line ([`held_on_a_line`]); `None` when every part is held on a plane
+    /// at least. Its stiffness is singular then: the static solve's failure says why.
+    fn support_problem(
+        &self,
+        x: &[[f64; 3]],
+        fixed: &[bool],
+    ) -> Result<Option<Support>, PhysicsError> {
+        let n = x.len();
+        // union-find over rows, joined through each element's rows
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn root(parent: &mut [usize], mut a: usize) -> usize {
+            while parent[a] != a {
+                parent[a] = parent[parent[a]];
+                a = parent[a];
+            }
+            a
+        }
+        for e in self.elements()? {
+            let mut rows = e.rows.iter().filter(|&&r| r < n);
+            let Some(&first) = rows.next() else { continue };
+            for &r in rows {
+                let (a, b) = (root(&mut parent, first), root(&mut parent, r));
+                if a != b {
+                    parent[a.max(b)] = a.min(b);
+                }
+            }
+        }
+        // each part's smallest row (its root: roots are the smaller of two joined) and its
+        // held positions
+        let mut parts: Vec<(usize, Vec<[f64; 3]>)> = Vec::new();
+        let mut part_of: Vec<usize> = vec![usize::MAX; n];
+        for r in 0..n {
+            let top = root(&mut parent, r);
+            if part_of[top] == usize::MAX {
+                part_of[top] = parts.len();
+                parts.push((top, Vec::new()));
+            }
+            if fixed[r] {
+                parts[part_of[top]].1.push(x[r]);
+            }
+        }
+        let size = body_size(x);
+        let count = parts.len();
+        if let Some((row, _)) = parts.iter().find(|(_, held)| held.is_empty()) {
+            return Ok(Some(Support {
+                parts: count,
+                row: *row,
+                held: Held::Nowhere,
+            }));
+        }
+        Ok(parts.iter().find_map(|(row, held)| {
+            held_on_a_line(held, size).map(|held| Support {
+                parts: count,
+                row: *row,
+                held,
+            })
+        }))
+    }
+}
+
+/// The diagonal of the bounding box of `x`.
+fn body_size(x: &[[f64; 3]]) -> f64 {
     let (lo, hi) = x.iter().fold(
         ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
         |(lo, hi), p| {
@@ -1249,10 +1359,20 @@ fn held_on_a_line(x: &[[f64; 3]], fixed: &[bool]) -> Option<&'static str> {
             )
         },
     );
-    let size = norm3(sub(hi, lo));
+    norm3(std::array::from_fn(|a| hi[a] - lo[a]))
+}
+
+/// Where the held positions `held` all lie when they leave rigid rotations free:
+/// [`Held::Point`] (all within 1e-9 of `size`, the body's, of the first), or [`Held::Line`]
+/// (the largest distance of any from the line through the first and the farthest from it
+/// within 1e-9 of `size`); `None` when they span a plane, or none is given. A body held so
+/// can turn about that point or line: its stiffness matrix is singular there.
+fn held_on_a_line(held: &[[f64; 3]], size: f64) -> Option<Held> {
+    let first = *held.first()?;
     if !(size.is_finite() && size > 0.0) {
         return None;
     }
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
     let eps = 1e-9 * size;
     // the held vertex farthest from the first, then the farthest from the line through both
     let far = held
@@ -1262,7 +1382,7 @@ fn held_on_a_line(x: &[[f64; 3]], fixed: &[bool]) -> Option<&'static str> {
     let axis = sub(far, first);
     let length = norm3(axis);
     if length <= eps {
-        return Some("at one point");
+        return Some(Held::Point);
     }
     let u = axis.map(|c| c / length);
     let off_line = held.iter().map(|p| {
@@ -1274,5 +1394,5 @@ fn held_on_a_line(x: &[[f64; 3]], fixed: &[bool]) -> Option<&'static str> {
             d[2] - along * u[2],
         ])
     });
-    (off_line.fold(0.0, f64::max) <= eps).then_some("on one line")
+    (off_line.fold(0.0, f64::max) <= eps).then_some(Held::Line)
 }

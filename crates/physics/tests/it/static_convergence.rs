@@ -159,6 +159,55 @@ fn a_body_held_at_a_point_or_on_a_line_is_told_so() {
     assert!(s.solver_report().unwrap().converged);
 }
 
+/// A body of two parts (two boxes apart), one held at x = 0 and the other nowhere, under
+/// gravity: the failure says the body is two parts and one has no held vertex, and names a
+/// vertex of that part (its smallest row, which is the second box's first point), not the
+/// largest residual in the held part; the second box held on one edge line is told that
+/// its held vertices lie on one line.
+#[test]
+fn a_part_held_nowhere_is_named() {
+    let one = cuboid([2, 1, 1], [1.0, 0.2, 0.2], BoxElement::Tetra);
+    let mut two = one.clone();
+    let shift = one.points.len();
+    two.points
+        .extend(one.points.iter().map(|p| [p[0] + 2.0, p[1], p[2]]));
+    two.kinds.extend(one.kinds.iter().copied());
+    two.cells.extend(
+        one.cells
+            .iter()
+            .map(|c| c.iter().map(|&v| v + shift).collect::<Vec<_>>()),
+    );
+    let (g, _) = build(&two, &BuildOptions::default()).unwrap();
+    let with = |fixed: &str| Config {
+        gravity: [0.0, 0.0, -9.81],
+        ..static_config("corotational", fixed)
+    };
+    let mut s = Simulation::new(g.clone(), with("x < 1e-9")).unwrap();
+    let e = s.step().unwrap_err();
+    let PhysicsError::Diverged { vertex, .. } = &e else {
+        panic!("{e:?}");
+    };
+    let msg = e.to_string();
+    assert!(
+        msg.contains("the body is 2 parts") && msg.contains("one has no held vertex"),
+        "{msg}"
+    );
+    let rows = s.point_ids().unwrap();
+    let v = vertex.expect("a vertex of the part");
+    assert_eq!(rows[v], shift as i64, "{msg}");
+    assert!(
+        msg.contains("the part held nowhere is the one at vertex row"),
+        "{msg}"
+    );
+    // the second box held on its edge y = z = 0 (and the first on its face x = 0)
+    let mut s = Simulation::new(g, with("x < 1e-9 || (x > 1.99 && y < 1e-9 && z < 1e-9)")).unwrap();
+    let msg = s.step().unwrap_err().to_string();
+    assert!(
+        msg.contains("the body is 2 parts") && msg.contains("of one all lie on one line"),
+        "{msg}"
+    );
+}
+
 /// A body held nowhere under gravity has no equilibrium: every load increment fails, the
 /// step raises `Diverged` naming the relative residual, the tolerance, that no vertex is
 /// held and what to try (no vertex named), and the positions are those before the step.
