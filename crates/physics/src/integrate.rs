@@ -64,18 +64,35 @@ impl Simulation {
             // every slot scanned in order first (dead slots included: they hold old, finite
             // values), the vertices searched one by one only to name the one that fails
             Ok(()) if self.columns_sane(pos, vel) => None,
-            Ok(()) => self.rows.darts.iter().enumerate().find_map(|(v, d)| {
-                let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
-                if p.iter().chain(u).any(|x| !x.is_finite()) {
-                    return Some((Some(v), "non-finite position or velocity".to_string()));
+            // the first vertex with a non-finite value, else the fastest one where it runs
+            // away (a vertex crossing more than the whole object in one step; the speed
+            // without overflow: `norm3`): an implicit step moves the vertices coupled to a
+            // runaway one too, and the first of those in row order is not the one to blame
+            Ok(()) => {
+                let mut fastest: Option<(usize, f64)> = None;
+                let non_finite = self.rows.darts.iter().enumerate().find_map(|(v, d)| {
+                    let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
+                    if p.iter().chain(u).any(|x| !x.is_finite()) {
+                        return Some(v);
+                    }
+                    let step = norm3([u[0], u[1], u[2]]) * self.cfg.dt;
+                    if fastest.is_none_or(|(_, s)| step > s) {
+                        fastest = Some((v, step));
+                    }
+                    None
+                });
+                match (non_finite, fastest) {
+                    (Some(v), _) => {
+                        Some((Some(v), "non-finite position or velocity".to_string()))
+                    }
+                    (None, Some((v, step))) if step > self.size => Some((
+                        Some(v),
+                        format!("runaway motion: the vertex's new velocity would carry it {step:.3e} in one step, more than the object's size ({:.3e})", self.size),
+                    )),
+                    // (the scan above is conservative: nothing runs away)
+                    (None, _) => None,
                 }
-                // runaway: a vertex crossing more than the whole object in one step (the
-                // speed without overflow: `norm3`)
-                let step = norm3([u[0], u[1], u[2]]) * self.cfg.dt;
-                (step > self.size).then(|| {
-                    (Some(v), format!("runaway motion: the vertex's new velocity would carry it {step:.3e} in one step, more than the object's size ({:.3e})", self.size))
-                })
-            }),
+            }
         };
         if let Some((vertex, why)) = bad {
             // (without the copy, the step failed before writing any position or velocity)

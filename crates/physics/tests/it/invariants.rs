@@ -447,3 +447,28 @@ fn a_runaway_refused_before_the_integrator_writes_leaves_the_state_as_it_was() {
         ));
     }
 }
+
+/// An implicit Euler step couples the vertices: one sent far too fast drags its neighbours
+/// across the object in the same step. The error names the fastest vertex, the one sent
+/// (the middle row of the box), not the first row that ran away in row order (a neighbour
+/// with a smaller row, which the scan in order named before).
+#[test]
+fn an_implicit_runaway_names_the_fastest_vertex() {
+    let mesh = cuboid([4, 2, 2], [2.0, 1.0, 1.0], BoxElement::Tetra);
+    let mut s = sim(&mesh, vec![model("corotational", &[])], |c| {
+        c.integrator = Integrator::ImplicitEuler;
+        c.dt = 1e-3;
+    })
+    .unwrap();
+    let mut vel = s.vertex_vec3("velocity").unwrap();
+    let n = vel.len();
+    vel[n - 1] = [1e9, 0.0, 0.0];
+    s.set_vertex_vec3("velocity", &vel).unwrap();
+    match s.step() {
+        Err(PhysicsError::Diverged { vertex, why, .. }) => {
+            assert_eq!(vertex, Some(n - 1), "{why}");
+            assert!(why.contains("runaway"), "{why}");
+        }
+        other => panic!("expected a runaway, got {other:?}"),
+    }
+}
