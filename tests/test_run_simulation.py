@@ -312,11 +312,25 @@ def test_a_real_quotient_in_a_predicate_is_accepted() -> None:
 
 
 @pytest.mark.parametrize(
-    "pred", ["x < 2*2/3", "x < (1+3)/3", "x < abs(-4)/3", "x < 4/--3", "let k = 3; x < 1/k"]
+    "pred",
+    [
+        "x < 2*2/3",
+        "x < (1+3)/3",
+        "x < abs(-4)/3",
+        "x < 4/--3",
+        "let k = 3; x < 1/k",
+        "x < clamp(4, 0, 9)/3",
+        "x < select(true, 4, 5)/3",
+        "x < { let a = 4; a }/3",
+        "x < to_i64(4.0)/3",
+        "x < sign(4)/sign(3)",
+        "x < (if y > 0.0 { 4 } else { 5 })/3",
+    ],
 )
 def test_an_integer_quotient_in_a_predicate_is_refused(pred: str) -> None:
-    """Integer operands built of literals, integer `let` names, arithmetic and abs/min/max:
-    their quotient is an integer (read as `x < 1` or `x < 0`), so the predicate is refused."""
+    """Operands the rule language types i64 (literals, integer `let` names, arithmetic and
+    built-ins by their signatures): their quotient is an integer (read as `x < 1` or
+    `x < 0`), so the predicate is refused."""
     with pytest.raises(topomech.SimulationError, match="a quotient of two integers"):
         springs(fixed=[pred])
 
@@ -326,3 +340,5 @@ def test_a_quotient_by_a_real_let_is_accepted() -> None:
     integer one of the same name."""
     springs(fixed=["let k = 3.0; x < 1/k + 0.5"])
     springs(fixed=["let k = 3; let k = 3.0; x < 1/k + 0.5"])
+    # reals by the built-ins' signatures: real quotients
+    springs(fixed=["x < to_f64(4)/3", "x < clamp(4.0, 0.0, 9.0)/3", "x < floor(4.5)/3"])

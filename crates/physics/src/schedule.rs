@@ -2,8 +2,8 @@
 //! fixed and prescribed vertices, material regions, ground), and the set-up they run.
 
 use topomech_gmap::{ColumnMut, Dart, GMap, OrbitType, Value};
-use topomech_rules::value::{BinOp, UnOp};
-use topomech_rules::{ast, build, parser, ApplyError, Params, RuleSet, Val};
+use topomech_rules::value::BinOp;
+use topomech_rules::{ast, build, parser, ApplyError, Params, RuleSet, Ty, Val};
 
 use crate::*;
 
@@ -197,68 +197,89 @@ fn integer_division_refused(label: &str, e: &ast::Expr) -> Option<topomech_rules
 }
 
 /// Where `e` divides an integer by an integer, if it does anywhere: in a predicate on
-/// coordinates that is a mistake (`x < 4/3` reads `x < 1`). An operand is known to be an
-/// integer when it is built of integer literals, `let` names bound to such, `+ - * / %`,
-/// negation and `abs`/`min`/`max` of them (what the rule language types `i64` without a
-/// read; the coordinates `x`, `y`, `z` are reals).
+/// coordinates that is a mistake (`x < 4/3` reads `x < 1`). An operand is an integer when
+/// the rule language types it `i64` ([`expr_type`]: literals, `let` names bound to such,
+/// arithmetic, and built-ins by their signatures, `clamp(4, 0, 9)`, `to_i64(x)`,
+/// `select(c, 4, 5)`; the coordinates `x`, `y`, `z` are reals).
 fn integer_division(e: &ast::Expr) -> Option<topomech_rules::ast::Pos> {
     integer_division_in(e, &mut Vec::new())
 }
 
-/// [`integer_division`] with the `let` names bound so far to integer expressions (`ints`).
-fn integer_division_in(e: &ast::Expr, ints: &mut Vec<String>) -> Option<topomech_rules::ast::Pos> {
+/// [`integer_division`] with the types of the `let` names bound so far (`env`, the last
+/// binding of a name winning).
+fn integer_division_in(
+    e: &ast::Expr,
+    env: &mut Vec<(String, Option<Ty>)>,
+) -> Option<topomech_rules::ast::Pos> {
     use ast::ExprKind as K;
     match &e.kind {
-        K::Binary(BinOp::Div, a, b) if is_integer(a, ints) && is_integer(b, ints) => Some(e.pos),
-        K::Binary(_, a, b) => integer_division_in(a, ints).or_else(|| integer_division_in(b, ints)),
-        K::Unary(_, a) => integer_division_in(a, ints),
-        K::If(c, a, b) => integer_division_in(c, ints)
-            .or_else(|| integer_division_in(a, ints))
-            .or_else(|| integer_division_in(b, ints)),
-        K::Call { args, .. } => args.iter().find_map(|a| integer_division_in(a, ints)),
+        K::Binary(BinOp::Div, a, b)
+            if expr_type(a, env) == Some(Ty::I64) && expr_type(b, env) == Some(Ty::I64) =>
+        {
+            Some(e.pos)
+        }
+        K::Binary(_, a, b) => integer_division_in(a, env).or_else(|| integer_division_in(b, env)),
+        K::Unary(_, a) => integer_division_in(a, env),
+        K::If(c, a, b) => integer_division_in(c, env)
+            .or_else(|| integer_division_in(a, env))
+            .or_else(|| integer_division_in(b, env)),
+        K::Call { args, .. } => args.iter().find_map(|a| integer_division_in(a, env)),
         K::Block(stmts, r) => {
-            let bound = ints.len();
+            let bound = env.len();
             let mut found = None;
             for st in stmts {
                 if let ast::Stmt::Let { name, value, .. } = st {
-                    found = found.or_else(|| integer_division_in(value, ints));
-                    if is_integer(value, ints) {
-                        ints.push(name.clone());
-                    } else {
-                        // a real binding shadows an integer one of the same name
-                        ints.retain(|n| n != name);
-                    }
+                    found = found.or_else(|| integer_division_in(value, env));
+                    let t = expr_type(value, env);
+                    env.push((name.clone(), t));
                 }
             }
-            let out = found.or_else(|| integer_division_in(r, ints));
-            ints.truncate(bound.min(ints.len()));
+            let out = found.or_else(|| integer_division_in(r, env));
+            env.truncate(bound);
             out
         }
         _ => None,
     }
 }
 
-/// Whether `e` is an integer by its form (see [`integer_division`]).
-fn is_integer(e: &ast::Expr, ints: &[String]) -> bool {
+/// The type the rule language gives `e` in a predicate on coordinates, where it can tell
+/// from the expression alone (`env`: the `let` names bound around it; `x`, `y`, `z` are
+/// reals; operators and built-ins by [`binop_type`](topomech_rules::value::binop_type),
+/// [`unop_type`](topomech_rules::value::unop_type) and
+/// [`call_type`](topomech_rules::builtins::call_type)); `None` where it cannot (a read, an
+/// aggregate, a type error, which the checker reports).
+fn expr_type(e: &ast::Expr, env: &[(String, Option<Ty>)]) -> Option<Ty> {
     use ast::ExprKind as K;
+    use topomech_rules::value::{binop_type, unop_type};
     match &e.kind {
-        K::Int(_) => true,
-        K::Name(n) => ints.contains(n),
-        K::Unary(UnOp::Neg, a) => is_integer(a, ints),
-        K::Binary(op, a, b) => {
-            matches!(
-                op,
-                BinOp::Add | BinOp::Sub | BinOp::Mul | BinOp::Div | BinOp::Rem
-            ) && is_integer(a, ints)
-                && is_integer(b, ints)
-        }
+        K::Int(_) => Some(Ty::I64),
+        K::Real(_) => Some(Ty::F64),
+        K::Bool(_) => Some(Ty::Bool),
+        K::Name(n) => match env.iter().rev().find(|(m, _)| m == n) {
+            Some((_, t)) => *t,
+            None => ["x", "y", "z"].contains(&n.as_str()).then_some(Ty::F64),
+        },
+        K::Unary(op, a) => unop_type(*op, expr_type(a, env)?).ok(),
+        K::Binary(op, a, b) => binop_type(*op, expr_type(a, env)?, expr_type(b, env)?).ok(),
         K::Call { name, args } => {
-            matches!(name.as_str(), "abs" | "min" | "max")
-                && !args.is_empty()
-                && args.iter().all(|a| is_integer(a, ints))
+            let types: Option<Vec<Ty>> = args.iter().map(|a| expr_type(a, env)).collect();
+            topomech_rules::builtins::call_type(name, &types?).ok()
         }
-        K::If(_, a, b) => is_integer(a, ints) && is_integer(b, ints),
-        _ => false,
+        K::If(_, a, b) => {
+            let (ta, tb) = (expr_type(a, env)?, expr_type(b, env)?);
+            (ta == tb).then_some(ta)
+        }
+        K::Block(stmts, r) => {
+            let mut env = env.to_vec();
+            for st in stmts {
+                if let ast::Stmt::Let { name, value, .. } = st {
+                    let t = expr_type(value, &env);
+                    env.push((name.clone(), t));
+                }
+            }
+            expr_type(r, &env)
+        }
+        _ => None,
     }
 }
 
