@@ -137,7 +137,12 @@ pub fn lex(src: &str) -> Result<Vec<(Tok, Pos)>, LexError> {
             } else {
                 match s.parse() {
                     Ok(i) => Tok::Int(i),
-                    Err(_) if s.trim_start_matches('0') == "9223372036854775808" => {
+                    // 2^63 after a minus: the smallest i64, if the minus is its sign (the
+                    // parser tells); anywhere else no i64 holds it
+                    Err(_)
+                        if s.trim_start_matches('0') == "9223372036854775808"
+                            && matches!(out.last(), Some((Tok::Punct("-"), _))) =>
+                    {
                         Tok::IntMinMagnitude
                     }
                     Err(_) => {

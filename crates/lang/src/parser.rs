@@ -67,6 +67,10 @@ struct Parser {
 
 type R<T> = Result<T, SyntaxError>;
 
+/// The refusal of the literal 9223372036854775808 (2^63) where it is not the magnitude of
+/// the smallest i64 after its minus sign.
+const INT_TOO_LARGE: &str = "integer '9223372036854775808' is too large (integers are i64: from -9223372036854775808 to 9223372036854775807; only the smallest may be written, with its minus sign)";
+
 impl Parser {
     fn peek(&self) -> &Tok {
         &self.toks[self.at].0
@@ -139,6 +143,7 @@ impl Parser {
                 let p = self.bump().1;
                 Ok((i, p))
             }
+            Tok::IntMinMagnitude => self.err(INT_TOO_LARGE),
             t => self.err(format!("expected {what}, found {}", t.describe())),
         }
     }
@@ -199,6 +204,9 @@ impl Parser {
         let x = match self.peek().clone() {
             #[allow(clippy::cast_precision_loss)]
             Tok::Int(i) => i as f64,
+            // -2^63, the smallest i64, exactly: negated below
+            Tok::IntMinMagnitude if neg => 2f64.powi(63),
+            Tok::IntMinMagnitude => return self.err(INT_TOO_LARGE),
             Tok::Real(x) => x,
             t => return self.err(format!("expected {what}, found {}", t.describe())),
         };
@@ -705,7 +713,7 @@ impl Parser {
             Tok::IntMinMagnitude => {
                 return Err(SyntaxError {
                     pos,
-                    message: "integer '9223372036854775808' is too large (integers are i64: from -9223372036854775808 to 9223372036854775807; only the smallest may be written, with its minus sign)".into(),
+                    message: INT_TOO_LARGE.into(),
                 })
             }
             Tok::Real(x) => (ExprKind::Real(x), 1),
@@ -860,6 +868,49 @@ mod tests {
 
     /// The example of the language's specification, as written there.
     const EXAMPLE: &str = include_str!("../../rules/tests/it/spec_example.tmr");
+
+    /// The smallest i64 is written with its minus sign wherever a number goes: in an
+    /// expression (the integer) and as a model default or argument (the real -2^63,
+    /// exactly). 2^63 anywhere else (unsigned, after a binary minus, as an orbit label, an
+    /// arc or a dimension) is refused saying it is too large and what the range is.
+    #[test]
+    fn the_smallest_integer_and_its_magnitude() {
+        let f = parse(
+            "model m(k: f64 = -9223372036854775808, d: vec3 = vec3(0, -9223372036854775808, 0)) { init r(-9223372036854775808) }",
+        )
+        .unwrap();
+        let m = &f.models[0];
+        let minus = -(2f64.powi(63));
+        assert_eq!(
+            m.params[0].default.as_ref().map(|a| a.kind.clone()),
+            Some(ModelArgKind::Number(minus))
+        );
+        assert_eq!(
+            m.params[1].default.as_ref().map(|a| a.kind.clone()),
+            Some(ModelArgKind::Vec3([0.0, minus, 0.0]))
+        );
+        assert_eq!(m.init[0].args[0].kind, ModelArgKind::Number(minus));
+        let r = parse("rule r { left { a : <> hook } compute { a.k = -9223372036854775808 } }")
+            .unwrap();
+        let body = format!("{:?}", r.rules[0].compute);
+        assert!(body.contains("Int(-9223372036854775808)"), "{body}");
+        for src in [
+            "model m(k: f64 = 9223372036854775808) { }",
+            "rule r { left { a : <9223372036854775808> hook } compute { } }",
+            "rule r { left { a : <> hook  b : <>  a -9223372036854775808- b } compute { } }",
+            "dimension 9223372036854775808",
+            "rule r { left { a : <> hook } compute { a.k = 1 - 9223372036854775808 } }",
+        ] {
+            let e = parse(src).unwrap_err();
+            assert!(
+                e.message.contains("'9223372036854775808' is too large")
+                    && e.message
+                        .contains("from -9223372036854775808 to 9223372036854775807"),
+                "{src}: {}",
+                e.message
+            );
+        }
+    }
 
     #[test]
     fn the_issue_example_parses() {
