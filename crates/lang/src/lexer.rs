@@ -53,6 +53,9 @@ const PUNCTS: [&str; 26] = [
 
 /// Splits `src` into tokens with their positions; `#` starts a comment to the end of the line.
 pub fn lex(src: &str) -> Result<Vec<(Tok, Pos)>, LexError> {
+    // a byte-order mark (what some editors write first in a UTF-8 file) is not text: the
+    // first character after it is at 1:1
+    let src = src.strip_prefix('\u{feff}').unwrap_or(src);
     let chars: Vec<char> = src.chars().collect();
     let mut out = Vec::new();
     let (mut i, mut line, mut col) = (0usize, 1u32, 1u32);
@@ -234,6 +237,17 @@ mod tests {
         assert_eq!(lex("1.7e308").unwrap()[0].0, Tok::Real(1.7e308));
         // underflow is no error: the nearest float is 0 or a subnormal
         assert_eq!(lex("1e-999").unwrap()[0].0, Tok::Real(0.0));
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_skipped() {
+        let t = lex("\u{feff}dimension 3").unwrap();
+        assert_eq!(
+            t[0],
+            (Tok::Ident("dimension".into()), Pos { line: 1, col: 1 })
+        );
+        // elsewhere it is a character the language does not have
+        assert!(lex("dimension \u{feff}3").is_err());
     }
 
     #[test]
