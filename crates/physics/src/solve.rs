@@ -1298,13 +1298,6 @@ impl Simulation {
         let n = x.len();
         // union-find over rows, joined through each element's rows
         let mut parent: Vec<usize> = (0..n).collect();
-        fn root(parent: &mut [usize], mut a: usize) -> usize {
-            while parent[a] != a {
-                parent[a] = parent[parent[a]];
-                a = parent[a];
-            }
-            a
-        }
         for e in self.elements()? {
             let mut rows = e.rows.iter().filter(|&&r| r < n);
             let Some(&first) = rows.next() else { continue };
@@ -1346,6 +1339,15 @@ impl Simulation {
             })
         }))
     }
+}
+
+/// The root of `a` in the union-find forest `parent` (paths halved on the way).
+fn root(parent: &mut [usize], mut a: usize) -> usize {
+    while parent[a] != a {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    a
 }
 
 /// The diagonal of the bounding box of `x`.
