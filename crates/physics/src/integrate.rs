@@ -144,13 +144,7 @@ impl Simulation {
                 point: None,
                 why,
             } => {
-                let point = self.g.embedding_id("point_id").and_then(|id| {
-                    let d = *self.rows.darts.get(v)?;
-                    match self.g.value(id, d) {
-                        Ok(topomech_gmap::Value::Int(p)) if p >= 0 => Some(p),
-                        _ => None,
-                    }
-                });
+                let point = self.input_point(v);
                 PhysicsError::Diverged {
                     step,
                     vertex: Some(v),

@@ -164,6 +164,15 @@ impl System {
         }
     }
 
+    /// What to try after the direct solver failed (it was the one tried: it is not
+    /// suggested again).
+    fn direct_hint(self) -> &'static str {
+        match self {
+            System::Stiffness => "the stiffness is singular at this state: buckling, or a model with no stiffness in some direction (springs without shear springs, a free vertex or a rigid-body motion no fixed vertex holds); load stepping is automatic, so try more fixed vertices, a smaller load, a stiffer shear model, or the integrator implicit_euler",
+            System::Implicit => "the stiffness is indefinite at this state (buckling, inverted elements) beyond what the mass holds at this time step; try a smaller dt or a stiffer shear model",
+        }
+    }
+
     fn hint(self) -> &'static str {
         match self {
             System::Stiffness => "the stiffness is not positive definite at this state: buckling, or a model with no stiffness in some direction (springs without shear springs, a free vertex or a rigid-body motion no fixed vertex holds); load stepping is automatic, so try more fixed vertices, a smaller load, a stiffer shear model, the linear solver direct (its LDL^T factorization handles an indefinite but nonsingular stiffness), or the integrator implicit_euler",
@@ -435,7 +444,7 @@ impl Simulation {
                 Some((&m, 1.0 + h * c)),
                 &rhs,
                 &fixed,
-                (System::Implicit.what(), System::Implicit.hint()),
+                (System::Implicit.what(), System::Implicit.direct_hint()),
             )?;
             let mut ax = apply(self, &x)?;
             project(&mut ax, &fixed);
@@ -668,6 +677,9 @@ impl Simulation {
         let mut good = start.clone();
         // the closest the whole load came to balance (the first attempt is the whole load)
         let (mut best, mut worst) = (f64::INFINITY, 0);
+        // the vertex of the largest residual force of the last attempt with a finite one
+        // (named where no attempt at the whole load had one)
+        let mut last_worst: Option<usize> = None;
         // whether the rules' products were compared with finite differences yet
         let mut probed = false;
         // A body held nowhere can move rigidly: its stiffness is singular, and a load it
@@ -686,6 +698,9 @@ impl Simulation {
             if t >= 1.0 && out.residual < best {
                 best = out.residual;
                 worst = out.worst;
+            }
+            if out.residual.is_finite() {
+                last_worst = Some(out.worst);
             }
             if out.converged {
                 load_steps += 1;
@@ -742,33 +757,52 @@ impl Simulation {
                     // the linear solve's failure says what to try; then a part of the body
                     // whose held vertices leave it a rigid motion; otherwise, the general
                     // advice (a static solve has no ground: `Simulation::new` refuses one)
-                    let support = match &why {
-                        Some(_) => None,
-                        // (a map whose elements cannot be listed gets the general advice)
-                        None => self.support_problem(&start, &fixed).ok().flatten(),
+                    // (a part that leaves a rigid motion explains a linear solve's failure
+                    // too: a singular matrix)
+                    let worst = if best.is_finite() {
+                        worst
+                    } else {
+                        last_worst.unwrap_or(worst)
                     };
+                    // (a map whose elements cannot be listed gets the other advice)
+                    let support = self.support_problem(&start, &fixed, &r0).ok().flatten();
                     let (cause, vertex, named) = match (&why, support) {
-                        (Some(w), _) => (
+                        (_, Some(p)) => {
+                            let (what, named) = match (p.parts, &p.loose[..]) {
+                                (1, [(_, held)]) => (format!(
+                                    "; the held vertices (fixed or prescribed) all lie {}, so the body can still rotate rigidly about it: its stiffness is singular there, and a load with a moment about it has no nearby balance; hold vertices that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion",
+                                    held.where_()
+                                ), "the largest residual force is"),
+                                (n, loose) => {
+                                    let each: Vec<String> = loose
+                                        .iter()
+                                        .take(4)
+                                        .map(|&(row, held)| {
+                                            let point = self
+                                                .input_point(row)
+                                                .map_or(String::new(), |q| format!(" (input point {q})"));
+                                            format!("the one at vertex row {row}{point}, held {}", held.where_())
+                                        })
+                                        .collect();
+                                    let more = if loose.len() > 4 {
+                                        format!(" and {} more", loose.len() - 4)
+                                    } else {
+                                        String::new()
+                                    };
+                                    let k = loose.len();
+                                    (format!(
+                                        "; the body is {n} parts (elements connected to each other), and {k} of them can still move rigidly, their stiffness singular (held nowhere, or on vertices that all lie at one point or on one line that the load turns them about): {}{more}; hold vertices of each that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for their motion",
+                                        each.join("; ")
+                                    ), if k == 1 { "it is the one" } else { "the first is the one" })
+                                }
+                            };
+                            (what, p.loose[0].0, named)
+                        }
+                        (Some(w), None) => (
                             format!("; the last linear solve that failed: {w}"),
                             worst,
                             "the largest residual force is",
                         ),
-                        (None, Some(p)) => {
-                            let (what, named) = match (p.parts, p.held) {
-                                (1, Held::Point | Held::Line) => (format!(
-                                    "; the held vertices (fixed or prescribed) all lie {}, so the body can still rotate rigidly about it: its stiffness is singular there, and a load with a moment about it has no nearby balance; hold vertices that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion",
-                                    p.held.where_()
-                                ), "the largest residual force is"),
-                                (n, Held::Nowhere) => (format!(
-                                    "; the body is {n} parts (elements connected to each other), and one has no held vertex (fixed or prescribed): it can move rigidly, so the stiffness is singular; hold some of its vertices, or use the integrator implicit_euler for its motion"
-                                ), "the part held nowhere is the one"),
-                                (n, _) => (format!(
-                                    "; the body is {n} parts (elements connected to each other), and the held vertices (fixed or prescribed) of one all lie {}, so that part can still rotate rigidly about it: the stiffness is singular there; hold vertices of it that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion",
-                                    p.held.where_()
-                                ), "that part is the one"),
-                            };
-                            (what, p.row, named)
-                        }
                         (None, None) => (
                             "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
                             worst,
@@ -1214,7 +1248,7 @@ impl Simulation {
                 None,
                 r,
                 fixed,
-                (System::Stiffness.what(), System::Stiffness.hint()),
+                (System::Stiffness.what(), System::Stiffness.direct_hint()),
             ) {
                 Ok((x, _)) => return Ok((x, 0, false)),
                 // auto: a singular stiffness (a mechanism the load does not excite) may
@@ -1274,26 +1308,35 @@ impl Held {
     }
 }
 
-/// A part of a body whose held vertices leave it a rigid motion.
+/// The parts of a body whose held vertices leave them a rigid motion.
 struct Support {
     /// The number of parts of the body.
     parts: usize,
-    /// The smallest vertex row of the part.
-    row: usize,
-    /// How its held vertices lie.
-    held: Held,
+    /// Each such part's smallest vertex row and how its held vertices lie: those held
+    /// nowhere first, then at one point, then on one line, each by row.
+    loose: Vec<(usize, Held)>,
 }
 
+/// A relative size of a moment, against the load's forces times the body's size, below
+/// which the load leaves a rotation about a support unexcited (rounding of sums of a few
+/// thousand products is far below it; a load with a real moment far above).
+const MOMENT_TOLERANCE: f64 = 1e-9;
+
 impl Simulation {
-    /// The first part of the body (its elements connected through shared vertex rows, in
-    /// order of their smallest row) whose held vertices (`fixed`, at positions `x`, by row)
-    /// leave it a rigid motion: none held (looked for first, in every part), or all at one
-    /// point or on one line ([`held_on_a_line`]); `None` when every part is held on a plane
-    /// at least. Its stiffness is singular then: the static solve's failure says why.
+    /// The parts of the body (its elements connected through shared vertex rows, each
+    /// named by its smallest row) whose held vertices (`fixed`, at positions `x`, by row)
+    /// leave them a rigid motion: none held (its stiffness is singular, whatever the
+    /// load), or all at one point or on one line ([`held_on_a_line`]) with a load (`load`,
+    /// by row: the residual of the start) that has a moment about that point, or about
+    /// that line's axis; `None` when there is none: every part is held on a plane at
+    /// least, or its load does not turn it (a sheet in a plane held along a line of it
+    /// under loads in that plane). Which one stops the solve the residual cannot tell (a
+    /// part held on a line may swing to a balance, another not), so all are given.
     fn support_problem(
         &self,
         x: &[[f64; 3]],
         fixed: &[bool],
+        load: &[[f64; 3]],
     ) -> Result<Option<Support>, PhysicsError> {
         let n = x.len();
         // union-find over rows, joined through each element's rows
@@ -1308,36 +1351,64 @@ impl Simulation {
                 }
             }
         }
-        // each part's smallest row (its root: roots are the smaller of two joined) and its
-        // held positions
-        let mut parts: Vec<(usize, Vec<[f64; 3]>)> = Vec::new();
+        // each part's smallest row (its root: roots are the smaller of two joined), its
+        // held positions and its free rows
+        let mut parts: Vec<(usize, Vec<[f64; 3]>, Vec<usize>)> = Vec::new();
         let mut part_of: Vec<usize> = vec![usize::MAX; n];
         for r in 0..n {
             let top = root(&mut parent, r);
             if part_of[top] == usize::MAX {
                 part_of[top] = parts.len();
-                parts.push((top, Vec::new()));
+                parts.push((top, Vec::new(), Vec::new()));
             }
+            let p = &mut parts[part_of[top]];
             if fixed[r] {
-                parts[part_of[top]].1.push(x[r]);
+                p.1.push(x[r]);
+            } else {
+                p.2.push(r);
             }
         }
         let size = body_size(x);
         let count = parts.len();
-        if let Some((row, _)) = parts.iter().find(|(_, held)| held.is_empty()) {
-            return Ok(Some(Support {
-                parts: count,
-                row: *row,
-                held: Held::Nowhere,
-            }));
-        }
-        Ok(parts.iter().find_map(|(row, held)| {
-            held_on_a_line(held, size).map(|held| Support {
-                parts: count,
-                row: *row,
-                held,
-            })
+        // how each part is held, where that leaves it a rigid motion its load excites
+        let problem = |(row, held, free): &(usize, Vec<[f64; 3]>, Vec<usize>)| {
+            if held.is_empty() {
+                return Some((*row, Held::Nowhere));
+            }
+            let (how, axis) = held_on_a_line(held, size)?;
+            // the load's moment about the first held vertex (along the line's axis)
+            let p0 = held[0];
+            let (mut m, mut total) = ([0.0; 3], 0.0);
+            for &r in free {
+                let arm: [f64; 3] = std::array::from_fn(|a| x[r][a] - p0[a]);
+                let f = load[r];
+                m[0] += arm[1] * f[2] - arm[2] * f[1];
+                m[1] += arm[2] * f[0] - arm[0] * f[2];
+                m[2] += arm[0] * f[1] - arm[1] * f[0];
+                total += norm3(f);
+            }
+            let turning = match axis {
+                Some(u) => (m[0] * u[0] + m[1] * u[1] + m[2] * u[2]).abs(),
+                None => norm3(m),
+            };
+            (turning > MOMENT_TOLERANCE * total * size).then_some((*row, how))
+        };
+        let mut loose: Vec<(usize, Held)> = parts.iter().filter_map(problem).collect();
+        loose.sort_by_key(|&(row, held)| (held as u8, row));
+        Ok((!loose.is_empty()).then_some(Support {
+            parts: count,
+            loose,
         }))
+    }
+
+    /// The input point of vertex row `row` (its `point_id`), where the map has one.
+    pub(crate) fn input_point(&self, row: usize) -> Option<i64> {
+        let id = self.g.embedding_id("point_id")?;
+        let d = *self.rows.darts.get(row)?;
+        match self.g.value(id, d) {
+            Ok(topomech_gmap::Value::Int(p)) if p >= 0 => Some(p),
+            _ => None,
+        }
     }
 }
 
@@ -1366,10 +1437,11 @@ fn body_size(x: &[[f64; 3]]) -> f64 {
 
 /// Where the held positions `held` all lie when they leave rigid rotations free:
 /// [`Held::Point`] (all within 1e-9 of `size`, the body's, of the first), or [`Held::Line`]
-/// (the largest distance of any from the line through the first and the farthest from it
-/// within 1e-9 of `size`); `None` when they span a plane, or none is given. A body held so
-/// can turn about that point or line: its stiffness matrix is singular there.
-fn held_on_a_line(held: &[[f64; 3]], size: f64) -> Option<Held> {
+/// with its unit direction (the largest distance of any from the line through the first and
+/// the farthest from it within 1e-9 of `size`); `None` when they span a plane, or none is
+/// given. A body held so can turn about that point or line: its stiffness matrix is
+/// singular there.
+fn held_on_a_line(held: &[[f64; 3]], size: f64) -> Option<(Held, Option<[f64; 3]>)> {
     let first = *held.first()?;
     if !(size.is_finite() && size > 0.0) {
         return None;
@@ -1384,7 +1456,7 @@ fn held_on_a_line(held: &[[f64; 3]], size: f64) -> Option<Held> {
     let axis = sub(far, first);
     let length = norm3(axis);
     if length <= eps {
-        return Some(Held::Point);
+        return Some((Held::Point, None));
     }
     let u = axis.map(|c| c / length);
     let off_line = held.iter().map(|p| {
@@ -1396,5 +1468,5 @@ fn held_on_a_line(held: &[[f64; 3]], size: f64) -> Option<Held> {
             d[2] - along * u[2],
         ])
     });
-    (off_line.fold(0.0, f64::max) <= eps).then_some(Held::Line)
+    (off_line.fold(0.0, f64::max) <= eps).then_some((Held::Line, Some(u)))
 }

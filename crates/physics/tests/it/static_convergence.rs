@@ -159,13 +159,16 @@ fn a_body_held_at_a_point_or_on_a_line_is_told_so() {
     assert!(s.solver_report().unwrap().converged);
 }
 
-/// A body of two parts (two boxes apart), one held at x = 0 and the other nowhere, under
-/// gravity: the failure says the body is two parts and one has no held vertex, and names a
-/// vertex of that part (its smallest row, which is the second box's first point), not the
-/// largest residual in the held part; the second box held on one edge line is told that
-/// its held vertices lie on one line.
+/// A body of two parts (two boxes apart) under gravity -z, one held at x = 0 and the other
+/// nowhere: the failure says the body is two parts, one of which can still move rigidly,
+/// held nowhere, and names a vertex of it (its smallest row, the second box's first point),
+/// not the largest residual in the held part. Held instead on the first box's edge
+/// y = z = 0 (a line its weight turns it about) and at the second box's corner: both parts
+/// are listed, the one held at a point first (the residual cannot tell which one stops the
+/// solve). A part held on a line the load does not turn it about (the edge x = y = 0,
+/// parallel to gravity) is not listed.
 #[test]
-fn a_part_held_nowhere_is_named() {
+fn the_parts_of_a_body_left_a_rigid_motion_are_named() {
     let one = cuboid([2, 1, 1], [1.0, 0.2, 0.2], BoxElement::Tetra);
     let mut two = one.clone();
     let shift = one.points.len();
@@ -184,28 +187,78 @@ fn a_part_held_nowhere_is_named() {
     };
     let mut s = Simulation::new(g.clone(), with("x < 1e-9")).unwrap();
     let e = s.step().unwrap_err();
+    let PhysicsError::Diverged { vertex, point, .. } = &e else {
+        panic!("{e:?}");
+    };
+    let msg = e.to_string();
+    assert!(
+        msg.contains("the body is 2 parts") && msg.contains("1 of them can still move rigidly"),
+        "{msg}"
+    );
+    assert_eq!(*point, Some(shift as i64), "{msg}");
+    let v = vertex.expect("a vertex of the part");
+    assert!(
+        msg.contains(&format!(
+            "the one at vertex row {v} (input point {shift}), held nowhere"
+        )),
+        "{msg}"
+    );
+    assert!(msg.contains("; it is the one at vertex row"), "{msg}");
+    // held on a line its weight turns it about, and at a point
+    let corner = "(x > 1.99 && y < 1e-9 && z < 1e-9 && x < 2.01)";
+    let mut s = Simulation::new(
+        g.clone(),
+        with(&format!("(x < 1e-9 && z < 1e-9) || {corner}")),
+    )
+    .unwrap();
+    let e = s.step().unwrap_err();
+    let msg = e.to_string();
+    let at_point = msg
+        .find(&format!("(input point {shift}), held at one point"))
+        .unwrap_or_else(|| panic!("{msg}"));
+    let on_line = msg
+        .find("(input point 0), held on one line")
+        .unwrap_or_else(|| panic!("{msg}"));
+    assert!(at_point < on_line && msg.contains("2 of them"), "{msg}");
+    // the first box held on a line parallel to gravity: only the second is listed
+    let mut s = Simulation::new(g, with(&format!("(x < 1e-9 && y < 1e-9) || {corner}"))).unwrap();
+    let msg = s.step().unwrap_err().to_string();
+    assert!(
+        msg.contains("1 of them") && msg.contains("held at one point"),
+        "{msg}"
+    );
+    assert!(!msg.contains("held on one line"), "{msg}");
+}
+
+/// A sheet in the plane z = 0 clamped along its edge y = 0 under a load in its plane too
+/// large to balance: the edge is a line, but the load does not turn the sheet about it, so
+/// the failure gives the general advice, not the support's, and names a free vertex.
+#[test]
+fn an_in_plane_load_on_a_sheet_held_on_a_line_gets_no_support_advice() {
+    let mesh = topomech_gmap::generators::grid(
+        [4, 4],
+        [1.0, 1.0],
+        topomech_gmap::generators::GridElement::Triangle,
+    );
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        gravity: [0.0, -1e5, 0.0],
+        young: 1e5,
+        density: 1.0,
+        ..static_config("corotational", "y < 1e-9")
+    };
+    let mut s = Simulation::new(g, cfg).unwrap();
+    let e = s.step().unwrap_err();
     let PhysicsError::Diverged { vertex, .. } = &e else {
         panic!("{e:?}");
     };
     let msg = e.to_string();
     assert!(
-        msg.contains("the body is 2 parts") && msg.contains("one has no held vertex"),
+        !msg.contains("on one line") && !msg.contains("rigid"),
         "{msg}"
     );
-    let rows = s.point_ids().unwrap();
-    let v = vertex.expect("a vertex of the part");
-    assert_eq!(rows[v], shift as i64, "{msg}");
-    assert!(
-        msg.contains("the part held nowhere is the one at vertex row"),
-        "{msg}"
-    );
-    // the second box held on its edge y = z = 0 (and the first on its face x = 0)
-    let mut s = Simulation::new(g, with("x < 1e-9 || (x > 1.99 && y < 1e-9 && z < 1e-9)")).unwrap();
-    let msg = s.step().unwrap_err().to_string();
-    assert!(
-        msg.contains("the body is 2 parts") && msg.contains("of one all lie on one line"),
-        "{msg}"
-    );
+    let fixed = s.vertex_bool("fixed").unwrap();
+    assert!(!fixed[vertex.expect("a vertex")], "{msg}");
 }
 
 /// A body held nowhere under gravity has no equilibrium: every load increment fails, the
