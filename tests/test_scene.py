@@ -189,6 +189,13 @@ def test_message_names_the_file(tmp_path: Path) -> None:
         topomech.load_scene(p)
 
 
+def test_a_byte_order_mark_is_skipped(tmp_path: Path) -> None:
+    """A scene file some editor started with a UTF-8 byte-order mark reads as without it."""
+    p = tmp_path / "beam.toml"
+    p.write_text("\ufeff" + BASE, encoding="utf-8")
+    assert topomech.load_scene(p).config == parse_scene(BASE).config
+
+
 def test_invalid_toml() -> None:
     e = refusal(BASE + "[[[\n")
     assert e.key is None

@@ -857,7 +857,10 @@ fn to_i64(x: f64) -> Result<i64, EvalError> {
     if t.is_finite() && (-TWO_63..TWO_63).contains(&t) {
         Ok(t as i64)
     } else {
-        Err(err(format!("to_i64: {x} has no i64 value")))
+        // (in scientific notation: 1e300 written out is 301 digits)
+        Err(err(format!(
+            "to_i64: {x:e} has no i64 value (it is outside -2^63..2^63 or not finite)"
+        )))
     }
 }
 

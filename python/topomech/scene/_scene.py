@@ -289,7 +289,8 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     fail = _Fail(str(p) if p is not None else "<scene>")
     base_dir = Path(base) if base is not None else (p.parent if p is not None else None)
     try:
-        data = tomllib.loads(text)
+        # (a byte-order mark, which some editors write first, is not TOML)
+        data = tomllib.loads(text.removeprefix("\ufeff"))
     except tomllib.TOMLDecodeError as e:
         raise fail(None, f"invalid TOML: {e}") from None
     top = _Table(data, "", fail)
