@@ -37,9 +37,11 @@ def test_scene_spellings_of_elements() -> None:
     # the names a scene's `element` takes (tet, hex, tri) give the kernel names' meshes
     for short, long in [("tet", "tetra"), ("hex", "hexahedron")]:
         a, b = _core.box(2, 1, 1, element=short), _core.box(2, 1, 1, element=long)
-        assert a[1] == b[1] and (a[3] == b[3]).all()
+        assert a[1] == b[1]
+        assert (a[3] == b[3]).all()
     a, b = _core.grid(2, 1, element="tri"), _core.grid(2, 1, element="triangle")
-    assert a[1] == b[1] and (a[3] == b[3]).all()
+    assert a[1] == b[1]
+    assert (a[3] == b[3]).all()
 
 
 @pytest.mark.parametrize(

@@ -278,7 +278,8 @@ def test_divergence_names_the_input_point_where_it_differs_from_the_row() -> Non
     with pytest.raises(topomech.DivergenceError) as info:
         sim.step(1000)
     e = info.value
-    assert e.vertex is not None and e.point == e.vertex + 2
+    assert e.vertex is not None
+    assert e.point == e.vertex + 2
     assert f"at vertex row {e.vertex} (input point {e.point})" in str(e)
 
 

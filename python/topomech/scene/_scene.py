@@ -334,7 +334,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
             "world.ground",
             "the static integrator does not model contact with the ground (it would balance"
             " the body as if the plane were not there): hold the vertices the ground supports"
-            " ([[fix]]), or use integrator.kind = \"implicit_euler\"",
+            ' ([[fix]]), or use integrator.kind = "implicit_euler"',
         )
 
     out = top.table("output")
