@@ -65,17 +65,20 @@ impl Simulation {
             // values), the vertices searched one by one only to name the one that fails
             Ok(()) if self.columns_sane(pos, vel) => None,
             // the first vertex with a non-finite value, else the fastest one where it runs
-            // away (a vertex crossing more than the whole object in one step; the speed
-            // without overflow: `norm3`): an implicit step moves the vertices coupled to a
-            // runaway one too, and the first of those in row order is not the one to blame
+            // away: crossing more than the whole object in one step relative to the body's
+            // mean motion (a body in uniform motion or falling freely, however fast, is not
+            // running away; the speed without overflow: `norm3`). An implicit step moves
+            // the vertices coupled to a runaway one too, and the first of those in row
+            // order is not the one to blame
             Ok(()) => {
+                let mean = self.mean_velocity(vel);
                 let mut fastest: Option<(usize, f64)> = None;
                 let non_finite = self.rows.darts.iter().enumerate().find_map(|(v, d)| {
                     let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
                     if p.iter().chain(u).any(|x| !x.is_finite()) {
                         return Some(v);
                     }
-                    let step = norm3([u[0], u[1], u[2]]) * self.cfg.dt;
+                    let step = norm3([u[0] - mean[0], u[1] - mean[1], u[2] - mean[2]]) * self.cfg.dt;
                     if fastest.is_none_or(|(_, s)| step > s) {
                         fastest = Some((v, step));
                     }
@@ -87,9 +90,10 @@ impl Simulation {
                     }
                     (None, Some((v, step))) if step > self.size => Some((
                         Some(v),
-                        format!("runaway motion: the vertex's new velocity would carry it {step:.3e} in one step, more than the object's size ({:.3e})", self.size),
+                        format!("runaway motion: the vertex's new velocity, relative to the body's mean velocity, would carry it {step:.3e} in one step, more than the object's size ({:.3e})", self.size),
                     )),
-                    // (the scan above is conservative: nothing runs away)
+                    // (the scan above is conservative, and counts the body's mean motion:
+                    // nothing runs away)
                     (None, _) => None,
                 }
             }
@@ -153,6 +157,39 @@ impl Simulation {
                 }
             }
             e => e,
+        }
+    }
+
+    /// The body's mean velocity (each row's weighted by its vertex `mass` where the map has
+    /// one and every mass is finite and positive in sum, else the plain mean), the frame in
+    /// which a runaway is measured; zero without rows or where it is not finite.
+    fn mean_velocity(&self, vel: EmbeddingId) -> [f64; 3] {
+        let mass = self.g.embedding_id("mass");
+        let (mut sum, mut total) = ([0.0; 3], 0.0);
+        let (mut plain, mut n) = ([0.0; 3], 0.0);
+        for d in &self.rows.darts {
+            let u = self.g.real(vel, *d);
+            let m = mass.map_or(0.0, |id| {
+                self.g.real(id, *d).first().copied().unwrap_or(0.0)
+            });
+            for a in 0..3 {
+                sum[a] += m * u[a];
+                plain[a] += u[a];
+            }
+            total += m;
+            n += 1.0;
+        }
+        let mean = if total > 0.0 && total.is_finite() {
+            sum.map(|x| x / total)
+        } else if n > 0.0 {
+            plain.map(|x| x / n)
+        } else {
+            [0.0; 3]
+        };
+        if mean.iter().all(|x| x.is_finite()) {
+            mean
+        } else {
+            [0.0; 3]
         }
     }
 

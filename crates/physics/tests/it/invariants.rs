@@ -472,3 +472,38 @@ fn an_implicit_runaway_names_the_fastest_vertex() {
         other => panic!("expected a runaway, got {other:?}"),
     }
 }
+
+/// A body in uniform motion fast enough to cross its own size in one step is not a runaway:
+/// the runaway test measures velocities relative to the body's mean velocity. Each
+/// integrator takes the step, and every vertex moves by v dt (the forces of a rigid
+/// translation are zero up to rounding: 1e-9 of the step, far above rounding and far
+/// below any deformation a force could give in one step of 1e-3 s).
+#[test]
+fn a_fast_uniform_motion_is_not_a_runaway() {
+    let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    for integrator in [
+        Integrator::SymplecticEuler,
+        Integrator::ExplicitEuler,
+        Integrator::ImplicitEuler,
+    ] {
+        let mut s = sim(&mesh, vec![model("corotational", &[])], |c| {
+            c.integrator = integrator;
+            c.gravity = [0.0; 3];
+            c.dt = 1e-3;
+        })
+        .unwrap();
+        let x0 = s.vertex_vec3("position").unwrap();
+        let v = vec![[2000.0, 0.0, 0.0]; x0.len()];
+        s.set_vertex_vec3("velocity", &v).unwrap();
+        s.step()
+            .unwrap_or_else(|e| panic!("{integrator:?}: a uniform motion refused: {e}"));
+        let x1 = s.vertex_vec3("position").unwrap();
+        for (a, b) in x0.iter().zip(&x1) {
+            assert!(
+                (b[0] - a[0] - 2.0).abs() < 1e-9,
+                "{integrator:?}: {a:?} -> {b:?}"
+            );
+            assert!((b[1] - a[1]).abs() < 1e-9 && (b[2] - a[2]).abs() < 1e-9);
+        }
+    }
+}
