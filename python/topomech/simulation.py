@@ -368,9 +368,9 @@ class Simulation:
         criterion (the mean of the two tetrahedra's largest principal stresses, Pa) needs
         tetrahedra and the FEM rules: a simulation built with a stress ``fracture`` or with
         an FEM model (``corotational``, ``linear_fem``, ...) has them; a surface, or a 3D
-        simulation with springs only, raises :class:`SimulationError` saying which. Elements
-        that are not tetrahedra never open by stress (a configured stress ``fracture`` on a
-        mesh with such volumes is refused when the simulation is built)."""
+        simulation with springs only, raises :class:`SimulationError` saying which, and so
+        does a mesh with volumes that are not tetrahedra, which would never open by stress
+        (as a configured stress ``fracture`` is refused when the simulation is built)."""
         unsewn, added = self._core.fracture(criterion, threshold)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 

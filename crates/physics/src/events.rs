@@ -515,7 +515,12 @@ impl Simulation {
             return Ok(TopologyResult::default());
         }
         let previous = self.strain_bound.take();
-        self.rules.apply_everywhere(&mut self.g, measure, &none)?;
+        let rep = self.rules.apply_everywhere(&mut self.g, measure, &none)?;
+        if f.criterion == Criterion::Stress {
+            // (the strain's bound, taken above, is then unknown: the next strain
+            // evaluation computes it)
+            stress_needs_tetrahedra(&self.g, rep.matches)?;
+        }
         // The guards of the shipped criteria compare a mean of the measure with the threshold
         // (the mean spring strain of a face's edges; the mean of the two elements' largest
         // principal stresses): no mean exceeds the largest value of the measure's column, so
@@ -749,13 +754,7 @@ impl Simulation {
             .rules
             .apply_everywhere(&mut self.g, measure, &Params::new())?;
         if criterion == Criterion::Stress {
-            let volumes = self.g.count_orbits(topomech_gmap::OrbitType::volume());
-            if rep.matches < volumes {
-                return Err(PhysicsError::Config(format!(
-                    "the stress criterion of fracture needs tetrahedra: {} of the mesh's {volumes} volumes are not, and would never break (the strain criterion works with springs on any element)",
-                    volumes - rep.matches
-                )));
-            }
+            stress_needs_tetrahedra(&self.g, rep.matches)?;
         }
         let p: Params = [("threshold".to_string(), Val::F(1.0))].into();
         self.rules.prepare_guard(&mut self.g, rule, &p)?;
@@ -945,4 +944,18 @@ mod tests {
         assert_eq!(plane_box([1.0, 0.0, 0.0], 3.0, lo, hi), None);
         assert_eq!(plane_box([0.0; 3], 0.0, lo, hi), None);
     }
+}
+
+/// Refuses the stress criterion of fracture where the rule computing the stress per
+/// tetrahedron matched `tetrahedra` of the map's volumes and some volumes are not
+/// tetrahedra: they would never break.
+fn stress_needs_tetrahedra(g: &GMap, tetrahedra: usize) -> Result<(), PhysicsError> {
+    let volumes = g.count_orbits(topomech_gmap::OrbitType::volume());
+    if tetrahedra < volumes {
+        return Err(PhysicsError::Config(format!(
+            "the stress criterion of fracture needs tetrahedra: {} of the mesh's {volumes} volumes are not, and would never break (the strain criterion works with springs on any element)",
+            volumes - tetrahedra
+        )));
+    }
+    Ok(())
 }

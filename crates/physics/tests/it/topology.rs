@@ -1014,3 +1014,27 @@ fn the_strain_skip_sees_moves_too_small_to_square() {
     assert!(want > 0, "the stretched sheet tears");
     assert_eq!(opened, want);
 }
+
+/// The stress criterion is computed per tetrahedron: asked of a simulation of hexahedra
+/// (which loads the FEM rules), an interactive fracture is refused saying how many volumes
+/// are not tetrahedra, as a configured one is when the simulation is built, instead of
+/// opening nothing; the map is left as it was.
+#[test]
+fn a_stress_fracture_of_hexahedra_is_refused() {
+    let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Hexa);
+    let mut s = sim(&mesh, vec![model("corotational", &[])], |_| {});
+    let darts = s.gmap().n_darts();
+    let e = s
+        .fracture(Fracture {
+            criterion: Criterion::Stress,
+            threshold: 1e3,
+        })
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("needs tetrahedra: 2 of the mesh's 2 volumes are not"),
+        "{e}"
+    );
+    assert_eq!(s.gmap().n_darts(), darts);
+    assert!(s.topology_changes().is_empty());
+}
