@@ -26,7 +26,8 @@
   integral of ``-f . dx`` along the straight path from the rest positions to the initial
   ones (3-point Gauss-Legendre; zero when the run starts at rest), then every step adds
   ``-(f(x_k) + f(x_{k+1})) / 2 . (x_{k+1} - x_k)`` (the trapezoid rule: exact for forces
-  linear in the positions — linear FEM, mass-tensor — and second order otherwise). The
+  linear in the positions — linear FEM, mass-tensor — and second order otherwise: with few,
+  large steps far off, even below zero). The
   forces are the models' forces at zero velocity, so the dashpots of damped springs do no
   work here: what they and the viscous damping dissipate shows as the total
   ``kinetic + gravitational + elastic`` going down. Written as ``energy.csv``, a row per
