@@ -64,6 +64,24 @@ def test_info_json_is_exactly_one_object(tet_file: tuple) -> None:
     assert "Traceback" not in r.stderr
 
 
+def test_info_json_of_a_refused_file_is_an_error_object(tmp_path: Path) -> None:
+    """A script reading `info --json` gets an object naming the file and why, on a file
+    that cannot be read or a mesh that is refused: exit 2, the reason on stderr too."""
+    missing = tmp_path / "missing.vtu"
+    flat = tmp_path / "flat.vtu"
+    points = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]]
+    meshio.write(flat, meshio.Mesh(points, [("tetra", [[0, 1, 2, 3]])]))
+    for path in (missing, flat):
+        r = run("info", str(path), "--json")
+        assert r.returncode == 2, r.stderr
+        assert r.stdout.count("\n") == 1
+        data = json.loads(r.stdout)
+        assert data["file"] == str(path)
+        assert data["error"]
+        assert data["error"] in r.stderr or str(path) in r.stderr
+        assert "Traceback" not in r.stderr
+
+
 def test_info_text(tet_file: tuple) -> None:
     path, expected = tet_file
     r = run("info", str(path))

@@ -156,7 +156,12 @@ def _add_info(sub: Any) -> None:
         ),
     )
     p.add_argument("mesh_file", metavar="MESH_FILE", type=Path)
-    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object on stdout ({file, error} when the file cannot be read "
+        "or the mesh is refused)",
+    )
     _add_import_options(p)
     p.set_defaults(run=_run_info)
 
@@ -266,7 +271,15 @@ def _report_violations(s: dict[str, Any]) -> None:
 
 
 def _run_info(args: argparse.Namespace) -> int:
-    m = _import(args.mesh_file, args)
+    try:
+        m = _import(args.mesh_file, args)
+    except (TopomechError, OSError) as e:
+        if args.json:
+            # a script reading stdout gets an object saying why (the reason is on stderr
+            # too, and the exit code is 2 as without --json)
+            reason = str(e) if isinstance(e, TopomechError) else (e.strerror or str(e))
+            print(json.dumps({"file": str(args.mesh_file), "error": reason}))
+        raise
     s = _summary(args.mesh_file, m)
     _report_violations(s)
     if args.json:
