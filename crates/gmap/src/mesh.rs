@@ -663,7 +663,13 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
     let mut bad_counts = Vec::new();
     for (c, (&kind, verts)) in mesh.kinds.iter().zip(&mesh.cells).enumerate() {
         if kind.dimension() != dim {
-            other_dim.push((c, kind.name()));
+            // a polygon by its usual name where it has one (a triangle, not "a polygon")
+            let name = match (kind, verts.len()) {
+                (CellKind::Polygon, 3) => "triangle",
+                (CellKind::Polygon, 4) => "quad",
+                _ => kind.name(),
+            };
+            other_dim.push((c, name));
         }
         let expected = kind.n_vertices();
         let bad_count = match expected {

@@ -379,18 +379,21 @@ fn non_finite_points_and_empty_meshes_are_refused() {
         build(&Mesh::default(), &BuildOptions::default()).unwrap_err(),
         MeshError::Empty
     );
+    // a polygon of another dimension is named as a mesh file names it: a triangle, a quad
     let m = Mesh {
-        kinds: vec![CellKind::Tetra, CellKind::Polygon],
-        cells: vec![vec![0, 1, 2, 3], vec![0, 1, 2]],
+        kinds: vec![CellKind::Tetra, CellKind::Polygon, CellKind::Polygon],
+        cells: vec![vec![0, 1, 2, 3], vec![0, 1, 2], vec![0, 1, 2, 3]],
         points: unit_tet_points(),
     };
+    let e = build(&m, &BuildOptions::default()).unwrap_err();
     assert_eq!(
-        build(&m, &BuildOptions::default()).unwrap_err(),
+        e,
         MeshError::MixedDimension {
-            cells: vec![(1, "polygon")],
+            cells: vec![(1, "triangle"), (2, "quad")],
             dim: 3
         }
     );
+    assert!(e.to_string().contains("cell 1 is a triangle"), "{e}");
 }
 
 #[test]
