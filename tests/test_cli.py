@@ -251,7 +251,10 @@ def test_exit_2_when_the_file_cannot_be_read(case: str, tmp_path: Path, tet_file
         )
     r = run("info", str(path), "--json")
     assert r.returncode == 2
-    assert r.stdout == ""
+    # stdout: one object saying why, for a script that reads it; the reason on stderr too
+    error = json.loads(r.stdout)
+    assert error["file"] == str(path)
+    assert error["error"] in r.stderr
     assert r.stderr.startswith("topomech: error: ")
     assert "Traceback" not in r.stderr
     if case != "refused":

@@ -878,6 +878,20 @@ impl Simulation {
     }
 }
 
+/// Refuses the stress criterion of fracture where the rule computing the stress per
+/// tetrahedron matched `tetrahedra` of the map's volumes and some volumes are not
+/// tetrahedra: they would never break.
+fn stress_needs_tetrahedra(g: &GMap, tetrahedra: usize) -> Result<(), PhysicsError> {
+    let volumes = g.count_orbits(topomech_gmap::OrbitType::volume());
+    if tetrahedra < volumes {
+        return Err(PhysicsError::Config(format!(
+            "the stress criterion of fracture needs tetrahedra: {} of the mesh's {volumes} volumes are not, and would never break (the strain criterion works with springs on any element)",
+            volumes - tetrahedra
+        )));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::{plane_box, predicate_box};
@@ -944,18 +958,4 @@ mod tests {
         assert_eq!(plane_box([1.0, 0.0, 0.0], 3.0, lo, hi), None);
         assert_eq!(plane_box([0.0; 3], 0.0, lo, hi), None);
     }
-}
-
-/// Refuses the stress criterion of fracture where the rule computing the stress per
-/// tetrahedron matched `tetrahedra` of the map's volumes and some volumes are not
-/// tetrahedra: they would never break.
-fn stress_needs_tetrahedra(g: &GMap, tetrahedra: usize) -> Result<(), PhysicsError> {
-    let volumes = g.count_orbits(topomech_gmap::OrbitType::volume());
-    if tetrahedra < volumes {
-        return Err(PhysicsError::Config(format!(
-            "the stress criterion of fracture needs tetrahedra: {} of the mesh's {volumes} volumes are not, and would never break (the strain criterion works with springs on any element)",
-            volumes - tetrahedra
-        )));
-    }
-    Ok(())
 }
