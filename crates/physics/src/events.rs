@@ -500,6 +500,18 @@ impl Simulation {
         let none = Params::new();
         let (measure, column, rule) = criterion_rules(f.criterion);
         if self.rules.rule(measure).is_err() {
+            // a mesh with volumes that are not tetrahedra (24 darts: four triangles; a
+            // wedge has 36, a pyramid 32, a hexahedron 48) is refused for that, first:
+            // loading the FEM rules would not help it
+            if self.g.dimension() == 3 && f.criterion == Criterion::Stress {
+                let volume = topomech_gmap::OrbitType::volume();
+                let volumes = self.g.orbit_representatives(volume);
+                let tetrahedra = volumes
+                    .iter()
+                    .filter(|&&d| self.g.orbit(d, volume).len() == 24)
+                    .count();
+                stress_needs_tetrahedra(&self.g, tetrahedra)?;
+            }
             return Err(PhysicsError::Config(if self.g.dimension() == 3 {
                 "the stress criterion needs the FEM rules (fem3d.tmr), which this simulation's models do not load (neohookean and stvk do not either): declare the stress fracture in its configuration when it is built, which loads them (or use an FEM model such as corotational)"
                     .into()
@@ -885,8 +897,9 @@ fn stress_needs_tetrahedra(g: &GMap, tetrahedra: usize) -> Result<(), PhysicsErr
     let volumes = g.count_orbits(topomech_gmap::OrbitType::volume());
     if tetrahedra < volumes {
         return Err(PhysicsError::Config(format!(
-            "the stress criterion of fracture needs tetrahedra: {} of the mesh's {volumes} volumes are not, and would never break (the strain criterion works with springs on any element)",
-            volumes - tetrahedra
+            "the stress criterion of fracture needs tetrahedra: {} of the mesh's {volumes} volumes {} not, and would never break (the strain criterion works with springs on any element)",
+            volumes - tetrahedra,
+            if volumes - tetrahedra == 1 { "is" } else { "are" }
         )));
     }
     Ok(())

@@ -65,38 +65,11 @@ impl Simulation {
             // values), the vertices searched one by one only to name the one that fails
             Ok(()) if self.columns_sane(pos, vel) => None,
             // the first vertex with a non-finite value, else the fastest one where it runs
-            // away: crossing more than the whole object in one step relative to the body's
-            // mean motion (a body in uniform motion or falling freely, however fast, is not
-            // running away; the speed without overflow: `norm3`). An implicit step moves
-            // the vertices coupled to a runaway one too, and the first of those in row
-            // order is not the one to blame
-            Ok(()) => {
-                let mean = self.mean_velocity(vel);
-                let mut fastest: Option<(usize, f64)> = None;
-                let non_finite = self.rows.darts.iter().enumerate().find_map(|(v, d)| {
-                    let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
-                    if p.iter().chain(u).any(|x| !x.is_finite()) {
-                        return Some(v);
-                    }
-                    let step = norm3([u[0] - mean[0], u[1] - mean[1], u[2] - mean[2]]) * self.cfg.dt;
-                    if fastest.is_none_or(|(_, s)| step > s) {
-                        fastest = Some((v, step));
-                    }
-                    None
-                });
-                match (non_finite, fastest) {
-                    (Some(v), _) => {
-                        Some((Some(v), "non-finite position or velocity".to_string()))
-                    }
-                    (None, Some((v, step))) if step > self.size => Some((
-                        Some(v),
-                        format!("runaway motion: the vertex's new velocity, relative to the body's mean velocity, would carry it {step:.3e} in one step, more than the object's size ({:.3e})", self.size),
-                    )),
-                    // (the scan above is conservative, and counts the body's mean motion:
-                    // nothing runs away)
-                    (None, _) => None,
-                }
-            }
+            // away: crossing more than the whole object in one step relative to its part's
+            // mean motion (a piece in uniform motion or falling freely, however fast, is not
+            // running away). An implicit step moves the vertices coupled to a runaway one
+            // too, and the first of those in row order is not the one to blame
+            Ok(()) => self.runaway(pos, vel),
         };
         if let Some((vertex, why)) = bad {
             // (without the copy, the step failed before writing any position or velocity)
@@ -160,37 +133,130 @@ impl Simulation {
         }
     }
 
-    /// The body's mean velocity (each row's weighted by its vertex `mass` where the map has
-    /// one and every mass is finite and positive in sum, else the plain mean), the frame in
-    /// which a runaway is measured; zero without rows or where it is not finite.
-    fn mean_velocity(&self, vel: EmbeddingId) -> [f64; 3] {
-        let mass = self.g.embedding_id("mass");
-        let (mut sum, mut total) = ([0.0; 3], 0.0);
-        let (mut plain, mut n) = ([0.0; 3], 0.0);
-        for d in &self.rows.darts {
-            let u = self.g.real(vel, *d);
-            let m = mass.map_or(0.0, |id| {
-                self.g.real(id, *d).first().copied().unwrap_or(0.0)
-            });
-            for a in 0..3 {
-                sum[a] += m * u[a];
-                plain[a] += u[a];
+    /// The slow runaway test of a step that saved the state (what the fast test, one pass
+    /// over the velocities less [`Simulation::frame`](crate::Simulation) at half the
+    /// object's size per step, could not pass): the first row with a non-finite position or
+    /// velocity, else the row moving fastest relative to the mean velocity of its part (the
+    /// map's connected components, joined where a welded row holds orbits of several),
+    /// where that carries it more than the object's size in one step, with why; `None`
+    /// when nothing runs away. A relative motion below 1e-9 of the vertex's own is within
+    /// the rounding of the mean, not a runaway. When nothing runs away and the body is one
+    /// part, its mean becomes the frame of the next fast tests: passing them (every
+    /// velocity within half the limit of the frame) implies passing this one (the mean of
+    /// velocities all within a distance of the frame lies within it too).
+    fn runaway(&mut self, pos: EmbeddingId, vel: EmbeddingId) -> Option<(Option<usize>, String)> {
+        let (part, means) = self.part_mean_velocities(vel);
+        let dt = self.cfg.dt;
+        let mut fastest: Option<(usize, f64)> = None;
+        let non_finite = self.rows.darts.iter().enumerate().find_map(|(v, d)| {
+            let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
+            if p.iter().chain(u).any(|x| !x.is_finite()) {
+                return Some(v);
             }
-            total += m;
-            n += 1.0;
+            let m = means[part[v]];
+            let step = norm3([u[0] - m[0], u[1] - m[1], u[2] - m[2]]) * dt;
+            let own = norm3([u[0], u[1], u[2]]) * dt;
+            if step > 1e-9 * own && fastest.is_none_or(|(_, s)| step > s) {
+                fastest = Some((v, step));
+            }
+            None
+        });
+        match (non_finite, fastest) {
+            (Some(v), _) => Some((Some(v), "non-finite position or velocity".to_string())),
+            (None, Some((v, step))) if step > self.size => Some((
+                Some(v),
+                format!("runaway motion: the vertex's new velocity, relative to the mean velocity of its part of the body, would carry it {step:.3e} in one step, more than the object's size ({:.3e})", self.size),
+            )),
+            (None, _) => {
+                self.frame = if means.len() == 1 { means[0] } else { [0.0; 3] };
+                None
+            }
         }
-        let mean = if total > 0.0 && total.is_finite() {
-            sum.map(|x| x / total)
-        } else if n > 0.0 {
-            plain.map(|x| x / n)
-        } else {
-            [0.0; 3]
+    }
+
+    /// Each row's part of the body (the map's connected components, joined where a welded
+    /// row holds vertex orbits of several; numbered from 0 in row order) and each part's
+    /// mean velocity: its rows' velocities weighted by their masses (the row's total, over
+    /// its orbits), as a running mean (no sum that overflows), or the plain mean where the
+    /// masses are not finite and positive; zero where the mean is not finite.
+    fn part_mean_velocities(&self, vel: EmbeddingId) -> (Vec<usize>, Vec<[f64; 3]>) {
+        let n = self.rows.darts.len();
+        let all = topomech_gmap::OrbitType::all(self.g.dimension());
+        // the component of each dart, then of each row (joined through welded rows)
+        let mut comp: Vec<u32> = vec![u32::MAX; self.g.capacity()];
+        let mut parent: Vec<usize> = Vec::new();
+        let mut seen = topomech_gmap::Marks::with_capacity(self.g.capacity());
+        let mut component = |d: Dart, parent: &mut Vec<usize>| -> usize {
+            if comp[d.index()] == u32::MAX {
+                let c = parent.len() as u32;
+                parent.push(parent.len());
+                self.g
+                    .visit_orbit(d, all, &mut seen, |x| comp[x.index()] = c);
+            }
+            comp[d.index()] as usize
         };
-        if mean.iter().all(|x| x.is_finite()) {
-            mean
-        } else {
-            [0.0; 3]
+        let mut row_comp: Vec<usize> = self
+            .rows
+            .darts
+            .iter()
+            .map(|&d| component(d, &mut parent))
+            .collect();
+        for (row, darts) in &self.rows.welded {
+            for &d in darts {
+                let c = component(d, &mut parent);
+                let (a, b) = (
+                    crate::solve::root(&mut parent, row_comp[*row]),
+                    crate::solve::root(&mut parent, c),
+                );
+                if a != b {
+                    parent[a.max(b)] = a.min(b);
+                }
+            }
         }
+        // parts numbered in row order
+        let mut number: Vec<usize> = vec![usize::MAX; parent.len()];
+        let mut parts = 0;
+        for c in &mut row_comp {
+            let r = crate::solve::root(&mut parent, *c);
+            if number[r] == usize::MAX {
+                number[r] = parts;
+                parts += 1;
+            }
+            *c = number[r];
+        }
+        let masses = self.vertex_scalar_sum("mass").ok().filter(|m| m.len() == n);
+        let top = masses
+            .as_ref()
+            .map_or(0.0, |m| m.iter().fold(0.0_f64, |a, &x| a.max(x)));
+        let weighted = top > 0.0
+            && top.is_finite()
+            && masses
+                .as_ref()
+                .is_some_and(|m| m.iter().all(|x| x.is_finite() && *x >= 0.0));
+        let mut mean = vec![[0.0; 3]; parts];
+        let mut weight = vec![0.0; parts];
+        for (v, d) in self.rows.darts.iter().enumerate() {
+            let u = self.g.real(vel, *d);
+            let w = match (&masses, weighted) {
+                (Some(m), true) => m[v] / top,
+                _ => 1.0,
+            };
+            if w <= 0.0 || u.len() < 3 {
+                continue;
+            }
+            let p = row_comp[v];
+            weight[p] += w;
+            let f = w / weight[p];
+            for a in 0..3 {
+                mean[p][a] += f * (u[a] - mean[p][a]);
+            }
+        }
+        for m in &mut mean {
+            if !m.iter().all(|x| x.is_finite()) {
+                *m = [0.0; 3];
+            }
+        }
+        (row_comp, mean)
     }
 
     /// The row of the vertex whose orbit holds `dart`, by the slot of the vertex
@@ -224,7 +290,7 @@ impl Simulation {
             return false;
         };
         let finite = !p.iter().fold(false, |bad, x| bad | !x.is_finite());
-        finite && velocities_slow(v, speed_limit(self.size, self.cfg.dt))
+        finite && velocities_slow(v, speed_limit(0.5 * self.size, self.cfg.dt), self.frame)
     }
 
     /// The explicit step of [`Simulation::explicit`] with the integrator's values tested
@@ -244,8 +310,10 @@ impl Simulation {
         if let Err(e) = self.forces().and_then(|()| self.share_welded_forces()) {
             return Checked::Done(Err(e));
         }
-        let limit = speed_limit(self.size, self.cfg.dt);
-        let check = |id: EmbeddingId, v: &[f64]| id != vel || velocities_slow(v, limit);
+        // (half the distance, from the frame: see `runaway`)
+        let limit = speed_limit(0.5 * self.size, self.cfg.dt);
+        let frame = self.frame;
+        let check = |id: EmbeddingId, v: &[f64]| id != vel || velocities_slow(v, limit, frame);
         match self
             .rules
             .apply_everywhere_checked(&mut self.g, rule, &self.step_params, &check)
@@ -398,13 +466,15 @@ fn speed_limit(size: f64, dt: f64) -> f64 {
     (limit * limit * (1.0 - 1e-9)).min(f64::MAX)
 }
 
-/// Whether every velocity of `v` (vec3s, flat) has a squared length at most `limit`
-/// ([`speed_limit`]): one pass without early exit or square root, so that it vectorizes.
-fn velocities_slow(v: &[f64], limit: f64) -> bool {
+/// Whether every velocity of `v` (vec3s, flat) less `frame` has a squared length at most
+/// `limit` ([`speed_limit`]): one pass without early exit or square root, so that it
+/// vectorizes.
+fn velocities_slow(v: &[f64], limit: f64, frame: [f64; 3]) -> bool {
     // `&`, not `&&`: no early exit, so that the loop vectorizes
     #[allow(clippy::needless_bitwise_bool)]
     let slow = v.chunks_exact(3).fold(true, |ok, u| {
-        ok & (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] <= limit)
+        let d = [u[0] - frame[0], u[1] - frame[1], u[2] - frame[2]];
+        ok & (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= limit)
     });
     v.len() % 3 == 0 && slow
 }

@@ -117,6 +117,10 @@ pub struct Simulation {
     /// The position and velocity columns before the step being taken (kept between steps so
     /// that a step allocates nothing).
     saved: [Vec<f64>; 2],
+    /// The velocity the fast runaway test measures speeds from: the mean velocity of a body
+    /// of one part at the last step whose runaway test was taken the slow way (zero at
+    /// first); see `integrate::Simulation::runaway`.
+    frame: [f64; 3],
     /// What the last static or implicit Euler step's solve did.
     report: Option<SolverReport>,
     /// The positions of the last converged static solve: where a load ramp of prescribed

@@ -1018,6 +1018,7 @@ impl Simulation {
             strain_bound: None,
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
+            frame: [0.0; 3],
             forces_written: None,
             fd_jacobian: false,
             report: None,

@@ -768,11 +768,11 @@ impl Simulation {
                     let support = self.support_problem(&start, &fixed, &r0).ok().flatten();
                     let (cause, vertex, named) = match (&why, support) {
                         (_, Some(p)) => {
-                            let (what, named) = match (p.parts, &p.loose[..]) {
+                            let (what, named, at) = match (p.parts, &p.loose[..]) {
                                 (1, [(_, held)]) => (format!(
                                     "; the held vertices (fixed or prescribed) all lie {}, so the body can still rotate rigidly about it: its stiffness is singular there, and a load with a moment about it has no nearby balance; hold vertices that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for its motion",
                                     held.where_()
-                                ), "the largest residual force is"),
+                                ), "the largest residual force is", worst),
                                 (n, loose) => {
                                     let each: Vec<String> = loose
                                         .iter()
@@ -785,7 +785,7 @@ impl Simulation {
                                         })
                                         .collect();
                                     let more = if loose.len() > 4 {
-                                        format!(" and {} more", loose.len() - 4)
+                                        format!("; and {} more", loose.len() - 4)
                                     } else {
                                         String::new()
                                     };
@@ -793,10 +793,10 @@ impl Simulation {
                                     (format!(
                                         "; the body is {n} parts (elements connected to each other), and {k} of them can still move rigidly, their stiffness singular (held nowhere, or on vertices that all lie at one point or on one line that the load turns them about): {}{more}; hold vertices of each that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for their motion",
                                         each.join("; ")
-                                    ), if k == 1 { "it is the one" } else { "the first is the one" })
+                                    ), if k == 1 { "it is the one" } else { "the first is the one" }, loose[0].0)
                                 }
                             };
-                            (what, p.loose[0].0, named)
+                            (what, at, named)
                         }
                         (Some(w), None) => (
                             format!("; the last linear solve that failed: {w}"),
@@ -1413,7 +1413,7 @@ impl Simulation {
 }
 
 /// The root of `a` in the union-find forest `parent` (paths halved on the way).
-fn root(parent: &mut [usize], mut a: usize) -> usize {
+pub(crate) fn root(parent: &mut [usize], mut a: usize) -> usize {
     while parent[a] != a {
         parent[a] = parent[parent[a]];
         a = parent[a];

@@ -507,3 +507,76 @@ fn a_fast_uniform_motion_is_not_a_runaway() {
         }
     }
 }
+
+/// A cut box's two pieces flying apart, each in uniform motion faster than the box's size
+/// per step, are not runaways: speeds are measured from the mean velocity of each part of
+/// the body (its connected components). One vertex of a piece sent far faster than the
+/// rest is still one, named, and the state restored; after a uniform motion the fast test
+/// measures from that motion (the frame), and still refuses that vertex.
+#[test]
+fn pieces_in_uniform_motion_are_not_runaways_but_a_vertex_of_them_is() {
+    let mesh = cuboid([4, 1, 1], [2.0, 0.5, 0.5], BoxElement::Tetra);
+    let mut s = sim(&mesh, vec![model("corotational", &[])], |c| {
+        c.gravity = [0.0; 3];
+        c.dt = 1e-3;
+    })
+    .unwrap();
+    // between the cells at x = 1: the two pieces come apart
+    let opened = s
+        .cut(&topomech_physics::Cut::Plane {
+            normal: [1.0, 0.0, 0.0],
+            offset: 1.0,
+        })
+        .unwrap();
+    assert!(opened.unsewn > 0);
+    assert_eq!(s.gmap().cell_counts().components, 2);
+    let x = s.vertex_vec3("position").unwrap();
+    // each row's piece by its elements' centroids (the rows at x = 1 were split, one per
+    // piece); the box is 2.1 across: 3000 m/s moves 3 m in a step of 1e-3 s
+    let mut v = vec![[0.0; 3]; x.len()];
+    for e in s.elements().unwrap() {
+        let cx = e.rows.iter().map(|&r| x[r][0]).sum::<f64>() / e.rows.len() as f64;
+        for &r in &e.rows {
+            v[r] = [if cx > 1.0 { 3000.0 } else { -3000.0 }, 0.0, 0.0];
+        }
+    }
+    s.set_vertex_vec3("velocity", &v).unwrap();
+    for _ in 0..3 {
+        s.step().expect("two pieces in uniform motion");
+    }
+    let mut v = s.vertex_vec3("velocity").unwrap();
+    let fast = x.iter().position(|p| p[0] > 1.9).unwrap();
+    v[fast][1] += 1e5;
+    s.set_vertex_vec3("velocity", &v).unwrap();
+    let before = s.vertex_vec3("position").unwrap();
+    match s.step() {
+        Err(PhysicsError::Diverged { vertex, why, .. }) => {
+            assert_eq!(vertex, Some(fast), "{why}");
+            assert!(
+                why.contains("relative to the mean velocity of its part"),
+                "{why}"
+            );
+        }
+        other => panic!("expected a runaway, got {other:?}"),
+    }
+    assert_eq!(s.vertex_vec3("position").unwrap(), before);
+    // one body in uniform motion: its frame is set; a runaway vertex is refused from it
+    let mut s = sim(&mesh, vec![model("corotational", &[])], |c| {
+        c.gravity = [0.0; 3];
+        c.dt = 1e-3;
+    })
+    .unwrap();
+    let n = s.vertex_vec3("position").unwrap().len();
+    s.set_vertex_vec3("velocity", &vec![[0.0, 2000.0, 0.0]; n])
+        .unwrap();
+    for _ in 0..3 {
+        s.step().expect("a uniform motion");
+    }
+    let mut v = s.vertex_vec3("velocity").unwrap();
+    v[n - 1][2] += 3000.0;
+    s.set_vertex_vec3("velocity", &v).unwrap();
+    match s.step() {
+        Err(PhysicsError::Diverged { vertex, .. }) => assert_eq!(vertex, Some(n - 1)),
+        other => panic!("expected a runaway, got {other:?}"),
+    }
+}

@@ -770,3 +770,35 @@ fn a_cut_through_a_welded_vertex_keeps_the_particle() {
         assert_eq!(pos(g, welded[0].1[0]), pos(g, welded[0].1[1]));
     }
 }
+
+/// The runaway test weights a welded row by its whole mass (both tetrahedra's corners), not
+/// one orbit's: the merged pair at rest but for row 0 (mass 2 m of 8 m) sent at 3,750 m/s
+/// moves 3.75 m in a step of 1e-3 s, 2.81 m from the mean (3,750 / 4 m/s) against the
+/// object's size of 3 m: no runaway (weighted by one corner it would be 3.21 m: refused).
+/// No gravity, so the step's forces, at rest, are zero and the velocities stay.
+#[test]
+fn a_welded_row_weighs_its_whole_mass_in_the_runaway_test() {
+    let mut s = pinched_with(true, Integrator::SymplecticEuler, &[], |c| {
+        c.gravity = [0.0; 3];
+    });
+    let mut v = s.vertex_vec3("velocity").unwrap();
+    assert_eq!(v.len(), 7);
+    v[0] = [3750.0, 0.0, 0.0];
+    s.set_vertex_vec3("velocity", &v).unwrap();
+    s.step()
+        .expect("2.81 m from the mean, under the size of 3 m");
+    // one step more and the same row at 4,100 m/s: 3.08 m from the mean, refused
+    let mut v = s.vertex_vec3("velocity").unwrap();
+    v[0] = [4100.0, 0.0, 0.0];
+    for r in 1..7 {
+        v[r] = [0.0; 3];
+    }
+    s.set_vertex_vec3("velocity", &v).unwrap();
+    assert!(matches!(
+        s.step(),
+        Err(topomech_physics::PhysicsError::Diverged {
+            vertex: Some(0),
+            ..
+        })
+    ));
+}

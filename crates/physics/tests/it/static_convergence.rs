@@ -149,6 +149,14 @@ fn a_body_held_at_a_point_or_on_a_line_is_told_so() {
         let mut s = Simulation::new(g.clone(), with(fixed)).unwrap();
         let e = s.step().unwrap_err();
         let msg = e.to_string();
+        // the vertex named is the largest residual's: a free one
+        let PhysicsError::Diverged { vertex, .. } = &e else {
+            panic!("{e:?}");
+        };
+        assert!(
+            !s.vertex_bool("fixed").unwrap()[vertex.expect("a vertex")],
+            "{msg}"
+        );
         for part in [lies, "rotate rigidly", "not all on one line"] {
             assert!(msg.contains(part), "{fixed}: {part:?} missing from {msg}");
         }

@@ -1037,4 +1037,19 @@ fn a_stress_fracture_of_hexahedra_is_refused() {
     );
     assert_eq!(s.gmap().n_darts(), darts);
     assert!(s.topology_changes().is_empty());
+    // wedges with springs (no FEM rules loaded): refused for the wedges, not sent to declare
+    // the fracture at set-up (which refuses them too)
+    let mesh = cuboid([1, 1, 1], [1.0, 0.5, 0.5], BoxElement::Wedge);
+    let mut s = sim(&mesh, vec![model("stretch_elementary", &[])], |_| {});
+    let e = s
+        .fracture(Fracture {
+            criterion: Criterion::Stress,
+            threshold: 1e3,
+        })
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("needs tetrahedra: 2 of the mesh's 2 volumes are not"),
+        "{e}"
+    );
 }
