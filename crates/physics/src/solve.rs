@@ -754,11 +754,11 @@ impl Simulation {
                             ),
                         });
                     }
-                    // the linear solve's failure says what to try; then a part of the body
-                    // whose held vertices leave it a rigid motion; otherwise, the general
-                    // advice (a static solve has no ground: `Simulation::new` refuses one)
-                    // (a part that leaves a rigid motion explains a linear solve's failure
-                    // too: a singular matrix)
+                    // what to try: first the parts of the body whose held vertices leave
+                    // them a rigid motion (that explains a linear solve's failure too: a
+                    // singular matrix), then the last failed linear solve's advice,
+                    // otherwise the general advice (a static solve has no ground:
+                    // `Simulation::new` refuses one)
                     let worst = if best.is_finite() {
                         worst
                     } else {
