@@ -139,14 +139,18 @@ impl Simulation {
     /// velocity, else the row moving fastest relative to the mean velocity of its part (the
     /// map's connected components, joined where a welded row holds orbits of several),
     /// where that carries it more than the object's size in one step, with why; `None`
-    /// when nothing runs away. A relative motion below 1e-9 of the vertex's own is within
-    /// the rounding of the mean, not a runaway. When nothing runs away and the body is one
+    /// when nothing runs away. A relative motion below 8 (n + 1) eps of the vertex's own
+    /// (n rows) is within the rounding of the mean, not a runaway. When nothing runs away and the body is one
     /// part, its mean becomes the frame of the next fast tests: passing them (every
     /// velocity within half the limit of the frame) implies passing this one (the mean of
     /// velocities all within a distance of the frame lies within it too).
     fn runaway(&mut self, pos: EmbeddingId, vel: EmbeddingId) -> Option<(Option<usize>, String)> {
         let (part, means) = self.part_mean_velocities(vel);
         let dt = self.cfg.dt;
+        // the rounding of a running mean of n values (a few eps per update) and of the
+        // difference, relative to the vertex's own motion
+        #[allow(clippy::cast_precision_loss)]
+        let rounding = 8.0 * (self.rows.darts.len() as f64 + 1.0) * f64::EPSILON;
         let mut fastest: Option<(usize, f64)> = None;
         let non_finite = self.rows.darts.iter().enumerate().find_map(|(v, d)| {
             let (p, u) = (self.g.real(pos, *d), self.g.real(vel, *d));
@@ -156,7 +160,7 @@ impl Simulation {
             let m = means[part[v]];
             let step = norm3([u[0] - m[0], u[1] - m[1], u[2] - m[2]]) * dt;
             let own = norm3([u[0], u[1], u[2]]) * dt;
-            if step > 1e-9 * own && fastest.is_none_or(|(_, s)| step > s) {
+            if step > rounding * own && fastest.is_none_or(|(_, s)| step > s) {
                 fastest = Some((v, step));
             }
             None
@@ -175,23 +179,27 @@ impl Simulation {
     }
 
     /// Each row's part of the body (the map's connected components, joined where a welded
-    /// row holds vertex orbits of several; numbered from 0 in row order) and each part's
-    /// mean velocity: its rows' velocities weighted by their masses (the row's total, over
-    /// its orbits), as a running mean (no sum that overflows), or the plain mean where the
-    /// masses are not finite and positive; zero where the mean is not finite.
-    fn part_mean_velocities(&self, vel: EmbeddingId) -> (Vec<usize>, Vec<[f64; 3]>) {
-        let n = self.rows.darts.len();
+    /// row holds vertex orbits of several; numbered from 0 in row order) and the number of
+    /// parts: found once per topology version (a walk of every dart), kept until the map
+    /// changes.
+    fn parts(&mut self) -> (Vec<usize>, usize) {
+        let identity = self.g.identity();
+        if let Some((at, part, count)) = &self.parts {
+            if *at == identity && part.len() == self.rows.darts.len() {
+                return (part.clone(), *count);
+            }
+        }
         let all = topomech_gmap::OrbitType::all(self.g.dimension());
         // the component of each dart, then of each row (joined through welded rows)
         let mut comp: Vec<u32> = vec![u32::MAX; self.g.capacity()];
         let mut parent: Vec<usize> = Vec::new();
         let mut seen = topomech_gmap::Marks::with_capacity(self.g.capacity());
+        let g = &self.g;
         let mut component = |d: Dart, parent: &mut Vec<usize>| -> usize {
             if comp[d.index()] == u32::MAX {
                 let c = parent.len() as u32;
                 parent.push(parent.len());
-                self.g
-                    .visit_orbit(d, all, &mut seen, |x| comp[x.index()] = c);
+                g.visit_orbit(d, all, &mut seen, |x| comp[x.index()] = c);
             }
             comp[d.index()] as usize
         };
@@ -224,6 +232,17 @@ impl Simulation {
             }
             *c = number[r];
         }
+        self.parts = Some((identity, row_comp.clone(), parts));
+        (row_comp, parts)
+    }
+
+    /// Each row's part of the body ([`Simulation::parts`]) and each part's mean velocity:
+    /// its rows' velocities weighted by their masses (the row's total, over its orbits), as
+    /// a running mean (no sum that overflows), or the plain mean where the masses are not
+    /// finite and positive; zero where the mean is not finite.
+    fn part_mean_velocities(&mut self, vel: EmbeddingId) -> (Vec<usize>, Vec<[f64; 3]>) {
+        let n = self.rows.darts.len();
+        let (row_comp, parts) = self.parts();
         let masses = self.vertex_scalar_sum("mass").ok().filter(|m| m.len() == n);
         let top = masses
             .as_ref()

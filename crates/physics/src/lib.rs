@@ -121,6 +121,9 @@ pub struct Simulation {
     /// of one part at the last step whose runaway test was taken the slow way (zero at
     /// first); see `integrate::Simulation::runaway`.
     frame: [f64; 3],
+    /// Each row's part of the body (see `integrate::Simulation::parts`) and the number of
+    /// parts, for the map identity (id, topology version) it was found for.
+    parts: Option<((u64, u64), Vec<usize>, usize)>,
     /// What the last static or implicit Euler step's solve did.
     report: Option<SolverReport>,
     /// The positions of the last converged static solve: where a load ramp of prescribed

@@ -1019,6 +1019,7 @@ impl Simulation {
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
             frame: [0.0; 3],
+            parts: None,
             forces_written: None,
             fd_jacobian: false,
             report: None,

@@ -580,3 +580,26 @@ fn pieces_in_uniform_motion_are_not_runaways_but_a_vertex_of_them_is() {
         other => panic!("expected a runaway, got {other:?}"),
     }
 }
+
+/// In a body moving at 1e14 m/s, a vertex sent 1e4 m/s faster (10 m in a step of 1e-3 s,
+/// against a size of 1.2 m) is a runaway still: the rounding allowed for the mean is a few
+/// eps per row of the vertex's own motion (about 1e-2 m here), not a fixed fraction of it.
+#[test]
+fn a_runaway_inside_a_very_fast_body_is_found() {
+    let mesh = cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    let mut s = sim(&mesh, vec![model("corotational", &[])], |c| {
+        c.gravity = [0.0; 3];
+        c.dt = 1e-3;
+    })
+    .unwrap();
+    let n = s.vertex_vec3("position").unwrap().len();
+    let mut v = vec![[1e14, 0.0, 0.0]; n];
+    v[n - 1][1] = 1e4;
+    s.set_vertex_vec3("velocity", &v).unwrap();
+    match s.step() {
+        Err(PhysicsError::Diverged { vertex, why, .. }) => {
+            assert_eq!(vertex, Some(n - 1), "{why}");
+        }
+        other => panic!("expected a runaway, got {other:?}"),
+    }
+}
