@@ -519,6 +519,8 @@ pub struct RuleSet {
     patches: std::sync::atomic::AtomicUsize,
     /// Those of `patches` made in place ([`RuleSet::plan_patches_in_place`]).
     in_place_patches: std::sync::atomic::AtomicUsize,
+    /// Plans of computation rules built from a search ([`RuleSet::plans_built`]).
+    builds: std::sync::atomic::AtomicUsize,
     /// Matches of patched plans rebuilt without a search ([`RuleSet::matches_rebuilt`]).
     rebuilt: std::sync::atomic::AtomicUsize,
     /// Runs of a compiled plan that failed and were applied by the interpreter instead (see
@@ -861,6 +863,7 @@ impl RuleSet {
             backend: crate::native::default_backend(),
             patches: std::sync::atomic::AtomicUsize::new(0),
             in_place_patches: std::sync::atomic::AtomicUsize::new(0),
+            builds: std::sync::atomic::AtomicUsize::new(0),
             rebuilt: std::sync::atomic::AtomicUsize::new(0),
             fallbacks: std::sync::atomic::AtomicUsize::new(0),
             guard_plans: std::sync::Mutex::new(HashMap::new()),
@@ -1277,6 +1280,8 @@ impl RuleSet {
                 .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             plans.insert(index, p);
         } else if !fresh {
+            self.builds
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let matches = self.matches_of(g, &b, poll)?;
             let index_of = if patchable(b.rule, b.embs) && (self.compile || matches.is_empty()) {
                 // a plan without matches keeps the guard's embeddings only: a rule without
@@ -1762,6 +1767,14 @@ impl RuleSet {
     /// rule set was made.
     pub fn plan_fallbacks(&self) -> usize {
         self.fallbacks.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// How many plans of computation rules were built from a search of their matches (the
+    /// first application on a map, and again where a plan cannot be kept or patched: what
+    /// its guard reads was written, a parameter it reads changed, the map changed beyond a
+    /// patch), since this rule set was made.
+    pub fn plans_built(&self) -> usize {
+        self.builds.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// How many times a plan was patched after a topology change instead of rebuilt (see

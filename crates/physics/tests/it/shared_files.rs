@@ -249,10 +249,16 @@ fn the_merged_files_are_the_per_dimension_files_as_before() {
         let signs_guard = format!(
             "  where {{\n    let da = dot(mean{vol}(a.position), normal) - offset\n    let db = dot(mean{vol}(b.position), normal) - offset\n    let opposite = (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)\n    let near = min(abs(da), abs(db))\n    let far = max(abs(da), abs(db))\n    opposite && near > 1e-12 * far\n  }}"
         );
+        // and a fifth (2026-12-05): the ground's test below the plane moved from the guard,
+        // which read the positions every step writes (so the rule was planned again every
+        // step), into the body
+        let ground_was = "  where !v.fixed && dot(v.position - p, n) < 0.0\n  compute {\n    v.position = v.position - dot(v.position - p, n) * n\n    v.velocity = v.velocity - min(dot(v.velocity, n), 0.0) * n\n  }";
+        let ground_now = "  where !v.fixed\n  compute {\n    let d = dot(v.position - p, n)\n    v.position = if d < 0.0 { v.position - d * n } else { v.position }\n    v.velocity = if d < 0.0 { v.velocity - min(dot(v.velocity, n), 0.0) * n } else { v.velocity }\n  }";
         let was: Vec<(&str, String)> = was
             .iter()
             .map(|(n, t)| {
                 let t = t
+                    .replace(ground_was, ground_now)
                     .replace(&product_guard, &signs_guard)
                     .replace(
                         "embedding spring_strain : f64 on <0>",
