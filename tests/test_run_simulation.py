@@ -235,6 +235,19 @@ def test_not_a_map() -> None:
         topomech.Simulation("beam.msh", models=["corotational"])  # type: ignore[arg-type]
 
 
+def test_a_key_given_none_keeps_its_default() -> None:
+    """`events=None` as `ground=None`: every configuration key given None is left at its
+    default (the simulation is the one built without it)."""
+    keys = ["events", "prescribed", "regions", "fracture", "ground", "model_files"]
+    sim = springs(**dict.fromkeys(keys), gravity=[0.0, -9.81, 0.0])
+    plain = springs(gravity=[0.0, -9.81, 0.0])
+    sim.step(3)
+    plain.step(3)
+    assert np.array_equal(sim.positions(), plain.positions())
+    # `fixed=None`: the default, nothing held
+    assert springs(fixed=None).fixed().sum() == 0 < plain.fixed().sum()
+
+
 def test_negative_step_count() -> None:
     with pytest.raises(ValueError, match="n must be >= 0, got -1"):
         springs().step(-1)

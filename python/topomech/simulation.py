@@ -199,7 +199,8 @@ def _check_dimensions(models: Any, gmap: Any) -> None:
 class Simulation:
     """Physical models on a copy of a G-map, stepped in time.
 
-    ``config`` (a dict) or keyword arguments, mirroring the kernel's configuration:
+    ``config`` (a dict) or keyword arguments, mirroring the kernel's configuration (a key
+    given ``None`` keeps its default: no ground, no events, no fracture, ...):
 
     - ``models``: a list of model kinds, dicts ``{"kind": ..., param: value}`` (a real
       number for an ``f64`` parameter, a sequence of 3 for a ``vec3`` one;

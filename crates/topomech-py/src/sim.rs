@@ -648,6 +648,10 @@ fn config_arg(entries: &[(String, Bound<'_, PyAny>)]) -> Result<Config> {
     let mut cfg = Config::default();
     for (key, v) in entries {
         let k = key.as_str();
+        // a key given None keeps its default (as `ground=None`, `fracture=None` always did)
+        if v.is_none() && CONFIG_KEYS.contains(&k) {
+            continue;
+        }
         match k {
             "models" => {
                 cfg.models = list_arg(v, k)?
