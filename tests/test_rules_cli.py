@@ -377,6 +377,27 @@ def test_apply_exit_2_when_the_format_cannot_hold_the_cells(
     assert not out.exists()
 
 
+@pytest.mark.parametrize("suffix", [".stl", ".off", ".mesh"])
+def test_apply_exit_2_when_the_format_would_drop_cells(
+    quad_file: tuple, tmp_path: Path, capsys: pytest.CaptureFixture[str], suffix: str
+) -> None:
+    """STL keeps triangles only, OFF and Medit skip polygons, meshio only warning: a file
+    missing cells is refused (read back and counted) and removed, not written with exit 0.
+    A map of triangles only is written to STL whole."""
+    out = tmp_path / f"split{suffix}"
+    code = cli.main(
+        ["apply", str(quad_file[0]), "@library", "split_edge", "--at", "0", "--out", str(out)]
+    )
+    assert code == 2
+    assert "cannot hold all of the map's cells" in capsys.readouterr().err
+    assert not out.exists()
+    points, kinds, offsets, connectivity = _core.grid(3, 2, 1.0, 1.0, "triangle")
+    g = topomech.GMap.from_flat(points, kinds, offsets, connectivity)
+    whole = tmp_path / "triangles.stl"
+    topomech.io.write_gmap(g, whole)
+    assert sum(len(b.data) for b in meshio.read(whole).cells) == 12
+
+
 @pytest.mark.parametrize(
     "args",
     [

@@ -1009,7 +1009,8 @@ def write_gmap(gmap: GMap, path: PathLike) -> None:
     """Writes a map: a saved G-map (round-trip exact) for ``.tmg``, else its points and cells
     as a mesh file in the format of the extension (``.vtu``, ``.vtk``, ``.msh``, ...).
     Raises ``ValueError`` when the extension names no format or the format cannot hold the
-    map's cells (Gmsh has no polygons, say); nothing is left written then."""
+    map's cells (Gmsh has no polygons, say; STL keeps triangles only and OFF and Medit skip
+    polygons, which the file read back shows); nothing is left written then."""
     fmt = write_format(path)
     if fmt == "tmg":
         gmap.save(path)
@@ -1031,3 +1032,29 @@ def write_gmap(gmap: GMap, path: PathLike) -> None:
                 f"{path}: cannot write the map as {fmt} (cells: {kinds}): "
                 f"{type(e).__name__}: {e}; write .vtu or .tmg instead"
             ) from e
+        _refuse_dropped_cells(path, fmt, mesh)
+
+
+def _refuse_dropped_cells(path: PathLike, fmt: str, mesh: Any) -> None:
+    """Reads back the mesh file ``path`` that meshio wrote as ``fmt`` from ``mesh`` and, when
+    it holds fewer cells (STL keeps triangles only, OFF and Medit skip polygons, each with a
+    warning only), removes it and raises ``ValueError``: a written file silently missing
+    cells is lost data. A file meshio cannot read back is left as written."""
+    import meshio
+
+    written = sum(len(b.data) for b in mesh.cells)
+    try:
+        back = meshio.read(os.fspath(path), file_format=fmt)
+    except (MemoryError, KeyboardInterrupt):
+        raise
+    except Exception:  # a format meshio writes but reads otherwise: no check
+        return
+    found = sum(len(b.data) for b in back.cells)
+    if found < written:
+        with contextlib.suppress(OSError):
+            Path(path).unlink()
+        kinds = ", ".join(sorted({b.type for b in mesh.cells}))
+        raise ValueError(
+            f"{path}: the {fmt} format cannot hold all of the map's cells ({kinds}): "
+            f"{written} written, {found} in the file; write .vtu or .tmg instead"
+        )
