@@ -85,19 +85,11 @@ impl Simulation {
             let e = match result {
                 // the step's own finding, or a rule's non-finite value (its why says which)
                 Ok(()) | Err(PhysicsError::Apply(ApplyError::NonFinite { .. })) => {
-                    PhysicsError::Diverged {
-                        step: self.steps + 1,
-                        point: None,
-                        vertex,
-                        why,
-                    }
+                    PhysicsError::diverged(self.steps + 1, vertex, why)
                 }
-                Err(PhysicsError::Apply(e)) => PhysicsError::Diverged {
-                    step: self.steps + 1,
-                    point: None,
-                    vertex,
-                    why: e.to_string(),
-                },
+                Err(PhysicsError::Apply(e)) => {
+                    PhysicsError::diverged(self.steps + 1, vertex, e.to_string())
+                }
                 Err(e) => e,
             };
             return Err(self.with_input_point(e));
@@ -182,7 +174,7 @@ impl Simulation {
     /// row holds vertex orbits of several; numbered from 0 in row order) and the number of
     /// parts: found once per topology version (a walk of every dart), kept until the map
     /// changes.
-    fn parts(&mut self) -> (Vec<usize>, usize) {
+    pub(crate) fn parts(&mut self) -> (Vec<usize>, usize) {
         let identity = self.g.identity();
         if let Some((at, part, count)) = &self.parts {
             if *at == identity && part.len() == self.rows.darts.len() {
@@ -212,10 +204,7 @@ impl Simulation {
         for (row, darts) in &self.rows.welded {
             for &d in darts {
                 let c = component(d, &mut parent);
-                let (a, b) = (
-                    crate::solve::root(&mut parent, row_comp[*row]),
-                    crate::solve::root(&mut parent, c),
-                );
+                let (a, b) = (root(&mut parent, row_comp[*row]), root(&mut parent, c));
                 if a != b {
                     parent[a.max(b)] = a.min(b);
                 }
@@ -225,7 +214,7 @@ impl Simulation {
         let mut number: Vec<usize> = vec![usize::MAX; parent.len()];
         let mut parts = 0;
         for c in &mut row_comp {
-            let r = crate::solve::root(&mut parent, *c);
+            let r = root(&mut parent, *c);
             if number[r] == usize::MAX {
                 number[r] = parts;
                 parts += 1;
@@ -496,4 +485,13 @@ fn velocities_slow(v: &[f64], limit: f64, frame: [f64; 3]) -> bool {
         ok & (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= limit)
     });
     v.len() % 3 == 0 && slow
+}
+
+/// The root of `a` in the union-find forest `parent` (paths halved on the way).
+fn root(parent: &mut [usize], mut a: usize) -> usize {
+    while parent[a] != a {
+        parent[a] = parent[parent[a]];
+        a = parent[a];
+    }
+    a
 }

@@ -78,6 +78,19 @@ pub enum PhysicsError {
     },
 }
 
+impl PhysicsError {
+    /// A [`PhysicsError::Diverged`] without its input point, which the public entry points
+    /// fill in from the vertex row ([`Simulation::step`], [`Simulation::solve_static`]).
+    pub(crate) fn diverged(step: u64, vertex: Option<usize>, why: String) -> Self {
+        PhysicsError::Diverged {
+            step,
+            vertex,
+            point: None,
+            why,
+        }
+    }
+}
+
 /// How a divergence message names its vertex: its row, and its input point where known.
 fn vertex_at(vertex: Option<usize>, point: Option<i64>) -> String {
     match (vertex, point) {

@@ -660,12 +660,7 @@ impl Simulation {
             self.solver.direct = Some(d);
         }
         let step = self.steps + 1;
-        let fail = |why: String| PhysicsError::Diverged {
-            step,
-            point: None,
-            vertex: None,
-            why,
-        };
+        let fail = |why: String| PhysicsError::diverged(step, None, why);
         // a component with no entry in the matrix must have no load
         let bn = rows_norm(b);
         let loaded = b
@@ -927,12 +922,7 @@ impl Simulation {
         (what, hint): (&str, &str),
     ) -> Result<Vec<[f64; 3]>, PhysicsError> {
         let step = self.steps + 1;
-        let fail = |why: String| PhysicsError::Diverged {
-            step,
-            point: None,
-            vertex: None,
-            why,
-        };
+        let fail = |why: String| PhysicsError::diverged(step, None, why);
         let c = self.solver.coupling.as_ref().expect("assembled on it");
         let d = self.solver.direct.as_mut().expect("set by direct_solve");
         if d.lu.is_none() {
@@ -1074,11 +1064,12 @@ impl Simulation {
             SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(&fwd, &inv, nfree)),
             CholeskySymbolicParams::default(),
         )
-        .map_err(|e| PhysicsError::Diverged {
-            step,
-            point: None,
-            vertex: None,
-            why: format!("the sparse factorization could not be set up: {e:?}"),
+        .map_err(|e| {
+            PhysicsError::diverged(
+                step,
+                None,
+                format!("the sparse factorization could not be set up: {e:?}"),
+            )
         })?;
         Ok(Direct {
             identity,

@@ -496,15 +496,14 @@ impl Simulation {
         // solve without a finite residual: no step is taken with it
         if !solve.relative.is_finite() || solve.x.iter().flatten().any(|x| !x.is_finite()) {
             let vertex = (0..rhs.len()).max_by(|&a, &b| norm3(rhs[a]).total_cmp(&norm3(rhs[b])));
-            return Err(PhysicsError::Diverged {
-                step: self.steps + 1,
-                point: None,
+            return Err(PhysicsError::diverged(
+                self.steps + 1,
                 vertex,
-                why: format!(
+                format!(
                     "the implicit step's linear solve has no finite result (relative residual {:e}): the forces or velocities are beyond what f64 arithmetic can solve for (the largest at this vertex); scale the problem (units) or the load down, or take a smaller dt",
                     solve.relative
                 ),
-            });
+            ));
         }
         let converged = solve.relative <= tol;
         let (linear_solver, preconditioner) = self.solver_names(choice);
@@ -624,14 +623,13 @@ impl Simulation {
         let norm = rows_norm;
         let scale = load.max(norm(&first)).max(norm(&r0)).max(f64::MIN_POSITIVE);
         if !scale.is_finite() {
-            return Err(PhysicsError::Diverged {
-                step: self.steps + 1,
-                point: None,
-                vertex: None,
-                why: format!(
+            return Err(PhysicsError::diverged(
+                self.steps + 1,
+                None,
+                format!(
                     "the static solve's load overflows: its size is {scale:e} (gravity times mass plus the external loads), beyond what f64 arithmetic can balance; scale the problem (units) or the load down"
                 ),
-            });
+            ));
         }
         let tolerance = self.cfg.tolerance.unwrap_or(STATIC_TOLERANCE);
         let tol = tolerance * scale;
@@ -744,15 +742,14 @@ impl Simulation {
                         self.fd_jacobian,
                     ));
                     if !held {
-                        return Err(PhysicsError::Diverged {
-                            step: self.steps + 1,
-                            point: None,
-                            vertex: None,
-                            why: format!(
+                        return Err(PhysicsError::diverged(
+                            self.steps + 1,
+                            None,
+                            format!(
                                 "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} ({:.1}% of the load reached), and no vertex is held (fixed or prescribed): the body can move rigidly, so its stiffness is singular (a load it does not balance by itself has no static equilibrium at all, and a balanced one leaves the rigid motion undetermined); hold some vertices, or use the integrator implicit_euler for its motion",
                                 100.0 * s
                             ),
-                        });
+                        ));
                     }
                     // what to try: first the parts of the body whose held vertices leave
                     // them a rigid motion (that explains a linear solve's failure too: a
@@ -764,8 +761,7 @@ impl Simulation {
                     } else {
                         last_worst.unwrap_or(worst)
                     };
-                    // (a map whose elements cannot be listed gets the other advice)
-                    let support = self.support_problem(&start, &fixed, &r0).ok().flatten();
+                    let support = self.support_problem(&start, &fixed, &r0);
                     let (cause, vertex, named) = match (&why, support) {
                         (_, Some(p)) => {
                             let (what, named, at) = match (p.parts, &p.loose[..]) {
@@ -809,16 +805,15 @@ impl Simulation {
                             "the largest residual force is",
                         ),
                     };
-                    return Err(PhysicsError::Diverged {
-                        step: self.steps + 1,
-                        point: None,
-                        vertex: Some(vertex),
-                        why: format!(
+                    return Err(PhysicsError::diverged(
+                        self.steps + 1,
+                        Some(vertex),
+                        format!(
                             "the static solve did not converge: relative residual {rel:.3e} above the tolerance {tolerance:e} after {iterations} Newton iterations with a line search and load stepping down to increments of 1/{} of the load, on the models' Jacobian rules and then on finite differences of their forces ({:.1}% of the load reached){cause}; {named}",
                             (1.0 / MIN_LOAD_INCREMENT).round(),
                             100.0 * s
                         ),
-                    });
+                    ));
                 }
             }
         }
@@ -834,12 +829,7 @@ impl Simulation {
                 (iterations, load_steps, linear_iterations),
                 self.fd_jacobian,
             ));
-            return Err(PhysicsError::Diverged {
-                step: self.steps + 1,
-                point: None,
-                vertex: Some(d.row),
-                why: d.why,
-            });
+            return Err(PhysicsError::diverged(self.steps + 1, Some(d.row), d.why));
         }
         self.static_base = good;
         self.record(report(
@@ -1183,16 +1173,15 @@ impl Simulation {
             project(&mut ap, fixed);
             let pap = dot(&p, &ap);
             if pap <= 0.0 || !pap.is_finite() || rz <= 0.0 || rz.is_nan() {
-                return Err(PhysicsError::Diverged {
-                    step: self.steps + 1,
-                    point: None,
-                    vertex: None,
-                    why: format!(
+                return Err(PhysicsError::diverged(
+                    self.steps + 1,
+                    None,
+                    format!(
                         "{} is not positive definite for conjugate gradients (p^T A p = {pap:.3e} at iteration {iterations}): {}",
                         system.what(),
                         system.hint()
                     ),
-                });
+                ));
             }
             let alpha = rz / pap;
             for i in 0..n {
@@ -1323,8 +1312,8 @@ struct Support {
 const MOMENT_TOLERANCE: f64 = 1e-9;
 
 impl Simulation {
-    /// The parts of the body (its elements connected through shared vertex rows, each
-    /// named by its smallest row) whose held vertices (`fixed`, at positions `x`, by row)
+    /// The parts of the body ([`Simulation::parts`]: its connected components, joined
+    /// through welded rows; each named by its smallest row) whose held vertices (`fixed`, at positions `x`, by row)
     /// leave them a rigid motion: none held (its stiffness is singular, whatever the
     /// load), or all at one point or on one line ([`held_on_a_line`]) with a load (`load`,
     /// by row: the residual of the start) that has a moment about that point, or about
@@ -1333,39 +1322,23 @@ impl Simulation {
     /// under loads in that plane). Which one stops the solve the residual cannot tell (a
     /// part held on a line may swing to a balance, another not), so all are given.
     fn support_problem(
-        &self,
+        &mut self,
         x: &[[f64; 3]],
         fixed: &[bool],
         load: &[[f64; 3]],
-    ) -> Result<Option<Support>, PhysicsError> {
-        let n = x.len();
-        // union-find over rows, joined through each element's rows
-        let mut parent: Vec<usize> = (0..n).collect();
-        for e in self.elements()? {
-            let mut rows = e.rows.iter().filter(|&&r| r < n);
-            let Some(&first) = rows.next() else { continue };
-            for &r in rows {
-                let (a, b) = (root(&mut parent, first), root(&mut parent, r));
-                if a != b {
-                    parent[a.max(b)] = a.min(b);
-                }
-            }
-        }
-        // each part's smallest row (its root: roots are the smaller of two joined), its
-        // held positions and its free rows
+    ) -> Option<Support> {
+        let (part, _) = self.parts();
+        // each part's smallest row (parts are numbered in row order, so a part is new at its
+        // smallest row), its held positions and its free rows
         let mut parts: Vec<(usize, Vec<[f64; 3]>, Vec<usize>)> = Vec::new();
-        let mut part_of: Vec<usize> = vec![usize::MAX; n];
-        for r in 0..n {
-            let top = root(&mut parent, r);
-            if part_of[top] == usize::MAX {
-                part_of[top] = parts.len();
-                parts.push((top, Vec::new(), Vec::new()));
+        for (r, &p) in part.iter().enumerate().take(x.len()) {
+            if p == parts.len() {
+                parts.push((r, Vec::new(), Vec::new()));
             }
-            let p = &mut parts[part_of[top]];
             if fixed[r] {
-                p.1.push(x[r]);
+                parts[p].1.push(x[r]);
             } else {
-                p.2.push(r);
+                parts[p].2.push(r);
             }
         }
         let size = body_size(x);
@@ -1395,10 +1368,10 @@ impl Simulation {
         };
         let mut loose: Vec<(usize, Held)> = parts.iter().filter_map(problem).collect();
         loose.sort_by_key(|&(row, held)| (held as u8, row));
-        Ok((!loose.is_empty()).then_some(Support {
+        (!loose.is_empty()).then_some(Support {
             parts: count,
             loose,
-        }))
+        })
     }
 
     /// The input point of vertex row `row` (its `point_id`), where the map has one.
@@ -1410,15 +1383,6 @@ impl Simulation {
             _ => None,
         }
     }
-}
-
-/// The root of `a` in the union-find forest `parent` (paths halved on the way).
-pub(crate) fn root(parent: &mut [usize], mut a: usize) -> usize {
-    while parent[a] != a {
-        parent[a] = parent[parent[a]];
-        a = parent[a];
-    }
-    a
 }
 
 /// The diagonal of the bounding box of `x`.
