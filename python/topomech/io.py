@@ -33,7 +33,7 @@ import re
 import sys
 import tempfile
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -1026,14 +1026,22 @@ def write_gmap(gmap: GMap, path: PathLike) -> None:
         except (MemoryError, KeyboardInterrupt, OSError):
             raise
         except Exception as e:  # meshio's writers raise KeyError for cells they cannot hold
-            with contextlib.suppress(OSError):
-                Path(path).unlink()
-            kinds = ", ".join(sorted({b.type for b in mesh.cells}))
-            raise ValueError(
-                f"{path}: cannot write the map as {fmt} (cells: {kinds}): "
-                f"{type(e).__name__}: {e}; write .vtu or .tmg instead"
+            reason = f"{type(e).__name__}: {e}"
+            raise _unwritable(
+                path,
+                mesh,
+                lambda kinds: f"cannot write the map as {fmt} (cells: {kinds}): {reason}",
             ) from e
         _refuse_dropped_cells(path, fmt, mesh)
+
+
+def _unwritable(path: PathLike, mesh: Any, why: Callable[[str], str]) -> ValueError:
+    """The refusal of a mesh file meshio could not write whole: what it left at ``path`` is
+    removed, and the message is ``why`` of the map's cell kinds (``"polygon, quad"``)."""
+    with contextlib.suppress(OSError):
+        Path(path).unlink()
+    kinds = ", ".join(sorted({b.type for b in mesh.cells}))
+    return ValueError(f"{path}: {why(kinds)}; write .vtu or .tmg instead")
 
 
 def _refuse_dropped_cells(path: PathLike, fmt: str, mesh: Any) -> None:
@@ -1055,10 +1063,11 @@ def _refuse_dropped_cells(path: PathLike, fmt: str, mesh: Any) -> None:
         return
     found = sum(len(b.data) for b in back.cells)
     if found < written:
-        with contextlib.suppress(OSError):
-            Path(path).unlink()
-        kinds = ", ".join(sorted({b.type for b in mesh.cells}))
-        raise ValueError(
-            f"{path}: the {fmt} format cannot hold all of the map's cells ({kinds}): "
-            f"{written} written, {found} in the file; write .vtu or .tmg instead"
+        raise _unwritable(
+            path,
+            mesh,
+            lambda kinds: (
+                f"the {fmt} format cannot hold all of the map's cells ({kinds}): "
+                f"{written} written, {found} in the file"
+            ),
         )
