@@ -409,6 +409,37 @@ fn check_model(
     let init = calls(&m.init, "init", out);
     let step = calls(&m.step, "step", out);
     let jvp = calls(&m.jvp, "jvp", out);
+    // a parameter no rule call passes on changes nothing: required, it would make every
+    // user give a value that does nothing (an error); with a default, a likely slip (a
+    // warning). The material's `young` and `poisson` are not parameters of models.
+    for p in &m.params {
+        let used = m.init.iter().chain(&m.step).chain(&m.jvp).any(|c| {
+            c.args
+                .iter()
+                .any(|a| matches!(&a.kind, ModelArgKind::Param(n) if *n == p.name))
+        });
+        if used {
+            continue;
+        }
+        let (severity, what) = if p.default.is_none() {
+            (
+                Severity::Error,
+                "is required but no rule call of the model passes it on: a value given for it would change nothing (pass it to a rule of init, step or jvp, or remove it)",
+            )
+        } else {
+            (
+                Severity::Warning,
+                "is passed to no rule call of the model: a value given for it changes nothing",
+            )
+        };
+        out.push(Diagnostic {
+            file: file.to_string(),
+            pos: p.pos,
+            severity,
+            condition: "unused-parameter",
+            message: format!("model '{mn}': parameter '{}' {what}", p.name),
+        });
+    }
     let vector_embeddings = |list: &[(String, Pos)], what: &str, out: &mut Vec<Diagnostic>| {
         for (name, pos) in list {
             let Some(e) = embs.iter().find(|e| &e.name == name) else {

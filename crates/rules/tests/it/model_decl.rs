@@ -49,7 +49,7 @@ fn line_of(model: &str, needle: &str) -> u32 {
 #[test]
 fn a_declaration_is_parsed_into_a_checked_model() {
     let model = "model anchor(k: f64 = 10.0, d: vec3 = vec3(0, 0, -1.5), c: f64) {
-  init   anchor_init(k, vec3(1, 2, 3)), anchor_init(2.5, d)
+  init   anchor_init(k, vec3(1, 2, 3)), anchor_init(2.5, d), anchor_init(c, d)
   step   anchor_force
   forces f_anchor
   jvp    anchor_jvp -> df_anchor
@@ -68,7 +68,7 @@ fn a_declaration_is_parsed_into_a_checked_model() {
     assert_eq!(m.params[0].default, Some(Val::F(10.0)));
     assert_eq!(m.params[1].default, Some(Val::V3([0.0, 0.0, -1.5])));
     assert_eq!(m.params[2].default, None);
-    assert_eq!(m.init.len(), 2);
+    assert_eq!(m.init.len(), 3);
     assert_eq!(m.init[0].rule, "anchor_init");
     assert_eq!(
         m.init[0].args,
@@ -134,6 +134,12 @@ fn mistakes_are_refused_where_they_are() {
             "name",
             "argument 'stiff' of rule 'anchor_init' names no parameter of the model (it has: k)",
             "init anchor_init",
+        ),
+        (
+            "model a(k: f64 = 1.0,\n stiff: f64) {\n init anchor_init(k, vec3(0,0,0))\n step anchor_force forces f_anchor }",
+            "unused-parameter",
+            "parameter 'stiff' is required but no rule call of the model passes it on",
+            "stiff: f64",
         ),
         (
             "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces f_nope }",
@@ -295,4 +301,26 @@ fn outputs_nobody_writes_and_non_finite_defaults_are_refused() {
             .unwrap_or_else(|| panic!("no '{says}' in {errs:?}"));
         assert_eq!(e.pos.line, line_of(model, needle), "{says}");
     }
+}
+
+/// A parameter with a default that no rule call passes on loads, with a warning at the
+/// parameter (a value given for it would change nothing); one that is passed on gives none.
+#[test]
+fn an_unused_parameter_with_a_default_is_a_warning() {
+    let model = "model a(k: f64 = 1.0,\n unused: f64 = 2.0) {\n init anchor_init(k, vec3(0,0,0))\n step anchor_force forces f_anchor }\n";
+    let (_, warnings) = load_sources(&[("m.tmr".into(), format!("{HEAD}{model}"))])
+        .expect("a warning does not refuse the file");
+    let w: Vec<&Diagnostic> = warnings
+        .iter()
+        .filter(|d| d.condition == "unused-parameter")
+        .collect();
+    assert_eq!(w.len(), 1, "{warnings:?}");
+    assert_eq!(w[0].severity, Severity::Warning);
+    assert!(
+        w[0].message
+            .contains("model 'a': parameter 'unused' is passed to no rule call"),
+        "{}",
+        w[0]
+    );
+    assert_eq!(w[0].pos.line, line_of(model, "unused: f64"));
 }
