@@ -152,6 +152,9 @@ pub(crate) struct CgOutcome {
 pub(crate) enum System {
     /// The stiffness of a static Newton iteration.
     Stiffness,
+    /// The same, solved by conjugate gradients after the direct solver found it singular
+    /// (`linear_solver = "auto"`): the direct solver is not suggested again.
+    StiffnessAfterDirect,
     /// The implicit Euler matrix.
     Implicit,
 }
@@ -159,7 +162,7 @@ pub(crate) enum System {
 impl System {
     fn what(self) -> &'static str {
         match self {
-            System::Stiffness => "the stiffness matrix -df/dx",
+            System::Stiffness | System::StiffnessAfterDirect => "the stiffness matrix -df/dx",
             System::Implicit => "the implicit Euler matrix (1 + h c) M - h df/dv - h^2 df/dx",
         }
     }
@@ -168,13 +171,15 @@ impl System {
     /// suggested again).
     fn direct_hint(self) -> &'static str {
         match self {
-            System::Stiffness => "the stiffness is singular at this state: buckling, or a model with no stiffness in some direction (springs without shear springs, a free vertex or a rigid-body motion no fixed vertex holds); load stepping is automatic, so try more fixed vertices, a smaller load, a stiffer shear model, or the integrator implicit_euler",
+            System::Stiffness | System::StiffnessAfterDirect => "the stiffness is singular at this state: buckling, or a model with no stiffness in some direction (springs without shear springs, a free vertex or a rigid-body motion no fixed vertex holds); load stepping is automatic, so try more fixed vertices, a smaller load, a stiffer shear model, or the integrator implicit_euler",
             System::Implicit => "the stiffness is indefinite at this state (buckling, inverted elements) beyond what the mass holds at this time step; try a smaller dt or a stiffer shear model",
         }
     }
 
     fn hint(self) -> &'static str {
         match self {
+            // the direct solver was tried first, and found the stiffness singular
+            System::StiffnessAfterDirect => "the direct solver found the stiffness singular at this state and conjugate gradients found it not positive definite: buckling, or a model with no stiffness in some direction (springs without shear springs, a free vertex or a rigid-body motion no fixed vertex holds); load stepping is automatic, so try more fixed vertices, a smaller load, a stiffer shear model, or the integrator implicit_euler",
             System::Stiffness => "the stiffness is not positive definite at this state: buckling, or a model with no stiffness in some direction (springs without shear springs, a free vertex or a rigid-body motion no fixed vertex holds); load stepping is automatic, so try more fixed vertices, a smaller load, a stiffer shear model, the linear solver direct (its LDL^T factorization handles an indefinite but nonsingular stiffness), or the integrator implicit_euler",
             System::Implicit => "the stiffness is indefinite at this state (buckling, inverted elements) beyond what the mass holds at this time step; try a smaller dt, a stiffer shear model, or the linear solver direct (its LDL^T factorization handles an indefinite but nonsingular matrix)",
         }
@@ -1225,6 +1230,7 @@ impl Simulation {
             Ok(sim.jvp(z, &zero)?.iter().map(|d| d.map(|x| -x)).collect())
         };
         let mut choice = choice;
+        let mut system = System::Stiffness;
         if choice == LinearSolver::Direct && lagged {
             if let Some(x) = self.direct_resolve(r, fixed) {
                 return Ok((x, 0, true));
@@ -1246,6 +1252,7 @@ impl Simulation {
                     if self.cfg.linear_solver == LinearSolver::Auto =>
                 {
                     choice = LinearSolver::Pcg;
+                    system = System::StiffnessAfterDirect;
                 }
                 Err(e) => return Err(e),
             }
@@ -1264,7 +1271,7 @@ impl Simulation {
             None,
             precond.as_ref(),
             (NEWTON_LINEAR_TOLERANCE, max_it),
-            System::Stiffness,
+            system,
             apply,
         )?;
         Ok((out.x, out.iterations, false))
