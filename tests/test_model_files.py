@@ -365,6 +365,11 @@ def test_model_load_and_shipped(tmp_path: Path) -> None:
         str(path),
     )
     assert m.with_params(k=3).values == {"k": 3.0}
+    # what a simulation runs it with: the value set, else the default (params stays the
+    # declared defaults)
+    assert m.param_values == {"k": 10.0}
+    assert m.with_params(k=3).param_values == {"k": 3.0}
+    assert m.with_params(k=3).params == {"k": 10.0}
     with pytest.raises(ValueError, match=r"has no parameter 'q' \(it has: k\)"):
         m.with_params(q=1.0)
     with pytest.raises(ValueError, match="finite"):

@@ -158,6 +158,12 @@ def model(tmp_path: Path) -> Model:
 def test_a_vec3_parameter_is_declared_with_its_default(model: Model) -> None:
     assert model.params == {"k": 10.0, "offset": [0.0, 0.0, 0.0]}
     assert model.param_types == {"k": "f64", "offset": "vec3"}
+    # the values a simulation runs it with: a vec3 as a tuple, its default's too
+    assert model.param_values == {"k": 10.0, "offset": (0.0, 0.0, 0.0)}
+    assert model.with_params(offset=[1, 2, 3]).param_values == {
+        "k": 10.0,
+        "offset": (1.0, 2.0, 3.0),
+    }
 
 
 @pytest.mark.parametrize(

@@ -92,6 +92,22 @@ class Model:
         return INTEGRATORS if self.has_jvp else EXPLICIT_INTEGRATORS
 
     @property
+    def param_values(self) -> dict[str, ParamValue | None]:
+        """Each parameter's value a simulation runs the model with, in declaration order:
+        the one set by :meth:`with_params`, else the default (:attr:`params`); None for a
+        required parameter not set yet (see :attr:`missing`). A ``vec3`` value is a tuple of
+        3 floats, its default's too."""
+        out: dict[str, ParamValue | None] = {}
+        for p, d in self.params.items():
+            if p in self.values:
+                out[p] = self.values[p]
+            elif isinstance(d, list):
+                out[p] = (float(d[0]), float(d[1]), float(d[2]))
+            else:
+                out[p] = d
+        return out
+
+    @property
     def missing(self) -> list[str]:
         """The parameters without a default that :attr:`values` does not set."""
         return [p for p, d in self.params.items() if d is None and p not in self.values]
