@@ -2257,6 +2257,42 @@ impl Plan {
 
     /// Appends to `out` the slots row `row` reads from the program columns `cols` (its
     /// gathers and aggregates of them).
+    /// The gathers and the aggregates (their CSR indices) of the program that read the
+    /// program columns `cols`, for [`Plan::row_slots_from`].
+    pub(crate) fn slot_sources(&self, cols: &[usize]) -> (Vec<usize>, Vec<usize>) {
+        let (mut gathers, mut csrs) = (Vec::new(), Vec::new());
+        for op in &self.prog.ops {
+            match op {
+                Op::Gather { col, idx, .. } if cols.contains(col) => gathers.push(*idx),
+                Op::Agg { col, csr, .. } if cols.contains(col) => csrs.push(*csr),
+                _ => {}
+            }
+        }
+        (gathers, csrs)
+    }
+
+    /// Calls `f` with every slot row `row` reads through `sources` ([`Plan::slot_sources`]):
+    /// the slots [`Plan::row_slots`] lists, the gathers' first (an order that does not
+    /// matter to a bounding box).
+    pub(crate) fn row_slots_from(
+        &self,
+        (gathers, csrs): &(Vec<usize>, Vec<usize>),
+        row: usize,
+        mut f: impl FnMut(u32),
+    ) {
+        for &k in gathers {
+            f(self.gathers[k][row]);
+        }
+        for &k in csrs {
+            let (offs, slots) = &self.csr[k];
+            if offs.len() > row + 1 {
+                for &sl in &slots[offs[row] as usize..offs[row + 1] as usize] {
+                    f(sl);
+                }
+            }
+        }
+    }
+
     pub(crate) fn row_slots(&self, cols: &[usize], row: usize, out: &mut Vec<u32>) {
         for op in &self.prog.ops {
             match op {

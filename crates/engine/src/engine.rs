@@ -2480,6 +2480,34 @@ impl GuardPlan {
         out.extend(c.tail.iter().filter(|t| inside(t.0)).map(|t| t.1));
         out.sort_unstable();
         out.dedup();
+        // of those, the rows whose own box (of the values they read now) meets the region
+        // grown by the rounding margin: the caller's promise makes the guard false at the
+        // others. The growth above, by the largest extent of any row around its first slot,
+        // finds twice a row's size around a thin region such as a blade's quad (the plane
+        // of the blade, one step of its sweep): the box halves the rows the guard runs on
+        let margin = 1e-9 * (1.0 + scale);
+        let sources = self.plan.slot_sources(&cols);
+        out.retain(|&r| {
+            let (mut blo, mut bhi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+            let (mut read, mut outside) = (false, false);
+            self.plan.row_slots_from(&sources, r as usize, |s| {
+                let Some(p) = x.get(3 * s as usize..3 * s as usize + 3) else {
+                    outside = true;
+                    return;
+                };
+                read = true;
+                for k in 0..3 {
+                    blo[k] = blo[k].min(p[k]);
+                    bhi[k] = bhi[k].max(p[k]);
+                }
+            });
+            // a row reading no value of the region's embedding, or a slot past its values:
+            // the guard decides
+            !read
+                || outside
+                || (0..3)
+                    .all(|k| blo[k] <= region.hi[k] + margin && bhi[k] >= region.lo[k] - margin)
+        });
         self.cull = Some(c);
         Some(out)
     }
