@@ -25,6 +25,7 @@ impl Simulation {
             (result, false)
         } else {
             let ready = matches!(checked, Checked::ForcesReady);
+            self.saving_steps += 1;
             // the state before the step: the whole position and velocity columns (kept to
             // restore them on divergence; a step changes values only, never the slots)
             for (id, saved) in [pos, vel].into_iter().zip(&mut self.saved) {
@@ -101,6 +102,16 @@ impl Simulation {
         // hold what they need
         self.rules.clear_shared_matches();
         events
+    }
+
+    /// How many steps so far (taken or refused) copied the positions and velocities before
+    /// integrating, to restore them on divergence: implicit Euler and static steps, an
+    /// explicit step whose integrator's values were refused before being written (a
+    /// runaway vertex, say), and every step through the interpreter
+    /// ([`Simulation::set_compiled`] off). An explicit step of compiled plans, with or
+    /// without a ground plane, tests its values before writing them and copies nothing.
+    pub fn steps_saving_state(&self) -> usize {
+        self.saving_steps
     }
 
     /// `e` with the input point of its vertex row filled in (a [`PhysicsError::Diverged`]
@@ -312,9 +323,24 @@ impl Simulation {
     ///
     /// [`RuleSet::apply_everywhere_checked`]: topomech_rules::RuleSet::apply_everywhere_checked
     fn explicit_checked(&mut self, rule: &str, vel: EmbeddingId) -> Checked {
-        if self.cfg.ground.is_some() || !self.rules.compiled() {
+        if !self.rules.compiled() {
             return Checked::NotTested;
         }
+        // with a ground plane, the integrator and the ground rule in one rule (glue.tmr:
+        // the same operations, so the same bits as the two in turn)
+        let ground = match &self.cfg.ground {
+            None => None,
+            Some(g) => match g.plane(self.cfg.gravity) {
+                Ok((p, n)) => {
+                    let mut params = self.step_params.clone();
+                    params.insert("p".to_string(), Val::V3(p));
+                    params.insert("n".to_string(), Val::V3(n));
+                    Some((format!("{rule}_ground"), params))
+                }
+                // the saving way reports it
+                Err(_) => return Checked::NotTested,
+            },
+        };
         if let Err(e) = self.forces().and_then(|()| self.share_welded_forces()) {
             return Checked::Done(Err(e));
         }
@@ -322,9 +348,13 @@ impl Simulation {
         let limit = speed_limit(0.5 * self.size, self.cfg.dt);
         let frame = self.frame;
         let check = |id: EmbeddingId, v: &[f64]| id != vel || velocities_slow(v, limit, frame);
+        let (rule, params) = match &ground {
+            Some((r, p)) => (r.as_str(), p),
+            None => (rule, &self.step_params),
+        };
         match self
             .rules
-            .apply_everywhere_checked(&mut self.g, rule, &self.step_params, &check)
+            .apply_everywhere_checked(&mut self.g, rule, params, &check)
         {
             Ok(Some(_)) => Checked::Done(Ok(())),
             Ok(None) => Checked::ForcesReady,

@@ -130,6 +130,9 @@ pub struct Simulation {
     /// The position and velocity columns before the step being taken (kept between steps so
     /// that a step allocates nothing).
     saved: [Vec<f64>; 2],
+    /// The steps that copied the state into `saved` (see
+    /// [`Simulation::steps_saving_state`]).
+    saving_steps: usize,
     /// The velocity the fast runaway test measures speeds from: the mean velocity of a body
     /// of one part at the last step whose runaway test was taken the slow way (zero at
     /// first); see `integrate::Simulation::runaway`.

@@ -1018,6 +1018,7 @@ impl Simulation {
             strain_bound: None,
             changes: Vec::new(),
             saved: [Vec::new(), Vec::new()],
+            saving_steps: 0,
             frame: [0.0; 3],
             parts: None,
             forces_written: None,
