@@ -768,6 +768,40 @@ impl Simulation {
                     };
                     let support = self.support_problem(&start, &fixed, &r0);
                     let (cause, vertex, named) = match (&why, support) {
+                        (_, Some(p)) if p.loose.is_empty() => {
+                            let each: Vec<String> = p
+                                .hinges
+                                .iter()
+                                .take(4)
+                                .map(|&(row, held, joint)| {
+                                    format!(
+                                        "the one at vertex row {row}{}, joined {} (at vertex row {joint}{})",
+                                        self.input_point_note(row),
+                                        match held {
+                                            Held::Line => "to the rest at pinched vertices on one line",
+                                            _ => "to the rest at one pinched vertex only",
+                                        },
+                                        self.input_point_note(joint)
+                                    )
+                                })
+                                .collect();
+                            let more = if p.hinges.len() > 4 {
+                                format!("; and {} more", p.hinges.len() - 4)
+                            } else {
+                                String::new()
+                            };
+                            let k = p.hinges.len();
+                            (
+                                format!(
+                                    "; {k} piece(s) of the body touch the rest only at pinched vertices (points where elements meet without sharing a {}, kept as one particle), held nowhere else, and the load turns them about those points: a hinge, so the stiffness is singular there: {}{more}; hold vertices of each piece, join the pieces through shared {}s in the mesh (or import it with pinched = \"split\" to see the pieces apart), or use the integrator implicit_euler for their motion",
+                                    if self.g.dimension() == 3 { "face" } else { "edge" },
+                                    each.join("; "),
+                                    if self.g.dimension() == 3 { "face" } else { "edge" },
+                                ),
+                                p.hinges[0].0,
+                                if k == 1 { "it is the one" } else { "the first is the one" },
+                            )
+                        }
                         (_, Some(p)) => {
                             let (what, named, at) = match (p.parts, &p.loose[..]) {
                                 (1, [(_, held)]) => (format!(
@@ -1311,6 +1345,12 @@ struct Support {
     /// Each such part's smallest vertex row and how its held vertices lie: those held
     /// nowhere first, then at one point, then on one line, each by row.
     loose: Vec<(usize, Held)>,
+    /// Pieces of parts that are held as a whole, joined to the rest of their part only at
+    /// pinched vertices (rows of several vertex orbits kept as one particle) that all lie
+    /// at one point or on one line, with nothing of their own holding them off it, and
+    /// whose load turns them about it: (the piece's smallest row, how, the row of a
+    /// pinched vertex it hangs on), by row.
+    hinges: Vec<(usize, Held, usize)>,
 }
 
 /// A relative size of a moment, against the load's forces times the body's size, below
@@ -1375,10 +1415,106 @@ impl Simulation {
         };
         let mut loose: Vec<(usize, Held)> = parts.iter().filter_map(problem).collect();
         loose.sort_by_key(|&(row, held)| (held as u8, row));
-        (!loose.is_empty()).then_some(Support {
+        let hinges = self.hinges(x, fixed, &part, &loose, &problem);
+        (!loose.is_empty() || !hinges.is_empty()).then_some(Support {
             parts: count,
             loose,
+            hinges,
         })
+    }
+
+    /// The pieces of the body's parts (the map's connected components: the elements
+    /// joined through faces in 3D, edges in 2D) that hang on the rest of their part at
+    /// pinched vertices only (see [`Support::hinges`]), for parts not in `loose`: each
+    /// piece's held positions are its own held rows' and those of the pinched rows joining
+    /// it to another piece, taken as held (where the other piece is held), and `problem`
+    /// says whether they leave it a rotation its load excites.
+    #[allow(clippy::type_complexity)]
+    fn hinges(
+        &self,
+        x: &[[f64; 3]],
+        fixed: &[bool],
+        part: &[usize],
+        loose: &[(usize, Held)],
+        problem: &dyn Fn(&(usize, Vec<[f64; 3]>, Vec<usize>)) -> Option<(usize, Held)>,
+    ) -> Vec<(usize, Held, usize)> {
+        if self.rows.welded.is_empty() {
+            return Vec::new();
+        }
+        let all = topomech_gmap::OrbitType::all(self.g.dimension());
+        let mut comp: Vec<u32> = vec![u32::MAX; self.g.capacity()];
+        let mut count = 0u32;
+        let mut seen = topomech_gmap::Marks::with_capacity(self.g.capacity());
+        let mut piece = |d: topomech_gmap::Dart| -> usize {
+            if comp[d.index()] == u32::MAX {
+                let c = count;
+                count += 1;
+                self.g
+                    .visit_orbit(d, all, &mut seen, |y| comp[y.index()] = c);
+            }
+            comp[d.index()] as usize
+        };
+        let n = x.len().min(self.rows.darts.len());
+        let mut of_row: Vec<usize> = (0..n).map(|r| piece(self.rows.darts[r])).collect();
+        // the pinched rows joining two pieces or more: (row, its pieces)
+        let mut joints: Vec<(usize, Vec<usize>)> = Vec::new();
+        for (row, darts) in &self.rows.welded {
+            let mut ps: Vec<usize> = darts.iter().map(|&d| piece(d)).collect();
+            ps.sort_unstable();
+            ps.dedup();
+            if *row < n && ps.len() > 1 {
+                of_row[*row] = usize::MAX;
+                joints.push((*row, ps));
+            }
+        }
+        let pieces = count as usize;
+        // per piece: (smallest row, held positions, free rows), and a joint it hangs on
+        let mut each: Vec<(usize, Vec<[f64; 3]>, Vec<usize>)> =
+            vec![(usize::MAX, Vec::new(), Vec::new()); pieces];
+        let mut joint_of: Vec<Option<usize>> = vec![None; pieces];
+        let mut part_of: Vec<usize> = vec![usize::MAX; pieces];
+        for (r, &p) in of_row.iter().enumerate() {
+            if p == usize::MAX {
+                continue;
+            }
+            let e = &mut each[p];
+            e.0 = e.0.min(r);
+            part_of[p] = part[r];
+            if fixed[r] {
+                e.1.push(x[r]);
+            } else {
+                e.2.push(r);
+            }
+        }
+        for (row, ps) in &joints {
+            for &p in ps {
+                each[p].1.push(x[*row]);
+                joint_of[p].get_or_insert(*row);
+                if part_of[p] == usize::MAX {
+                    part_of[p] = part[*row];
+                }
+            }
+        }
+        let loose_parts: Vec<usize> = loose.iter().map(|&(row, _)| part[row]).collect();
+        let mut out: Vec<(usize, Held, usize)> = (0..pieces)
+            .filter_map(|p| {
+                let joint = joint_of[p]?;
+                // a piece of pinched vertices alone has no element of its own to turn
+                if loose_parts.contains(&part_of[p]) || each[p].0 == usize::MAX {
+                    return None;
+                }
+                let (row, how) = problem(&each[p])?;
+                (how != Held::Nowhere).then_some((row, how, joint))
+            })
+            .collect();
+        out.sort_by_key(|&(row, held, _)| (held as u8, row));
+        out
+    }
+
+    /// " (input point P)" for vertex row `row`, where the map has input points; else "".
+    fn input_point_note(&self, row: usize) -> String {
+        self.input_point(row)
+            .map_or(String::new(), |q| format!(" (input point {q})"))
     }
 
     /// The input point of vertex row `row` (its `point_id`), where the map has one.

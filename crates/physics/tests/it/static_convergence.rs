@@ -566,3 +566,75 @@ fn finite_difference_products_are_the_exact_rules_and_see_what_the_corotational_
         }
     }
 }
+
+/// Two boxes touching at one corner only (a pinched vertex, kept as one particle: the
+/// default): the first held at x = 0, the second hanging on the corner under gravity -z.
+/// The body is one part, held on a plane, yet the second box can turn about the corner:
+/// the static solve fails, and its message names the second box (its smallest row and
+/// input point) and the pinched vertex, not a rigid motion of the whole body or a linear
+/// solver. Held on its own far face too, it balances.
+#[test]
+fn a_piece_hanging_on_a_pinched_vertex_is_named() {
+    let one = cuboid([2, 1, 1], [1.0, 0.2, 0.2], BoxElement::Tetra);
+    let shift = [1.0, 0.2, 0.2];
+    let n = one.points.len();
+    let corner = one
+        .points
+        .iter()
+        .position(|p| *p == [1.0, 0.2, 0.2])
+        .expect("the first box's far corner");
+    let origin = one
+        .points
+        .iter()
+        .position(|p| *p == [0.0, 0.0, 0.0])
+        .expect("the first box's origin corner");
+    let mut two = one.clone();
+    // the second box's points, but its origin corner, which is the first box's far corner
+    let mut index = vec![0; n];
+    for (k, p) in one.points.iter().enumerate() {
+        if k == origin {
+            index[k] = corner;
+        } else {
+            index[k] = two.points.len();
+            two.points
+                .push([p[0] + shift[0], p[1] + shift[1], p[2] + shift[2]]);
+        }
+    }
+    two.kinds.extend(one.kinds.iter().copied());
+    two.cells.extend(
+        one.cells
+            .iter()
+            .map(|c| c.iter().map(|&v| index[v]).collect::<Vec<_>>()),
+    );
+    let (g, _) = build(&two, &BuildOptions::default()).unwrap();
+    let with = |fixed: &str| Config {
+        gravity: [0.0, 0.0, -9.81],
+        ..static_config("corotational", fixed)
+    };
+    let mut s = Simulation::new(g.clone(), with("x < 1e-9")).unwrap();
+    assert_eq!(s.welded_rows().len(), 1, "one pinched vertex, one particle");
+    let e = s.step().unwrap_err();
+    let PhysicsError::Diverged { point, .. } = &e else {
+        panic!("{e:?}");
+    };
+    let msg = e.to_string();
+    assert!(
+        msg.contains("1 piece(s) of the body touch the rest only at pinched vertices"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains(&format!(
+            "joined to the rest at one pinched vertex only (at vertex row {corner} (input point {corner}))"
+        )),
+        "{msg}"
+    );
+    // the second box's smallest row is its first point (input point n: the first after
+    // the first box's)
+    assert_eq!(*point, Some(n as i64), "{msg}");
+    assert!(!msg.contains("can still move rigidly"), "{msg}");
+    assert!(!msg.contains("linear solve"), "{msg}");
+    // held on its own far face too: it balances
+    let mut s = Simulation::new(g, with("x < 1e-9 || x > 1.999")).unwrap();
+    s.step().unwrap();
+    assert!(s.solver_report().unwrap().converged);
+}
