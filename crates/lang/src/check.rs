@@ -328,6 +328,11 @@ pub fn check_sources_for(
     check_files_for(target, &files)
 }
 
+/// The advice ending the error on rule files that all serve 2-maps and 3-maps when they are
+/// loaded without a dimension (a front end may replace it by how its caller gives one).
+pub const LOAD_FOR_A_DIMENSION: &str =
+    "load the rules for one dimension, 2 (surfaces) or 3 (volumes)";
+
 /// Checks rule files already parsed (or built as syntax trees, see [`crate::build`]), given as
 /// `(file name, syntax tree)`, exactly as [`check_sources`] checks parsed text.
 pub fn check_files(files: &[(String, crate::ast::File)]) -> (Option<Checked>, Vec<Diagnostic>) {
@@ -431,7 +436,12 @@ pub fn check_files_for(
                     d
                 }
                 None => {
-                    for (name, f) in files {
+                    let others = if files.len() > 1 {
+                        "no other file fixes the dimension"
+                    } else {
+                        "nothing fixes the dimension"
+                    };
+                    for ((name, f), dims) in files.iter().zip(&file_dims) {
                         let mut c = Ctx {
                             file: name,
                             out: &mut diags,
@@ -440,12 +450,15 @@ pub fn check_files_for(
                             None => c.error(
                                 Pos { line: 1, col: 1 },
                                 "dimension",
-                                "the file does not say 'dimension 2' or 'dimension 3', and no other file fixes the dimension: load the rules for a dimension (load_sources_for)".into(),
+                                format!("the file has no 'dimension' line, so it serves 2-maps and 3-maps, and {others}: {LOAD_FOR_A_DIMENSION}"),
                             ),
                             Some((_, p)) => c.error(
                                 p,
                                 "dimension",
-                                "the files serve several dimensions and none fixes one: load the rules for a dimension (load_sources_for)".into(),
+                                format!(
+                                    "the file says 'dimension {}', so it serves 2-maps and 3-maps, and {others}: {LOAD_FOR_A_DIMENSION}",
+                                    dims.iter().map(ToString::to_string).collect::<Vec<_>>().join(" ")
+                                ),
                             ),
                         }
                     }

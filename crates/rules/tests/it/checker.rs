@@ -89,7 +89,12 @@ fn dimension() {
         "label 4",
     );
     refused("dimension 4\n", "dimension", 1, "dimension 4");
-    refused("embedding x : f64 on <0>\n", "dimension", 1, "does not say");
+    refused(
+        "embedding x : f64 on <0>\n",
+        "dimension",
+        1,
+        "has no 'dimension' line",
+    );
     accepted(&with_head("rule r {\n  left { a : <0,2> hook }\n}"));
 }
 
