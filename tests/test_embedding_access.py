@@ -164,6 +164,8 @@ def test_every_embedding_round_trips_exactly_on_thousands_of_orbits() -> None:
             values, darts, _ = g.embedding(spec.name)
             if values.dtype == np.bool_:
                 new = rng.random(values.shape) < 0.5
+            elif spec.name == "particle":  # the vertex numbering: another numbering
+                new = rng.permutation(values)
             elif values.dtype == np.int64:
                 new = rng.integers(-(2**62), 2**62, values.shape, dtype=np.int64)
             else:
@@ -300,6 +302,83 @@ def test_wrong_shape_dtype_and_values_are_refused_and_nothing_is_written() -> No
         with pytest.raises(SimulationError, match=rf"'{name}' numbers the simulation"):
             sim.set_embedding(name, sim.embedding(name).values)
     assert np.array_equal(sim.positions(), x0)
+
+
+def test_a_particle_numbering_that_numbers_no_rows_is_refused() -> None:
+    """Regression: ``GMap.set_embedding("particle", ...)`` accepted any int64 values: all
+    zeros collapsed every written vertex onto one point, and negative, gapped or huge rows
+    were written and then silently ignored (the rows fell back to the orbit order). Each is
+    now a ValueError naming the embedding, the problem and the row (its dart), and nothing
+    is written; a permutation of the rows is a numbering and is accepted."""
+    g = GMap.from_flat(*_core.grid(2, 1, 2.0, 1.0, "quad"))
+    before = g.to_bytes()
+    p, darts, _ = g.embedding("particle")
+    assert sorted(p.tolist()) == list(range(6))
+    d = [int(x) for x in darts]
+    cases = [
+        (
+            np.zeros(6, dtype=np.int64),
+            rf"give particle row 0 to vertices at different positions: the vertex of dart "
+            rf"{d[0]} \(value 0\) at .* and the vertex of dart {d[1]} \(value 1\) at ",
+        ),
+        (p - 3, r"must not be negative: -\d for the vertex of dart \d+ \(value \d\)"),
+        (np.where(p == 5, 3_000_000_000, p), r"must be below 6: 3000000000 for the vertex"),
+        (np.where(p == 5, 7, p), r"must be below 6: 7 for the vertex of dart"),
+    ]
+    for values, match in cases:
+        with pytest.raises(
+            ValueError,
+            match=r"values for 'particle' \(the vertex numbering: a row "
+            r"0\.\.n-1 for each of the 6 vertex orbits\) " + match,
+        ):
+            g.set_embedding("particle", values)
+    assert g.to_bytes() == before, "a refused numbering is not written"
+    # a permutation renumbers the rows: the written points follow it
+    perm = (5 - p).astype(np.int64)
+    g.set_embedding("particle", perm)
+    assert g.embedding("particle").values.tolist() == perm.tolist()
+    points = g.to_flat()[0]
+    x = g.embedding("position").values
+    assert np.array_equal(points[perm], x)
+
+
+def test_a_particle_numbering_with_gaps_is_refused() -> None:
+    """Rows must be 0..n-1, every one used; orbits at one place may share a row (a pinched
+    point kept as one particle)."""
+    pts = np.array(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]],
+        dtype=float,
+    )
+    tets = [("tetra", np.array([[0, 1, 2, 3], [0, 4, 6, 5]]))]
+    g = GMap.from_mesh(pts, tets, pinched="split")
+    p = g.embedding("particle").values
+    assert sorted(p.tolist()) == list(range(8)), "the pinched point is two rows"
+    merged = np.where(p == 7, 0, p).astype(np.int64)  # point 0's two orbits as one row: fine
+    g.set_embedding("particle", merged)
+    assert g.to_flat()[0].shape == (7, 3)
+    gapped = np.where(p == 7, 0, np.where(p == 3, 7, p)).astype(np.int64)  # no row 3
+    with pytest.raises(
+        ValueError, match=r"must use every row below the largest, 7: no vertex has row 3$"
+    ):
+        g.set_embedding("particle", gapped)
+    assert g.embedding("particle").values.tolist() == merged.tolist()
+
+
+def test_ragged_values_and_unknown_names_say_so() -> None:
+    """Regression: rows of different lengths raised numpy's own message (naming no
+    embedding), and did so before an unknown name was refused with KeyError."""
+    g = GMap.from_mesh(TET_POINTS, TETS)
+    sim = tet_sim()
+    ragged = [[0.0, 0.0, 0.0]] * 4 + [[0.0, 0.0]]
+    for obj in (g, sim):
+        with pytest.raises(KeyError, match=r"no embedding named 'nope'"):
+            obj.set_embedding("nope", ragged)
+        with pytest.raises(
+            ValueError,
+            match=r"values for 'position' \(vec3 on <1,2,3>\) are not an array of one row per "
+            r"orbit, all of one shape: ",
+        ):
+            obj.set_embedding("position", ragged)
 
 
 def test_welded_particle_needs_one_position() -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import re
 import subprocess
 import sys
 from collections.abc import Iterable
@@ -142,6 +143,32 @@ def test_a_vtu_written_by_another_tool(tmp_path: Path) -> None:
     np.testing.assert_array_equal(m.points, TWO_TETS_POINTS)
     assert rows(m.cells) == [("tetra", tuple(c)) for c in TWO_TETS.tolist()]
     assert m.notes == []
+
+
+@pytest.mark.parametrize(
+    ("points", "cells", "only"),
+    [
+        (np.zeros((0, 3)), [], "and no points"),
+        (np.zeros((3, 3)), [], "only 3 points"),
+        (np.zeros((0, 3)), [("triangle", np.zeros((0, 3), dtype=int))], "and no points"),
+    ],
+    ids=["empty", "points-only", "empty-block"],
+)
+def test_a_vtu_without_cells_says_so(
+    tmp_path: Path, points: np.ndarray, cells: list, only: str
+) -> None:
+    """Regression: a VTU with no cells was refused with meshio's own words ("need at least one
+    array to concatenate", "Inconsistent data!"). The error names the file and says it has
+    no cells, in each reader and from a lying extension (read by its content)."""
+    for name in ("empty.vtu", "empty.vtk"):
+        path = tmp_path / name
+        meshio.write(path, meshio.Mesh(points, cells), file_format="vtu")
+        want = rf"^{re.escape(str(path))}: the VTU file has no cells, {only}: there is no mesh"
+        for read in (read_mesh, read_gmap, import_mesh):
+            with pytest.raises(topomech.MeshReadError, match=want) as e:
+                read(path)
+            assert "concatenate" not in str(e.value)
+            assert "Inconsistent" not in str(e.value)
 
 
 def test_meshio_point_and_cell_sets_are_kept(tmp_path: Path) -> None:

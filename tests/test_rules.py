@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import topomech
 from topomech import _core
+from topomech.io import write_gmap
 from topomech.rules import RuleSet
 
 from conftest import VOLUME_FACES, flat_to_cells, independent_counts
@@ -285,6 +286,47 @@ def test_quad_subdivide(mesh: tuple) -> None:
         deg,
         c0["volumes"],
     )
+
+
+def _signed_areas(points: np.ndarray, cells: Any) -> list[float]:
+    """Twice the signed area (in the plane z = 0) of every polygon (a list of point indices)."""
+    areas = []
+    for cell in cells:
+        p = np.asarray(points)[np.asarray(cell)]
+        q = np.roll(p, -1, axis=0)
+        areas.append(float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1])))
+    return areas
+
+
+@pytest.mark.parametrize("element", ["quad", "triangle", "mixed"])
+@pytest.mark.parametrize("turned", [False, True], ids=["ccw", "cw"])
+@pytest.mark.parametrize("rule", ["quad_subdivide", "split_edge", "triangulate_face"])
+def test_written_faces_keep_the_input_orientation_after_a_2d_rule(
+    tmp_path: Path, element: str, turned: bool, rule: str
+) -> None:
+    """Regression: after ``quad_subdivide`` the faces written to a file had mixed
+    orientations (each face started at its smallest dart, of either orientation class), so
+    half the normals were flipped. Every written face has the sign of the input's faces."""
+    import meshio
+
+    points, kinds, offsets, conn = _core.grid(3, 2, 3.0, 2.0, element)
+    cells = [conn[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
+    if turned:  # every face clockwise: still one consistent orientation, kept as it is
+        cells = [c[::-1] for c in cells]
+        conn = np.concatenate(cells).astype(conn.dtype)
+    sign = -1.0 if turned else 1.0
+    assert all(a * sign > 0 for a in _signed_areas(points, cells))
+    g = topomech.GMap.from_flat(points, kinds, offsets, conn)
+    assert g.report.reoriented == []
+    RuleSet.library(2).apply(g, rule)
+    path = tmp_path / "out.vtu"
+    write_gmap(g, path)
+    back = meshio.read(path)
+    areas = _signed_areas(back.points, [c for block in back.cells for c in block.data])
+    assert len(areas) == g.cell_counts()["faces"] >= len(kinds)
+    assert g.cell_counts()["vertices"] > len(points)
+    flipped = [i for i, a in enumerate(areas) if a * sign <= 0]
+    assert flipped == [], f"{rule}: faces {flipped} of {len(areas)} are turned"
 
 
 def test_unsew_everything_then_remove_every_cell(mesh: tuple) -> None:

@@ -69,13 +69,24 @@ class EmbeddingSpec(NamedTuple):
     derived: bool
 
 
-def as_embedding_array(type_: str, values: Any) -> npt.NDArray[Any]:
-    """``values`` as an array of the dtype an embedding of type ``type_`` holds, converting
-    only where nothing is lost or reinterpreted: integers and floats to float64 for real
-    types, integers to int64 for ``i64``. Anything else is passed on unchanged for the
-    kernel to refuse by name (a float array for an ``i64`` embedding, numbers for a
-    ``bool`` one)."""
-    a = np.asarray(values)
+def as_embedding_array(spec: EmbeddingSpec | None, values: Any) -> npt.NDArray[Any]:
+    """``values`` as an array of the dtype the embedding ``spec`` holds, converting only
+    where nothing is lost or reinterpreted: integers and floats to float64 for real types,
+    integers to int64 for ``i64``. Anything else is passed on unchanged for the kernel to
+    refuse by name (a float array for an ``i64`` embedding, numbers for a ``bool`` one).
+    Without a spec (an unknown name) an empty array: the kernel refuses the name before
+    reading values. Raises ValueError, naming the embedding, for values numpy cannot make
+    an array of (rows of different lengths)."""
+    if spec is None:
+        return np.empty(0)
+    type_ = spec.type
+    try:
+        a = np.asarray(values)
+    except (ValueError, TypeError) as e:
+        raise ValueError(
+            f"values for {spec.name!r} ({type_} on {spec.orbit}) are not an array of one row "
+            f"per orbit, all of one shape: {e}"
+        ) from None
     if type_ == "bool":
         return a
     if type_ == "i64":
@@ -446,13 +457,14 @@ class GMap:
 
         - :class:`KeyError` for an unknown name (listing the map's embeddings);
         - :class:`TypeError` for a dtype that does not fit (a float array for ``i64``);
-        - :class:`ValueError` for another shape, or a NaN or infinite value (naming the
-          embedding, the first bad row and its dart);
+        - :class:`ValueError` for another shape (rows of different lengths too), or a NaN or
+          infinite value (naming the embedding, the first bad row and its dart), or, for
+          ``particle`` (the vertex numbering), values that number no rows: a negative row, a
+          row past the number of vertex orbits, an unused row below the largest, or one row
+          for vertex orbits at different positions;
         - :class:`EmbeddingError` for a derived embedding (write its source)."""
         specs = {s.name: s for s in self.embeddings()}
-        spec = specs.get(name)
-        a = as_embedding_array(spec.type, values) if spec is not None else np.asarray(values)
-        self._core.set_embedding(name, a)
+        self._core.set_embedding(name, as_embedding_array(specs.get(name), values))
 
     def embeddings(self) -> list[EmbeddingSpec]:
         """Every embedding's name, type, orbit type and whether it is derived, in declaration

@@ -946,8 +946,10 @@ def _load_rules(spec: str, dimension: int) -> RuleSet | None:
     sources = _read_rule_files([Path(spec)])
     if sources is None:
         return None
+    # a file that serves both dimensions (`dimension 2 3`, or no line) is loaded for the map's
+    serves_both = all(len(RuleSet.file_dimensions(text)) != 1 for _, text in sources)
     try:
-        rules = RuleSet.from_sources(sources)
+        rules = RuleSet.from_sources(sources, dimension if serves_both else None)
     except RuleError as e:
         for line in [*e.diagnostics, *e.warnings]:
             print(line, file=sys.stderr)

@@ -485,6 +485,30 @@ def _read_as(
     return mesh, printed, reason
 
 
+_VTU_PIECE = re.compile(rb"<Piece\b([^>]*)>")
+_VTU_COUNT = re.compile(rb"""\b(NumberOf(?:Points|Cells))\s*=\s*["'](\d+)["']""")
+
+
+def _vtu_without_cells(p: Path) -> MeshReadError | None:
+    """The error for a VTU file whose pieces all declare no cells (meshio fails on it with
+    "need at least one array to concatenate" or "Inconsistent data!"), else None. Reads the
+    file's first MiB: a piece's counts are in its opening tag, before its data."""
+    with p.open("rb") as f:
+        head = f.read(1 << 20)
+    points = cells = pieces = 0
+    for m in _VTU_PIECE.finditer(head):
+        counts = {k.decode(): int(v) for k, v in _VTU_COUNT.findall(m.group(1))}
+        if "NumberOfCells" not in counts:
+            return None
+        pieces += 1
+        points += counts.get("NumberOfPoints", 0)
+        cells += counts["NumberOfCells"]
+    if pieces == 0 or cells:
+        return None
+    only = "and no points" if points == 0 else f"only {points} point{'s' if points > 1 else ''}"
+    return MeshReadError(f"{p}: the VTU file has no cells, {only}: there is no mesh to read")
+
+
 def _read_raw(p: Path) -> tuple[meshio.Mesh, str | None, _GmshTags, list[str]]:
     """The whole file as meshio reads it, the format it was read as (None when meshio's own
     choice), the Gmsh entity tags, and notes."""
@@ -500,6 +524,8 @@ def _read_raw(p: Path) -> tuple[meshio.Mesh, str | None, _GmshTags, list[str]]:
             if printed.strip():
                 print(f"meshio: {_clean(printed)}", file=sys.stderr)
             return mesh, fmt, tags, notes
+        if fmt == "vtu" and (empty := _vtu_without_cells(p)) is not None:
+            raise empty
         reasons.append(f"as {fmt}: {reason or 'no points and no cells'}")
     with p.open("rb") as f:
         head = f.read(4096)
@@ -516,6 +542,8 @@ def _read_raw(p: Path) -> tuple[meshio.Mesh, str | None, _GmshTags, list[str]]:
         notes.append(f"read {p.name} as a Gmsh 1 file ($NOD/$ELM), by its content ({why})")
         return mesh, "gmsh", tags, notes
     mesh, printed, reason = _read_as(p, sniffed, tags, notes)
+    if mesh is None and sniffed == "vtu" and (empty := _vtu_without_cells(p)) is not None:
+        raise empty
     if mesh is None:
         reasons.append(f"as {sniffed} (by its content): {reason}")
         raise MeshReadError(f"{p}: cannot read this file as a mesh ({'; '.join(reasons)})")

@@ -81,17 +81,22 @@ class RuleSet:
     # ------------------------------------------------------------------ loading
 
     @classmethod
-    def load(cls, paths: PathLike | Sequence[PathLike]) -> RuleSet:
-        """Reads and checks one rule file or several together. Raises :class:`RuleError`
-        with every error (an unreadable file included)."""
+    def load(cls, paths: PathLike | Sequence[PathLike], dimension: int | None = None) -> RuleSet:
+        """Reads and checks one rule file or several together, for ``dimension`` (2 or 3:
+        needed when every file serves both, with ``dimension 2 3`` or no dimension line; by
+        default the dimension the files say). Raises :class:`RuleError` with every error (an
+        unreadable file included), ValueError for another dimension."""
         if isinstance(paths, (str, os.PathLike)):
             paths = [paths]
-        return cls(_core.RuleSet.load([os.fspath(p) for p in paths]))
+        return cls(_core.RuleSet.load([os.fspath(p) for p in paths], dimension))
 
     @classmethod
-    def from_source(cls, text: str, name: str = "<string>") -> RuleSet:
-        """Checks the text of a rule file; ``name`` is the file name diagnostics show."""
-        return cls(_core.RuleSet.from_source(text, name))
+    def from_source(
+        cls, text: str, name: str = "<string>", dimension: int | None = None
+    ) -> RuleSet:
+        """Checks the text of a rule file; ``name`` is the file name diagnostics show; for
+        ``dimension`` as :meth:`load` (needed for a ``dimension 2 3`` file)."""
+        return cls(_core.RuleSet.from_source(text, name, dimension))
 
     @classmethod
     def from_sources(

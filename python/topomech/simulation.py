@@ -551,9 +551,7 @@ class Simulation:
         shared vertex values; :class:`SimulationError` for the embeddings that number rows
         and elements (``particle``, ``point_id``, ``cell_id``, ``vertex0``, ``face0``)."""
         specs = {s.name: s for s in self.embeddings()}
-        spec = specs.get(name)
-        a = as_embedding_array(spec.type, values) if spec is not None else np.asarray(values)
-        self._core.set_orbit_embedding(name, a)
+        self._core.set_orbit_embedding(name, as_embedding_array(specs.get(name), values))
 
     def embeddings(self) -> list[EmbeddingSpec]:
         """Every embedding of the simulated map: name, type, orbit type and whether it is

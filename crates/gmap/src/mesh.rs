@@ -1659,6 +1659,14 @@ fn non_manifold_faces(
 /// Turns a map back into points and cells: one point per vertex orbit (numbered by
 /// [`GMap::orbit_labels`]), one cell per face `<0,1>` (2D) or volume `<0,1,2>` (3D), in the
 /// order of their smallest dart. Needs the `position` embedding.
+///
+/// A face's vertices start at the vertex of its smallest dart. On an orientable connected
+/// surface every face has the orientation of the component's smallest dart (its darts are
+/// split into two classes, alternating along every alpha link; each face is walked from its
+/// darts of that class), so that a built map gives back its cells as listed, and a map
+/// changed by rules that keep the darts they match (the shipped modeling rules) keeps the
+/// input's orientation. On a non-orientable component each face follows its smallest dart.
+/// Volumes are listed in VTK order with a positive volume.
 pub fn extract(g: &GMap) -> Result<Mesh, MeshError> {
     let n = g.dimension();
     let pos = g
@@ -1685,8 +1693,16 @@ pub fn extract(g: &GMap) -> Result<Mesh, MeshError> {
         cells: Vec::new(),
     };
     if n == 2 {
+        let class = orientation_classes(g);
         for d in g.orbit_representatives(OrbitType::face(2)) {
-            let verts = face_cycle(g, d, &labels)?;
+            // a face of the other class than its component's smallest dart is walked from
+            // the other dart at the same corner: the same first vertex, the other direction
+            let start = if class[d.index()] == 1 {
+                g.alpha(1, d)
+            } else {
+                d
+            };
+            let verts = face_cycle(g, start, &labels)?;
             mesh.kinds.push(CellKind::Polygon);
             mesh.cells.push(verts.into_iter().map(|(_, v)| v).collect());
         }
@@ -1704,6 +1720,48 @@ pub fn extract(g: &GMap) -> Result<Mesh, MeshError> {
         }
     }
     Ok(mesh)
+}
+
+/// The orientation class of each dart of a 2-map (indexed by dart): 0 for the smallest dart
+/// of its connected component and every dart an even number of alpha links from it, 1 for the
+/// others; 0 for every dart of a non-orientable component (where a dart is linked to one of
+/// its own class); removed darts are left unclassed.
+fn orientation_classes(g: &GMap) -> Vec<u8> {
+    const UNSET: u8 = u8::MAX;
+    let mut class = vec![UNSET; g.capacity()];
+    let mut component = Vec::new();
+    let mut stack = Vec::new();
+    for d0 in g.darts() {
+        if class[d0.index()] != UNSET {
+            continue;
+        }
+        class[d0.index()] = 0;
+        component.clear();
+        stack.push(d0);
+        let mut orientable = true;
+        while let Some(d) = stack.pop() {
+            component.push(d);
+            let c = class[d.index()];
+            for i in 0..=g.dimension() {
+                let e = g.alpha(i, d);
+                if e == d {
+                    continue;
+                }
+                if class[e.index()] == UNSET {
+                    class[e.index()] = 1 - c;
+                    stack.push(e);
+                } else if class[e.index()] == c {
+                    orientable = false;
+                }
+            }
+        }
+        if !orientable {
+            for d in &component {
+                class[d.index()] = 0;
+            }
+        }
+    }
+    class
 }
 
 /// The (dart, vertex) pairs around the face of `d`, one per corner, following alpha0 then

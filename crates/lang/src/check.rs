@@ -328,6 +328,11 @@ pub fn check_sources_for(
     check_files_for(target, &files)
 }
 
+/// The advice ending the error on rule files that all serve 2-maps and 3-maps when they are
+/// loaded without a dimension (a front end may replace it by how its caller gives one).
+pub const LOAD_FOR_A_DIMENSION: &str =
+    "load the rules for one dimension, 2 (surfaces) or 3 (volumes)";
+
 /// Checks rule files already parsed (or built as syntax trees, see [`crate::build`]), given as
 /// `(file name, syntax tree)`, exactly as [`check_sources`] checks parsed text.
 pub fn check_files(files: &[(String, crate::ast::File)]) -> (Option<Checked>, Vec<Diagnostic>) {
@@ -431,7 +436,12 @@ pub fn check_files_for(
                     d
                 }
                 None => {
-                    for (name, f) in files {
+                    let others = if files.len() > 1 {
+                        "no other file fixes the dimension"
+                    } else {
+                        "nothing fixes the dimension"
+                    };
+                    for ((name, f), dims) in files.iter().zip(&file_dims) {
                         let mut c = Ctx {
                             file: name,
                             out: &mut diags,
@@ -440,12 +450,15 @@ pub fn check_files_for(
                             None => c.error(
                                 Pos { line: 1, col: 1 },
                                 "dimension",
-                                "the file does not say 'dimension 2' or 'dimension 3', and no other file fixes the dimension: load the rules for a dimension (load_sources_for)".into(),
+                                format!("the file has no 'dimension' line, so it serves 2-maps and 3-maps, and {others}: {LOAD_FOR_A_DIMENSION}"),
                             ),
                             Some((_, p)) => c.error(
                                 p,
                                 "dimension",
-                                "the files serve several dimensions and none fixes one: load the rules for a dimension (load_sources_for)".into(),
+                                format!(
+                                    "the file says 'dimension {}', so it serves 2-maps and 3-maps, and {others}: {LOAD_FOR_A_DIMENSION}",
+                                    dims.iter().map(ToString::to_string).collect::<Vec<_>>().join(" ")
+                                ),
                             ),
                         }
                     }
@@ -476,6 +489,8 @@ pub fn check_files_for(
     };
     // embeddings, shared by all files
     let mut embs: Vec<EmbDecl> = Vec::new();
+    // where each of `embs` is declared first
+    let mut emb_at: Vec<(String, Pos)> = Vec::new();
     for (name, f) in files {
         let mut c = Ctx {
             file: name,
@@ -483,16 +498,26 @@ pub fn check_files_for(
         };
         for e in &f.embeddings {
             if let Some(d) = check_embedding(&mut c, e, dim, &embs) {
-                if let Some(prev) = embs.iter().find(|x| x.name == d.name) {
-                    if *prev != d {
+                if let Some(k) = embs.iter().position(|x| x.name == d.name) {
+                    if embs[k] != d {
+                        let (other, p) = &emb_at[k];
                         c.error(
                             e.pos,
                             "name",
-                            format!("embedding '{}' is declared again differently", e.name),
+                            format!(
+                                "embedding '{}' is declared again differently (its {}): '{}' here, '{}' at {other}:{}:{}",
+                                e.name,
+                                emb_differences(&embs[k], &d, &embs).join(" and "),
+                                describe_embedding(&d, &embs),
+                                describe_embedding(&embs[k], &embs),
+                                p.line,
+                                p.col
+                            ),
                         );
                     }
                 } else {
                     embs.push(d);
+                    emb_at.push((name.clone(), e.pos));
                 }
             }
         }
@@ -558,6 +583,38 @@ fn check_orbit(c: &mut Ctx, dims: &[u64], dim: usize, pos: Pos, what: &str) -> O
             None
         }
     }
+}
+
+/// A checked embedding declaration as it would be written after its name:
+/// `f64 on <0,1> policy sum`, with `derived AGG(SOURCE)` for a derived one (`embs` names its
+/// source).
+fn describe_embedding(e: &EmbDecl, embs: &[EmbDecl]) -> String {
+    let s = format!("{} on {} policy {}", e.ty, e.orbit, e.policy.name());
+    match e.derived {
+        Some((agg, k)) => {
+            let source = embs.get(k).map_or("?", |x| x.name.as_str());
+            format!("{s} derived {}({source})", agg.name())
+        }
+        None => s,
+    }
+}
+
+/// What differs between two declarations of one embedding: "type", "orbit", "policy",
+/// "derivation".
+fn emb_differences(a: &EmbDecl, b: &EmbDecl, embs: &[EmbDecl]) -> Vec<&'static str> {
+    let source = |e: &EmbDecl| {
+        e.derived
+            .map(|(agg, k)| (agg, embs.get(k).map(|x| &x.name)))
+    };
+    [
+        (a.ty != b.ty, "type"),
+        (a.orbit != b.orbit, "orbit"),
+        (a.policy != b.policy, "policy"),
+        (source(a) != source(b), "derivation"),
+    ]
+    .into_iter()
+    .filter_map(|(differs, what)| differs.then_some(what))
+    .collect()
 }
 
 fn check_embedding(

@@ -14,9 +14,9 @@
 //! - `topomech-codegen`: the Cranelift code generator ([`jit`]), implementing that interface.
 //!
 //! The facade re-exports their public paths and wires the backend in: every rule set it
-//! builds ([`load_sources`], [`load_sources_for`], [`load_files`], [`build::load`]), and every
-//! rule set built with [`RuleSet::new`] from rules checked through it ([`check`]), gets the
-//! Cranelift backend.
+//! builds ([`load_sources`], [`load_sources_for`], [`load_files`], [`load_files_for`],
+//! [`build::load`]), and every rule set built with [`RuleSet::new`] from rules checked through
+//! it ([`check`]), gets the Cranelift backend.
 //!
 //! ```
 //! use topomech_rules::{load_sources, Params};
@@ -200,6 +200,20 @@ pub fn load_sources_for(
 
 /// Reads, parses and checks rule files. An unreadable file is a diagnostic at 1:1.
 pub fn load_files(paths: &[&Path]) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
+    load_sources(&read_files(paths)?)
+}
+
+/// Reads, parses and checks rule files for maps of dimension `dim` (2 or 3), as
+/// [`load_sources_for`] checks their texts. An unreadable file is a diagnostic at 1:1.
+pub fn load_files_for(
+    dim: usize,
+    paths: &[&Path],
+) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
+    load_sources_for(dim, &read_files(paths)?)
+}
+
+/// The `(file name, text)` of each file, or a diagnostic at 1:1 for each unreadable one.
+fn read_files(paths: &[&Path]) -> Result<Vec<(String, String)>, Vec<Diagnostic>> {
     let mut sources = Vec::new();
     let mut errs = Vec::new();
     for p in paths {
@@ -214,10 +228,11 @@ pub fn load_files(paths: &[&Path]) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Dia
             }),
         }
     }
-    if !errs.is_empty() {
-        return Err(errs);
+    if errs.is_empty() {
+        Ok(sources)
+    } else {
+        Err(errs)
     }
-    load_sources(&sources)
 }
 
 /// The modeling rules shipped with topomech, as `(file name, text)`: split an edge, triangulate

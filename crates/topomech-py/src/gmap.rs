@@ -67,6 +67,93 @@ impl PyGMap {
 /// each orbit (int64), and the orbit type as written (`<1,2,3>`).
 pub(crate) type OrbitValuesPy<'py> = (Bound<'py, PyAny>, Bound<'py, PyArray1<i64>>, String);
 
+/// Refuses values for the map's vertex numbering `particle` (i64 on the vertex orbit, see
+/// `GMap::vertex_rows`) that number no rows: a negative row, a row past the number of vertex
+/// orbits, unused rows below the largest (the numbering is dense, 0..n), or one row given to
+/// vertex orbits at different positions (orbits sharing a row are one particle). Without the
+/// check such a numbering was written and then ignored, or collapsed the written mesh onto one
+/// point. Other embeddings, and a `particle` declared otherwise, pass.
+fn check_particle_rows(
+    g: &GMap,
+    id: EmbeddingId,
+    vals: &Gathered,
+    reps: &[topomech_gmap::Dart],
+) -> Result<()> {
+    let e = g.embedding(id);
+    let vertex = OrbitType::vertex(g.dimension());
+    let Gathered::Int(rows) = vals else {
+        return Ok(());
+    };
+    if e.name() != "particle" || e.ty() != EmbeddingType::I64 || e.orbit() != vertex {
+        return Ok(());
+    }
+    let what = format!(
+        "values for 'particle' (the vertex numbering: a row 0..n-1 for each of the {} vertex orbits)",
+        reps.len()
+    );
+    let at = |k: usize| format!("the vertex of dart {} (value {k})", reps[k].0);
+    if let Some(k) = rows.iter().position(|&r| r < 0) {
+        return Err(value_error(format!(
+            "{what} must not be negative: {} for {}",
+            rows[k],
+            at(k)
+        )));
+    }
+    if let Some(k) = rows
+        .iter()
+        .position(|&r| usize::try_from(r).map_or(true, |r| r >= reps.len()))
+    {
+        return Err(value_error(format!(
+            "{what} must be below {}: {} for {}",
+            reps.len(),
+            rows[k],
+            at(k)
+        )));
+    }
+    // every row now indexes `first` (0 <= r < reps.len())
+    let n = rows.iter().max().map_or(0, |&m| m as usize + 1);
+    let mut first: Vec<Option<usize>> = vec![None; n];
+    let pos = g
+        .embedding_id("position")
+        .filter(|&p| matches!(g.embedding(p).column(), ColumnRef::Real(_)));
+    for (k, &r) in rows.iter().enumerate() {
+        let r = r as usize;
+        match first[r] {
+            None => first[r] = Some(k),
+            Some(j) => {
+                if let Some(p) = pos {
+                    let (a, b) = (g.real(p, reps[j]), g.real(p, reps[k]));
+                    if a != b {
+                        return Err(value_error(format!(
+                            "{what} give particle row {r} to vertices at different positions: {} at {a:?} and {} at {b:?} (vertex orbits sharing a row are one particle, at one place)",
+                            at(j),
+                            at(k)
+                        )));
+                    }
+                }
+            }
+        }
+    }
+    let unused: Vec<String> = (0..n)
+        .filter(|&r| first[r].is_none())
+        .map(|r| r.to_string())
+        .collect();
+    if !unused.is_empty() {
+        let shown = unused.len().min(20);
+        let more = if unused.len() > shown {
+            format!(" and {} more", unused.len() - shown)
+        } else {
+            String::new()
+        };
+        return Err(value_error(format!(
+            "{what} must use every row below the largest, {}: no vertex has row {}{more}",
+            n - 1,
+            unused[..shown].join(", ")
+        )));
+    }
+    Ok(())
+}
+
 /// An embedding's values gathered one per orbit, owned: `width` reals per orbit (row-major),
 /// or one integer or boolean per orbit.
 pub(crate) enum Gathered {
@@ -596,9 +683,9 @@ impl PyGMap {
     /// layout that `embedding(name)` returns (same shape; float64 for real types, int64 for
     /// `i64`, bool for `bool`), then recomputes the derived embeddings. Nothing is written
     /// when it raises: `KeyError` for an unknown name (listing the map's embeddings),
-    /// `TypeError` for another dtype, `ValueError` for another shape or a non-finite value
-    /// (naming the embedding, the row and its dart), `EmbeddingError` for a derived
-    /// embedding.
+    /// `TypeError` for another dtype, `ValueError` for another shape, a non-finite value
+    /// (naming the embedding, the row and its dart) or a `particle` that is not a vertex
+    /// numbering, `EmbeddingError` for a derived embedding.
     fn set_embedding(
         slf: &Bound<'_, Self>,
         py: Python<'_>,
@@ -609,7 +696,8 @@ impl PyGMap {
         let (id, vals) = {
             let g = this.map()?;
             let id = embedding_key(g, name)?;
-            let (vals, _) = guard(|| orbit_values_arg(g, id, values))?;
+            let (vals, reps) = guard(|| orbit_values_arg(g, id, values))?;
+            guard(|| check_particle_rows(g, id, &vals, &reps))?;
             (id, vals)
         };
         this.mutate(py, |g| Ok(g.set_orbit_values(id, vals.as_column())?))

@@ -18,11 +18,11 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyInt, PyList, PyMapping, PyTuple};
 use topomech_gmap::{Dart, GMap};
 use topomech_physics::{common_rules, prelude_rules};
-use topomech_rules::check::Rule;
+use topomech_rules::check::{Rule, LOAD_FOR_A_DIMENSION};
 use topomech_rules::model::Model;
 use topomech_rules::{
-    library, load_files, load_sources, load_sources_for, ApplyError as KernelApplyError,
-    ApplyReport, Diagnostic, Params, RuleSet, Ty, Val,
+    library, load_files, load_files_for, load_sources, load_sources_for,
+    ApplyError as KernelApplyError, ApplyReport, Diagnostic, Params, RuleSet, Ty, Val,
 };
 
 use crate::convert::{dart_arg, shape_str, type_name};
@@ -72,7 +72,16 @@ fn loaded(
             inner,
             warnings: diags.iter().map(ToString::to_string).collect(),
         }),
-        Err(diags) => Err(Error::Rules(diags)),
+        Err(mut diags) => {
+            // the checker's advice for files that serve both dimensions, in Python's terms
+            for d in &mut diags {
+                if let Some(head) = d.message.strip_suffix(LOAD_FOR_A_DIMENSION) {
+                    d.message =
+                        format!("{head}pass dimension=2 (surfaces) or dimension=3 (volumes)");
+                }
+            }
+            Err(Error::Rules(diags))
+        }
     }
 }
 
@@ -387,27 +396,48 @@ fn report_dict<'py>(py: Python<'py>, r: &ApplyReport) -> PyResult<Bound<'py, PyD
 
 #[pymethods]
 impl PyRuleSet {
-    /// Reads and checks rule files together (they share their dimension and embeddings).
-    /// Raises `RuleError` listing every error, an unreadable file included.
+    /// Reads and checks rule files together (they share their dimension and embeddings), for
+    /// `dimension` (2 or 3; needed when every file serves both, `dimension 2 3` or no
+    /// dimension line; by default the dimension the files say). Raises `RuleError` listing
+    /// every error, an unreadable file included.
     #[staticmethod]
-    fn load(py: Python<'_>, paths: Vec<PathBuf>) -> PyResult<PyRuleSet> {
+    #[pyo3(signature = (paths, dimension=None))]
+    fn load(py: Python<'_>, paths: Vec<PathBuf>, dimension: Option<i64>) -> PyResult<PyRuleSet> {
         if paths.is_empty() {
             return Err(value_error("load needs at least one rule file").into());
         }
+        let dim = rule_dimension(dimension)?;
         py.detach(move || {
             guard(|| {
                 let refs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
-                loaded(load_files(&refs))
+                loaded(match dim {
+                    Some(d) => load_files_for(d, &refs),
+                    None => load_files(&refs),
+                })
             })
         })
     }
 
-    /// Checks the text of one rule file; `name` is the file name diagnostics show.
+    /// Checks the text of one rule file; `name` is the file name diagnostics show; for
+    /// `dimension` as `from_sources`.
     #[staticmethod]
-    #[pyo3(signature = (text, name = "<string>"))]
-    fn from_source(py: Python<'_>, text: String, name: &str) -> PyResult<PyRuleSet> {
-        let source = (name.to_string(), text);
-        py.detach(move || guard(|| loaded(load_sources(&[source]))))
+    #[pyo3(signature = (text, name = "<string>", dimension=None))]
+    fn from_source(
+        py: Python<'_>,
+        text: String,
+        name: &str,
+        dimension: Option<i64>,
+    ) -> PyResult<PyRuleSet> {
+        let dim = rule_dimension(dimension)?;
+        let sources = [(name.to_string(), text)];
+        py.detach(move || {
+            guard(|| {
+                loaded(match dim {
+                    Some(d) => load_sources_for(d, &sources),
+                    None => load_sources(&sources),
+                })
+            })
+        })
     }
 
     /// Checks the texts of several rule files together: `[(name, text), ...]`, for

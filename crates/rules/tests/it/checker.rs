@@ -89,7 +89,12 @@ fn dimension() {
         "label 4",
     );
     refused("dimension 4\n", "dimension", 1, "dimension 4");
-    refused("embedding x : f64 on <0>\n", "dimension", 1, "does not say");
+    refused(
+        "embedding x : f64 on <0>\n",
+        "dimension",
+        1,
+        "has no 'dimension' line",
+    );
     accepted(&with_head("rule r {\n  left { a : <0,2> hook }\n}"));
 }
 
@@ -126,6 +131,62 @@ fn name() {
         "declared again differently",
     );
     accepted(&with_head("rule r {\n  left { a : <0> hook  b : <0>  a -2- b }\n}\nrule s {\n  left { a : <0> hook }\n}"));
+}
+
+/// Regression: "embedding 'w' is declared again differently" did not say how, nor where the
+/// other declaration is. The error names what differs and both declarations, the first at its
+/// `FILE:LINE:COL`.
+#[test]
+fn an_embedding_declared_again_differently_names_both_declarations() {
+    let first = "dimension 2\nembedding m : f64 on <>\nembedding w : f64 on <0> policy sum\n";
+    let cases = [
+        (
+            "embedding w : i64 on <0> policy sum",
+            "type",
+            "i64 on <0> policy sum",
+        ),
+        (
+            "embedding w : f64 on <1> policy sum",
+            "orbit",
+            "f64 on <1> policy sum",
+        ),
+        (
+            "embedding w : f64 on <0>",
+            "policy",
+            "f64 on <0> policy copy",
+        ),
+        (
+            "embedding w : vec3 on <0,1>",
+            "type and orbit and policy",
+            "vec3 on <0,1> policy copy",
+        ),
+        (
+            "embedding w : f64 on <0> policy sum derived sum(m)",
+            "derivation",
+            "f64 on <0> policy sum derived sum(m)",
+        ),
+    ];
+    for (again, what, described) in cases {
+        let second = format!("dimension 2\n\n{again}\n");
+        let errs = load_sources(&[("a.tmr".into(), first.into()), ("b.tmr".into(), second)])
+            .map(|_| ())
+            .expect_err(again);
+        let hit = errs.iter().find(|d| d.condition == "name").expect(again);
+        assert_eq!(
+            hit.to_string(),
+            format!(
+                "b.tmr:3:1: error[name]: embedding 'w' is declared again differently (its \
+                 {what}): '{described}' here, 'f64 on <0> policy sum' at a.tmr:3:1"
+            )
+        );
+    }
+    // the same declaration again is the same embedding
+    let same = "dimension 2\nembedding w : f64 on <0> policy sum\n";
+    assert!(load_sources(&[
+        ("a.tmr".into(), first.into()),
+        ("b.tmr".into(), same.into())
+    ])
+    .is_ok());
 }
 
 #[test]

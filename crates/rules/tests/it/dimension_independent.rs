@@ -3,7 +3,8 @@
 //! exactly the 2D ones; what cannot be read on a 2-map is refused where it is written.
 
 use topomech_rules::check::Rule;
-use topomech_rules::{load_sources, load_sources_for, RuleSet};
+use topomech_rules::check::LOAD_FOR_A_DIMENSION;
+use topomech_rules::{load_files, load_files_for, load_sources, load_sources_for, RuleSet};
 
 const PRELUDE: &str = include_str!("../../../physics/models/prelude.tmr");
 const COMMON2D: &str = include_str!("../../../physics/models/common2d.tmr");
@@ -131,13 +132,47 @@ fn a_file_serves_only_its_dimensions() {
     }
     // without a dimension to load for, a set that fixes none is refused clearly ...
     let both = format!("dimension 2 3\n{bare}");
+    // (its message says what the file says and what to do, naming no API function)
     let d = load_sources(&[("b.tmr".into(), both.clone())]).unwrap_err();
     assert_eq!(d[0].condition, "dimension");
-    assert!(
-        d[0].message.contains("load the rules for a dimension"),
-        "{}",
-        d[0]
+    assert_eq!(
+        d[0].message,
+        format!(
+            "the file says 'dimension 2 3', so it serves 2-maps and 3-maps, and nothing fixes \
+             the dimension: {LOAD_FOR_A_DIMENSION}"
+        )
     );
+    let d = load_sources(&[
+        ("b.tmr".into(), bare.clone()),
+        ("c.tmr".into(), both.clone()),
+    ])
+    .unwrap_err();
+    assert_eq!(d.len(), 2);
+    assert_eq!(
+        d[0].message,
+        format!(
+            "the file has no 'dimension' line, so it serves 2-maps and 3-maps, and no other \
+             file fixes the dimension: {LOAD_FOR_A_DIMENSION}"
+        )
+    );
+    assert!(
+        d.iter().all(|x| !x.message.contains("load_sources")),
+        "{d:?}"
+    );
+    // files on disk are loaded for a dimension the same way
+    let dir = std::env::temp_dir().join(format!("topomech-both-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("both.tmr");
+    std::fs::write(&path, &both).unwrap();
+    assert!(load_files(&[path.as_path()]).is_err());
+    for dim in [2, 3] {
+        let (r, _) = load_files_for(dim, &[path.as_path()]).unwrap();
+        assert_eq!(r.dimension(), dim);
+    }
+    let missing = dir.join("missing.tmr");
+    let d = load_files_for(2, &[missing.as_path()]).unwrap_err();
+    assert_eq!(d[0].condition, "file");
+    std::fs::remove_dir_all(&dir).unwrap();
     // ... and one file of a single dimension fixes it for the others
     let (r, _) = load_sources(&[
         ("a.tmr".into(), "dimension 2\n".into()),

@@ -403,3 +403,48 @@ rule unsew_edge { left { a : <0> hook   b : <0>   a -2- b } right { a : <0>   b 
         .unwrap();
     assert_eq!(values(&g1), values(&h));
 }
+
+/// Twice the signed area of a polygon of the plane z = 0 (positive counter-clockwise).
+fn signed_area2(cell: &[usize], points: &[[f64; 3]]) -> f64 {
+    (0..cell.len())
+        .map(|k| {
+            let (p, q) = (points[cell[k]], points[cell[(k + 1) % cell.len()]]);
+            p[0] * q[1] - q[0] * p[1]
+        })
+        .sum()
+}
+
+/// Regression: after `quad_subdivide` (and the other 2D rules) the faces extracted from the map
+/// came out with mixed orientations, each starting at its smallest dart whichever orientation
+/// class it was in, so that a written surface had flipped normals. Every face of a planar grid
+/// listed counter-clockwise (or every face clockwise) must come back with the input's sign.
+#[test]
+fn extracted_faces_keep_the_input_orientation_after_2d_rules() {
+    use topomech_gmap::mesh::extract;
+    let r = rules(2);
+    for m in meshes2() {
+        for turned in [false, true] {
+            let mut m = m.clone();
+            if turned {
+                m.cells.iter_mut().for_each(|c| c.reverse());
+            }
+            let sign = if turned { -1.0 } else { 1.0 };
+            // an unchanged map gives back its input cells, each from its first vertex
+            assert_eq!(extract(&map(&m)).unwrap().cells, m.cells);
+            for rule in ["quad_subdivide", "split_edge", "triangulate_face"] {
+                let mut g = map(&m);
+                apply(&r, &mut g, rule);
+                let out = extract(&g).unwrap();
+                assert!(out.cells.len() >= m.cells.len());
+                for (k, c) in out.cells.iter().enumerate() {
+                    let a = signed_area2(c, &out.points);
+                    assert!(
+                        a * sign > 0.0,
+                        "{rule}, input turned: {turned}: face {k} {c:?} has signed area {}",
+                        a / 2.0
+                    );
+                }
+            }
+        }
+    }
+}
