@@ -234,3 +234,36 @@ def test_info_on_a_saved_map_and_reoriented_count(tmp_path: Path) -> None:
     data = json.loads(r.stdout)
     assert (data["reoriented"], data["reoriented_cells"]) == (1, [1])
     assert data["quality"]["min_volume"] == pytest.approx(1 / 6, rel=REL)
+
+
+def test_info_on_a_map_of_general_polyhedra(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A tetrahedron whose edge `split_edge` split is a volume of 5 vertices and 4 faces (two
+    of them quads), which no mesh file holds: `info` on its .tmg gives the map's counts, its
+    validity and the vertices' bounding box, lists no cells, says why in a note (stderr and
+    the JSON's notes), and exits 0 (it exited 2, describing nothing). Writing it to a mesh
+    file is still refused (exit 2, naming the volume)."""
+    tet = write(
+        tmp_path, "t.vtu", [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [("tetra", [[0, 1, 2, 3]])]
+    )
+    tmg = tmp_path / "t.tmg"
+    code = cli.main(["apply", str(tet), "@library", "split_edge", "--at", "0", "--out", str(tmg)])
+    assert code == 0
+    capsys.readouterr()
+    data = info_json(tmg, capsys)
+    assert (data["vertices"], data["faces"], data["volumes"], data["valid"]) == (5, 4, 1, True)
+    assert data["cells_by_kind"] == {}
+    assert data["bounding_box"] == {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0]}
+    assert data["quality"]["min_volume"] is None
+    assert any("5 vertices and 4 faces" in n for n in data["notes"]), data["notes"]
+    code = cli.main(["info", str(tmg)])
+    out, err = capsys.readouterr()
+    assert code == 0
+    assert "not listed (see the note)" in out
+    assert "cannot be written to one" in err
+    code = cli.main(
+        ["apply", str(tet), "@library", "split_edge", "--at", "0", "--out", str(tmp_path / "x.vtu")]
+    )
+    assert code == 2
+    assert "5 vertices and 4 faces" in capsys.readouterr().err

@@ -28,7 +28,7 @@ from typing import Any, Callable, TextIO
 
 from topomech import __version__
 from topomech._cells import flat_to_blocks, mesh_figures
-from topomech._core import ApplyError, RuleError, SceneError, TopomechError
+from topomech._core import ApplyError, MeshError, RuleError, SceneError, TopomechError
 from topomech.io import DUPLICATES, PINCHED, ImportedMesh, import_mesh, write_format, write_gmap
 from topomech.models import Model, shipped_models
 from topomech.rules import ParamValue, RuleSet
@@ -168,6 +168,7 @@ def _add_info(sub: Any) -> None:
 
 def _summary(path: Path, m: ImportedMesh) -> dict[str, Any]:
     g, dropped = m.gmap, m.dropped
+    notes = list(m.notes)
     counts = g.cell_counts()
     valid = g.is_valid()
     violations = [] if valid else g.violations()
@@ -193,9 +194,27 @@ def _summary(path: Path, m: ImportedMesh) -> dict[str, Any]:
                 start += len(data)
             blocks = kept
     else:
-        points, kinds, offsets, connectivity = g.to_flat()
-        blocks = [(b.type, b.data) for b in flat_to_blocks(kinds, offsets, connectivity)]
+        try:
+            points, kinds, offsets, connectivity = g.to_flat()
+            blocks = [(b.type, b.data) for b in flat_to_blocks(kinds, offsets, connectivity)]
+        except MeshError as e:
+            # a map whose cells are not the kinds a mesh file holds (a rewrite made a volume
+            # a general polyhedron): its counts and validity are the map's; the cells are
+            # not listed, and the note says why (writing it to a mesh file is refused)
+            points, blocks = g.positions(), []
+            notes.append(
+                f"cells by kind and quality not given: {e} (a mesh file holds tetrahedra, "
+                "hexahedra, wedges, pyramids and polygons: this map cannot be written to one; "
+                "it stays a .tmg)"
+            )
+            _note(notes[-1])
     figures = mesh_figures(points, blocks, g.dimension)
+    if not blocks and len(points):
+        # the bounding box of the vertices (the figures' is of the points cells use)
+        figures["bounding_box"] = {
+            "min": [float(v) for v in points.min(axis=0)],
+            "max": [float(v) for v in points.max(axis=0)],
+        }
     return {
         "file": str(path),
         "darts": counts["darts"],
@@ -218,7 +237,7 @@ def _summary(path: Path, m: ImportedMesh) -> dict[str, Any]:
         "merged_duplicates": [[int(a), int(b)] for a, b in getattr(r, "merged_duplicates", [])],
         "non_orientable": bool(getattr(r, "non_orientable", False)),
         **figures,
-        "notes": list(m.notes),
+        "notes": notes,
         "memory_bytes": g.memory_bytes(),
     }
 
@@ -238,7 +257,11 @@ def _print_summary(s: dict[str, Any]) -> None:
         ("volumes", s["volumes"]),
         ("components", s["components"]),
         ("boundary", f"{s['boundary']} {s['boundary_kind']}"),
-        ("cells", ", ".join(f"{n} {k}" for k, n in s["cells_by_kind"].items())),
+        (
+            "cells",
+            ", ".join(f"{n} {k}" for k, n in s["cells_by_kind"].items())
+            or "not listed (see the note)",
+        ),
         (
             "bounds",
             f"min ({', '.join(f'{x:.6g}' for x in box['min'])}), "
