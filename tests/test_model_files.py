@@ -591,3 +591,24 @@ def test_a_model_file_that_is_not_utf8_is_named(tmp_path: Path) -> None:
     bad.write_bytes(b"\xff\xfe model m() {}\n")
     with pytest.raises(UnicodeDecodeError, match=r"binary\.tmr: not UTF-8 text"):
         topomech.Model.load(bad)
+
+
+def test_an_unused_parameter_with_a_default_is_a_warning_not_a_lost_model(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A model parameter with a default that no rule call passes on gets a warning from
+    `topomech check` (exit 0), and the model stays: `Model.load` finds it, with the
+    parameter (QA: the warning dropped the model, and the file then declared none)."""
+    from topomech import cli
+
+    path = _write(
+        tmp_path,
+        "anchor.tmr",
+        ANCHOR.replace("model anchor(k: f64 = 10.0)", "model anchor(k: f64 = 10.0, c: f64 = 3.0)"),
+    )
+    assert cli.main(["check", str(path)]) == 0
+    out, err = capsys.readouterr()
+    assert "warning[unused-parameter]" in out + err
+    assert "1 model" in out + err
+    m = Model.load(path)
+    assert m.params == {"k": 10.0, "c": 3.0}

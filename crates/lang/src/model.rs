@@ -522,7 +522,8 @@ fn check_model(
             ),
         );
     }
-    if out.len() > before {
+    // an error drops the model; a warning (an unused parameter with a default) does not
+    if out[before..].iter().any(|d| d.severity == Severity::Error) {
         return None;
     }
     Some(Model {

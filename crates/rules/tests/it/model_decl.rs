@@ -308,8 +308,11 @@ fn outputs_nobody_writes_and_non_finite_defaults_are_refused() {
 #[test]
 fn an_unused_parameter_with_a_default_is_a_warning() {
     let model = "model a(k: f64 = 1.0,\n unused: f64 = 2.0) {\n init anchor_init(k, vec3(0,0,0))\n step anchor_force forces f_anchor }\n";
-    let (_, warnings) = load_sources(&[("m.tmr".into(), format!("{HEAD}{model}"))])
+    let (rules, warnings) = load_sources(&[("m.tmr".into(), format!("{HEAD}{model}"))])
         .expect("a warning does not refuse the file");
+    // nor drop the model
+    let names: Vec<&str> = rules.models().iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["a"], "{warnings:?}");
     let w: Vec<&Diagnostic> = warnings
         .iter()
         .filter(|d| d.condition == "unused-parameter")
