@@ -267,3 +267,29 @@ def test_info_on_a_map_of_general_polyhedra(
     )
     assert code == 2
     assert "5 vertices and 4 faces" in capsys.readouterr().err
+
+
+def test_a_run_of_a_map_of_general_polyhedra_is_refused_before_it_steps(tmp_path: Path) -> None:
+    """`topomech run` of a scene whose saved map has a general polyhedron (after
+    `split_edge`) is refused at set-up, naming `mesh.file` and the volume, before any step
+    and before the output folder is made (it stepped to the end, then failed writing
+    final.vtu with exit 2 and no summary: the results lost)."""
+    tet = write(
+        tmp_path, "t.vtu", [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [("tetra", [[0, 1, 2, 3]])]
+    )
+    tmg = tmp_path / "t.tmg"
+    assert (
+        cli.main(["apply", str(tet), "@library", "split_edge", "--at", "0", "--out", str(tmg)]) == 0
+    )
+    scene = tmp_path / "s.toml"
+    scene.write_text(
+        '[mesh]\nfile = "t.tmg"\n[[model]]\nkind = "stretch_cumulated"\n'
+        '[integrator]\nkind = "symplectic_euler"\ndt = 0.001\nsteps = 5\n[output]\nevery = 0\n',
+        encoding="utf-8",
+    )
+    out = tmp_path / "out"
+    with pytest.raises(topomech.SceneError, match=r"mesh\.file: .*5 vertices and 4 faces"):
+        topomech.run_scene(scene, out=out)
+    assert not out.exists()
+    assert cli.main(["run", str(scene), "--out", str(out)]) == 2
+    assert not out.exists()

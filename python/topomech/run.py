@@ -73,7 +73,13 @@ import numpy as np
 
 from topomech import __version__
 from topomech._cells import FlatMesh, to_flat
-from topomech._core import DivergenceError, SceneError, SimulationError, TopomechError
+from topomech._core import (
+    DivergenceError,
+    MeshError,
+    SceneError,
+    SimulationError,
+    TopomechError,
+)
 from topomech._manifest import OutputError, OutputFolder
 from topomech._output import OutputCells, check_fields, field_values
 from topomech._solver_log import SolverLog, SolverWarning
@@ -639,10 +645,22 @@ def run_scene(
         sim = sc.build()
         input_counts = _counts(sim)
         fields = check_fields(sim, getattr(sc, "fields", ()), sc.path)
+        cells = OutputCells(sim, _input_cells(sc))
+        try:
+            cells.elements()
+        except (MeshError, SimulationError) as e:
+            # refused before a step is taken and before the output folder is made: every
+            # frame and final.vtu list the elements (a saved map whose volumes a rewrite
+            # made general polyhedra has none a mesh file holds)
+            where = str(sc.path) if sc.path is not None else "<scene>"
+            raise SceneError(
+                f"{where}: mesh.file: the run's output files (final.vtu, the frames) cannot "
+                f"hold this map's cells: {e}; a mesh file holds tetrahedra, hexahedra, wedges, "
+                "pyramids and polygons (step such a map from Python: topomech.Simulation)"
+            ) from None
         folder.prepare()
         for rel in ("view.bin", "view.json", "energy.csv"):
             folder.add(rel)  # before the recorder starts: it may write them as it goes
-        cells = OutputCells(sim, _input_cells(sc))
         writer = _Writer(sim, cells, fields)
         recorder = Recorder(sim, sc, energy=preview, cells=cells, out_dir=out_dir)
 
