@@ -266,7 +266,16 @@ def test_info_on_a_map_of_general_polyhedra(
         ["apply", str(tet), "@library", "split_edge", "--at", "0", "--out", str(tmp_path / "x.vtu")]
     )
     assert code == 2
-    assert "5 vertices and 4 faces" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "5 vertices and 4 faces (2 triangles, 2 quads)" in err
+    assert "write the map as a .tmg" in err
+    assert not (tmp_path / "x.vtu").exists()
+    # a second split: every face counted, by its sides (the pentagons were left out)
+    code = cli.main(
+        ["apply", str(tmg), "@library", "split_edge", "--at", "1", "--out", str(tmp_path / "y.vtu")]
+    )
+    assert code == 2
+    assert "6 vertices and 4 faces (2 triangles, 2 pentagons)" in capsys.readouterr().err
 
 
 def test_a_run_of_a_map_of_general_polyhedra_is_refused_before_it_steps(tmp_path: Path) -> None:

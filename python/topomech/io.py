@@ -1039,11 +1039,27 @@ def write_gmap(gmap: GMap, path: PathLike) -> None:
     as a mesh file in the format of the extension (``.vtu``, ``.vtk``, ``.msh``, ...).
     Raises ``ValueError`` when the extension names no format or the format cannot hold the
     map's cells (Gmsh has no polygons, say; STL keeps triangles only and OFF and Medit skip
-    polygons, which the file read back shows); nothing is left written then."""
+    polygons, which the file read back shows), :class:`topomech.MeshError` naming the file
+    and the volume when a cell is no kind a mesh file holds (a general polyhedron after a
+    rewrite); nothing is left written then."""
     fmt = write_format(path)
     if fmt == "tmg":
         gmap.save(path)
-    elif fmt == "vtu":
+        return
+    try:
+        _write_cells(gmap, path, fmt)
+    except MeshError as e:
+        # the map's cells could not be listed (extracted before anything is written): a
+        # map whose volumes a rewrite made general polyhedra has none a mesh file holds
+        raise MeshError(
+            f"{path}: {e}; a mesh file holds tetrahedra, hexahedra, wedges, pyramids and "
+            "polygons: write the map as a .tmg (topomech's own format) instead"
+        ) from None
+
+
+def _write_cells(gmap: GMap, path: PathLike, fmt: str) -> None:
+    """:func:`write_gmap` for a mesh file of format ``fmt``."""
+    if fmt == "vtu":
         write_vtu(gmap, path)
     else:
         import meshio

@@ -1821,11 +1821,27 @@ fn volume_cell(
         (6, 5, 2, 3) => CellKind::Wedge,
         (5, 5, 4, 1) => CellKind::Pyramid,
         _ => {
+            // every face counted by its number of sides: "2 triangles, 1 quad, 1 pentagon"
+            let mut sides: Vec<usize> = faces.iter().map(Vec::len).collect();
+            sides.sort_unstable();
+            sides.dedup();
+            let name = |k: usize, n: usize| {
+                let one = match k {
+                    3 => "triangle".to_string(),
+                    4 => "quad".to_string(),
+                    5 => "pentagon".to_string(),
+                    6 => "hexagon".to_string(),
+                    k => format!("{k}-sided face"),
+                };
+                format!("{n} {one}{}", if n == 1 { "" } else { "s" })
+            };
+            let kinds: Vec<String> = sides.iter().map(|&k| name(k, sizes(k))).collect();
             return Err(MeshError::Extract(format!(
-                "the volume of dart {d} has {} vertices and {} faces ({tris} triangles, {quads} quads): not a tetra, hexahedron, wedge or pyramid",
+                "the volume of dart {d} has {} vertices and {} faces ({}): not a tetra, hexahedron, wedge or pyramid",
                 verts.len(),
-                faces.len()
-            )))
+                faces.len(),
+                kinds.join(", ")
+            )));
         }
     };
     let base_len = if matches!(kind, CellKind::Tetra | CellKind::Wedge) {
