@@ -293,3 +293,26 @@ def test_cut_arguments_are_refused_by_name() -> None:
     with pytest.raises(ValueError, match="offset is too large for a float"):
         sim.cut([1, 0, 0], 10**400)
     assert sim.cut(np.array([1, 0, 0], dtype=np.int32), 0.5).unsewn > 0
+
+
+def test_a_blade_over_faces_a_cut_opened_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A blade that sweeps only faces a plane cut opened before it crosses nothing sewn: the
+    run stops as for a blade that misses, and the message says that every face it met may
+    be open already (it said only that it misses the object, which it does not: QA)."""
+    from test_topology_scenes import box_with, run_cli, summary_of
+
+    scene = box_with(
+        tmp_path,
+        '[[event]]\ntime = 0.0\nkind = "cut"\nplane = { normal = [1, 0, 0], offset = 1.0 }\n'
+        '[[event]]\nkind = "blade"\nstart = 0.0\nend = 0.002\n'
+        "from = [[1.0, -0.1, -0.1], [1.0, -0.1, 1.1]]\nto = [[1.0, 1.1, -0.1], [1.0, 1.1, 1.1]]\n",
+    )
+    out = tmp_path / "o"
+    code, err = run_cli([str(scene), "--out", str(out)], capsys)
+    assert code == 1, err
+    s = summary_of(out)
+    assert s["error"]["type"] == "event", s["error"]
+    assert s["error"]["event"] == 1
+    assert "or every face it meets is open already" in s["error"]["message"]

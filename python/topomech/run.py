@@ -724,7 +724,8 @@ def run_scene(
                     "type": "event",
                     "message": (
                         f"event[{missed}] ({_describe_event(sc.events[missed])}) separates "
-                        f"nothing at step {sim.steps} (t = {sim.time:g}): it misses the object"
+                        f"nothing at step {sim.steps} (t = {sim.time:g}): it misses the object, "
+                        "or every face it meets is open already"
                     ),
                     "step": sim.steps,
                     "event": missed,

@@ -416,7 +416,7 @@ impl Simulation {
                 // path without crossing anything misses the object
                 if t1 >= end - 1e-9 * self.cfg.dt && self.blades_opened[k] == 0 {
                     return Err(PhysicsError::Config(format!(
-                        "blade {k} moved from t = {} to t = {end} and crossed nothing: it misses the object",
+                        "blade {k} moved from t = {} to t = {end} and crossed nothing: it misses the object, or every face it meets is open already",
                         self.cfg.blades[k].start
                     )));
                 }
