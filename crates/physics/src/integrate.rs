@@ -335,6 +335,12 @@ impl Simulation {
                     let mut params = self.step_params.clone();
                     params.insert("p".to_string(), Val::V3(p));
                     params.insert("n".to_string(), Val::V3(n));
+                    // the fast runaway test's bound, a little looser (see glue.tmr): a
+                    // velocity the rule leaves unprojected as a runaway is one the test
+                    // below refuses
+                    let limit = speed_limit(0.5 * self.size, self.cfg.dt);
+                    params.insert("limit".to_string(), Val::F(limit * (1.0 + 1e-9)));
+                    params.insert("frame".to_string(), Val::V3(self.frame));
                     Some((format!("{rule}_ground"), params))
                 }
                 // the saving way reports it
@@ -371,6 +377,18 @@ impl Simulation {
         }
         self.rules
             .apply_everywhere(&mut self.g, rule, &self.step_params)?;
+        if self.cfg.ground.is_some() {
+            // a runaway is one before the ground's projection, which would hide a vertex
+            // sent into the plane (its velocity into it dropped, the vertex put back onto
+            // it, or, from far enough, beside it: the projection cancels); the caller
+            // restores the state (it saved it: this way always does)
+            let (pos, vel) = (self.id("position")?, self.id("velocity")?);
+            if !self.columns_sane(pos, vel) {
+                if let Some((vertex, why)) = self.runaway(pos, vel) {
+                    return Err(PhysicsError::diverged(self.steps + 1, vertex, why));
+                }
+            }
+        }
         self.contact()
     }
 

@@ -793,7 +793,7 @@ impl Simulation {
                             let k = p.hinges.len();
                             (
                                 format!(
-                                    "; {k} piece(s) of the body touch the rest only at pinched vertices (points where elements meet without sharing a {}, kept as one particle), held nowhere else, and the load turns them about those points: a hinge, so the stiffness is singular there: {}{more}; hold vertices of each piece, join the pieces through shared {}s in the mesh (or import it with pinched = \"split\" to see the pieces apart), or use the integrator implicit_euler for their motion",
+                                    "; {k} piece(s) of the body touch the rest only at pinched vertices (points where elements meet without sharing a {}, kept as one particle), held nowhere else, and the load turns them about those points: a hinge, so the stiffness is singular there: {}{more}; hold vertices of each piece, join the pieces through shared {}s in the mesh (or import it with the pinched option set to split, to see the pieces apart), or use the integrator implicit_euler for their motion",
                                     if self.g.dimension() == 3 { "face" } else { "edge" },
                                     each.join("; "),
                                     if self.g.dimension() == 3 { "face" } else { "edge" },

@@ -200,8 +200,8 @@ fn the_ground_keeps_its_plan_from_step_to_step() {
 /// with each explicit integrator: the steps give the bits of the interpreter's, which runs
 /// the integrator and then the ground rule and copies the state every step (exact: the
 /// same operations in the same order); some vertices did reach the plane; no compiled step
-/// copied the state; and a vertex sent running away is refused before anything is written
-/// (the state after the failed step is the one before it, bit for bit).
+/// copied the state; and a vertex sent running away, also into the plane, is refused, the
+/// state after the failed step the one before it, bit for bit, in both runs.
 #[test]
 fn a_step_with_ground_is_tested_before_it_writes() {
     for integrator in [Integrator::SymplecticEuler, Integrator::ExplicitEuler] {
@@ -237,22 +237,40 @@ fn a_step_with_ground_is_tested_before_it_writes() {
         assert!(on_plane > 0, "{integrator:?}: the box reached the plane");
         assert_eq!(fast.steps_saving_state(), 0, "{integrator:?}");
         assert_eq!(slow.steps_saving_state(), 80, "{integrator:?}");
-        // a runaway vertex: refused, nothing written
-        let mut vel = fast.vertex_vec3("velocity").unwrap();
-        vel[0] = [0.0, 0.0, 1e6];
-        fast.set_vertex_vec3("velocity", &vel).unwrap();
-        let (p0, v0) = (
-            fast.vertex_vec3("position").unwrap(),
-            fast.vertex_vec3("velocity").unwrap(),
-        );
-        match fast.step() {
-            Err(PhysicsError::Diverged { vertex, why, .. }) => {
-                assert_eq!(vertex, Some(0), "{integrator:?}: {why}");
-                assert!(why.contains("runaway"), "{integrator:?}: {why}");
+        // a runaway vertex, up, or down into the plane (the projection would drop its
+        // velocity into it and put it back onto the plane, or, from 1e100 m/s, beside it: a
+        // runaway is one before the projection), compiled and through the interpreter:
+        // refused, nothing written
+        for v in [1e6, -1e6, -1e100] {
+            for s in [&mut fast, &mut slow] {
+                let mut vel = s.vertex_vec3("velocity").unwrap();
+                let keep = vel[0];
+                vel[0] = [0.0, 0.0, v];
+                s.set_vertex_vec3("velocity", &vel).unwrap();
+                let (p0, v0) = (
+                    s.vertex_vec3("position").unwrap(),
+                    s.vertex_vec3("velocity").unwrap(),
+                );
+                match s.step() {
+                    Err(PhysicsError::Diverged { vertex, why, .. }) => {
+                        assert_eq!(vertex, Some(0), "{integrator:?} {v}: {why}");
+                        assert!(why.contains("runaway"), "{integrator:?} {v}: {why}");
+                    }
+                    other => panic!("{integrator:?} {v}: expected a runaway, got {other:?}"),
+                }
+                assert_eq!(s.vertex_vec3("position").unwrap(), p0, "{integrator:?} {v}");
+                assert_eq!(s.vertex_vec3("velocity").unwrap(), v0, "{integrator:?} {v}");
+                vel[0] = keep;
+                s.set_vertex_vec3("velocity", &vel).unwrap();
             }
-            other => panic!("{integrator:?}: expected a runaway, got {other:?}"),
         }
-        assert_eq!(fast.vertex_vec3("position").unwrap(), p0, "{integrator:?}");
-        assert_eq!(fast.vertex_vec3("velocity").unwrap(), v0, "{integrator:?}");
+        // and both step on alike
+        fast.step().unwrap();
+        slow.step().unwrap();
+        assert_eq!(
+            fast.vertex_vec3("position").unwrap(),
+            slow.vertex_vec3("position").unwrap(),
+            "{integrator:?}"
+        );
     }
 }
