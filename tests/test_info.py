@@ -302,3 +302,13 @@ def test_a_run_of_a_map_of_general_polyhedra_is_refused_before_it_steps(tmp_path
     assert not out.exists()
     assert cli.main(["run", str(scene), "--out", str(out)]) == 2
     assert not out.exists()
+
+
+def test_a_mesh_of_lines_only_is_refused_naming_the_file(tmp_path: Path) -> None:
+    """A mesh file with line cells only has no surface or volume: refused with the file's
+    name, as the other read errors are (QA: the name was missing)."""
+    path = write(
+        tmp_path, "lines.vtu", [[0, 0, 0], [1, 0, 0], [1, 1, 0]], [("line", [[0, 1], [1, 2]])]
+    )
+    with pytest.raises(topomech.MeshError, match=r"lines\.vtu: the mesh has no surface or volume"):
+        topomech.read_mesh(path)

@@ -740,7 +740,11 @@ def read_mesh(
         # meshio's Gmsh 4 reader makes cell sets of the named physical groups: same cells.
         if name not in groups:
             groups[name] = members
-    kept, dropped = _select(blocks)
+    try:
+        kept, dropped = _select(blocks)
+    except MeshError as e:
+        # the file it was read from, as the other read errors name it
+        raise MeshError(f"{p}: {e}") from None
     blocks = _linearize(blocks, kept, linear, notes, _style)
     sets = _named_sets(raw, blocks, kept, groups)
     out = meshio.Mesh(raw.points, [(blocks[k].type, blocks[k].data) for k in kept])
