@@ -559,3 +559,14 @@ def test_rules_at_any_darts_apply_or_refuse_and_never_panic(dim: int) -> None:
 
     check()
     assert outcomes == {"applied", "refused"}
+
+
+@pytest.mark.parametrize("bad", [True, False, 2.0, "3"])
+def test_a_dimension_that_is_not_an_integer_is_refused(bad: object) -> None:
+    """`dimension=True` was read as 1 ("got 1"); a bool, a float or a string is a TypeError
+    naming what was given (numpy integers are integers)."""
+    import numpy as np
+
+    with pytest.raises(TypeError, match=r"dimension must be 2 or 3 \(or None\), got"):
+        RuleSet.from_source("dimension 2 3\n", dimension=bad)
+    assert RuleSet.from_source("dimension 2 3\n", dimension=np.int64(3)).dimension == 3

@@ -18,6 +18,7 @@ A rule that does not apply raises :class:`ApplyError` naming why, and the map is
 
 from __future__ import annotations
 
+import operator
 import os
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, TypedDict, Union
@@ -64,6 +65,19 @@ class RuleInfo(TypedDict):
     changes_topology: bool
 
 
+def _dimension(dimension: Any) -> int | None:
+    """``dimension`` as the kernel takes it: None, 2 or 3 (a bool is refused, not read as
+    0 or 1). Raises :class:`TypeError` for another type; the kernel refuses other ints."""
+    if dimension is None:
+        return None
+    if not isinstance(dimension, bool):
+        try:
+            return operator.index(dimension)  # an int, numpy's included
+        except TypeError:
+            pass
+    raise TypeError(f"dimension must be 2 or 3 (or None), got {dimension!r}")
+
+
 class RuleSet:
     """Checked rules of one dimension, from one or several rule files sharing their
     embeddings. The kernel object is :attr:`core`; this class adds typing."""
@@ -88,7 +102,7 @@ class RuleSet:
         unreadable file included), ValueError for another dimension."""
         if isinstance(paths, (str, os.PathLike)):
             paths = [paths]
-        return cls(_core.RuleSet.load([os.fspath(p) for p in paths], dimension))
+        return cls(_core.RuleSet.load([os.fspath(p) for p in paths], _dimension(dimension)))
 
     @classmethod
     def from_source(
@@ -96,7 +110,7 @@ class RuleSet:
     ) -> RuleSet:
         """Checks the text of a rule file; ``name`` is the file name diagnostics show; for
         ``dimension`` as :meth:`load` (needed for a ``dimension 2 3`` file)."""
-        return cls(_core.RuleSet.from_source(text, name, dimension))
+        return cls(_core.RuleSet.from_source(text, name, _dimension(dimension)))
 
     @classmethod
     def from_sources(
@@ -106,7 +120,7 @@ class RuleSet:
         when every file serves both, with ``dimension 2 3`` or no dimension line; by default
         the dimension the files say). Raises :class:`RuleError` with every error at its
         ``FILE:LINE:COL``, ValueError for another dimension."""
-        return cls(_core.RuleSet.from_sources(list(sources), dimension))
+        return cls(_core.RuleSet.from_sources(list(sources), _dimension(dimension)))
 
     @staticmethod
     def file_dimensions(text: str) -> list[int]:
