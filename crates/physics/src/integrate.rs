@@ -326,6 +326,9 @@ impl Simulation {
         if !self.rules.compiled() {
             return Checked::NotTested;
         }
+        // (half the distance, from the frame: see `runaway`)
+        let limit = speed_limit(0.5 * self.size, self.cfg.dt);
+        let frame = self.frame;
         // with a ground plane, the integrator and the ground rule in one rule (glue.tmr:
         // the same operations, so the same bits as the two in turn)
         let ground = match &self.cfg.ground {
@@ -338,9 +341,8 @@ impl Simulation {
                     // the fast runaway test's bound, a little looser (see glue.tmr): a
                     // velocity the rule leaves unprojected as a runaway is one the test
                     // below refuses
-                    let limit = speed_limit(0.5 * self.size, self.cfg.dt);
                     params.insert("limit".to_string(), Val::F(limit * (1.0 + 1e-9)));
-                    params.insert("frame".to_string(), Val::V3(self.frame));
+                    params.insert("frame".to_string(), Val::V3(frame));
                     Some((format!("{rule}_ground"), params))
                 }
                 // the saving way reports it
@@ -350,9 +352,6 @@ impl Simulation {
         if let Err(e) = self.forces().and_then(|()| self.share_welded_forces()) {
             return Checked::Done(Err(e));
         }
-        // (half the distance, from the frame: see `runaway`)
-        let limit = speed_limit(0.5 * self.size, self.cfg.dt);
-        let frame = self.frame;
         let check = |id: EmbeddingId, v: &[f64]| id != vel || velocities_slow(v, limit, frame);
         let (rule, params) = match &ground {
             Some((r, p)) => (r.as_str(), p),
