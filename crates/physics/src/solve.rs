@@ -813,10 +813,11 @@ impl Simulation {
                                         .iter()
                                         .take(4)
                                         .map(|&(row, held)| {
-                                            let point = self
-                                                .input_point(row)
-                                                .map_or(String::new(), |q| format!(" (input point {q})"));
-                                            format!("the one at vertex row {row}{point}, held {}", held.where_())
+                                            format!(
+                                                "the one at vertex row {row}{}, held {}",
+                                                self.input_point_note(row),
+                                                held.where_()
+                                            )
                                         })
                                         .collect();
                                     let more = if loose.len() > 4 {
