@@ -25,9 +25,24 @@
 //! - `type`: a parameter type other than `f64`/`vec3`, a default or argument of the wrong
 //!   type, a force or jvp output that is not a `vec3` embedding on a sub-orbit of the vertex
 //!   orbit (labels within {1, 2, 3});
-//! - `syntax`: a model without `init`, `step` or `forces`.
+//! - `syntax`: a model without `init`, `step` or `forces`;
+//! - `model-rule`: a call to a rule that changes the topology or writes an embedding of the
+//!   simulation's own ([`SIMULATION_STATE`]), such an embedding listed as a force or jvp
+//!   output;
+//! - a force or jvp output listed twice (`name`);
+//! - `unused-parameter`: a required parameter no rule call passes on (a warning for one
+//!   with a default).
 
 use std::collections::HashMap;
+
+/// The embeddings a simulation owns (declared by its prelude): the state it integrates, the
+/// loads and supports it sets, the rest shape, the sum of the models' forces, the vectors of
+/// its linear solves. A model's rules must not write them (a model that wrote `fixed` or
+/// `position` would undo the supports, one that wrote `force` would be summed over), and a
+/// model cannot list them as forces or jvp outputs (`model-rule`).
+pub const SIMULATION_STATE: &[&str] = &[
+    "position", "rest", "velocity", "force", "fixed", "f_ext", "dx", "dv", "df",
+];
 
 use crate::ast::{self, ModelArgKind, Pos};
 use crate::check::{Diagnostic, EmbDecl, Rule, Severity};
@@ -335,6 +350,39 @@ fn check_model(
                 );
                 continue;
             };
+            if rule.changes_topology {
+                error(
+                    out,
+                    file,
+                    c.pos,
+                    "model-rule",
+                    format!(
+                        "model '{mn}': {what} calls rule '{}', which changes the topology (it has a right graph): a model's rules compute embeddings only; cuts, fracture and tearing are the simulation's events",
+                        c.rule
+                    ),
+                );
+                continue;
+            }
+            if let Some(name) = rule.program.iter().find_map(|st| match st {
+                crate::check::TStmt::Write { emb, .. } => embs
+                    .get(*emb)
+                    .map(|e| e.name.as_str())
+                    .filter(|n| SIMULATION_STATE.contains(n)),
+                _ => None,
+            }) {
+                error(
+                    out,
+                    file,
+                    c.pos,
+                    "model-rule",
+                    format!(
+                        "model '{mn}': {what} calls rule '{}', which writes '{name}', the simulation's own (its state, loads and solver vectors: {}): a model computes its own embeddings, its forces summed into 'force' by the simulation",
+                        c.rule,
+                        SIMULATION_STATE.join(", ")
+                    ),
+                );
+                continue;
+            }
             if c.args.len() != rule.params.len() {
                 let want: Vec<String> = rule
                     .params
@@ -441,7 +489,32 @@ fn check_model(
         });
     }
     let vector_embeddings = |list: &[(String, Pos)], what: &str, out: &mut Vec<Diagnostic>| {
-        for (name, pos) in list {
+        for (k, (name, pos)) in list.iter().enumerate() {
+            if list[..k].iter().any(|(n, _)| n == name) {
+                error(
+                    out,
+                    file,
+                    *pos,
+                    "name",
+                    format!(
+                        "model '{mn}': {what} '{name}' is listed twice: it would be summed twice"
+                    ),
+                );
+                continue;
+            }
+            if SIMULATION_STATE.contains(&name.as_str()) {
+                error(
+                    out,
+                    file,
+                    *pos,
+                    "model-rule",
+                    format!(
+                        "model '{mn}': {what} '{name}' is the simulation's own (its state, loads and solver vectors: {}): a model lists embeddings its rules write",
+                        SIMULATION_STATE.join(", ")
+                    ),
+                );
+                continue;
+            }
             let Some(e) = embs.iter().find(|e| &e.name == name) else {
                 error(
                     out,

@@ -802,6 +802,22 @@ impl Simulation {
             .iter()
             .map(|m| declared_outputs(&sources, &m.kind))
             .collect();
+        // two models listing one force (or jvp output): their rules write one value (the
+        // last writer's), which the accumulation would sum once per model
+        for (k, (f, j)) in outputs.iter().enumerate() {
+            for (i, (g, h)) in outputs[..k].iter().enumerate() {
+                let shared = f
+                    .iter()
+                    .find(|x| g.contains(x))
+                    .or_else(|| j.iter().find(|x| h.contains(x)));
+                if let Some(name) = shared {
+                    return Err(PhysicsError::Model(format!(
+                        "models '{}' (model[{i}]) and '{}' (model[{k}]) both list the embedding '{name}' as a force or jvp output: their rules write one value (the last one's), which would be summed once per model; give each model its own",
+                        cfg.models[i].kind, cfg.models[k].kind
+                    )));
+                }
+            }
+        }
         let forces: Vec<&str> = outputs
             .iter()
             .flat_map(|o| o.0.iter().map(String::as_str))

@@ -514,3 +514,31 @@ fn a_model_file_that_does_not_parse_is_reported_where() {
     assert!(e.contains(&format!("{path}:2:")), "{e}");
     assert!(e.contains("syntax") && !e.contains("unknown model"), "{e}");
 }
+
+/// Two models whose rules write one force embedding and that both list it: their rules
+/// write one value (the last one's), which the accumulation would sum once per model (QA:
+/// an "up" and a "down" force of 1 N gave -2 N). Refused when the simulation is built,
+/// naming both models and the embedding.
+#[test]
+fn two_models_listing_one_force_are_refused() {
+    let file = "dimension 3
+embedding qa_dummy : f64 on <1,2,3>
+embedding fe : vec3 on <1,2,3>
+rule qa_noop { left { v : <1,2,3> hook } compute { v.qa_dummy = 0.0 } }
+rule fr(a: f64) { left { v : <1,2,3> hook } compute { v.fe = vec3(0.0, a, 0.0) } }
+model up(a: f64 = 1.0) { init qa_noop step fr(a) forces fe }
+model down(a: f64 = -1.0) { init qa_noop step fr(a) forces fe }
+";
+    let mesh = cuboid([1, 1, 1], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("up", &[]), model("down", &[])],
+        model_files: vec![written("updown", "updown.tmr", file)],
+        ..Config::default()
+    };
+    let e = Simulation::new(g, cfg).unwrap_err().to_string();
+    assert!(
+        e.contains("models 'up' (model[0]) and 'down' (model[1]) both list the embedding 'fe'"),
+        "{e}"
+    );
+}

@@ -327,3 +327,56 @@ fn an_unused_parameter_with_a_default_is_a_warning() {
     );
     assert_eq!(w[0].pos.line, line_of(model, "unused: f64"));
 }
+
+/// A model's rules compute its own embeddings: a call to a rule that changes the topology
+/// (it lost the map's masses and crashed a run: QA), or to one that writes the simulation's
+/// state (`fixed`, `position`: it undid the supports), is refused at the call (`model-rule`);
+/// so is a force that is the simulation's own (`f_ext`) or one listed twice (summed twice).
+#[test]
+fn model_rules_that_would_change_what_the_simulation_owns_are_refused() {
+    let extra = "embedding fixed : bool on <1,2,3>
+embedding f_ext : vec3 on <1,2,3>
+rule tear {
+  left  { a : <0,1> hook   b : <0,1>   a -3- b }
+  right { a : <0,1>        b : <0,1> }
+}
+rule unfix { left { v : <1,2,3> hook } compute { v.fixed = false  v.f_anchor = vec3(0, 0, 0) } }
+rule push { left { v : <1,2,3> hook } compute { v.position = v.position + vec3(0, 0, 1) } }
+";
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "model a { init anchor_init(1, vec3(0,0,0))\n step anchor_force, tear forces f_anchor }",
+            "step calls rule 'tear', which changes the topology",
+            "step anchor_force, tear",
+        ),
+        (
+            "model a {\n init unfix\n step anchor_force forces f_anchor }",
+            "init calls rule 'unfix', which writes 'fixed', the simulation's own",
+            "init unfix",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0))\n step push forces f_anchor }",
+            "step calls rule 'push', which writes 'position'",
+            "step push",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces f_ext }",
+            "force 'f_ext' is the simulation's own",
+            "forces f_ext",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces f_anchor, f_anchor }",
+            "force 'f_anchor' is listed twice",
+            "forces f_anchor",
+        ),
+    ];
+    for (model, msg, at) in cases {
+        let text = format!("{extra}{model}");
+        let errs = errors(&text);
+        let hit = errs
+            .iter()
+            .find(|d| d.message.contains(msg))
+            .unwrap_or_else(|| panic!("{model}: no error with {msg:?} in {errs:?}"));
+        assert_eq!(hit.pos.line, line_of(&text, at), "{model}: {hit}");
+    }
+}
