@@ -312,3 +312,22 @@ def test_a_mesh_of_lines_only_is_refused_naming_the_file(tmp_path: Path) -> None
     )
     with pytest.raises(topomech.MeshError, match=r"lines\.vtu: the mesh has no surface or volume"):
         topomech.read_mesh(path)
+
+
+def test_a_simulation_of_a_map_with_broken_links_names_the_violation() -> None:
+    """A saved map whose alpha_0 of dart 0 was overwritten (the file's layout: a 26-byte
+    header, the alive flags, then alpha_0) loads, and `info` reports it; a `Simulation` of
+    it is refused saying the map is not a valid G-map and naming the violation (QA: it ran
+    the set-up rules, and one of them reported a non-finite value)."""
+    import struct
+
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=float)
+    g = topomech.GMap.from_mesh(pts, {"tetra": np.array([[0, 1, 2, 3], [1, 2, 3, 4]])})
+    data = bytearray(g.to_bytes())
+    capacity = struct.unpack_from("<I", data, 22)[0]
+    assert capacity == g.n_darts
+    struct.pack_into("<I", data, 26 + capacity, 5)
+    broken = topomech.GMap.from_bytes(bytes(data))
+    assert not broken.is_valid()
+    with pytest.raises(topomech.SimulationError, match=r"the map is not a valid G-map: .*alpha0"):
+        topomech.Simulation(broken, models=["linear_fem"])

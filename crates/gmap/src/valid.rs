@@ -112,7 +112,23 @@ impl GMap {
         self.validate_limited(100)
     }
 
+    /// The first violated invariant of the links alone (each alpha an involution on live
+    /// darts, `alpha_i alpha_j` one for `i + 2 <= j`), or `None`: the part of [`GMap::validate`]
+    /// that orbit walks rely on, in two passes over the darts (embeddings not checked).
+    pub fn first_link_violation(&self) -> Option<Violation> {
+        self.validate_links(1).into_iter().next()
+    }
+
     fn validate_limited(&self, limit: usize) -> Vec<Violation> {
+        let mut out = self.validate_links(limit);
+        if !out.is_empty() {
+            return out; // later checks follow links: only safe on involutions
+        }
+        self.validate_embeddings(limit, &mut out);
+        out
+    }
+
+    fn validate_links(&self, limit: usize) -> Vec<Violation> {
         let mut out = Vec::new();
         let cap = self.capacity() as u32;
         // involutions
@@ -156,6 +172,10 @@ impl GMap {
                 }
             }
         }
+        out
+    }
+
+    fn validate_embeddings(&self, limit: usize, out: &mut Vec<Violation>) {
         for e in &self.embeddings {
             if e.is_direct() {
                 continue;
@@ -173,7 +193,7 @@ impl GMap {
                         embedding: e.name.clone(),
                         slot: s,
                     });
-                    return out;
+                    return;
                 }
                 if owner[s] == u32::MAX {
                     owner[s] = d.0;
@@ -202,7 +222,7 @@ impl GMap {
                     });
                 }
                 if out.len() >= limit {
-                    return out;
+                    return;
                 }
             }
             for (s, (&c, &u)) in counts.iter().zip(&e.slot_use).enumerate() {
@@ -212,11 +232,10 @@ impl GMap {
                         slot: s,
                     });
                     if out.len() >= limit {
-                        return out;
+                        return;
                     }
                 }
             }
         }
-        out
     }
 }

@@ -708,6 +708,14 @@ impl Simulation {
     /// the models, computes rest state, masses and model parameters.
     pub fn new(mut g: GMap, cfg: Config) -> Result<Self, PhysicsError> {
         let dim = g.dimension();
+        // the links every orbit walk relies on (two passes over the darts; the embeddings'
+        // consistency is left to `GMap::validate`): a broken map would otherwise fail later
+        // in some rule, with a message about that rule
+        if let Some(v) = g.first_link_violation() {
+            return Err(PhysicsError::Config(format!(
+                "the map is not a valid G-map: {v} (GMap.violations() in Python, topomech info on its file, list every violation)"
+            )));
+        }
         if !(cfg.dt > 0.0 && cfg.dt.is_finite()) {
             return Err(PhysicsError::Config(format!(
                 "dt must be positive, got {}",
