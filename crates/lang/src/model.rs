@@ -368,7 +368,7 @@ fn check_model(
                     .get(*emb)
                     .map(|e| e.name.as_str())
                     .filter(|n| SIMULATION_STATE.contains(n)),
-                _ => None,
+                crate::check::TStmt::Let(..) => None,
             }) {
                 error(
                     out,
