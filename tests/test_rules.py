@@ -570,3 +570,8 @@ def test_a_dimension_that_is_not_an_integer_is_refused(bad: object) -> None:
     with pytest.raises(TypeError, match=r"dimension must be 2 or 3 \(or None\), got"):
         RuleSet.from_source("dimension 2 3\n", dimension=bad)
     assert RuleSet.from_source("dimension 2 3\n", dimension=np.int64(3)).dimension == 3
+    # the library and the shipped models too (True was read as 1, 2.0 as 2)
+    with pytest.raises(TypeError, match="dimension must be 2 or 3"):
+        RuleSet.library(bad)
+    with pytest.raises(TypeError, match="dimension must be 2 or 3"):
+        topomech.Model.shipped("corotational", bad)

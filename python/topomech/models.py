@@ -183,6 +183,9 @@ class Model:
         between dimensions: the 2D co-rotational triangle has a ``thickness``, the 3D
         elements have none; without ``dimension`` the first listed). Raises
         :class:`ValueError` naming the shipped models when there is none."""
+        from topomech.rules import _dimension
+
+        dimension = _dimension(dimension)
         found = [
             m
             for m in shipped_models()

@@ -144,7 +144,10 @@ class RuleSet:
     @classmethod
     def library(cls, dimension: int) -> RuleSet:
         """The modeling rules shipped with topomech for surfaces (2) or volumes (3)."""
-        return cls(_core.RuleSet.library(dimension))
+        dim = _dimension(dimension)
+        if dim is None:
+            raise TypeError("dimension must be 2 or 3, got None")
+        return cls(_core.RuleSet.library(dim))
 
     # ------------------------------------------------------------------ queries
 

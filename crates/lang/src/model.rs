@@ -202,6 +202,12 @@ pub(crate) fn check_models(
 ) -> Vec<Model> {
     let mut models: Vec<Model> = Vec::new();
     let mut seen: HashMap<String, (String, Pos)> = HashMap::new();
+    // every rule written, checked or refused: a call to one the checker refused is not a
+    // call to an undefined rule
+    let written: Vec<&str> = files
+        .iter()
+        .flat_map(|(_, f)| f.rules.iter().map(|r| r.name.as_str()))
+        .collect();
     for ((file, f), fdims) in files.iter().zip(dims) {
         for m in &f.models {
             let mn = m.name.as_str();
@@ -219,7 +225,7 @@ pub(crate) fn check_models(
                 continue;
             }
             seen.insert(m.name.clone(), (file.clone(), m.pos));
-            if let Some(c) = check_model(file, m, fdims, embs, rules, out) {
+            if let Some(c) = check_model(file, m, fdims, embs, (rules, &written), out) {
                 models.push(c);
             }
         }
@@ -233,7 +239,7 @@ fn check_model(
     m: &ast::ModelDecl,
     dims: &[usize],
     embs: &[EmbDecl],
-    rules: &[Rule],
+    (rules, written): (&[Rule], &[&str]),
     out: &mut Vec<Diagnostic>,
 ) -> Option<Model> {
     let before = out.len();
@@ -338,15 +344,17 @@ fn check_model(
         let mut v = Vec::new();
         for c in list {
             let Some(rule) = rules.iter().find(|r| r.name == c.rule) else {
+                let why = if written.contains(&c.rule.as_str()) {
+                    "which the checker refused (its errors are reported at the rule)"
+                } else {
+                    "which is not defined"
+                };
                 error(
                     out,
                     file,
                     c.pos,
                     "name",
-                    format!(
-                        "model '{mn}': {what} calls rule '{}', which is not defined",
-                        c.rule
-                    ),
+                    format!("model '{mn}': {what} calls rule '{}', {why}", c.rule),
                 );
                 continue;
             };

@@ -380,3 +380,25 @@ rule push { left { v : <1,2,3> hook } compute { v.position = v.position + vec3(0
         assert_eq!(hit.pos.line, line_of(&text, at), "{model}: {hit}");
     }
 }
+
+/// A model calling a rule the checker refused says so, instead of calling the rule
+/// undefined (QA: the rule is right there, with its own errors above).
+#[test]
+fn a_call_to_a_refused_rule_says_it_was_refused() {
+    let model = "rule broken { left { v : <1,2,3> hook } compute { v.nope = 1.0 } }
+model a { init broken step anchor_force forces f_anchor }
+";
+    let errs = errors(model);
+    assert!(
+        errs.iter().any(|d| d
+            .message
+            .contains("init calls rule 'broken', which the checker refused")),
+        "{errs:?}"
+    );
+    assert!(
+        !errs
+            .iter()
+            .any(|d| d.message.contains("which is not defined")),
+        "{errs:?}"
+    );
+}
