@@ -222,6 +222,18 @@ def test_missing_mesh_file_is_named(tmp_path: Path) -> None:
     assert f"no such file: {tmp_path / 'nope.msh'}" in str(e)
 
 
+@pytest.mark.parametrize("empty", ["", "  "])
+def test_an_empty_mesh_file_is_named(tmp_path: Path, empty: str) -> None:
+    """`file = ""` was read as the scene's folder (QA: "`.`: is a directory")."""
+    text = BASE.replace(
+        'generator = "box"\nelement = "tet"\nsize = [1.0, 0.2, 0.2]\ncells = [4, 1, 1]',
+        f'file = "{empty}"',
+    )
+    e = refusal(text, tmp_path)
+    assert e.key == "mesh.file"
+    assert "empty: give the mesh file's path" in str(e)
+
+
 def test_mesh_file_and_generator_both() -> None:
     e = refusal(BASE.replace('generator = "box"', 'generator = "box"\nfile = "a.msh"'))
     assert e.key == "mesh.generator"

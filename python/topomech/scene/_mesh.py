@@ -112,6 +112,8 @@ def _mesh(t: _Table, base: Path | None, fail: _Fail) -> MeshSpec:
         raise fail(t.key("generator"), "give either mesh.file or mesh.generator, not both")
     if file is None and generator is None:
         raise fail("mesh", "give mesh.file (a mesh file) or mesh.generator (box, grid)")
+    if file is not None and not file.strip():
+        raise fail(t.key("file"), "empty: give the mesh file's path")
     reorient_v = t._get("reorient")
     if reorient_v is not None and not isinstance(reorient_v, bool):
         raise fail(t.key("reorient"), f"expected true or false, got {_show(reorient_v)}")
