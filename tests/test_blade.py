@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import meshio
 import numpy as np
@@ -228,27 +229,54 @@ def test_blade_kind_and_timing_refusals(tmp_path: Path) -> None:
         miss.step(1)
 
 
-def test_a_blade_that_misses_stops_the_run_as_an_event(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """Beside a plane cut that does cut, a blade that crosses nothing by its end stops the run:
-    the summary's error is an ``event`` naming it, as for a timed cut that misses."""
+def _cut_then_blade(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], blade: str
+) -> tuple[dict[str, Any], str]:
+    """A run of a box cut at x = 1 at t = 0 and swept by the blade ``blade`` (its ``from``
+    and ``to`` lines) from t = 0 to 0.002: it stops (exit 1) with the blade's event error;
+    the summary's error and stderr."""
     from test_topology_scenes import box_with, run_cli, summary_of
 
     scene = box_with(
         tmp_path,
         '[[event]]\ntime = 0.0\nkind = "cut"\nplane = { normal = [1, 0, 0], offset = 1.0 }\n'
-        '[[event]]\nkind = "blade"\nstart = 0.0\nend = 0.002\n'
-        "from = [[50.0, 0.0, 0.0], [50.0, 1.0, 0.0]]\nto = [[50.0, 0.0, 1.0], [50.0, 1.0, 1.0]]\n",
+        '[[event]]\nkind = "blade"\nstart = 0.0\nend = 0.002\n' + blade,
     )
     out = tmp_path / "o"
     code, err = run_cli([str(scene), "--out", str(out)], capsys)
     assert code == 1, err
-    s = summary_of(out)
-    assert s["error"]["type"] == "event", s["error"]
-    assert s["error"]["event"] == 1
-    assert "event[1] (a blade moving from t = 0 to t = 0.002)" in s["error"]["message"]
+    error: dict[str, Any] = summary_of(out)["error"]
+    assert error["type"] == "event", error
+    assert error["event"] == 1
+    assert "event[1] (a blade moving from t = 0 to t = 0.002)" in error["message"]
+    return error, err
+
+
+def test_a_blade_that_misses_stops_the_run_as_an_event(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Beside a plane cut that does cut, a blade that crosses nothing by its end stops the run:
+    the summary's error is an ``event`` naming it, as for a timed cut that misses."""
+    _, err = _cut_then_blade(
+        tmp_path,
+        capsys,
+        "from = [[50.0, 0.0, 0.0], [50.0, 1.0, 0.0]]\nto = [[50.0, 0.0, 1.0], [50.0, 1.0, 1.0]]\n",
+    )
     assert "misses the object" in err
+
+
+def test_a_blade_over_faces_a_cut_opened_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A blade that sweeps only faces the plane cut opened before it crosses nothing sewn: the
+    run stops as for a blade that misses, and the message says that every face it met may
+    be open already (it said only that it misses the object, which it does not: QA)."""
+    error, _ = _cut_then_blade(
+        tmp_path,
+        capsys,
+        "from = [[1.0, -0.1, -0.1], [1.0, -0.1, 1.1]]\nto = [[1.0, 1.1, -0.1], [1.0, 1.1, 1.1]]\n",
+    )
+    assert "or every face it meets is open already" in error["message"]
 
 
 def test_prepare_cuts_changes_no_result() -> None:
@@ -293,26 +321,3 @@ def test_cut_arguments_are_refused_by_name() -> None:
     with pytest.raises(ValueError, match="offset is too large for a float"):
         sim.cut([1, 0, 0], 10**400)
     assert sim.cut(np.array([1, 0, 0], dtype=np.int32), 0.5).unsewn > 0
-
-
-def test_a_blade_over_faces_a_cut_opened_says_so(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """A blade that sweeps only faces a plane cut opened before it crosses nothing sewn: the
-    run stops as for a blade that misses, and the message says that every face it met may
-    be open already (it said only that it misses the object, which it does not: QA)."""
-    from test_topology_scenes import box_with, run_cli, summary_of
-
-    scene = box_with(
-        tmp_path,
-        '[[event]]\ntime = 0.0\nkind = "cut"\nplane = { normal = [1, 0, 0], offset = 1.0 }\n'
-        '[[event]]\nkind = "blade"\nstart = 0.0\nend = 0.002\n'
-        "from = [[1.0, -0.1, -0.1], [1.0, -0.1, 1.1]]\nto = [[1.0, 1.1, -0.1], [1.0, 1.1, 1.1]]\n",
-    )
-    out = tmp_path / "o"
-    code, err = run_cli([str(scene), "--out", str(out)], capsys)
-    assert code == 1, err
-    s = summary_of(out)
-    assert s["error"]["type"] == "event", s["error"]
-    assert s["error"]["event"] == 1
-    assert "or every face it meets is open already" in s["error"]["message"]

@@ -358,36 +358,29 @@ fn check_model(
                 );
                 continue;
             };
-            if rule.changes_topology {
-                error(
-                    out,
-                    file,
-                    c.pos,
-                    "model-rule",
-                    format!(
-                        "model '{mn}': {what} calls rule '{}', which changes the topology (it has a right graph): a model's rules compute embeddings only; cuts, fracture and tearing are the simulation's events",
-                        c.rule
-                    ),
-                );
-                continue;
-            }
-            if let Some(name) = rule.program.iter().find_map(|st| match st {
+            // what the rule would change that a model must not (see SIMULATION_STATE)
+            let state = rule.program.iter().find_map(|st| match st {
                 crate::check::TStmt::Write { emb, .. } => embs
                     .get(*emb)
                     .map(|e| e.name.as_str())
                     .filter(|n| SIMULATION_STATE.contains(n)),
                 crate::check::TStmt::Let(..) => None,
-            }) {
+            });
+            let forbidden = if rule.changes_topology {
+                Some("changes the topology (it has a right graph): a model's rules compute embeddings only; cuts, fracture and tearing are the simulation's events".to_string())
+            } else {
+                state.map(|name| format!(
+                    "writes '{name}', the simulation's own (its state, loads and solver vectors: {}): a model computes its own embeddings, its forces summed into 'force' by the simulation",
+                    SIMULATION_STATE.join(", ")
+                ))
+            };
+            if let Some(why) = forbidden {
                 error(
                     out,
                     file,
                     c.pos,
                     "model-rule",
-                    format!(
-                        "model '{mn}': {what} calls rule '{}', which writes '{name}', the simulation's own (its state, loads and solver vectors: {}): a model computes its own embeddings, its forces summed into 'force' by the simulation",
-                        c.rule,
-                        SIMULATION_STATE.join(", ")
-                    ),
+                    format!("model '{mn}': {what} calls rule '{}', which {why}", c.rule),
                 );
                 continue;
             }
