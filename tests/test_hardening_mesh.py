@@ -82,3 +82,13 @@ def test_two_tets_on_the_same_side_of_a_shared_face_are_refused() -> None:
     cells = [("tetra", np.array([[0, 1, 2, 3], [0, 2, 1, 4]]))]
     with pytest.raises(MeshError, match=r"folded pair.*cells 0 and 1"):
         GMap.from_mesh(points, cells)
+
+
+def test_volume_cells_of_points_in_a_plane_are_refused_as_such() -> None:
+    """Points with 2 coordinates and tetrahedra: every cell would be flat. The refusal says
+    the cells need 3D points (QA: it listed the cells as degenerate, of zero volume)."""
+    pts = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=float)
+    with pytest.raises(MeshError, match=r"tetra cells need points with 3 coordinates"):
+        GMap.from_mesh(pts, {"tetra": np.array([[0, 1, 2, 3]])})
+    # a surface of 2D points is fine
+    assert GMap.from_mesh(pts[:3], {"triangle": np.array([[0, 1, 2]])}).dimension == 2

@@ -144,6 +144,10 @@ def format_option(name: str, value: str, style: str) -> str:
     raise ValueError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
 
 
+#: The kernel's kinds of volume cells (see :func:`topomech._cells.to_flat`).
+_VOLUME_KINDS = frozenset({"tetra", "hexahedron", "wedge", "pyramid"})
+
+
 def _with_hint(e: MeshError, style: str) -> MeshError:
     """``e`` with the option that would accept the mesh appended in ``style``."""
     option = getattr(e, "option", None)
@@ -257,6 +261,16 @@ class GMap:
         Raises ``ValueError`` for an unknown ``pinched`` or ``duplicates`` value.
         """
         flat = to_flat(points, cells, kind)
+        # points in a plane pad to z = 0: every volume cell would be flat (refused as
+        # degenerate, cell by cell); say what is wrong instead
+        shape = np.shape(points)
+        if len(shape) == 2 and shape[1] == 2:
+            volumes = sorted({k for k in flat.kinds if k in _VOLUME_KINDS})
+            if volumes:
+                raise MeshError(
+                    f"{', '.join(volumes)} cells need points with 3 coordinates; these have 2 "
+                    f"(points of shape {shape}): a volume of points in a plane is flat"
+                )
         try:
             return cls.from_flat(*flat, reorient=reorient, pinched=pinched, duplicates=duplicates)
         except MeshError as e:
