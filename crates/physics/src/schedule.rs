@@ -936,6 +936,17 @@ impl Simulation {
         rules.apply_everywhere(&mut g, he, &none)?;
         rules.apply_everywhere(&mut g, elem, &none)?;
         rules.apply_everywhere(&mut g, "lump_mass", &none)?;
+        // which support holds each vertex orbit (its representative's index), to refuse a
+        // prescribed displacement that moves a vertex another support holds: the last one
+        // applied would win silently (nothing to check, and no walk over the map, without
+        // prescribed displacements)
+        let supports = if cfg.prescribed.is_empty() {
+            None
+        } else {
+            Some(Supports::new(&g)?)
+        };
+        let mut held_by: Vec<Option<String>> =
+            vec![None; supports.as_ref().map_or(0, |s| s.reps.len())];
         for k in 0..cfg.fixed.len() {
             let rep = rules
                 .apply_everywhere(&mut g, &format!("fix_{k}"), &none)
@@ -948,9 +959,17 @@ impl Simulation {
                     cfg.fixed[k]
                 )));
             }
+            if let Some(s) = &supports {
+                s.claim(
+                    &g,
+                    &mut held_by,
+                    &format!("fix predicate '{}'", cfg.fixed[k]),
+                );
+            }
         }
         for (k, (p, d)) in cfg.prescribed.iter().enumerate() {
             let params: Params = [("d".to_string(), Val::V3(*d))].into();
+            let before = supports.as_ref().map(|s| s.positions(&g));
             let rep = rules
                 .apply_everywhere(&mut g, &format!("prescribe_{k}"), &params)
                 .map_err(|e| {
@@ -961,6 +980,16 @@ impl Simulation {
                 return Err(PhysicsError::Config(format!(
                     "prescribed-displacement predicate '{p}' selects no vertex"
                 )));
+            }
+            if let (Some(supports), Some(before)) = (&supports, before) {
+                let this = format!("prescribed-displacement predicate '{p}'");
+                if let Some((r, other)) = supports.moved_held(&g, &before, &held_by) {
+                    let point = supports.point(&g, r);
+                    return Err(PhysicsError::Config(format!(
+                        "{this} moves the vertex at rest {point:?}, which {other} holds too: a vertex is held one way (narrow one predicate, or give both the same displacement)"
+                    )));
+                }
+                supports.claim(&g, &mut held_by, &this);
             }
         }
         let elements = g.count_orbits(if dim == 3 {
@@ -1126,5 +1155,70 @@ pub(crate) fn threshold_problem(t: f64) -> Option<String> {
         Some(format!("fracture threshold must be positive, got {t}"))
     } else {
         None
+    }
+}
+
+/// The vertex orbits of a map being set up, for [`Simulation::new`]'s check that no two
+/// supports (fix predicates, prescribed displacements) hold one vertex differently.
+struct Supports {
+    reps: Vec<Dart>,
+    fixed: topomech_gmap::EmbeddingId,
+    position: topomech_gmap::EmbeddingId,
+    rest: topomech_gmap::EmbeddingId,
+}
+
+impl Supports {
+    fn new(g: &GMap) -> Result<Self, PhysicsError> {
+        let id = |name: &str| {
+            g.require(name)
+                .map_err(|e| PhysicsError::Config(e.to_string()))
+        };
+        Ok(Supports {
+            reps: g.orbit_representatives(OrbitType::vertex(g.dimension())),
+            fixed: id("fixed")?,
+            position: id("position")?,
+            rest: id("rest")?,
+        })
+    }
+
+    /// Gives `what` the held vertex orbits no support holds yet.
+    fn claim(&self, g: &GMap, held_by: &mut [Option<String>], what: &str) {
+        for (h, &d) in held_by.iter_mut().zip(&self.reps) {
+            if h.is_none() && matches!(g.value(self.fixed, d), Ok(Value::Bool(true))) {
+                *h = Some(what.to_string());
+            }
+        }
+    }
+
+    /// Every vertex orbit's position, bit for bit.
+    fn positions(&self, g: &GMap) -> Vec<[u64; 3]> {
+        self.reps
+            .iter()
+            .map(|&d| {
+                let p = g.real(self.position, d);
+                [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()]
+            })
+            .collect()
+    }
+
+    /// The first vertex orbit (by index) that a support in `held_by` holds and whose position
+    /// differs from `before`, with that support.
+    fn moved_held<'a>(
+        &self,
+        g: &GMap,
+        before: &[[u64; 3]],
+        held_by: &'a [Option<String>],
+    ) -> Option<(usize, &'a str)> {
+        let now = self.positions(g);
+        (0..self.reps.len()).find_map(|r| match &held_by[r] {
+            Some(other) if now[r] != before[r] => Some((r, other.as_str())),
+            _ => None,
+        })
+    }
+
+    /// The rest position of vertex orbit `r`.
+    fn point(&self, g: &GMap, r: usize) -> [f64; 3] {
+        let p = g.real(self.rest, self.reps[r]);
+        [p[0], p[1], p[2]]
     }
 }

@@ -454,3 +454,45 @@ fn a_predicate_failing_at_a_vertex_names_its_key_and_the_vertex() {
         }
     }
 }
+
+/// Two supports holding one vertex differently (a fix predicate and a prescribed
+/// displacement, or two prescribed displacements) are refused naming both and the vertex's
+/// rest position: the last one applied won silently (QA). Supports that agree (a zero
+/// displacement on a fixed vertex, two equal displacements) are accepted.
+#[test]
+fn supports_holding_one_vertex_differently_are_refused() {
+    let m = mesh();
+    let d = [0.0, 0.0, 0.1];
+    let e = sim(&m, |c| {
+        c.fixed = vec!["x < 1e-9".into()];
+        c.prescribed = vec![("x < 1e-9 && y < 1e-9".into(), d)];
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains(
+            "prescribed-displacement predicate 'x < 1e-9 && y < 1e-9' moves the vertex at rest"
+        ) && e.contains("which fix predicate 'x < 1e-9' holds too"),
+        "{e}"
+    );
+    let e = sim(&m, |c| {
+        c.prescribed = vec![("x < 1e-9".into(), d), ("y < 1e-9".into(), [0.1, 0.0, 0.0])];
+    })
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("prescribed-displacement predicate 'y < 1e-9' moves")
+            && e.contains("which prescribed-displacement predicate 'x < 1e-9' holds too"),
+        "{e}"
+    );
+    // agreeing supports
+    sim(&m, |c| {
+        c.fixed = vec!["x < 1e-9".into()];
+        c.prescribed = vec![("x < 1e-9".into(), [0.0; 3])];
+    })
+    .unwrap();
+    sim(&m, |c| {
+        c.prescribed = vec![("x < 1e-9".into(), d), ("y < 1e-9".into(), d)];
+    })
+    .unwrap();
+}
