@@ -192,19 +192,16 @@ impl Simulation {
                 return (part.clone(), *count);
             }
         }
-        let all = topomech_gmap::OrbitType::all(self.g.dimension());
         // the component of each dart, then of each row (joined through welded rows)
-        let mut comp: Vec<u32> = vec![u32::MAX; self.g.capacity()];
+        let mut comps = Components::new(&self.g);
         let mut parent: Vec<usize> = Vec::new();
-        let mut seen = topomech_gmap::Marks::with_capacity(self.g.capacity());
         let g = &self.g;
         let mut component = |d: Dart, parent: &mut Vec<usize>| -> usize {
-            if comp[d.index()] == u32::MAX {
-                let c = parent.len() as u32;
-                parent.push(parent.len());
-                g.visit_orbit(d, all, &mut seen, |x| comp[x.index()] = c);
+            let c = comps.of(g, d);
+            if c == parent.len() {
+                parent.push(c); // a new component, numbered next
             }
-            comp[d.index()] as usize
+            c
         };
         let mut row_comp: Vec<usize> = self
             .rows
@@ -532,6 +529,45 @@ fn velocities_slow(v: &[f64], limit: f64, frame: [f64; 3]) -> bool {
         ok & (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= limit)
     });
     v.len() % 3 == 0 && slow
+}
+
+/// The connected components of a map's darts (each the orbit of all its labels), found as
+/// they are asked for: numbered 0, 1, ... in the order their first dart was asked for.
+pub(crate) struct Components {
+    comp: Vec<u32>,
+    seen: topomech_gmap::Marks,
+    count: u32,
+}
+
+impl Components {
+    pub(crate) fn new(g: &GMap) -> Self {
+        Components {
+            comp: vec![u32::MAX; g.capacity()],
+            seen: topomech_gmap::Marks::with_capacity(g.capacity()),
+            count: 0,
+        }
+    }
+
+    /// The component of dart `d` of `g` (the map `new` was given), walked on first sight.
+    pub(crate) fn of(&mut self, g: &GMap, d: Dart) -> usize {
+        if self.comp[d.index()] == u32::MAX {
+            let c = self.count;
+            self.count += 1;
+            let comp = &mut self.comp;
+            g.visit_orbit(
+                d,
+                topomech_gmap::OrbitType::all(g.dimension()),
+                &mut self.seen,
+                |x| comp[x.index()] = c,
+            );
+        }
+        self.comp[d.index()] as usize
+    }
+
+    /// How many components were found so far.
+    pub(crate) fn count(&self) -> usize {
+        self.count as usize
+    }
 }
 
 /// The root of `a` in the union-find forest `parent` (paths halved on the way).

@@ -1442,19 +1442,8 @@ impl Simulation {
         if self.rows.welded.is_empty() {
             return Vec::new();
         }
-        let all = topomech_gmap::OrbitType::all(self.g.dimension());
-        let mut comp: Vec<u32> = vec![u32::MAX; self.g.capacity()];
-        let mut count = 0u32;
-        let mut seen = topomech_gmap::Marks::with_capacity(self.g.capacity());
-        let mut piece = |d: topomech_gmap::Dart| -> usize {
-            if comp[d.index()] == u32::MAX {
-                let c = count;
-                count += 1;
-                self.g
-                    .visit_orbit(d, all, &mut seen, |y| comp[y.index()] = c);
-            }
-            comp[d.index()] as usize
-        };
+        let mut comps = crate::integrate::Components::new(&self.g);
+        let mut piece = |d: topomech_gmap::Dart| comps.of(&self.g, d);
         let n = x.len().min(self.rows.darts.len());
         let mut of_row: Vec<usize> = (0..n).map(|r| piece(self.rows.darts[r])).collect();
         // the pinched rows joining two pieces or more: (row, its pieces)
@@ -1468,7 +1457,7 @@ impl Simulation {
                 joints.push((*row, ps));
             }
         }
-        let pieces = count as usize;
+        let pieces = comps.count();
         // per piece: (smallest row, held positions, free rows), and a joint it hangs on
         let mut each: Vec<(usize, Vec<[f64; 3]>, Vec<usize>)> =
             vec![(usize::MAX, Vec::new(), Vec::new()); pieces];
