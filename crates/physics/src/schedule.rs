@@ -945,8 +945,10 @@ impl Simulation {
         } else {
             Some(Supports::new(&g)?)
         };
-        let mut held_by: Vec<Option<String>> =
+        // per vertex orbit, the index in `labels` of the support holding it
+        let mut held_by: Vec<Option<usize>> =
             vec![None; supports.as_ref().map_or(0, |s| s.reps.len())];
+        let mut labels: Vec<String> = Vec::new();
         for k in 0..cfg.fixed.len() {
             let rep = rules
                 .apply_everywhere(&mut g, &format!("fix_{k}"), &none)
@@ -960,11 +962,8 @@ impl Simulation {
                 )));
             }
             if let Some(s) = &supports {
-                s.claim(
-                    &g,
-                    &mut held_by,
-                    &format!("fix predicate '{}'", cfg.fixed[k]),
-                );
+                labels.push(format!("fix predicate '{}'", cfg.fixed[k]));
+                s.claim(&g, &mut held_by, labels.len() - 1);
             }
         }
         for (k, (p, d)) in cfg.prescribed.iter().enumerate() {
@@ -986,10 +985,12 @@ impl Simulation {
                 if let Some((r, other)) = supports.moved_held(&g, &before, &held_by) {
                     let point = supports.point(&g, r);
                     return Err(PhysicsError::Config(format!(
-                        "{this} moves the vertex at rest {point:?}, which {other} holds too: a vertex is held one way (narrow one predicate, or give both the same displacement)"
+                        "{this} moves the vertex at rest {point:?}, which {} holds too: a vertex is held one way (narrow one predicate, or give both the same displacement)",
+                        labels[other]
                     )));
                 }
-                supports.claim(&g, &mut held_by, &this);
+                labels.push(this);
+                supports.claim(&g, &mut held_by, labels.len() - 1);
             }
         }
         let elements = g.count_orbits(if dim == 3 {
@@ -1181,11 +1182,11 @@ impl Supports {
         })
     }
 
-    /// Gives `what` the held vertex orbits no support holds yet.
-    fn claim(&self, g: &GMap, held_by: &mut [Option<String>], what: &str) {
+    /// Gives support `k` the held vertex orbits no support holds yet.
+    fn claim(&self, g: &GMap, held_by: &mut [Option<usize>], k: usize) {
         for (h, &d) in held_by.iter_mut().zip(&self.reps) {
             if h.is_none() && matches!(g.value(self.fixed, d), Ok(Value::Bool(true))) {
-                *h = Some(what.to_string());
+                *h = Some(k);
             }
         }
     }
@@ -1203,15 +1204,15 @@ impl Supports {
 
     /// The first vertex orbit (by index) that a support in `held_by` holds and whose position
     /// differs from `before`, with that support.
-    fn moved_held<'a>(
+    fn moved_held(
         &self,
         g: &GMap,
         before: &[[u64; 3]],
-        held_by: &'a [Option<String>],
-    ) -> Option<(usize, &'a str)> {
+        held_by: &[Option<usize>],
+    ) -> Option<(usize, usize)> {
         let now = self.positions(g);
-        (0..self.reps.len()).find_map(|r| match &held_by[r] {
-            Some(other) if now[r] != before[r] => Some((r, other.as_str())),
+        (0..self.reps.len()).find_map(|r| match held_by[r] {
+            Some(other) if now[r] != before[r] => Some((r, other)),
             _ => None,
         })
     }
