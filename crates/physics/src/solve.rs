@@ -769,33 +769,22 @@ impl Simulation {
                     let support = self.support_problem(&start, &fixed, &r0);
                     let (cause, vertex, named) = match (&why, support) {
                         (_, Some(p)) if p.loose.is_empty() => {
-                            let each: Vec<String> = p
-                                .hinges
-                                .iter()
-                                .take(4)
-                                .map(|&(row, held, joint)| {
-                                    format!(
-                                        "the one at vertex row {row}{}, joined {} (at vertex row {joint}{})",
-                                        self.input_point_note(row),
-                                        match held {
-                                            Held::Line => "to the rest at pinched vertices on one line",
-                                            _ => "to the rest at one pinched vertex only",
-                                        },
-                                        self.input_point_note(joint)
-                                    )
-                                })
-                                .collect();
-                            let more = if p.hinges.len() > 4 {
-                                format!("; and {} more", p.hinges.len() - 4)
-                            } else {
-                                String::new()
-                            };
+                            let each = first_of(p.hinges.iter().map(|&(row, held, joint)| {
+                                format!(
+                                    "the one at vertex row {row}{}, joined {} (at vertex row {joint}{})",
+                                    self.input_point_note(row),
+                                    match held {
+                                        Held::Line => "to the rest at pinched vertices on one line",
+                                        _ => "to the rest at one pinched vertex only",
+                                    },
+                                    self.input_point_note(joint)
+                                )
+                            }));
                             let k = p.hinges.len();
                             (
                                 format!(
-                                    "; {k} piece(s) of the body touch the rest only at pinched vertices (points where elements meet without sharing a {}, kept as one particle), held nowhere else, and the load turns them about those points: a hinge, so the stiffness is singular there: {}{more}; hold vertices of each piece, join the pieces through shared {}s in the mesh (or import it with the pinched option set to split, to see the pieces apart), or use the integrator implicit_euler for their motion",
+                                    "; {k} piece(s) of the body touch the rest only at pinched vertices (points where elements meet without sharing a {}, kept as one particle), held nowhere else, and the load turns them about those points: a hinge, so the stiffness is singular there: {each}; hold vertices of each piece, join the pieces through shared {}s in the mesh (or import it with the pinched option set to split, to see the pieces apart), or use the integrator implicit_euler for their motion",
                                     if self.g.dimension() == 3 { "face" } else { "edge" },
-                                    each.join("; "),
                                     if self.g.dimension() == 3 { "face" } else { "edge" },
                                 ),
                                 p.hinges[0].0,
@@ -809,26 +798,16 @@ impl Simulation {
                                     held.where_()
                                 ), "the largest residual force is", worst),
                                 (n, loose) => {
-                                    let each: Vec<String> = loose
-                                        .iter()
-                                        .take(4)
-                                        .map(|&(row, held)| {
-                                            format!(
-                                                "the one at vertex row {row}{}, held {}",
-                                                self.input_point_note(row),
-                                                held.where_()
-                                            )
-                                        })
-                                        .collect();
-                                    let more = if loose.len() > 4 {
-                                        format!("; and {} more", loose.len() - 4)
-                                    } else {
-                                        String::new()
-                                    };
+                                    let each = first_of(loose.iter().map(|&(row, held)| {
+                                        format!(
+                                            "the one at vertex row {row}{}, held {}",
+                                            self.input_point_note(row),
+                                            held.where_()
+                                        )
+                                    }));
                                     let k = loose.len();
                                     (format!(
-                                        "; the body is {n} parts (elements connected to each other), and {k} of them can still move rigidly, their stiffness singular (held nowhere, or on vertices that all lie at one point or on one line that the load turns them about): {}{more}; hold vertices of each that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for their motion",
-                                        each.join("; ")
+                                        "; the body is {n} parts (elements connected to each other), and {k} of them can still move rigidly, their stiffness singular (held nowhere, or on vertices that all lie at one point or on one line that the load turns them about): {each}; hold vertices of each that are not all on one line (three, not in a row, at least), or use the integrator implicit_euler for their motion",
                                     ), if k == 1 { "it is the one" } else { "the first is the one" }, loose[0].0)
                                 }
                             };
@@ -1516,6 +1495,16 @@ impl Simulation {
             _ => None,
         }
     }
+}
+
+/// The first four of `items` joined by "; ", then "; and N more" for the others.
+fn first_of(items: impl ExactSizeIterator<Item = String>) -> String {
+    let n = items.len();
+    let mut out: Vec<String> = items.take(4).collect();
+    if n > 4 {
+        out.push(format!("and {} more", n - 4));
+    }
+    out.join("; ")
 }
 
 /// The diagonal of the bounding box of `x`.
