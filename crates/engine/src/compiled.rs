@@ -2257,55 +2257,39 @@ impl Plan {
 
     /// Appends to `out` the slots row `row` reads from the program columns `cols` (its
     /// gathers and aggregates of them).
-    /// The gathers and the aggregates (their CSR indices) of the program that read the
-    /// program columns `cols`, for [`Plan::row_slots_from`].
-    pub(crate) fn slot_sources(&self, cols: &[usize]) -> (Vec<usize>, Vec<usize>) {
-        let (mut gathers, mut csrs) = (Vec::new(), Vec::new());
-        for op in &self.prog.ops {
-            match op {
-                Op::Gather { col, idx, .. } if cols.contains(col) => gathers.push(*idx),
-                Op::Agg { col, csr, .. } if cols.contains(col) => csrs.push(*csr),
-                _ => {}
-            }
-        }
-        (gathers, csrs)
+    /// Where the program reads the program columns `cols`, in program order: per read, its
+    /// gather (`Ok(index)`) or its aggregate (`Err(CSR index)`), for [`Plan::row_slots_from`].
+    pub(crate) fn slot_sources(&self, cols: &[usize]) -> Vec<Result<usize, usize>> {
+        self.prog
+            .ops
+            .iter()
+            .filter_map(|op| match op {
+                Op::Gather { col, idx, .. } if cols.contains(col) => Some(Ok(*idx)),
+                Op::Agg { col, csr, .. } if cols.contains(col) => Some(Err(*csr)),
+                _ => None,
+            })
+            .collect()
     }
 
-    /// Calls `f` with every slot row `row` reads through `sources` ([`Plan::slot_sources`]):
-    /// the slots [`Plan::row_slots`] lists, the gathers' first (an order that does not
-    /// matter to a bounding box).
+    /// Calls `f` with every slot row `row` reads through `sources` ([`Plan::slot_sources`]),
+    /// in program order.
     pub(crate) fn row_slots_from(
         &self,
-        (gathers, csrs): &(Vec<usize>, Vec<usize>),
+        sources: &[Result<usize, usize>],
         row: usize,
         mut f: impl FnMut(u32),
     ) {
-        for &k in gathers {
-            f(self.gathers[k][row]);
-        }
-        for &k in csrs {
-            let (offs, slots) = &self.csr[k];
-            if offs.len() > row + 1 {
-                for &sl in &slots[offs[row] as usize..offs[row + 1] as usize] {
-                    f(sl);
-                }
-            }
-        }
-    }
-
-    pub(crate) fn row_slots(&self, cols: &[usize], row: usize, out: &mut Vec<u32>) {
-        for op in &self.prog.ops {
-            match op {
-                Op::Gather { col, idx, .. } if cols.contains(col) => {
-                    out.push(self.gathers[*idx][row]);
-                }
-                Op::Agg { col, csr, .. } if cols.contains(col) => {
-                    let (offs, slots) = &self.csr[*csr];
+        for source in sources {
+            match *source {
+                Ok(k) => f(self.gathers[k][row]),
+                Err(k) => {
+                    let (offs, slots) = &self.csr[k];
                     if offs.len() > row + 1 {
-                        out.extend_from_slice(&slots[offs[row] as usize..offs[row + 1] as usize]);
+                        for &sl in &slots[offs[row] as usize..offs[row + 1] as usize] {
+                            f(sl);
+                        }
                     }
                 }
-                _ => {}
             }
         }
     }

@@ -2436,6 +2436,7 @@ impl GuardPlan {
         // the rows appended since: their first slots, and their extents now, grown by what
         // the values moved since they joined the snapshot (see above)
         let mut buf = Vec::new();
+        let sources = self.plan.slot_sources(&cols);
         let moved_rows = std::mem::take(&mut c.moved);
         for r in moved_rows
             .into_iter()
@@ -2443,7 +2444,7 @@ impl GuardPlan {
             .chain(c.rows..rows)
         {
             buf.clear();
-            self.plan.row_slots(&cols, r, &mut buf);
+            self.plan.row_slots_from(&sources, r, |s| buf.push(s));
             if buf.is_empty() {
                 c.always.push(r as u32);
                 continue;
@@ -2486,7 +2487,6 @@ impl GuardPlan {
         // finds twice a row's size around a thin region such as a blade's quad (the plane
         // of the blade, one step of its sweep): the box halves the rows the guard runs on
         let margin = 1e-9 * (1.0 + scale);
-        let sources = self.plan.slot_sources(&cols);
         out.retain(|&r| {
             let (mut blo, mut bhi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
             let (mut read, mut outside) = (false, false);
@@ -2524,9 +2524,10 @@ impl GuardPlan {
         let mut extent = [0.0_f64; 3];
         let mut always = Vec::new();
         let mut buf = Vec::new();
+        let sources = self.plan.slot_sources(cols);
         for (r, f) in first.iter_mut().enumerate() {
             buf.clear();
-            self.plan.row_slots(cols, r, &mut buf);
+            self.plan.row_slots_from(&sources, r, |s| buf.push(s));
             if buf.is_empty() {
                 always.push(r as u32);
                 continue;
