@@ -173,6 +173,14 @@ impl Call {
     }
 }
 
+/// The names of the embeddings `rule`'s program writes, in program order.
+fn written_by<'a>(rule: &'a Rule, embs: &'a [EmbDecl]) -> impl Iterator<Item = &'a str> {
+    rule.program.iter().filter_map(move |st| match st {
+        crate::check::TStmt::Write { emb, .. } => embs.get(*emb).map(|e| e.name.as_str()),
+        crate::check::TStmt::Let(..) => None,
+    })
+}
+
 fn error(out: &mut Vec<Diagnostic>, file: &str, pos: Pos, condition: &'static str, m: String) {
     out.push(Diagnostic {
         file: file.to_string(),
@@ -359,13 +367,7 @@ fn check_model(
                 continue;
             };
             // what the rule would change that a model must not (see SIMULATION_STATE)
-            let state = rule.program.iter().find_map(|st| match st {
-                crate::check::TStmt::Write { emb, .. } => embs
-                    .get(*emb)
-                    .map(|e| e.name.as_str())
-                    .filter(|n| SIMULATION_STATE.contains(n)),
-                crate::check::TStmt::Let(..) => None,
-            });
+            let state = written_by(rule, embs).find(|n| SIMULATION_STATE.contains(n));
             let forbidden = if rule.changes_topology {
                 Some("changes the topology (it has a right graph): a model's rules compute embeddings only; cuts, fracture and tearing are the simulation's events".to_string())
             } else {
@@ -548,12 +550,10 @@ fn check_model(
     // such as `position`)
     let writes = |calls: &[ast::RuleCall], name: &str| {
         calls.iter().any(|c| {
-            rules.iter().find(|r| r.name == c.rule).is_some_and(|r| {
-                r.program.iter().any(|st| {
-                    matches!(st, crate::check::TStmt::Write { emb, .. }
-                        if embs.get(*emb).is_some_and(|e| e.name == name))
-                })
-            })
+            rules
+                .iter()
+                .find(|r| r.name == c.rule)
+                .is_some_and(|r| written_by(r, embs).any(|n| n == name))
         })
     };
     // (a constant force may be written once, by an init rule)
