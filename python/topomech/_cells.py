@@ -71,6 +71,11 @@ class CellBlock(NamedTuple):
     data: Any
 
 
+#: What a refusal of a map whose cells no mesh file holds (a general polyhedron after a
+#: rewrite) says of mesh files.
+MESH_FILE_CELLS = "a mesh file holds tetrahedra, hexahedra, wedges, pyramids and polygons"
+
+
 class FlatMesh(NamedTuple):
     """The kernel's flat layout (see the module docstring)."""
 

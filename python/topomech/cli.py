@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, Callable, TextIO
 
 from topomech import __version__
-from topomech._cells import flat_to_blocks, mesh_figures
+from topomech._cells import MESH_FILE_CELLS, flat_to_blocks, mesh_figures
 from topomech._core import ApplyError, MeshError, RuleError, SceneError, TopomechError
 from topomech.io import DUPLICATES, PINCHED, ImportedMesh, import_mesh, write_format, write_gmap
 from topomech.models import Model, shipped_models
@@ -203,9 +203,8 @@ def _summary(path: Path, m: ImportedMesh) -> dict[str, Any]:
             # not listed, and the note says why (writing it to a mesh file is refused)
             points, blocks = g.positions(), []
             notes.append(
-                f"cells by kind and quality not given: {e} (a mesh file holds tetrahedra, "
-                "hexahedra, wedges, pyramids and polygons: this map cannot be written to one; "
-                "it stays a .tmg)"
+                f"cells by kind and quality not given: {e} ({MESH_FILE_CELLS}: this map "
+                "cannot be written to one; it stays a .tmg)"
             )
             _note(notes[-1])
     figures = mesh_figures(points, blocks, g.dimension)

@@ -42,7 +42,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _gmap
-from topomech._cells import CellBlock, cell_dimension
+from topomech._cells import MESH_FILE_CELLS, CellBlock, cell_dimension
 from topomech._core import MeshError, MeshReadError
 from topomech._gmap import GMap, PathLike
 
@@ -1056,8 +1056,8 @@ def write_gmap(gmap: GMap, path: PathLike) -> None:
         # the map's cells could not be listed (extracted before anything is written): a
         # map whose volumes a rewrite made general polyhedra has none a mesh file holds
         raise MeshError(
-            f"{path}: {e}; a mesh file holds tetrahedra, hexahedra, wedges, pyramids and "
-            "polygons: write the map as a .tmg (topomech's own format) instead"
+            f"{path}: {e}; {MESH_FILE_CELLS}: write the map as a .tmg (topomech's own "
+            "format) instead"
         ) from None
 
 

@@ -72,7 +72,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from topomech import __version__
-from topomech._cells import FlatMesh, to_flat
+from topomech._cells import MESH_FILE_CELLS, FlatMesh, to_flat
 from topomech._core import (
     DivergenceError,
     MeshError,
@@ -655,8 +655,8 @@ def run_scene(
             where = str(sc.path) if sc.path is not None else "<scene>"
             raise SceneError(
                 f"{where}: mesh.file: the run's output files (final.vtu, the frames) cannot "
-                f"hold this map's cells: {e}; a mesh file holds tetrahedra, hexahedra, wedges, "
-                "pyramids and polygons (step such a map from Python: topomech.Simulation)"
+                f"hold this map's cells: {e}; {MESH_FILE_CELLS} (step such a map from Python: "
+                "topomech.Simulation)"
             ) from None
         folder.prepare()
         for rel in ("view.bin", "view.json", "energy.csv"):
