@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _core
-from topomech._cells import FlatMesh, flat_to_blocks, to_flat
+from topomech._cells import FlatMesh, cell_dimension, flat_to_blocks, to_flat
 from topomech._core import FileFormatError, MeshError, TopologyError
 
 if TYPE_CHECKING:
@@ -144,10 +144,6 @@ def format_option(name: str, value: str, style: str) -> str:
     raise ValueError(f"style must be one of {', '.join(STYLES)}, got {style!r}")
 
 
-#: The kernel's kinds of volume cells (see :func:`topomech._cells.to_flat`).
-_VOLUME_KINDS = frozenset({"tetra", "hexahedron", "wedge", "pyramid"})
-
-
 def _with_hint(e: MeshError, style: str) -> MeshError:
     """``e`` with the option that would accept the mesh appended in ``style``."""
     option = getattr(e, "option", None)
@@ -265,7 +261,7 @@ class GMap:
         # degenerate, cell by cell); say what is wrong instead
         shape = np.shape(points)
         if len(shape) == 2 and shape[1] == 2:
-            volumes = sorted({k for k in flat.kinds if k in _VOLUME_KINDS})
+            volumes = sorted({k for k in flat.kinds if cell_dimension(k) == 3})
             if volumes:
                 raise MeshError(
                     f"{', '.join(volumes)} cells need points with 3 coordinates; these have 2 "
