@@ -240,10 +240,11 @@ def test_info_on_a_map_of_general_polyhedra(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A tetrahedron whose edge `split_edge` split is a volume of 5 vertices and 4 faces (two
-    of them quads), which no mesh file holds: `info` on its .tmg gives the map's counts, its
+    of them quads), a cell of no kind: `info` on its .tmg gives the map's counts, its
     validity and the vertices' bounding box, lists no cells, says why in a note (stderr and
-    the JSON's notes), and exits 0 (it exited 2, describing nothing). Writing it to a mesh
-    file is still refused (exit 2, naming the volume)."""
+    the JSON's notes), and exits 0 (it exited 2, describing nothing). Writing it to a .vtu
+    gives a polyhedron (see test_io's polyhedra tests); to another mesh file it is refused
+    (exit 2, naming the volume, nothing written)."""
     tet = write(
         tmp_path, "t.vtu", [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [("tetra", [[0, 1, 2, 3]])]
     )
@@ -261,18 +262,24 @@ def test_info_on_a_map_of_general_polyhedra(
     out, err = capsys.readouterr()
     assert code == 0
     assert "not listed (see the note)" in out
-    assert "cannot be written to one" in err
+    assert "a .vtu also holds general polyhedra" in err
     code = cli.main(
         ["apply", str(tet), "@library", "split_edge", "--at", "0", "--out", str(tmp_path / "x.vtu")]
+    )
+    assert code == 0
+    assert [c.type for c in meshio.read(tmp_path / "x.vtu").cells] == ["polyhedron5"]
+    capsys.readouterr()
+    code = cli.main(
+        ["apply", str(tet), "@library", "split_edge", "--at", "0", "--out", str(tmp_path / "x.msh")]
     )
     assert code == 2
     err = capsys.readouterr().err
     assert "5 vertices and 4 faces (2 triangles, 2 quads)" in err
-    assert "write the map as a .tmg" in err
-    assert not (tmp_path / "x.vtu").exists()
+    assert "write the map as a .vtu or a .tmg" in err
+    assert not (tmp_path / "x.msh").exists()
     # a second split: every face counted, by its sides (the pentagons were left out)
     code = cli.main(
-        ["apply", str(tmg), "@library", "split_edge", "--at", "1", "--out", str(tmp_path / "y.vtu")]
+        ["apply", str(tmg), "@library", "split_edge", "--at", "1", "--out", str(tmp_path / "y.msh")]
     )
     assert code == 2
     assert "6 vertices and 4 faces (2 triangles, 2 pentagons)" in capsys.readouterr().err

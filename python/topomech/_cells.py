@@ -71,9 +71,13 @@ class CellBlock(NamedTuple):
     data: Any
 
 
-#: What a refusal of a map whose cells no mesh file holds (a general polyhedron after a
-#: rewrite) says of mesh files.
-MESH_FILE_CELLS = "a mesh file holds tetrahedra, hexahedra, wedges, pyramids and polygons"
+#: What a refusal of a map whose cells mesh files do not hold as cells of a kind (a general
+#: polyhedron after a rewrite) says of mesh files.
+MESH_FILE_CELLS = (
+    "mesh files hold tetrahedra, hexahedra, wedges, pyramids and polygons; a .vtu also holds "
+    "general polyhedra, every volume then written as one (for viewing: topomech does not read "
+    "them back)"
+)
 
 
 class FlatMesh(NamedTuple):
@@ -166,6 +170,13 @@ def _kernel_kind(cell_type: str, first_cell: int) -> tuple[str, int | None]:
         raise MeshError(
             f"cell {first_cell} is a {cell_type}, a {dim}D cell: a G-map is built from "
             "surface (2D) or volume (3D) cells only"
+        )
+    if cell_type.startswith("polyhedron") and cell_type[len("polyhedron") :].isdigit():
+        raise MeshError(
+            f"cell {first_cell} is a {cell_type}, a general polyhedron (VTK_POLYHEDRON): "
+            "topomech writes such cells to a .vtu for viewing but does not build a map from "
+            "them; load the map saved as a .tmg instead, or use tetra, hexahedron, wedge or "
+            "pyramid cells"
         )
     raise MeshError(
         f"cell {first_cell} has unknown type {cell_type!r}: expected triangle, quad, polygon, "

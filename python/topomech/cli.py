@@ -200,12 +200,9 @@ def _summary(path: Path, m: ImportedMesh) -> dict[str, Any]:
         except MeshError as e:
             # a map whose cells are not the kinds a mesh file holds (a rewrite made a volume
             # a general polyhedron): its counts and validity are the map's; the cells are
-            # not listed, and the note says why (writing it to a mesh file is refused)
+            # not listed, and the note says why (it can be written to a .vtu as polyhedra)
             points, blocks = g.positions(), []
-            notes.append(
-                f"cells by kind and quality not given: {e} ({MESH_FILE_CELLS}: this map "
-                "cannot be written to one; it stays a .tmg)"
-            )
+            notes.append(f"cells by kind and quality not given: {e} ({MESH_FILE_CELLS})")
             _note(notes[-1])
     figures = mesh_figures(points, blocks, g.dimension)
     if not blocks and len(points):

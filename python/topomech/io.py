@@ -1013,10 +1013,47 @@ def read_gmap(
 
 
 def write_vtu(gmap: GMap, path: PathLike) -> None:
-    """Writes the map's points and cells to a VTU file."""
+    """Writes the map's points and cells to a VTU file.
+
+    A volume map whose volumes are not all tetrahedra, hexahedra, wedges and pyramids (general
+    polyhedra after a rewrite such as ``split_edge``) is written with every volume as a VTK
+    polyhedron (cell type 42, ``VTK_POLYHEDRON``: its faces as point cycles, their normals
+    pointing out by the right-hand rule), since a VTU file cannot mix polyhedra with other
+    cells (meshio's limit); ParaView and VTK read them. Reading such a file back into a map is
+    not supported (save a ``.tmg`` for that). Raises :class:`topomech.MeshError` when the
+    cells cannot be listed (an open or non-orientable volume, an open face)."""
     import meshio
 
-    meshio.write(os.fspath(path), gmap.to_meshio(), file_format="vtu")
+    try:
+        mesh = gmap.to_meshio()
+    except MeshError:
+        if gmap.dimension != 3:
+            raise
+        mesh = polyhedra_meshio(gmap)
+    meshio.write(os.fspath(path), mesh, file_format="vtu")
+
+
+def polyhedra_meshio(gmap: GMap) -> meshio.Mesh:
+    """The map's volumes, every one as a general polyhedron, as a ``meshio.Mesh`` (cell blocks
+    ``polyhedron<n>``, ``n`` the number of points of the cell, in the map's volume order; each
+    cell a list of faces, each face an ``int64`` array of point indices, oriented outward).
+    Raises :class:`topomech.MeshError` for a map that is not 3D or an open or non-orientable
+    volume."""
+    import meshio
+
+    points, cell_offsets, face_offsets, connectivity = gmap.core.to_polyhedra()
+    faces = [
+        connectivity[face_offsets[f] : face_offsets[f + 1]] for f in range(len(face_offsets) - 1)
+    ]
+    blocks: list[tuple[str, list[list[npt.NDArray[np.int64]]]]] = []
+    for c in range(len(cell_offsets) - 1):
+        cell = faces[cell_offsets[c] : cell_offsets[c + 1]]
+        kind = f"polyhedron{len(np.unique(np.concatenate(cell)))}"
+        if blocks and blocks[-1][0] == kind:
+            blocks[-1][1].append(cell)
+        else:
+            blocks.append((kind, [cell]))
+    return meshio.Mesh(points, blocks)
 
 
 def write_format(path: PathLike) -> str:
@@ -1054,10 +1091,11 @@ def write_gmap(gmap: GMap, path: PathLike) -> None:
         _write_cells(gmap, path, fmt)
     except MeshError as e:
         # the map's cells could not be listed (extracted before anything is written): a
-        # map whose volumes a rewrite made general polyhedra has none a mesh file holds
+        # map whose volumes a rewrite made general polyhedra has none other mesh files hold
+        # (a .vtu holds them, see write_vtu)
+        instead = "a .tmg (topomech's own format)" if fmt == "vtu" else "a .vtu or a .tmg"
         raise MeshError(
-            f"{path}: {e}; {MESH_FILE_CELLS}: write the map as a .tmg (topomech's own "
-            "format) instead"
+            f"{path}: {e}; {MESH_FILE_CELLS}: write the map as {instead} instead"
         ) from None
 
 

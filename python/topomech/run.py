@@ -72,7 +72,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from topomech import __version__
-from topomech._cells import MESH_FILE_CELLS, FlatMesh, to_flat
+from topomech._cells import FlatMesh, to_flat
 from topomech._core import (
     DivergenceError,
     MeshError,
@@ -650,13 +650,14 @@ def run_scene(
             cells.elements()
         except (MeshError, SimulationError) as e:
             # refused before a step is taken and before the output folder is made: every
-            # frame and final.vtu list the elements (a saved map whose volumes a rewrite
-            # made general polyhedra has none a mesh file holds)
+            # frame and final.vtu list the elements by kind (a saved map whose volumes a
+            # rewrite made general polyhedra has none of a kind)
             where = str(sc.path) if sc.path is not None else "<scene>"
             raise SceneError(
-                f"{where}: mesh.file: the run's output files (final.vtu, the frames) cannot "
-                f"hold this map's cells: {e}; {MESH_FILE_CELLS} (step such a map from Python: "
-                "topomech.Simulation)"
+                f"{where}: mesh.file: the run's output files (final.vtu, the frames) list "
+                f"its cells by kind, and this map's are not of a kind: {e} (step such a map "
+                "from Python, topomech.Simulation, and write it with topomech.write_gmap to "
+                "a .vtu, every volume a polyhedron, or a .tmg)"
             ) from None
         folder.prepare()
         for rel in ("view.bin", "view.json", "energy.csv"):

@@ -1669,24 +1669,7 @@ fn non_manifold_faces(
 /// Volumes are listed in VTK order with a positive volume.
 pub fn extract(g: &GMap) -> Result<Mesh, MeshError> {
     let n = g.dimension();
-    let pos = g
-        .embedding_id("position")
-        .ok_or_else(|| MeshError::Extract("the map has no 'position' embedding".into()))?;
-    // points in the map's row order: the input point order for an imported map
-    let (labels, nv) = g.vertex_rows();
-    let mut points = vec![[0.0; 3]; nv];
-    let mut done = vec![false; nv];
-    for d in g.darts() {
-        let l = labels[d.index()] as usize;
-        if !done[l] {
-            done[l] = true;
-            let p = g.real(pos, d);
-            if p.len() != 3 {
-                return Err(MeshError::Extract("'position' is not a vec3".into()));
-            }
-            points[l] = [p[0], p[1], p[2]];
-        }
-    }
+    let (points, labels) = extract_points(g)?;
     let mut mesh = Mesh {
         points,
         kinds: Vec::new(),
@@ -1720,6 +1703,119 @@ pub fn extract(g: &GMap) -> Result<Mesh, MeshError> {
         }
     }
     Ok(mesh)
+}
+
+/// The points of a map, one per vertex row in the map's row order (the input point order
+/// for an imported map), and each dart's vertex row (indexed by dart).
+fn extract_points(g: &GMap) -> Result<(Vec<[f64; 3]>, Vec<u32>), MeshError> {
+    let pos = g
+        .embedding_id("position")
+        .ok_or_else(|| MeshError::Extract("the map has no 'position' embedding".into()))?;
+    let (labels, nv) = g.vertex_rows();
+    let mut points = vec![[0.0; 3]; nv];
+    let mut done = vec![false; nv];
+    for d in g.darts() {
+        let l = labels[d.index()] as usize;
+        if !done[l] {
+            done[l] = true;
+            let p = g.real(pos, d);
+            if p.len() != 3 {
+                return Err(MeshError::Extract("'position' is not a vec3".into()));
+            }
+            points[l] = [p[0], p[1], p[2]];
+        }
+    }
+    Ok((points, labels))
+}
+
+/// Every volume of a 3-map as a general polyhedron, for mesh files that hold polyhedra (VTK's
+/// `VTK_POLYHEDRON`, cell type 42): the points as [`extract`] gives them, and per volume (in
+/// [`extract`]'s order) its faces, each a cycle of point indices. The faces of a volume are
+/// oriented alike, so that their normals by the right-hand rule point out of it (VTK's
+/// convention): the face cycles are walked from the darts of one orientation class of the
+/// volume, and all reversed when the volume they enclose comes out negative. Refuses a map
+/// that is not 3D, an open volume (a free alpha2) or face, and a volume that is not
+/// orientable, naming the volume by a dart.
+pub fn extract_polyhedra(g: &GMap) -> Result<(Vec<[f64; 3]>, PolyhedronCells), MeshError> {
+    if g.dimension() != 3 {
+        return Err(MeshError::Extract(format!(
+            "a {}-map has no volumes to write as polyhedra",
+            g.dimension()
+        )));
+    }
+    let (points, labels) = extract_points(g)?;
+    let face = OrbitType::parse("<0,1>").expect("static");
+    let mut cells = Vec::new();
+    let mut class: Vec<u8> = vec![u8::MAX; g.capacity()];
+    let mut faces_seen = crate::Marks::with_capacity(g.capacity());
+    let mut stack = Vec::new();
+    for d in g.orbit_representatives(OrbitType::volume()) {
+        // the volume's two orientation classes, from `d` (class 0) through alpha0,1,2
+        let mut darts = vec![d];
+        class[d.index()] = 0;
+        stack.push(d);
+        while let Some(x) = stack.pop() {
+            if g.is_free(2, x) {
+                return Err(MeshError::Extract(format!(
+                    "the volume of dart {d} is open at {x}"
+                )));
+            }
+            for i in 0..3 {
+                let y = g.alpha(i, x);
+                if class[y.index()] == u8::MAX {
+                    class[y.index()] = 1 - class[x.index()];
+                    darts.push(y);
+                    stack.push(y);
+                } else if class[y.index()] == class[x.index()] {
+                    return Err(MeshError::Extract(format!(
+                        "the volume of dart {d} is not orientable (alpha{i} links {x} and {y} of one orientation class)"
+                    )));
+                }
+            }
+        }
+        let mut faces: Vec<Vec<usize>> = Vec::new();
+        for &x in &darts {
+            if class[x.index()] == 0 && !faces_seen.is_marked(x) {
+                g.visit_orbit(x, face, &mut faces_seen, |_| {});
+                faces.push(
+                    face_cycle(g, x, &labels)?
+                        .into_iter()
+                        .map(|(_, v)| v)
+                        .collect(),
+                );
+            }
+        }
+        if polyhedron_volume(&faces, &points) < 0.0 {
+            // each cycle run the other way from the same first point
+            for f in &mut faces {
+                f[1..].reverse();
+            }
+        }
+        cells.push(faces);
+    }
+    Ok((points, cells))
+}
+
+/// The faces of each polyhedron (see [`extract_polyhedra`]): cell, face, point index.
+pub type PolyhedronCells = Vec<Vec<Vec<usize>>>;
+
+/// Six times the signed volume a closed polyhedron's face cycles enclose (positive when their
+/// normals point out), each face fanned from its first point to the polyhedron's first point.
+fn polyhedron_volume(faces: &[Vec<usize>], points: &[[f64; 3]]) -> f64 {
+    let Some(&o) = faces.first().and_then(|f| f.first()) else {
+        return 0.0;
+    };
+    let o = points[o];
+    let mut v = 0.0;
+    for f in faces {
+        let a = sub(points[f[0]], o);
+        for k in 1..f.len().saturating_sub(1) {
+            let b = sub(points[f[k]], o);
+            let c = sub(points[f[k + 1]], o);
+            v += dot(a, cross(b, c));
+        }
+    }
+    v
 }
 
 /// The orientation class of each dart of a 2-map (indexed by dart): 0 for the smallest dart

@@ -98,6 +98,10 @@ fn profile(case: &str, n: [usize; 3]) {
         fracture_idle(n, dt);
         return;
     }
+    if case == "planecut" {
+        plane_cuts(n);
+        return;
+    }
     let steps: u32 = std::env::var("TOPOMECH_TOPOLOGY_STEPS")
         .ok()
         .and_then(|x| x.parse().ok())
@@ -184,6 +188,50 @@ fn profile(case: &str, n: [usize; 3]) {
         t * 1e3,
         t * 1e3 / f64::from(steps - 1)
     );
+}
+
+/// `TOPOMECH_TOPOLOGY_PROFILE=planecut`: the bench's plane cut (x = 1, after the cuts'
+/// guards are built) and the step after it, on `TOPOMECH_TOPOLOGY_STEPS` fresh simulations (3
+/// by default); with `TOPOMECH_PERF_CTL`, the profile holds only those. Prints each cut's
+/// and next step's time in steady steps.
+fn plane_cuts(n: [usize; 3]) {
+    let runs: usize = std::env::var("TOPOMECH_TOPOLOGY_STEPS")
+        .ok()
+        .and_then(|x| x.parse().ok())
+        .unwrap_or(3);
+    let fifo = std::env::var("TOPOMECH_PERF_CTL").ok();
+    let perf = |what: &str| {
+        if let Some(f) = &fifo {
+            std::fs::write(f, format!("{what}\n")).expect("writes to perf's control fifo");
+        }
+    };
+    for _ in 0..runs {
+        let mut s = simulation(n);
+        s.step().expect("steps");
+        let mut steps: Vec<f64> = (0..5)
+            .map(|_| seconds(|| black_box(s.step()).expect("steps")))
+            .collect();
+        let st = median(&mut steps);
+        s.prepare_cuts().expect("prepares");
+        perf("enable");
+        let ct = seconds(|| {
+            s.cut(&Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: 1.0,
+            })
+            .expect("cuts");
+        });
+        let at = seconds(|| black_box(s.step()).expect("steps"));
+        perf("disable");
+        println!(
+            "planecut: step {:.2} ms, cut {:.1} ms = {:.2} steps, next {:.1} ms = {:.2} steps",
+            st * 1e3,
+            ct * 1e3,
+            ct / st,
+            at * 1e3,
+            at / st
+        );
+    }
 }
 
 /// `TOPOMECH_TOPOLOGY_PROFILE=idle`: the step with fracture enabled and nothing breaking

@@ -198,6 +198,41 @@ pub(crate) fn mesh_to_flat<'py>(py: Python<'py>, mesh: &Mesh) -> Result<FlatMesh
     ))
 }
 
+/// Polyhedra as flat arrays `(points, cell_offsets, face_offsets, connectivity)`: the faces
+/// of cell `c` are `cell_offsets[c]..cell_offsets[c + 1]`, the points of face `f`
+/// `connectivity[face_offsets[f]..face_offsets[f + 1]]`.
+pub(crate) type FlatPolyhedra<'py> = (
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<i64>>,
+    Bound<'py, PyArray1<i64>>,
+);
+
+/// [`FlatPolyhedra`] of `mesh::extract_polyhedra`'s output.
+pub(crate) fn polyhedra_to_flat<'py>(
+    py: Python<'py>,
+    points: &[[f64; 3]],
+    cells: &[Vec<Vec<usize>>],
+) -> Result<FlatPolyhedra<'py>> {
+    let points = rows_to_array(py, points)?;
+    let mut cell_offsets = vec![0i64];
+    let mut face_offsets = vec![0i64];
+    let mut connectivity = Vec::new();
+    for faces in cells {
+        for f in faces {
+            connectivity.extend(f.iter().map(|&v| v as i64));
+            face_offsets.push(connectivity.len() as i64);
+        }
+        cell_offsets.push(face_offsets.len() as i64 - 1);
+    }
+    Ok((
+        points,
+        cell_offsets.into_pyarray(py),
+        face_offsets.into_pyarray(py),
+        connectivity.into_pyarray(py),
+    ))
+}
+
 /// A Python integer as `i64`; an integer too large for it is an `IndexError` (an index out of
 /// range), anything else not an integer a `TypeError`.
 fn int_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<i64> {

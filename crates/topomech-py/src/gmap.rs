@@ -11,7 +11,8 @@ use topomech_gmap::mesh::{self, BuildOptions, Duplicates, Pinched};
 use topomech_gmap::{io, ColumnRef, EmbeddingId, EmbeddingType, GMap, OrbitType};
 
 use crate::convert::{
-    array_arg, dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, rows_to_array, shape_str, FlatMesh,
+    array_arg, dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, polyhedra_to_flat, rows_to_array,
+    shape_str, FlatMesh, FlatPolyhedra,
 };
 use crate::errors::{exclusive, guard, shared, value_error, Error, InternalError, Result};
 
@@ -578,6 +579,17 @@ impl PyGMap {
         let g = this.map()?;
         let mesh = py.detach(|| guard(|| Ok(mesh::extract(g)?)))?;
         guard(|| mesh_to_flat(py, &mesh))
+    }
+
+    /// Every volume of a 3-map as a general polyhedron, faces oriented outward (see the
+    /// kernel's `mesh::extract_polyhedra`): `(points, cell_offsets, face_offsets,
+    /// connectivity)`, the points as `to_flat` gives them. Raises `MeshError` for a map that
+    /// is not 3D, an open or non-orientable volume.
+    fn to_polyhedra<'py>(slf: &Bound<'_, Self>, py: Python<'py>) -> PyResult<FlatPolyhedra<'py>> {
+        let this = shared(slf)?;
+        let g = this.map()?;
+        let (points, cells) = py.detach(|| guard(|| Ok(mesh::extract_polyhedra(g)?)))?;
+        guard(|| polyhedra_to_flat(py, &points, &cells))
     }
 
     /// `alpha_i(dart)`; a free link returns the dart itself.

@@ -427,3 +427,122 @@ fn unused_points_are_reported() {
     assert_eq!(report.unused_points, vec![4, 5]);
     assert_eq!(g.cell_counts().vertices, 4);
 }
+
+/// `cycle` started at its smallest point, in the same direction.
+fn canonical(cycle: &[usize]) -> Vec<usize> {
+    let k = (0..cycle.len()).min_by_key(|&k| cycle[k]).expect("a face");
+    cycle[k..].iter().chain(&cycle[..k]).copied().collect()
+}
+
+/// `extract_polyhedra` on every kind of volume cell (and a mixed box), on a box sheared by a
+/// linear map of determinant 1 (faces stay planar, the volume stays 3), checked against the cells `extract` gives and against
+/// geometry computed here: each polyhedron has its cell's points and its kind's number of
+/// faces; the volumes its faces enclose (fanned to a point of the cell, normals by the
+/// right-hand rule) are positive and add up to the box's volume (to rounding: 1e-12 of it,
+/// for sums of a few hundred products of order-one coordinates); every interior face is
+/// listed twice, in opposite directions, and every boundary face once.
+#[test]
+fn polyhedra_are_the_cells_with_outward_faces() {
+    use std::collections::HashMap;
+    use topomech_gmap::mesh::extract_polyhedra;
+    for e in BOX {
+        let mut mesh = cuboid([3, 2, 2], [2.0, 1.0, 1.5], e);
+        for p in &mut mesh.points {
+            p[0] += 0.1 * p[1] + 0.05 * p[2];
+        }
+        let g = built(&mesh);
+        let cells = extract(&g).expect("extracts");
+        let (points, polys) = extract_polyhedra(&g).expect("polyhedra");
+        assert_eq!(points, cells.points);
+        assert_eq!(polys.len(), cells.cells.len(), "{e:?}");
+        let mut total = 0.0;
+        // every face's cycle (started at its smallest point) by its point set: an interior
+        // face is listed by both its cells, running opposite ways
+        // the cell beside it
+        let mut face_keys: HashMap<Vec<usize>, Vec<Vec<usize>>> = HashMap::new();
+        for ((faces, verts), kind) in polys.iter().zip(&cells.cells).zip(&cells.kinds) {
+            let want = match kind {
+                CellKind::Tetra => 4,
+                CellKind::Hexa => 6,
+                CellKind::Wedge | CellKind::Pyramid => 5,
+                CellKind::Polygon => unreachable!("a 3D map"),
+            };
+            assert_eq!(faces.len(), want, "{kind:?}");
+            let mut seen: Vec<usize> = faces.iter().flatten().copied().collect();
+            seen.sort_unstable();
+            seen.dedup();
+            let mut cell: Vec<usize> = verts.clone();
+            cell.sort_unstable();
+            assert_eq!(seen, cell, "{kind:?}");
+            let o = points[faces[0][0]];
+            let mut v6 = 0.0;
+            for f in faces {
+                let d = |k: usize| {
+                    let p = points[f[k]];
+                    [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
+                };
+                for k in 1..f.len() - 1 {
+                    let (a, b, c) = (d(0), d(k), d(k + 1));
+                    v6 += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                        + a[2] * (b[0] * c[1] - b[1] * c[0]);
+                }
+                let mut key = f.clone();
+                key.sort_unstable();
+                face_keys.entry(key).or_default().push(canonical(f));
+            }
+            assert!(v6 > 0.0, "{kind:?}: {v6}");
+            total += v6 / 6.0;
+        }
+        assert!((total - 3.0).abs() < 1e-12 * 3.0, "{e:?}: {total}");
+        // mirrored (x -> -x) in the map itself, the walk's faces point in: all reversed
+        let mut m = g.clone();
+        let pos = m.embedding_id("position").expect("position");
+        for d in m.orbit_representatives(OrbitType::vertex(3)) {
+            let p = m.real(pos, d).to_vec();
+            m.set_real(pos, d, &[-p[0], p[1], p[2]]).expect("writes");
+        }
+        let (mirrored, mpolys) = extract_polyhedra(&m).expect("polyhedra");
+        let mut mtotal = 0.0;
+        for (faces, same) in mpolys.iter().zip(&polys) {
+            let o = mirrored[faces[0][0]];
+            let mut v6 = 0.0;
+            for f in faces {
+                let d = |k: usize| {
+                    let p = mirrored[f[k]];
+                    [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
+                };
+                for k in 1..f.len() - 1 {
+                    let (a, b, c) = (d(0), d(k), d(k + 1));
+                    v6 += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                        + a[2] * (b[0] * c[1] - b[1] * c[0]);
+                }
+            }
+            assert!(v6 > 0.0, "{e:?} mirrored: {v6}");
+            mtotal += v6 / 6.0;
+            // the same faces, each run the other way from the same first point
+            for (f, h) in faces.iter().zip(same) {
+                let mut r = h.clone();
+                r[1..].reverse();
+                assert_eq!(f, &r, "{e:?}");
+            }
+        }
+        assert!((mtotal - 3.0).abs() < 1e-12 * 3.0, "{e:?}: {mtotal}");
+        let boundary = face_keys.values().filter(|c| c.len() == 1).count();
+        for (key, cycles) in &face_keys {
+            assert!(
+                cycles.len() <= 2,
+                "{e:?}: face {key:?} listed {} times",
+                cycles.len()
+            );
+            if let [a, b] = &cycles[..] {
+                let mut r = a.clone();
+                r[1..].reverse();
+                assert_eq!(
+                    &r, b,
+                    "{e:?}: face {key:?} runs the same way from both cells"
+                );
+            }
+        }
+        assert!(boundary > 0, "{e:?}");
+    }
+}
