@@ -315,9 +315,10 @@ class GMap:
         """A map saved by :meth:`save` (a ``.tmg`` file). The map is taken as written: check
         :meth:`violations` before trusting one from elsewhere.
 
-        Raises :class:`FileFormatError` naming the path for a file that cannot be opened or
-        is not a regular file (a directory, or an endless stream such as ``/dev/zero`` or a
-        FIFO, refused before reading), and for a truncated or corrupt file (as
+        Raises :class:`FileNotFoundError` naming the path for a file that does not exist, and
+        :class:`FileFormatError` naming it for a file that cannot be opened or is not a
+        regular file (a directory, or an endless stream such as ``/dev/zero`` or a FIFO,
+        refused before reading), and for a truncated or corrupt file (as
         :meth:`from_bytes`)."""
         p = os.fspath(path)
         try:
@@ -340,7 +341,9 @@ class GMap:
     # ------------------------------------------------------------------ output
 
     def save(self, path: PathLike) -> None:
-        """Saves the map with its embeddings to a ``.tmg`` file (round-trip exact)."""
+        """Saves the map with its embeddings to a ``.tmg`` file (round-trip exact). Raises
+        :class:`FileNotFoundError` when the folder does not exist, :class:`FileFormatError`
+        naming the path when the file cannot be written."""
         self._core.save(os.fspath(path))
 
     def to_bytes(self) -> bytes:

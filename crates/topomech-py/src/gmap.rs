@@ -448,9 +448,10 @@ impl PyGMap {
         Ok((PyGMap::new(g), d))
     }
 
-    /// Loads a map saved by `save` (a `.tmg` file). Raises `FileFormatError` naming the path
-    /// for a file that cannot be opened or is not a regular file (a directory, `/dev/zero`,
-    /// a FIFO: refused before reading), or that is truncated or corrupt.
+    /// Loads a map saved by `save` (a `.tmg` file). Raises `FileNotFoundError` naming the
+    /// path for a file that does not exist, and `FileFormatError` naming it for one that
+    /// cannot be opened or is not a regular file (a directory, `/dev/zero`, a FIFO: refused
+    /// before reading), or that is truncated or corrupt.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<PyGMap> {
         let g = py.detach(move || guard(|| Ok(io::load(&path)?)))?;
@@ -465,7 +466,9 @@ impl PyGMap {
         Ok(PyGMap::new(g))
     }
 
-    /// Saves the map, with its embeddings, to a `.tmg` file (round-trip exact).
+    /// Saves the map, with its embeddings, to a `.tmg` file (round-trip exact). Raises
+    /// `FileNotFoundError` for a folder that does not exist, `FileFormatError` when the file
+    /// cannot be written.
     fn save(slf: &Bound<'_, Self>, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let this = shared(slf)?;
         let g = this.map()?;
