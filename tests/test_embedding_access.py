@@ -166,6 +166,10 @@ def test_every_embedding_round_trips_exactly_on_thousands_of_orbits() -> None:
                 new = rng.random(values.shape) < 0.5
             elif spec.name == "particle":  # the vertex numbering: another numbering
                 new = rng.permutation(values)
+            elif spec.name in ("point_id", "cell_id"):
+                # input numberings: indices >= 0 (-1: none), no point twice in an element
+                high = rng.permutation(len(values)).astype(np.int64) * 2**40
+                new = high + rng.integers(0, 2**40, values.shape, dtype=np.int64)
             elif values.dtype == np.int64:
                 new = rng.integers(-(2**62), 2**62, values.shape, dtype=np.int64)
             else:
@@ -362,6 +366,94 @@ def test_a_particle_numbering_with_gaps_is_refused() -> None:
     ):
         g.set_embedding("particle", gapped)
     assert g.embedding("particle").values.tolist() == merged.tolist()
+
+
+def test_input_numbering_below_minus_one_is_refused() -> None:
+    """Regression: ``set_embedding("point_id", ...)`` and ``set_embedding("cell_id", ...)``
+    took any int64: a -7 was written into final.vtu's ``point_id`` and ``cell_id`` data as if
+    it were an index of the input mesh. They hold an input index (>= 0) or -1 for none (a
+    vertex a rule created has point_id -1); anything below -1 is a ValueError naming the
+    embedding, the value and the orbit's dart, and nothing is written."""
+    for dim, g in (
+        (2, GMap.from_flat(*_core.grid(2, 1, 2.0, 1.0, "quad"))),
+        (3, GMap.from_mesh(TET_POINTS, TETS)),
+    ):
+        before = g.to_bytes()
+        element = "face" if dim == 2 else "volume"
+        for name, orbit, what in (
+            ("point_id", "vertex", "the input point of each vertex"),
+            ("cell_id", element, f"the input cell of each {element}"),
+        ):
+            values, darts, _ = g.embedding(name)
+            bad = values.copy()
+            bad[-1] = -7
+            with pytest.raises(
+                ValueError,
+                match=rf"values for '{name}' \({what}: its index in the mesh the map was "
+                rf"built from, or -1 for none\) must be -1 or more: -7 for the {orbit} of "
+                rf"dart {darts[-1]} \(value {len(values) - 1}\)$",
+            ):
+                g.set_embedding(name, bad)
+            assert g.to_bytes() == before, "a refused numbering is not written"
+            # -1 (none) is taken, and so is any other index of an input the map does not know
+            ok = values.copy()
+            ok[0], ok[-1] = -1, 10**12
+            g.set_embedding(name, ok)
+            assert g.embedding(name).values.tolist() == ok.tolist()
+            g.set_embedding(name, values)
+
+
+def test_a_point_twice_in_one_element_is_refused() -> None:
+    """Regression: ``set_embedding("point_id", ...)`` accepted one input point for two
+    vertices of one element, which no input cell has (its corners are distinct points): the
+    written element then matched no input cell and was written in the map's vertex order, and
+    a point group selected both vertices. Refused naming the point, both vertices (darts and
+    value rows) and the element; -1 (no input point) may repeat, as the vertices a rule adds
+    to one face all carry it."""
+    g = GMap.from_mesh(TET_POINTS, TETS)
+    before = g.to_bytes()
+    values, darts, _ = g.embedding("point_id")
+    rows = {int(p): k for k, p in enumerate(values)}
+    bad = values.copy()
+    bad[rows[4]] = 1  # point 4 of tetrahedron (1, 2, 3, 4) renamed 1: that tet has 1 twice
+    with pytest.raises(
+        ValueError,
+        match=r"values for 'point_id' .* must differ between the vertices of one volume: "
+        rf"point 1 for the vertex of dart {darts[rows[1]]} \(value {rows[1]}\) and the vertex "
+        rf"of dart {darts[rows[4]]} \(value {rows[4]}\), both on the volume of dart \d+$",
+    ):
+        g.set_embedding("point_id", bad)
+    assert g.to_bytes() == before
+    # point 0 and point 4 share no tetrahedron: one id for both is a point split in two
+    split = values.copy()
+    split[rows[4]] = 0
+    g.set_embedding("point_id", split)
+    none = np.full_like(values, -1)
+    g.set_embedding("point_id", none)
+    assert g.embedding("point_id").values.tolist() == none.tolist()
+
+
+def test_numbering_the_kernel_writes_is_taken_back() -> None:
+    """What the kernel itself writes reads back and writes again unchanged: duplicates
+    included. A pinched point split in two keeps its point_id on both vertices, the pieces
+    of a face cut by a rule keep its cell_id, and the vertices the rule adds have point_id
+    -1. (The contract is not uniqueness: these are the input's numbers carried through
+    topology changes.)"""
+    pts = [[0, 0], [1, 0], [0, 1], [-1, 0], [0, -1]]
+    g = GMap.from_mesh(pts, [("triangle", [[0, 1, 2], [0, 3, 4]])], pinched="split")
+    assert sorted(g.embedding("point_id").values.tolist()) == [0, 0, 1, 2, 3, 4]
+    quads = GMap.from_mesh(
+        [[0, 0], [1, 0], [1, 1], [0, 1], [2, 0], [2, 1]],
+        [("quad", [[0, 1, 2, 3], [1, 4, 5, 2]])],
+    )
+    topomech.RuleSet.library(2).apply(quads, "quad_subdivide", [0])
+    assert quads.embedding("cell_id").values.tolist().count(0) == 4
+    assert quads.embedding("point_id").values.tolist().count(-1) == 9
+    for m in (g, quads):
+        before = m.to_bytes()
+        for name in ("point_id", "cell_id"):
+            m.set_embedding(name, m.embedding(name).values)
+        assert m.to_bytes() == before
 
 
 def test_ragged_values_and_unknown_names_say_so() -> None:

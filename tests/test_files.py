@@ -33,7 +33,7 @@ def test_save_load_round_trip(name: str, request: pytest.FixtureRequest, tmp_pat
 
 
 def test_load_errors(tmp_path: Path) -> None:
-    with pytest.raises(topomech.FileFormatError, match=r"missing\.tmg"):
+    with pytest.raises(FileNotFoundError, match=r"missing\.tmg"):
         topomech.GMap.load(tmp_path / "missing.tmg")
     junk = tmp_path / "junk.tmg"
     junk.write_bytes(b"this is not a map at all")
@@ -142,7 +142,7 @@ def test_write_vtu_round_trip(tmp_path: Path, mixed_volume: tuple) -> None:
 
 
 def test_read_errors(tmp_path: Path) -> None:
-    with pytest.raises(topomech.MeshReadError, match=r"nothing\.msh: no such file"):
+    with pytest.raises(FileNotFoundError, match=r"No such file or directory: .*nothing\.msh"):
         read_mesh(tmp_path / "nothing.msh")
     with pytest.raises(topomech.MeshReadError, match="is a directory"):
         read_mesh(tmp_path)

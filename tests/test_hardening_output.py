@@ -516,6 +516,156 @@ def test_real_sigint_while_stepping(tmp_path: Path) -> None:
     assert 0 < s["error"]["steps_done"] == s["steps"] < 200000
 
 
+# ---------------------------------------------------------------------- 3b. SIGTERM
+
+posix_only = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+
+
+@posix_only
+def test_sigterm_while_stepping_leaves_a_summary(tmp_path: Path) -> None:
+    """SIGTERM (`kill`, a batch scheduler or a container stopping the job) sent once frames
+    appear is handled as Ctrl-C is: exit 143 (128 + SIGTERM), a summary.json saying
+    interrupted in the steps or a frame with the steps done, final.vtu written, one line on
+    stderr naming the folder (before: the process died at once, exit -15, no summary and no
+    final.vtu)."""
+    out = tmp_path / "o"
+    scene = springs(tmp_path, steps=200000, every=1000)
+    p = subprocess.Popen(
+        [sys.executable, "-m", "topomech", "run", str(scene), "--out", str(out), "--no-preview"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    second = out / "frames" / "frame_00001.vtu"
+    deadline = time.monotonic() + 60
+    while not second.exists() and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert p.poll() is None, "the run ended before the signal"
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 128 + signal.SIGTERM, err
+    assert f"topomech: error: terminated (SIGTERM); what was written is in {out}" in err
+    assert "Traceback" not in err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["error"]["type"] == "interrupted"
+    assert s["error"]["phase"] in ("steps", "frames")
+    assert 0 < s["error"]["steps_done"] == s["steps"] < 200000
+    assert len(meshio.read(out / "final.vtu").points) == s["vertices"]
+
+
+SIGNAL_WRAPPER = """
+import os, signal, sys
+import topomech.run as run_mod
+from topomech import cli
+
+signum = getattr(signal, sys.argv[1])
+phase = sys.argv[2]
+if sys.argv[3] == "ignored":
+    signal.signal(signum, signal.SIG_IGN)  # as a parent that ignores it leaves it
+real = run_mod._enter
+
+def hook(name):
+    real(name)
+    if name == phase:
+        os.kill(os.getpid(), signum)
+
+run_mod._enter = hook
+code = cli.main(sys.argv[4:])
+print("handler after:", signal.getsignal(signum) in (signal.SIG_DFL, signal.SIG_IGN))
+sys.exit(code)
+"""
+
+
+def run_signalled(
+    tmp_path: Path, signame: str, phase: str, how: str = "default"
+) -> tuple[subprocess.CompletedProcess[str], Path]:
+    """`topomech run` of a small scene in a fresh interpreter that sends itself ``signame``
+    as the run enters ``phase``."""
+    out = tmp_path / "o"
+    wrapper = tmp_path / "wrapper.py"
+    wrapper.write_text(SIGNAL_WRAPPER)
+    run_args = ["run", str(springs(tmp_path)), "--out", str(out), "-q"]
+    r = subprocess.run(
+        [sys.executable, str(wrapper), signame, phase, how, *run_args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    return r, out
+
+
+@posix_only
+@pytest.mark.parametrize("phase", ["setup", "steps", "final", "previews"])
+def test_real_sigterm_at_a_phase(phase: str, tmp_path: Path) -> None:
+    """SIGTERM as the run enters each phase: exit 143, the summary says interrupted in that
+    phase, stderr names the folder, and the handler in place before the run is back after it
+    (before: killed at once, nothing but what was written so far)."""
+    r, out = run_signalled(tmp_path, "SIGTERM", phase)
+    assert r.returncode == 128 + signal.SIGTERM, r.stderr
+    assert f"terminated (SIGTERM); what was written is in {out}" in r.stderr
+    assert "Traceback" not in r.stderr
+    assert "handler after: True" in r.stdout
+    s = json.loads((out / "summary.json").read_text())
+    assert s["error"]["type"] == "interrupted"
+    assert s["error"]["phase"] == phase
+
+
+@posix_only
+def test_sigint_still_exits_130_with_sigterm_handled(tmp_path: Path) -> None:
+    """Ctrl-C is told apart from SIGTERM: exit 130 and `interrupted`."""
+    r, out = run_signalled(tmp_path, "SIGINT", "steps")
+    assert r.returncode == 130, r.stderr
+    assert f"topomech: error: interrupted; what was written is in {out}" in r.stderr
+    assert "SIGTERM" not in r.stderr
+
+
+@posix_only
+def test_an_ignored_sigterm_stays_ignored(tmp_path: Path) -> None:
+    """A SIGTERM the parent ignores (SIG_IGN, inherited) is not turned into an
+    interruption: the run completes, and SIGTERM is still ignored after it."""
+    r, out = run_signalled(tmp_path, "SIGTERM", "steps", "ignored")
+    assert r.returncode == 0, r.stderr
+    assert "handler after: True" in r.stdout
+    assert "error" not in json.loads((out / "summary.json").read_text())
+
+
+@posix_only
+def test_the_sigterm_handler_is_restored(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """In-process: during the run SIGTERM has topomech's handler; after a run that ends, is
+    refused or is interrupted, the caller's handler is back."""
+
+    def callers(signum: int, frame: Any) -> None:  # pragma: no cover - never called
+        pass
+
+    seen: list[Any] = []
+    real = run_mod._enter
+
+    def hook(name: str) -> None:
+        real(name)
+        seen.append(signal.getsignal(signal.SIGTERM))
+
+    monkeypatch.setattr(run_mod, "_enter", hook)
+    old = signal.signal(signal.SIGTERM, callers)
+    try:
+        assert cli.main(["run", str(springs(tmp_path)), "--out", str(tmp_path / "a"), "-q"]) == 0
+        assert seen
+        assert all(h is not callers and callable(h) for h in seen)
+        assert signal.getsignal(signal.SIGTERM) is callers
+        bad = tmp_path / "bad.toml"
+        bad.write_text("[mesh]\n")
+        assert cli.main(["run", str(bad), "--out", str(tmp_path / "b")]) == 2
+        assert signal.getsignal(signal.SIGTERM) is callers
+        interrupt_at(monkeypatch, "steps")
+        assert cli.main(["run", str(springs(tmp_path)), "--out", str(tmp_path / "c"), "-q"]) == 130
+        assert signal.getsignal(signal.SIGTERM) is callers
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    capsys.readouterr()
+
+
 # ---------------------------------------------------------------------- 4. disk full
 
 

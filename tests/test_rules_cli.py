@@ -351,7 +351,7 @@ def test_apply_exit_2_when_the_input_cannot_be_read(
         )
         == 2
     )
-    assert "none.vtu: no such file" in capsys.readouterr().err
+    assert "none.vtu: No such file or directory" in capsys.readouterr().err
     assert not out.exists()
 
 

@@ -505,7 +505,7 @@ def test_shipped_scenes_parse() -> None:
 
 
 def test_unknown_scene_name() -> None:
-    with pytest.raises(topomech.SceneError, match="no shipped scene of that name"):
+    with pytest.raises(FileNotFoundError, match="no shipped scene of that name"):
         topomech.load_scene("no_such_scene")
 
 

@@ -56,7 +56,8 @@ class MeshError(TopomechError):
     option: tuple[str, str] | None
 
 class MeshReadError(TopomechError):
-    """A mesh file that cannot be read: missing, unreadable, or not a mesh."""
+    """A mesh file that cannot be read: unreadable, or not a mesh (a missing file raises
+    FileNotFoundError)."""
 
 class TopologyError(TopomechError):
     """A refused operation on darts, links or orbits, or a map that breaks an invariant."""

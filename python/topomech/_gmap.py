@@ -315,9 +315,10 @@ class GMap:
         """A map saved by :meth:`save` (a ``.tmg`` file). The map is taken as written: check
         :meth:`violations` before trusting one from elsewhere.
 
-        Raises :class:`FileFormatError` naming the path for a file that cannot be opened or
-        is not a regular file (a directory, or an endless stream such as ``/dev/zero`` or a
-        FIFO, refused before reading), and for a truncated or corrupt file (as
+        Raises :class:`FileNotFoundError` naming the path for a file that does not exist, and
+        :class:`FileFormatError` naming it for a file that cannot be opened or is not a
+        regular file (a directory, or an endless stream such as ``/dev/zero`` or a FIFO,
+        refused before reading), and for a truncated or corrupt file (as
         :meth:`from_bytes`)."""
         p = os.fspath(path)
         try:
@@ -340,7 +341,9 @@ class GMap:
     # ------------------------------------------------------------------ output
 
     def save(self, path: PathLike) -> None:
-        """Saves the map with its embeddings to a ``.tmg`` file (round-trip exact)."""
+        """Saves the map with its embeddings to a ``.tmg`` file (round-trip exact). Raises
+        :class:`FileNotFoundError` when the folder does not exist, :class:`FileFormatError`
+        naming the path when the file cannot be written."""
         self._core.save(os.fspath(path))
 
     def to_bytes(self) -> bytes:
@@ -471,8 +474,19 @@ class GMap:
           infinite value (naming the embedding, the first bad row and its dart), or, for
           ``particle`` (the vertex numbering), values that number no rows: a negative row, a
           row past the number of vertex orbits, an unused row below the largest, or one row
-          for vertex orbits at different positions;
-        - :class:`EmbeddingError` for a derived embedding (write its source)."""
+          for vertex orbits at different positions; or, for ``point_id`` and ``cell_id``
+          (the input numbering, see below), a value below -1 or one point for two vertices
+          of one element (naming the embedding, the value, its dart and row, and the
+          element);
+        - :class:`EmbeddingError` for a derived embedding (write its source).
+
+        ``point_id`` (on vertices) and ``cell_id`` (on faces in 2D, volumes in 3D) carry the
+        input mesh's numbering to the written meshes' ``point_id`` and ``cell_id`` data: each
+        value is an index of the input (>= 0) or -1 for none (a vertex a rule created), and
+        the vertices of one element are distinct points (-1 aside), as the cells of a mesh
+        are. They are not unique: a point split into several vertices (``pinched="split"``,
+        a fracture, a cut) keeps its ``point_id`` on each, and the pieces of a cell that a
+        rule subdivides keep its ``cell_id``."""
         specs = {s.name: s for s in self.embeddings()}
         self._core.set_embedding(name, as_embedding_array(specs.get(name), values))
 

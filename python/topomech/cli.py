@@ -8,21 +8,24 @@ that cannot write one of its files: a full disk), 2 a file
 cannot be read or is refused (a scene included, with an event after the end of the run, and
 an output directory holding files topomech did not write), or
 the arguments are wrong (the reason goes to stderr, without a traceback); 130 a run
-interrupted by Ctrl-C (what was written stays).
+interrupted by Ctrl-C and 143 one stopped by SIGTERM (``kill``, a batch scheduler, a
+container's stop), handled as Ctrl-C is: what was written stays, with its summary.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import json
 import os
 import re
 import signal
 import sys
+import threading
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
@@ -40,6 +43,8 @@ EXIT_INVALID = 1
 EXIT_REFUSED = 2
 #: Ctrl-C during `run` or `demo` (the shell's code for SIGINT).
 EXIT_INTERRUPTED = 130
+#: SIGTERM during `run` or `demo` (the shell's code for it): handled as Ctrl-C is.
+EXIT_TERMINATED = 128 + int(getattr(signal, "SIGTERM", 15))
 
 #: Violations listed by `info` before "... and N more".
 MAX_VIOLATIONS_SHOWN = 20
@@ -346,7 +351,8 @@ def _add_run(sub: Any) -> None:
             "(DIR/.topomech-manifest.jsonl): a rerun removes only those files, never "
             "following a symbolic link. A file that cannot be written (a full disk) stops "
             "the run with exit 1, the message naming the file; Ctrl-C stops it with exit "
-            "130; either way summary.json says what happened. " + PROGRESS_HELP
+            "130, SIGTERM the same way with exit 143; either way summary.json says what "
+            "happened. " + PROGRESS_HELP
         ),
     )
     p.add_argument("scene", metavar="SCENE", nargs="?", help="scene file (.toml) or shipped name")
@@ -509,6 +515,35 @@ def _progress_kinds(quiet: bool) -> tuple[bool, bool]:
     return tty_err, not (tty_out and tty_err)
 
 
+@contextlib.contextmanager
+def _sigterm_interrupts() -> Iterator[list[int]]:
+    """For the block, SIGTERM raises :class:`KeyboardInterrupt` as Ctrl-C does, so that a run
+    told to stop (``kill``, a batch scheduler, a container's stop) writes what it did and its
+    summary instead of dying at once; the list yielded gets the signal's number when it came.
+    The handler in place before is put back on leaving. Nothing changes where Python cannot
+    handle signals (another thread than the main one), where SIGTERM is ignored (the parent
+    asked for it) or where a handler not installed from Python holds it."""
+    received: list[int] = []
+    sigterm = getattr(signal, "SIGTERM", None)
+    if sigterm is None or threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+    old = signal.getsignal(sigterm)
+    if old is None or old == signal.SIG_IGN:
+        yield received
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        received.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(sigterm, interrupt)
+    try:
+        yield received
+    finally:
+        signal.signal(sigterm, old)
+
+
 def _run_scene_cli(
     scene: str,
     out: Path | None,
@@ -518,26 +553,32 @@ def _run_scene_cli(
     preview: bool = True,
     overwrite: bool = False,
 ) -> tuple[int, Path | None]:
-    """Runs a scene for ``run`` and ``demo``: the exit code and the output directory."""
+    """Runs a scene for ``run`` and ``demo``: the exit code and the output directory. Ctrl-C
+    and SIGTERM stop the run the same way (:func:`_sigterm_interrupts`), the exit code says
+    which came."""
     from topomech.run import OutputError, run_scene
     from topomech.scene import load_scene
 
     out_dir = out
+    received: list[int] = []
     try:
-        sc = load_scene(scene)
-        if steps is not None or every is not None:
-            sc = sc.with_steps(steps, every)
-        out_dir = out if out is not None else Path("out") / sc.name
-        bar, log = _progress_kinds(quiet)
-        summary = run_scene(
-            sc,
-            out_dir,
-            progress=bar,
-            log=log,
-            preview=preview,
-            overwrite=overwrite,
-            started=_started[0],
-        )
+        # the handler is put back as the interruption leaves: a second SIGTERM while the
+        # message is printed ends the process as it would have before
+        with _sigterm_interrupts() as received:
+            sc = load_scene(scene)
+            if steps is not None or every is not None:
+                sc = sc.with_steps(steps, every)
+            out_dir = out if out is not None else Path("out") / sc.name
+            bar, log = _progress_kinds(quiet)
+            summary = run_scene(
+                sc,
+                out_dir,
+                progress=bar,
+                log=log,
+                preview=preview,
+                overwrite=overwrite,
+                started=_started[0],
+            )
     except (SceneError, OutputError) as e:
         _error(str(e))
         return EXIT_REFUSED, None
@@ -545,8 +586,13 @@ def _run_scene_cli(
         # name the folder only when the run left its summary there
         wrote = out_dir is not None and (out_dir / "summary.json").is_file()
         where = f"; what was written is in {out_dir} (see summary.json)" if wrote else ""
-        _error(f"interrupted{where}")
-        return EXIT_INTERRUPTED, out_dir if wrote else None
+        what, code = (
+            ("terminated (SIGTERM)", EXIT_TERMINATED)
+            if received
+            else ("interrupted", EXIT_INTERRUPTED)
+        )
+        _error(f"{what}{where}")
+        return code, out_dir if wrote else None
     err = summary.get("error")
     if err is not None:
         _error(f"{sc.name}: {err['message']}")

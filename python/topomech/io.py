@@ -45,6 +45,7 @@ from topomech import _gmap
 from topomech._cells import MESH_FILE_CELLS, CellBlock, cell_dimension
 from topomech._core import MeshError, MeshReadError
 from topomech._gmap import GMap, PathLike
+from topomech._paths import missing_file
 
 if TYPE_CHECKING:
     import meshio
@@ -711,8 +712,9 @@ def read_mesh(
 
     Gmsh groups are named by ``$PhysicalNames``; an unnamed physical tag N is named ``"N"``.
 
-    Raises :class:`MeshReadError` (with the path and the reason) for a missing, unreadable,
-    truncated or garbage file, or one that is not a regular file (a device or FIFO such as
+    Raises :class:`FileNotFoundError` naming the path for a file that does not exist,
+    :class:`MeshReadError` (with the path and the reason) for an unreadable, truncated or
+    garbage file, or one that is not a regular file (a directory, or a device or FIFO such as
     ``/dev/zero``: an endless stream), and :class:`MeshError` for a file without surface or volume
     cells or with second-order cells (without ``linear=True``; ``.option`` is then
     ``("linear", "true")``). What meshio prints while reading goes to stderr, never stdout.
@@ -721,7 +723,7 @@ def read_mesh(
 
     p = Path(path)
     if not p.exists():
-        raise MeshReadError(f"{p}: no such file")
+        raise missing_file(p)
     if p.is_dir():
         raise MeshReadError(f"{p}: is a directory, not a mesh file")
     if not p.is_file():
@@ -979,15 +981,15 @@ def import_mesh(
     - ``linear``: keep the corner nodes of second-order cells.
 
     The notes say what was done, in ``_style``'s spelling (``"python"``, ``"cli"`` or
-    ``"scene"``). Raises :class:`MeshReadError` for a file that cannot be read,
-    :class:`MeshError` for a refused mesh (``.option``, when set, names the option that
-    would accept it), ``ValueError`` for an unknown option value."""
+    ``"scene"``). Raises :class:`FileNotFoundError` naming the path for a file that does
+    not exist, :class:`MeshReadError` for a mesh file that cannot be read,
+    :class:`FileFormatError` for a ``.tmg`` file that cannot be read (as
+    :meth:`GMap.load`), :class:`MeshError` for a refused mesh (``.option``, when set, names
+    the option that would accept it), ``ValueError`` for an unknown option value."""
     p = Path(path)
     _check_choice("pinched", pinched, PINCHED, _style)
     _check_choice("duplicates", duplicates, DUPLICATES, _style)
     if p.suffix.lower() == GMAP_SUFFIX:
-        if not p.exists():
-            raise MeshReadError(f"{p}: no such file")
         return ImportedMesh(GMap.load(p), None, [], [])
     mesh, dropped = read_mesh(p, linear=linear, _style=_style)
     g = build_gmap(mesh, reorient=reorient, pinched=pinched, duplicates=duplicates, _style=_style)
@@ -1007,7 +1009,8 @@ def read_gmap(
     linear: bool = False,
 ) -> tuple[GMap, list[DroppedBlock]]:
     """A G-map from a file: a saved map (``.tmg``) or any mesh file meshio reads, built with
-    the import options of :func:`import_mesh`."""
+    the import options of :func:`import_mesh` (errors as there: :class:`FileNotFoundError`
+    for a file that does not exist)."""
     m = import_mesh(path, reorient=reorient, pinched=pinched, duplicates=duplicates, linear=linear)
     return m.gmap, m.dropped
 

@@ -122,7 +122,8 @@ class Model:
         """The model ``name`` declared in the rule file ``path`` (the file's only model when
         ``name`` is None), with the parameter values ``params``.
 
-        Raises :class:`OSError` when the file cannot be read, :class:`UnicodeDecodeError`
+        Raises :class:`FileNotFoundError` naming the file when it does not exist,
+        :class:`OSError` when it cannot be read, :class:`UnicodeDecodeError`
         when it is not UTF-8, :class:`topomech.RuleError` when the checker refuses it (one
         ``FILE:LINE:COL: error[CONDITION]: message`` line per problem), :class:`ValueError`
         when it declares no model, when ``name`` is None and it declares several, or when it

@@ -98,8 +98,9 @@ class RuleSet:
     def load(cls, paths: PathLike | Sequence[PathLike], dimension: int | None = None) -> RuleSet:
         """Reads and checks one rule file or several together, for ``dimension`` (2 or 3:
         needed when every file serves both, with ``dimension 2 3`` or no dimension line; by
-        default the dimension the files say). Raises :class:`RuleError` with every error (an
-        unreadable file included), ValueError for another dimension."""
+        default the dimension the files say). Raises :class:`FileNotFoundError` naming the
+        first file that does not exist, :class:`RuleError` with every error (a file that
+        exists but cannot be read included), ValueError for another dimension."""
         if isinstance(paths, (str, os.PathLike)):
             paths = [paths]
         return cls(_core.RuleSet.load([os.fspath(p) for p in paths], _dimension(dimension)))

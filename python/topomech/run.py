@@ -485,22 +485,24 @@ def _io_error(e: OSError, phase: str, writing: Sequence[Path], steps: int) -> di
 
 
 @contextlib.contextmanager
-def _sigint_held() -> Any:
-    """SIGINT held back (delivered on leaving) in the main thread, where that is possible:
-    the summary of an interruption is written whole."""
+def _interrupts_held() -> Any:
+    """SIGINT and SIGTERM (which ``topomech run`` handles as Ctrl-C) held back, delivered on
+    leaving, in the main thread, where that is possible: the summary of an interruption is
+    written whole."""
     import signal
     import threading
 
     held = False
+    signals = {signal.SIGINT, signal.SIGTERM}
     if hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread():
         with contextlib.suppress(OSError, ValueError):
-            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            signal.pthread_sigmask(signal.SIG_BLOCK, signals)
             held = True
     try:
         yield
     finally:
         if held:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, signals)
 
 
 def _enter(phase: str) -> None:
@@ -562,7 +564,8 @@ def run_scene(
     After an interruption or an I/O error what was written stays and ``summary.json`` says
     what happened: after Ctrl-C during the steps or a frame, ``final.vtu`` and the view data
     are still written (not the previews); after an I/O error nothing more but the summary.
-    A Ctrl-C is raised again (:class:`KeyboardInterrupt`) once the summary is written. When
+    A Ctrl-C is raised again (:class:`KeyboardInterrupt`) once the summary is written (any
+    KeyboardInterrupt counts as one: ``topomech run`` raises it for SIGTERM too). When
     ``summary.json`` itself cannot be written the summary is returned with an ``io`` error
     naming it (and ``outputs.summary`` null).
 
@@ -804,7 +807,7 @@ def run_scene(
         except KeyboardInterrupt as e:
             stop(e)
             summary["error"] = error
-            with _sigint_held():
+            with _interrupts_held():
                 _write_summary(folder.add("summary.json"), summary)
     except OSError as e:
         stop(e)

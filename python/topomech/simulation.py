@@ -291,7 +291,8 @@ class Simulation:
     @classmethod
     def from_scene(cls, path: PathLike) -> Simulation:
         """The simulation a scene file (TOML) describes: ``load_scene(path).build()``.
-        Raises :class:`SceneError` for a refused scene."""
+        Raises :class:`FileNotFoundError` for a scene file that does not exist,
+        :class:`SceneError` for a refused scene."""
         from topomech.scene import load_scene
 
         return load_scene(path).build()

@@ -18,7 +18,9 @@
 //! ```
 //!
 //! Arguments checked at the boundary raise Python's own classes: `ValueError` for shapes and
-//! values, `TypeError` for types, `IndexError` for dart and dimension indices.
+//! values, `TypeError` for types, `IndexError` for dart and dimension indices. A file that
+//! does not exist raises `FileNotFoundError` naming it ([`not_found`]), as `open` does: the
+//! classes above are for files that exist and are refused.
 //!
 //! Every exported function runs its body through [`guard`], so a Rust panic never unwinds into
 //! Python: it becomes an `InternalError` carrying the panic's message and location.
@@ -31,9 +33,10 @@ use std::any::Any;
 use std::cell::RefCell;
 use std::fmt::Display;
 use std::panic::{self, AssertUnwindSafe};
+use std::path::Path;
 use std::sync::Once;
 
-use pyo3::exceptions::{PyException, PyIndexError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyException, PyFileNotFoundError, PyIndexError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::pyclass::boolean_struct::False;
 use pyo3::PyClass;
@@ -62,7 +65,8 @@ pyo3::create_exception!(
     topomech._core,
     MeshReadError,
     TopomechError,
-    "A mesh file that cannot be read: missing, unreadable, or not a mesh."
+    "A mesh file that cannot be read: unreadable, or not a mesh (a missing file raises\n\
+     FileNotFoundError)."
 );
 pyo3::create_exception!(
     topomech._core,
@@ -254,6 +258,11 @@ impl From<Error> for PyErr {
             Error::Topology(msg) => TopologyError::new_err(msg),
             Error::Embedding(e) => EmbeddingError::new_err(e.to_string()),
             Error::EmbeddingInput(msg) => EmbeddingError::new_err(msg),
+            Error::Format(FormatError::Io { path, source })
+                if source.kind() == std::io::ErrorKind::NotFound =>
+            {
+                not_found_err(&path)
+            }
             Error::Format(e) => FileFormatError::new_err(e.to_string()),
             Error::Rules(diags) => rule_error(&diags),
             Error::Apply(e) => ApplyError::new_err(e.to_string()),
@@ -327,6 +336,20 @@ fn physics_error(e: &PhysicsError) -> PyErr {
             Err(e) => e,
         }
     })
+}
+
+/// `errno.ENOENT`: the same number on every platform Python runs on.
+const ENOENT: i32 = 2;
+
+/// The `FileNotFoundError` of a missing `path`, as `open` raises it: `errno` `ENOENT`,
+/// `filename` the path, and the message `[Errno 2] No such file or directory: 'PATH'`.
+fn not_found_err(path: &str) -> PyErr {
+    PyFileNotFoundError::new_err((ENOENT, "No such file or directory", path.to_string()))
+}
+
+/// A `FileNotFoundError` naming `path` (a file to read that does not exist).
+pub(crate) fn not_found(path: &Path) -> Error {
+    Error::Py(not_found_err(&path.display().to_string()))
 }
 
 /// A `ValueError` (bad shape or value of an argument).

@@ -8,7 +8,7 @@ use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use topomech_gmap::mesh::{self, BuildOptions, Duplicates, Pinched};
-use topomech_gmap::{io, ColumnRef, EmbeddingId, EmbeddingType, GMap, OrbitType};
+use topomech_gmap::{io, ColumnRef, EmbeddingId, EmbeddingType, GMap, Marks, OrbitType};
 
 use crate::convert::{
     array_arg, dart_arg, dim_arg, mesh_from_flat, mesh_to_flat, polyhedra_to_flat, rows_to_array,
@@ -153,6 +153,113 @@ fn check_particle_rows(
         )));
     }
     Ok(())
+}
+
+/// Refuses values for the map's input numbering that no input mesh gives: `point_id` (i64 on
+/// the vertex orbit: the index of each vertex's point in the mesh the map was built from) and
+/// `cell_id` (i64 on the element orbit, faces of a 2-map and volumes of a 3-map: the index of
+/// its input cell), which the written meshes carry as their `point_id` and `cell_id` data and
+/// which point groups and the output's cell order are read through.
+///
+/// The contract, from what the kernel writes: a value is an input index (>= 0) or -1 for
+/// none (a vertex a rule created, see `GMap::rewire`); the vertices of one element are
+/// distinct input points (an input cell lists distinct points; the output maps an element
+/// back to its input cell through them), -1 aside. Values are not unique otherwise: a point
+/// split in several vertices (`pinched="split"`, a fracture, a cut) keeps its `point_id` on
+/// each, and the pieces of a cell a rule subdivides keep its `cell_id`. Other embeddings, and
+/// a `point_id` or `cell_id` declared on another orbit or type, pass.
+fn check_input_numbering(
+    g: &GMap,
+    id: EmbeddingId,
+    vals: &Gathered,
+    reps: &[topomech_gmap::Dart],
+) -> Result<()> {
+    let e = g.embedding(id);
+    let Gathered::Int(values) = vals else {
+        return Ok(());
+    };
+    let dim = g.dimension();
+    let (element, element_word) = if dim == 2 {
+        (OrbitType::face(2), "face")
+    } else {
+        (OrbitType::volume(), "volume")
+    };
+    let name = e.name();
+    let (orbit_word, of) = match name {
+        "point_id" if e.orbit() == OrbitType::vertex(dim) => {
+            ("vertex", "the input point of each vertex".to_string())
+        }
+        "cell_id" if e.orbit() == element => (
+            element_word,
+            format!("the input cell of each {element_word}"),
+        ),
+        _ => return Ok(()),
+    };
+    if e.ty() != EmbeddingType::I64 {
+        return Ok(());
+    }
+    let what = format!(
+        "values for '{name}' ({of}: its index in the mesh the map was built from, or -1 for none)"
+    );
+    let at = |k: usize| format!("the {orbit_word} of dart {} (value {k})", reps[k].0);
+    if let Some(k) = values.iter().position(|&v| v < -1) {
+        return Err(value_error(format!(
+            "{what} must be -1 or more: {} for {}",
+            values[k],
+            at(k)
+        )));
+    }
+    if name == "point_id" {
+        if let Some((elem, j, k)) = point_twice_in_an_element(g, values, reps, element) {
+            return Err(value_error(format!(
+                "{what} must differ between the vertices of one {element_word}: point {} for {} and {}, both on the {element_word} of dart {}",
+                values[j],
+                at(j),
+                at(k),
+                elem.0
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The first element of type `element` (by smallest dart, returned) with two vertex orbits
+/// that hold the same point (not -1), and those orbits' indices in `reps` (the vertex orbits,
+/// by smallest dart), smaller first; `values[k]` is the point of `reps[k]`.
+fn point_twice_in_an_element(
+    g: &GMap,
+    values: &[i64],
+    reps: &[topomech_gmap::Dart],
+    element: OrbitType,
+) -> Option<(topomech_gmap::Dart, usize, usize)> {
+    let vertex = OrbitType::vertex(g.dimension());
+    // the vertex orbit of each dart (an index into `reps`: below the dart count, a u32)
+    let mut vertex_of = vec![0u32; g.capacity()];
+    let mut marks = Marks::with_capacity(g.capacity());
+    for (k, &r) in reps.iter().enumerate() {
+        g.visit_orbit(r, vertex, &mut marks, |d| vertex_of[d.index()] = k as u32);
+    }
+    marks.clear();
+    // (point, vertex) of the element's corners, one entry per dart
+    let mut corners: Vec<(i64, usize)> = Vec::new();
+    for d in g.darts() {
+        if marks.is_marked(d) {
+            continue;
+        }
+        corners.clear();
+        g.visit_orbit(d, element, &mut marks, |x| {
+            let k = vertex_of[x.index()] as usize;
+            if values[k] >= 0 {
+                corners.push((values[k], k));
+            }
+        });
+        corners.sort_unstable();
+        corners.dedup();
+        if let Some(w) = corners.windows(2).find(|w| w[0].0 == w[1].0) {
+            return Some((d, w[0].1, w[1].1));
+        }
+    }
+    None
 }
 
 /// An embedding's values gathered one per orbit, owned: `width` reals per orbit (row-major),
@@ -449,9 +556,10 @@ impl PyGMap {
         Ok((PyGMap::new(g), d))
     }
 
-    /// Loads a map saved by `save` (a `.tmg` file). Raises `FileFormatError` naming the path
-    /// for a file that cannot be opened or is not a regular file (a directory, `/dev/zero`,
-    /// a FIFO: refused before reading), or that is truncated or corrupt.
+    /// Loads a map saved by `save` (a `.tmg` file). Raises `FileNotFoundError` naming the
+    /// path for a file that does not exist, and `FileFormatError` naming it for one that
+    /// cannot be opened or is not a regular file (a directory, `/dev/zero`, a FIFO: refused
+    /// before reading), or that is truncated or corrupt.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<PyGMap> {
         let g = py.detach(move || guard(|| Ok(io::load(&path)?)))?;
@@ -466,7 +574,9 @@ impl PyGMap {
         Ok(PyGMap::new(g))
     }
 
-    /// Saves the map, with its embeddings, to a `.tmg` file (round-trip exact).
+    /// Saves the map, with its embeddings, to a `.tmg` file (round-trip exact). Raises
+    /// `FileNotFoundError` for a folder that does not exist, `FileFormatError` when the file
+    /// cannot be written.
     fn save(slf: &Bound<'_, Self>, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let this = shared(slf)?;
         let g = this.map()?;
@@ -696,8 +806,9 @@ impl PyGMap {
     /// `i64`, bool for `bool`), then recomputes the derived embeddings. Nothing is written
     /// when it raises: `KeyError` for an unknown name (listing the map's embeddings),
     /// `TypeError` for another dtype, `ValueError` for another shape, a non-finite value
-    /// (naming the embedding, the row and its dart) or a `particle` that is not a vertex
-    /// numbering, `EmbeddingError` for a derived embedding.
+    /// (naming the embedding, the row and its dart), a `particle` that is not a vertex
+    /// numbering, or a `point_id` or `cell_id` that is not an input numbering (below -1, or
+    /// one point for two vertices of one element), `EmbeddingError` for a derived embedding.
     fn set_embedding(
         slf: &Bound<'_, Self>,
         py: Python<'_>,
@@ -710,6 +821,7 @@ impl PyGMap {
             let id = embedding_key(g, name)?;
             let (vals, reps) = guard(|| orbit_values_arg(g, id, values))?;
             guard(|| check_particle_rows(g, id, &vals, &reps))?;
+            guard(|| check_input_numbering(g, id, &vals, &reps))?;
             (id, vals)
         };
         this.mutate(py, |g| Ok(g.set_orbit_values(id, vals.as_column())?))

@@ -26,7 +26,7 @@ use topomech_rules::{
 };
 
 use crate::convert::{dart_arg, shape_str, type_name};
-use crate::errors::{exclusive, guard, type_error, value_error, Error, Result};
+use crate::errors::{exclusive, guard, not_found, type_error, value_error, Error, Result};
 use crate::gmap::PyGMap;
 
 /// Rules loaded from rule files (`.tmr`) and checked: every rule accepted keeps any map of
@@ -398,8 +398,9 @@ fn report_dict<'py>(py: Python<'py>, r: &ApplyReport) -> PyResult<Bound<'py, PyD
 impl PyRuleSet {
     /// Reads and checks rule files together (they share their dimension and embeddings), for
     /// `dimension` (2 or 3; needed when every file serves both, `dimension 2 3` or no
-    /// dimension line; by default the dimension the files say). Raises `RuleError` listing
-    /// every error, an unreadable file included.
+    /// dimension line; by default the dimension the files say). Raises `FileNotFoundError`
+    /// naming the first file that does not exist, else `RuleError` listing every error, an
+    /// unreadable file included.
     #[staticmethod]
     #[pyo3(signature = (paths, dimension=None))]
     fn load(py: Python<'_>, paths: Vec<PathBuf>, dimension: Option<i64>) -> PyResult<PyRuleSet> {
@@ -407,6 +408,12 @@ impl PyRuleSet {
             return Err(value_error("load needs at least one rule file").into());
         }
         let dim = rule_dimension(dimension)?;
+        if let Some(p) = paths
+            .iter()
+            .find(|p| std::fs::metadata(p).is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound))
+        {
+            return Err(not_found(p).into());
+        }
         py.detach(move || {
             guard(|| {
                 let refs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();

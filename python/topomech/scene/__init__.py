@@ -90,7 +90,10 @@ and ``cells`` of 3) and ``grid`` or ``rectangle`` (``element`` ``tri``, ``quad``
 Predicates are expressions of the rule language over ``x``, ``y``, ``z``
 (``x < 1e-9 && y > 0.1``, ``abs(z - 0.5) < 0.01``).
 
-Every problem raises :class:`SceneError` naming the key by its path: ``integrator.dtt:
+A scene file that does not exist (and names no shipped scene) raises
+:class:`FileNotFoundError`, as every reader of topomech does for a missing file; every problem
+of a scene file raises :class:`SceneError` naming the key by its path (a missing mesh or model
+file included: ``mesh.file: no such file: ...``): ``integrator.dtt:
 unknown key``, ``material.density: expected a number, got "abc"``, ``model[1].kind: ...``
 (arrays of tables are numbered from 0). An event after the end of the run (``time`` past
 ``steps x dt``, also when a shorter step count is asked for) is refused as

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from topomech._core import SimulationError
 from topomech._gmap import GMap
+from topomech._paths import missing_file
 from topomech.loads import LoadError, MeshGroups, apply_conditions
 from topomech.models import Model
 from topomech.scene._conditions import _fixes, _ground, _initial, _loads
@@ -439,12 +440,17 @@ def _or_names(names: tuple[str, ...]) -> str:
 
 def load_scene(path: PathLike) -> Scene:
     """Reads a scene file (TOML); ``path`` may also name a shipped scene (see
-    :func:`shipped_scenes`). Raises :class:`SceneError` naming the key of any problem."""
+    :func:`shipped_scenes`). Raises :class:`FileNotFoundError` when it names neither (as
+    :func:`find_scene`), :class:`SceneError` naming the key of any problem of the file (a
+    mesh or model file it names that does not exist included: that is the scene's key to
+    fix)."""
     p = find_scene(path)
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as e:
         raise _Fail(str(p))(None, f"not UTF-8 text (byte {e.start})") from None
+    except FileNotFoundError:
+        raise missing_file(p) from None  # removed since find_scene saw it
     except OSError as e:
         raise _Fail(str(p))(None, f"cannot read the scene file: {e.strerror or e}") from None
     return parse_scene(text, p)
@@ -458,7 +464,8 @@ def shipped_scenes() -> dict[str, Path]:
 
 def find_scene(spec: PathLike) -> Path:
     """The scene file ``spec`` names: an existing file, else a shipped scene of that name
-    (with or without ``.toml``). Raises :class:`SceneError` when neither exists."""
+    (with or without ``.toml``). Raises :class:`FileNotFoundError` naming ``spec`` and the
+    shipped scenes when neither exists, :class:`SceneError` for a directory."""
     p = Path(spec)
     if p.exists():
         if p.is_dir():
@@ -468,7 +475,7 @@ def find_scene(spec: PathLike) -> Path:
     name = p.name[: -len(".toml")] if p.name.endswith(".toml") else p.name
     if p.parent == Path() and name in shipped:
         return shipped[name]
-    raise _Fail(str(p))(
-        None,
+    raise missing_file(
+        p,
         f"no such scene file, and no shipped scene of that name (shipped: {', '.join(shipped)})",
     )
