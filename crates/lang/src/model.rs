@@ -35,13 +35,17 @@
 
 use std::collections::HashMap;
 
-/// The embeddings a simulation owns (declared by its prelude): the state it integrates, the
-/// loads and supports it sets, the rest shape, the sum of the models' forces, the vectors of
-/// its linear solves. A model's rules must not write them (a model that wrote `fixed` or
-/// `position` would undo the supports, one that wrote `force` would be summed over), and a
+/// The embeddings a simulation owns (declared by its prelude or by the import): the state it
+/// integrates, the loads and supports it sets, the rest shape, the sum of the models' forces,
+/// the vectors of its linear solves, and the mesh's numbering (`particle`, `point_id`,
+/// `cell_id`: the user's rows and input points and cells, which every output is written in)
+/// with the element markers it sets up (`vertex0`, `face0`). A model's rules must not write
+/// them (a model that wrote `fixed` or `position` would undo the supports, one that wrote
+/// `force` would be summed over, one that wrote `point_id` would renumber the output), and a
 /// model cannot list them as forces or jvp outputs (`model-rule`).
 pub const SIMULATION_STATE: &[&str] = &[
-    "position", "rest", "velocity", "force", "fixed", "f_ext", "dx", "dv", "df",
+    "position", "rest", "velocity", "force", "fixed", "f_ext", "dx", "dv", "df", "particle",
+    "point_id", "cell_id", "vertex0", "face0",
 ];
 
 use crate::ast::{self, ModelArgKind, Pos};
@@ -372,7 +376,7 @@ fn check_model(
                 Some("changes the topology (it has a right graph): a model's rules compute embeddings only; cuts, fracture and tearing are the simulation's events".to_string())
             } else {
                 state.map(|name| format!(
-                    "writes '{name}', the simulation's own (its state, loads and solver vectors: {}): a model computes its own embeddings, its forces summed into 'force' by the simulation",
+                    "writes '{name}', the simulation's own (its state, loads, solver vectors and numbering: {}): a model computes its own embeddings, its forces summed into 'force' by the simulation",
                     SIMULATION_STATE.join(", ")
                 ))
             };
@@ -512,7 +516,7 @@ fn check_model(
                     *pos,
                     "model-rule",
                     format!(
-                        "model '{mn}': {what} '{name}' is the simulation's own (its state, loads and solver vectors: {}): a model lists embeddings its rules write",
+                        "model '{mn}': {what} '{name}' is the simulation's own (its state, loads, solver vectors and numbering: {}): a model lists embeddings its rules write",
                         SIMULATION_STATE.join(", ")
                     ),
                 );

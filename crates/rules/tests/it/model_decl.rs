@@ -332,6 +332,9 @@ fn an_unused_parameter_with_a_default_is_a_warning() {
 /// (it lost the map's masses and crashed a run: QA), or to one that writes the simulation's
 /// state (`fixed`, `position`: it undid the supports), is refused at the call (`model-rule`);
 /// so is a force that is the simulation's own (`f_ext`) or one listed twice (summed twice).
+/// The numbering the simulation sets up is its own too: a model's `point_id = 0` passed the
+/// checker and renumbered every output to point 0, one writing `vertex0` passed and made a
+/// shipped model's init fail with a write conflict that blamed that model (QA).
 #[test]
 fn model_rules_that_would_change_what_the_simulation_owns_are_refused() {
     let extra = "embedding fixed : bool on <1,2,3>
@@ -342,6 +345,10 @@ rule tear {
 }
 rule unfix { left { v : <1,2,3> hook } compute { v.fixed = false  v.f_anchor = vec3(0, 0, 0) } }
 rule push { left { v : <1,2,3> hook } compute { v.position = v.position + vec3(0, 0, 1) } }
+embedding point_id : i64 on <1,2,3>
+embedding vertex0 : bool on <>
+rule renumber { left { v : <1,2,3> hook } compute { v.point_id = 0  v.f_anchor = vec3(0, 0, 0) } }
+rule mark { left { v : <1,2,3> hook } compute { v.vertex0 = true  v.f_anchor = vec3(0, 0, 0) } }
 ";
     let cases: &[(&str, &str, &str)] = &[
         (
@@ -358,6 +365,16 @@ rule push { left { v : <1,2,3> hook } compute { v.position = v.position + vec3(0
             "model a { init anchor_init(1, vec3(0,0,0))\n step push forces f_anchor }",
             "step calls rule 'push', which writes 'position'",
             "step push",
+        ),
+        (
+            "model a {\n init renumber\n step anchor_force forces f_anchor }",
+            "init calls rule 'renumber', which writes 'point_id', the simulation's own",
+            "init renumber",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0))\n step mark forces f_anchor }",
+            "step calls rule 'mark', which writes 'vertex0'",
+            "step mark",
         ),
         (
             "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces f_ext }",
