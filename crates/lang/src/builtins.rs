@@ -1489,9 +1489,25 @@ pub fn segment_hits_triangle(
         return false;
     }
     let sub = |u: &[f64; 3], v: &[f64; 3]| [u[0] - v[0], u[1] - v[1], u[2] - v[2]];
-    let d = sub(b, a);
-    let e1 = sub(q, p);
-    let e2 = sub(r, p);
+    let (mut d, mut e1, mut e2, mut s) = (sub(b, a), sub(q, p), sub(r, p), sub(a, p));
+    // The differences scaled by one power of two, their largest component to about 1: the
+    // test is the same for every scale (u, v and t are ratios, the tolerances relative) and
+    // a power of two scales exactly, so the answer is unchanged where nothing under- or
+    // overflows, and the products of three differences neither underflow (a body of
+    // coordinates about 1e-110 crossed nothing: QA) nor overflow.
+    let largest = [d, e1, e2, s]
+        .iter()
+        .flatten()
+        .fold(0.0_f64, |m, x| m.max(x.abs()));
+    if largest == 0.0 || !largest.is_finite() {
+        return false;
+    }
+    // (two factors, each a normal power of two, for exponents from -1023 to 1074)
+    let k = -(largest.log2().floor() as i32);
+    let (f1, f2) = (pow2(k / 2), pow2(k - k / 2));
+    for v in [&mut d, &mut e1, &mut e2, &mut s] {
+        *v = v.map(|x| x * f1 * f2);
+    }
     let h = cross(&d, &e2);
     let det = dot(&e1, &h);
     // the scale of det: |d| |e1| |e2|; below it relatively, the segment is parallel to the
@@ -1500,7 +1516,6 @@ pub fn segment_hits_triangle(
     if scale.is_nan() || scale <= 0.0 || det.abs() <= TOL * scale {
         return false;
     }
-    let s = sub(a, p);
     let u = dot(&s, &h) / det;
     if !(-TOL..=1.0 + TOL).contains(&u) {
         return false;
@@ -1512,6 +1527,12 @@ pub fn segment_hits_triangle(
     }
     let t = dot(&e2, &qv) / det;
     t > TOL && t < 1.0 - TOL
+}
+
+/// `2^k` for `k` in [-1022, 1023] (a normal number), exactly.
+fn pow2(k: i32) -> f64 {
+    debug_assert!((-1022..=1023).contains(&k));
+    f64::from_bits(((k + 1023) as u64) << 52)
 }
 
 /// The determinant of the matrix with columns `c`.
@@ -2094,8 +2115,10 @@ mod tests {
     /// the interior, outside, through an edge and a vertex (the closed triangle counts),
     /// ending or starting on its plane (no crossing: an end on the plane is on neither side)
     /// or just short of it, parallel and in-plane segments, degenerate
-    /// input; and the same answers after a translation and a scaling by 1e6 (the tolerances
-    /// are relative), and with the triangle's vertices in either order.
+    /// input; and the same answers after a translation and a scaling by 1e6, 1e-6, 1e-150
+    /// and 1e-300 (the tolerances are relative; products of three differences of 1e-150
+    /// underflowed to 0: QA) and by 1e95 (below the blade's 1e100 limit), and with the
+    /// triangle's vertices in either order.
     #[test]
     fn segment_hits_triangle_cases() {
         let (p, q, r) = ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
@@ -2150,7 +2173,7 @@ mod tests {
         ];
         let tf = |v: [f64; 3], k: f64| [v[0] * k + 3.0 * k, v[1] * k - 7.0 * k, v[2] * k + k];
         for (a, b, want, what) in cases {
-            for k in [1.0, 1e6, 1e-6] {
+            for k in [1.0, 1e6, 1e-6, 1e-150, 1e-300, 1e95] {
                 let (a, b, p, q, r) = (tf(a, k), tf(b, k), tf(p, k), tf(q, k), tf(r, k));
                 assert_eq!(
                     segment_hits_triangle(&a, &b, &p, &q, &r),

@@ -345,3 +345,44 @@ fn a_blade_that_misses_or_cannot_finish_is_an_error() {
         .to_string();
     assert!(err.contains("1e100"), "{err}");
 }
+
+/// A body of tiny coordinates: the blade opens what the plane cut opens at every scale down
+/// to 1e-300 (QA: at 1e-110 the crossing test's products of three differences underflowed to
+/// 0 and the blade opened nothing, and at 1e-170 a blade of distinct points was refused as
+/// having coinciding end points). The simulation is built at unit scale (the import refuses
+/// elements whose volume underflows) and its positions then scaled, as the QA did; the
+/// plane cut at the scaled offset on the same scaled positions is the reference.
+#[test]
+fn a_blade_cuts_bodies_of_tiny_coordinates() {
+    let mesh = cuboid([4, 2, 2], [1.0, 0.5, 0.5], BoxElement::Tetra);
+    let scaled = |s: f64| {
+        let mut sim = sim(&mesh, vec![]);
+        let x: Vec<[f64; 3]> = sim
+            .vertex_vec3("position")
+            .unwrap()
+            .iter()
+            .map(|p| p.map(|v| v * s))
+            .collect();
+        sim.set_vertex_vec3("position", &x).unwrap();
+        sim
+    };
+    for s in [1.0, 1e-110, 1e-160, 1e-200, 1e-300] {
+        let c = 0.3 * s;
+        let want = scaled(s)
+            .cut(&Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: c,
+            })
+            .unwrap()
+            .unsewn;
+        assert!(want > 0, "scale {s}");
+        let got = scaled(s)
+            .cut_swept(
+                [[c, 1.7 * s, -0.1 * s], [c, 1.7 * s, 1.6 * s]],
+                [[c, -0.2 * s, -0.1 * s], [c, -0.2 * s, 1.6 * s]],
+            )
+            .unwrap()
+            .unsewn;
+        assert_eq!(got, want, "scale {s}");
+    }
+}
