@@ -102,6 +102,8 @@ def cell_dimension(cell_type: str) -> int | None:
 
 def normalize_points(points: Any) -> npt.NDArray[np.float64]:
     """``points`` as float64 ``(N, 3)``; 2 columns get z = 0."""
+    if np.asarray(points).dtype.kind == "c":
+        raise TypeError("points must be real numbers, got complex values")
     try:
         p = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as e:

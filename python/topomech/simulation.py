@@ -164,6 +164,15 @@ def _check_solver_keys(cfg: Mapping[str, Any]) -> None:
         )
 
 
+def _real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
+    """``values`` as a contiguous float64 array. Raises :class:`TypeError` for complex values
+    (numpy would drop their imaginary parts with only a warning)."""
+    a = np.asarray(values)
+    if a.dtype.kind == "c":
+        raise TypeError(f"{what} must be real numbers, got an array of {a.dtype}")
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def _index(v: Any, what: str) -> Any:
     """``v`` as a Python int when it is an integer of any kind (numpy's included); left as
     it is otherwise, for the kernel to refuse with its message."""
@@ -460,8 +469,9 @@ class Simulation:
         ``static`` integrator. They replace the loads set before. :mod:`topomech.loads` makes
         them from point forces, tractions and pressures. When a cut or fracture splits a
         vertex, its load is divided equally between the copies (the total is kept). Raises
-        :class:`ValueError` for a wrong shape or a non-finite value (naming the row)."""
-        self._core.set_external_forces(np.ascontiguousarray(forces, dtype=np.float64))
+        :class:`ValueError` for a wrong shape or a non-finite value (naming the row),
+        :class:`TypeError` for complex values."""
+        self._core.set_external_forces(_real_array(forces, "external forces"))
 
     def external_forces(self) -> npt.NDArray[np.float64]:
         """The external loads ``f_ext`` ``(V, 3)`` (N); zeros unless set."""
@@ -511,12 +521,14 @@ class Simulation:
         self._core.set_vertex_field(name, np.ascontiguousarray(a))
 
     def set_positions(self, positions: Any) -> None:
-        """Sets the positions from an array-like ``(V, 3)`` of finite numbers."""
-        self._core.set_positions(np.ascontiguousarray(positions, dtype=np.float64))
+        """Sets the positions from an array-like ``(V, 3)`` of finite real numbers (complex
+        ones raise :class:`TypeError`)."""
+        self._core.set_positions(_real_array(positions, "positions"))
 
     def set_velocities(self, velocities: Any) -> None:
-        """Sets the velocities from an array-like ``(V, 3)`` of finite numbers."""
-        self._core.set_velocities(np.ascontiguousarray(velocities, dtype=np.float64))
+        """Sets the velocities from an array-like ``(V, 3)`` of finite real numbers (complex
+        ones raise :class:`TypeError`)."""
+        self._core.set_velocities(_real_array(velocities, "velocities"))
 
     def vertex_field(self, name: str) -> npt.NDArray[Any]:
         """The values of a vertex embedding, one row per vertex (the rows of
@@ -550,7 +562,9 @@ class Simulation:
         :meth:`GMap.set_embedding`; :class:`ValueError` also when the orbits of one particle
         (a pinched vertex kept as one row) would get different positions, velocities or other
         shared vertex values; :class:`SimulationError` for the embeddings that number rows
-        and elements (``particle``, ``point_id``, ``cell_id``, ``vertex0``, ``face0``)."""
+        and elements (``particle``, ``point_id``, ``cell_id``, ``vertex0``, ``face0``), and
+        for values no material has: a ``density``, ``young`` or ``corner_mass`` not positive,
+        a ``poisson`` outside (-1, 0.5), naming the value and its row."""
         specs = {s.name: s for s in self.embeddings()}
         self._core.set_orbit_embedding(name, as_embedding_array(specs.get(name), values))
 

@@ -735,7 +735,12 @@ impl Simulation {
     /// Writes every value of the stored embedding `name`, one per orbit of its orbit type by
     /// smallest dart ([`GMap::set_orbit_values`], which also recomputes derived embeddings).
     /// Refuses the embeddings the simulation numbers its rows and elements with (`particle`,
-    /// `point_id`, `cell_id`, `vertex0`, `face0`), naming them.
+    /// `point_id`, `cell_id`, `vertex0`, `face0`), naming them, and values of the material
+    /// and mass embeddings the shipped prelude declares that no material has
+    /// ([`material_problem`]: a `density`, `young` or `corner_mass` not positive, a `poisson`
+    /// outside (-1, 0.5)), naming the embedding, the value and its orbit's index, as the
+    /// scene and the constructor refuse them (QA: a negative `corner_mass` made the total
+    /// mass -192 and the steps ran).
     pub fn set_orbit_values(
         &mut self,
         name: &str,
@@ -747,6 +752,14 @@ impl Simulation {
                 "embedding '{name}' numbers the simulation's rows or elements and cannot be written ({} are set when the simulation is built)",
                 NUMBERING.join(", ")
             )));
+        }
+        if let (Some(why), topomech_gmap::ColumnRef::Real(v)) = (material_problem(name), values) {
+            if let Some(k) = v.iter().position(|&x| !why.0(x)) {
+                return Err(PhysicsError::Config(format!(
+                    "'{name}' {}: got {} at orbit {k} (the values are one per orbit, in the order of the embedding's orbits)",
+                    why.1, v[k]
+                )));
+            }
         }
         self.sync_rows()?;
         let id = self.id(name)?;
@@ -782,5 +795,27 @@ impl Simulation {
             }
         }
         Ok(p)
+    }
+}
+
+/// A test on one value, and what the value must be (for messages).
+type ValueRange = (fn(f64) -> bool, &'static str);
+
+/// The values a material or mass embedding of the shipped prelude takes (a test on one value,
+/// and what it must be), `None` for other names: `density` (kg/m^3, per area in 2D), `young`
+/// (Pa) and the `corner_mass` that vertex masses sum (kg) are positive and finite, `poisson`
+/// lies in (-1, 0.5) (the range in which the isotropic elasticity tensor is positive
+/// definite; Lamé's first parameter diverges at 0.5).
+fn material_problem(name: &str) -> Option<ValueRange> {
+    fn positive(x: f64) -> bool {
+        x > 0.0 && x.is_finite()
+    }
+    fn poisson(x: f64) -> bool {
+        -1.0 < x && x < 0.5
+    }
+    match name {
+        "density" | "young" | "corner_mass" => Some((positive, "must be positive and finite")),
+        "poisson" => Some((poisson, "must be in (-1, 0.5)")),
+        _ => None,
     }
 }

@@ -1,0 +1,70 @@
+"""Values no material has, written into a running simulation (QA): a negative
+``corner_mass`` made the total mass -192 and the steps ran; a negative ``young`` was taken;
+complex positions lost their imaginary parts with only numpy's warning. The constructor and
+the scenes refuse such materials; ``Simulation.set_embedding`` and the array setters now do
+too, naming the embedding and the value, and write nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import topomech
+
+
+def tet_box() -> topomech.Simulation:
+    """Two tetrahedra sharing a face (an input mesh small enough to read)."""
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=float)
+    g = topomech.GMap.from_mesh(pts, [("tetra", np.array([[0, 1, 2, 3], [1, 2, 3, 4]]))])
+    return topomech.Simulation(g, models=["corotational"], gravity=[0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "why"),
+    [
+        ("corner_mass", -1.0, "must be positive and finite"),
+        ("corner_mass", 0.0, "must be positive and finite"),
+        ("density", -1000.0, "must be positive and finite"),
+        ("young", -1e6, "must be positive and finite"),
+        ("poisson", 0.5, r"must be in \(-1, 0.5\)"),
+        ("poisson", -1.0, r"must be in \(-1, 0.5\)"),
+    ],
+)
+def test_values_no_material_has_are_refused(name: str, value: float, why: str) -> None:
+    sim = tet_box()
+    values = sim.embedding(name).values.copy()
+    before = sim.total_mass()
+    values[-1] = value
+    with pytest.raises(
+        topomech.SimulationError, match=rf"'{name}' {why}: got .* at orbit {len(values) - 1}"
+    ):
+        sim.set_embedding(name, values)
+    np.testing.assert_array_equal(sim.embedding(name).values[:-1], values[:-1])
+    assert sim.embedding(name).values[-1] != value
+    assert sim.total_mass() == before
+
+
+def test_valid_material_values_are_written() -> None:
+    """The check refuses only what no material has: doubled masses double the total mass."""
+    sim = tet_box()
+    before = sim.total_mass()
+    sim.set_embedding("corner_mass", 2.0 * sim.embedding("corner_mass").values)
+    assert sim.total_mass() == pytest.approx(2.0 * before, rel=1e-15)
+    sim.set_embedding("poisson", np.full(len(sim.embedding("poisson").values), -0.5))
+    sim.step()
+
+
+@pytest.mark.parametrize("setter", ["set_positions", "set_velocities", "set_external_forces"])
+def test_complex_arrays_are_refused(setter: str) -> None:
+    sim = tet_box()
+    x = sim.positions().astype(complex) + 1j
+    before = sim.positions().copy()
+    with pytest.raises(TypeError, match="must be real numbers, got an array of complex128"):
+        getattr(sim, setter)(x)
+    np.testing.assert_array_equal(sim.positions(), before)
+
+
+def test_complex_points_are_refused() -> None:
+    pts = np.zeros((4, 3), dtype=complex)
+    with pytest.raises(TypeError, match="points must be real numbers"):
+        topomech.GMap.from_mesh(pts, [("tetra", np.array([[0, 1, 2, 3]]))])
