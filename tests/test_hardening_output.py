@@ -493,9 +493,9 @@ def test_real_sigint_at_a_phase(phase: str, tmp_path: Path) -> None:
     assert s["error"]["phase"] == phase
 
 
-def test_real_sigint_while_stepping(tmp_path: Path) -> None:
-    """SIGINT sent from outside once frames appear: exit 130, interrupted in the steps or a
-    frame, steps done counted."""
+def run_until_second_frame(tmp_path: Path) -> tuple[subprocess.Popen[str], Path]:
+    """A long spring run in a subprocess (its output in ``tmp_path/o``), returned once its
+    second frame is written (or it ended, or a minute passed)."""
     out = tmp_path / "o"
     scene = springs(tmp_path, steps=200000, every=1000)
     p = subprocess.Popen(
@@ -508,6 +508,13 @@ def test_real_sigint_while_stepping(tmp_path: Path) -> None:
     deadline = time.monotonic() + 60
     while not second.exists() and p.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
+    return p, out
+
+
+def test_real_sigint_while_stepping(tmp_path: Path) -> None:
+    """SIGINT sent from outside once frames appear: exit 130, interrupted in the steps or a
+    frame, steps done counted."""
+    p, out = run_until_second_frame(tmp_path)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130, err
@@ -528,18 +535,7 @@ def test_sigterm_while_stepping_leaves_a_summary(tmp_path: Path) -> None:
     interrupted in the steps or a frame with the steps done, final.vtu written, one line on
     stderr naming the folder (before: the process died at once, exit -15, no summary and no
     final.vtu)."""
-    out = tmp_path / "o"
-    scene = springs(tmp_path, steps=200000, every=1000)
-    p = subprocess.Popen(
-        [sys.executable, "-m", "topomech", "run", str(scene), "--out", str(out), "--no-preview"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    second = out / "frames" / "frame_00001.vtu"
-    deadline = time.monotonic() + 60
-    while not second.exists() and p.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.02)
+    p, out = run_until_second_frame(tmp_path)
     assert p.poll() is None, "the run ended before the signal"
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=60)

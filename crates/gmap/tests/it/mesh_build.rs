@@ -428,6 +428,25 @@ fn unused_points_are_reported() {
     assert_eq!(g.cell_counts().vertices, 4);
 }
 
+/// Six times the volume the face cycles enclose, each face fanned from its first point to the
+/// polyhedron's first point (divergence theorem; positive for outward normals).
+fn volume6(points: &[[f64; 3]], faces: &[Vec<usize>]) -> f64 {
+    let o = points[faces[0][0]];
+    let d = |i: usize| {
+        let p = points[i];
+        [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
+    };
+    let mut v6 = 0.0;
+    for f in faces {
+        for k in 1..f.len() - 1 {
+            let (a, b, c) = (d(f[0]), d(f[k]), d(f[k + 1]));
+            v6 += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]);
+        }
+    }
+    v6
+}
+
 /// `cycle` started at its smallest point, in the same direction.
 fn canonical(cycle: &[usize]) -> Vec<usize> {
     let k = (0..cycle.len()).min_by_key(|&k| cycle[k]).expect("a face");
@@ -474,18 +493,8 @@ fn polyhedra_are_the_cells_with_outward_faces() {
             let mut cell: Vec<usize> = verts.clone();
             cell.sort_unstable();
             assert_eq!(seen, cell, "{kind:?}");
-            let o = points[faces[0][0]];
-            let mut v6 = 0.0;
+            let v6 = volume6(&points, faces);
             for f in faces {
-                let d = |k: usize| {
-                    let p = points[f[k]];
-                    [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
-                };
-                for k in 1..f.len() - 1 {
-                    let (a, b, c) = (d(0), d(k), d(k + 1));
-                    v6 += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                        + a[2] * (b[0] * c[1] - b[1] * c[0]);
-                }
                 let mut key = f.clone();
                 key.sort_unstable();
                 face_keys.entry(key).or_default().push(canonical(f));
@@ -504,19 +513,7 @@ fn polyhedra_are_the_cells_with_outward_faces() {
         let (mirrored, mpolys) = extract_polyhedra(&m).expect("polyhedra");
         let mut mtotal = 0.0;
         for (faces, same) in mpolys.iter().zip(&polys) {
-            let o = mirrored[faces[0][0]];
-            let mut v6 = 0.0;
-            for f in faces {
-                let d = |k: usize| {
-                    let p = mirrored[f[k]];
-                    [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
-                };
-                for k in 1..f.len() - 1 {
-                    let (a, b, c) = (d(0), d(k), d(k + 1));
-                    v6 += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                        + a[2] * (b[0] * c[1] - b[1] * c[0]);
-                }
-            }
+            let v6 = volume6(&mirrored, faces);
             assert!(v6 > 0.0, "{e:?} mirrored: {v6}");
             mtotal += v6 / 6.0;
             // the same faces, each run the other way from the same first point
