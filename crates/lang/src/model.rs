@@ -39,13 +39,16 @@ use std::collections::HashMap;
 /// integrates, the loads and supports it sets, the rest shape, the sum of the models' forces,
 /// the vectors of its linear solves, and the mesh's numbering (`particle`, `point_id`,
 /// `cell_id`: the user's rows and input points and cells, which every output is written in)
-/// with the element markers it sets up (`vertex0`, `face0`). A model's rules must not write
-/// them (a model that wrote `fixed` or `position` would undo the supports, one that wrote
-/// `force` would be summed over, one that wrote `point_id` would renumber the output), and a
-/// model cannot list them as forces or jvp outputs (`model-rule`).
+/// with the element markers it sets up (`vertex0`, `face0`), and the material and masses its
+/// common rules set from the configuration (`density`, `young`, `poisson`, `corner_mass`,
+/// which the vertex `mass` sums). A model's rules must not write them (a model that wrote
+/// `fixed` or `position` would undo the supports, one that wrote `force` would be summed
+/// over, one that wrote `point_id` would renumber the output, one that wrote `corner_mass`
+/// in a step made the total mass -192 and ran on: QA), and a model cannot list them as
+/// forces or jvp outputs (`model-rule`).
 pub const SIMULATION_STATE: &[&str] = &[
     "position", "rest", "velocity", "force", "fixed", "f_ext", "dx", "dv", "df", "particle",
-    "point_id", "cell_id", "vertex0", "face0",
+    "point_id", "cell_id", "vertex0", "face0", "density", "young", "poisson", "corner_mass",
 ];
 
 use crate::ast::{self, ModelArgKind, Pos};
@@ -376,7 +379,7 @@ fn check_model(
                 Some("changes the topology (it has a right graph): a model's rules compute embeddings only; cuts, fracture and tearing are the simulation's events".to_string())
             } else {
                 state.map(|name| format!(
-                    "writes '{name}', the simulation's own (its state, loads, solver vectors and numbering: {}): a model computes its own embeddings, its forces summed into 'force' by the simulation",
+                    "writes '{name}', the simulation's own (its state, loads, solver vectors, numbering and material: {}): a model computes its own embeddings, its forces summed into 'force' by the simulation",
                     SIMULATION_STATE.join(", ")
                 ))
             };
@@ -516,7 +519,7 @@ fn check_model(
                     *pos,
                     "model-rule",
                     format!(
-                        "model '{mn}': {what} '{name}' is the simulation's own (its state, loads, solver vectors and numbering: {}): a model lists embeddings its rules write",
+                        "model '{mn}': {what} '{name}' is the simulation's own (its state, loads, solver vectors, numbering and material: {}): a model lists embeddings its rules write",
                         SIMULATION_STATE.join(", ")
                     ),
                 );

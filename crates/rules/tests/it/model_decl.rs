@@ -334,7 +334,8 @@ fn an_unused_parameter_with_a_default_is_a_warning() {
 /// so is a force that is the simulation's own (`f_ext`) or one listed twice (summed twice).
 /// The numbering the simulation sets up is its own too: a model's `point_id = 0` passed the
 /// checker and renumbered every output to point 0, one writing `vertex0` passed and made a
-/// shipped model's init fail with a write conflict that blamed that model (QA).
+/// shipped model's init fail with a write conflict that blamed that model, one writing
+/// `corner_mass` in a step made the total mass negative and ran on (QA).
 #[test]
 fn model_rules_that_would_change_what_the_simulation_owns_are_refused() {
     let extra = "embedding fixed : bool on <1,2,3>
@@ -349,6 +350,8 @@ embedding point_id : i64 on <1,2,3>
 embedding vertex0 : bool on <>
 rule renumber { left { v : <1,2,3> hook } compute { v.point_id = 0  v.f_anchor = vec3(0, 0, 0) } }
 rule mark { left { v : <1,2,3> hook } compute { v.vertex0 = true  v.f_anchor = vec3(0, 0, 0) } }
+embedding corner_mass : f64 on <1,2>
+rule lose_mass { left { c : <1,2> hook } compute { c.corner_mass = -1.0 } }
 ";
     let cases: &[(&str, &str, &str)] = &[
         (
@@ -375,6 +378,11 @@ rule mark { left { v : <1,2,3> hook } compute { v.vertex0 = true  v.f_anchor = v
             "model a { init anchor_init(1, vec3(0,0,0))\n step mark forces f_anchor }",
             "step calls rule 'mark', which writes 'vertex0'",
             "step mark",
+        ),
+        (
+            "model a { init anchor_init(1, vec3(0,0,0))\n step anchor_force, lose_mass forces f_anchor }",
+            "step calls rule 'lose_mass', which writes 'corner_mass'",
+            "step anchor_force, lose_mass",
         ),
         (
             "model a { init anchor_init(1, vec3(0,0,0)) step anchor_force\n forces f_ext }",
