@@ -316,9 +316,20 @@ class _Writer:
         return meshio.Mesh(x, blocks, point_data=point_data, cell_data={"cell_id": ids})
 
     def write(self, path: Path) -> None:
+        """Writes the VTU at ``path`` through a file beside it (``<name>.part``), renamed
+        when complete and removed on any failure, so that an interruption (Ctrl-C, SIGTERM,
+        a full disk) never leaves a truncated VTU under the name (QA: a frame cut off by a
+        signal was left, and meshio could not read it)."""
         import meshio
 
-        meshio.write(os.fspath(path), self.mesh(), file_format="vtu")
+        part = path.with_name(path.name + ".part")
+        try:
+            meshio.write(os.fspath(part), self.mesh(), file_format="vtu")
+            os.replace(part, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                part.unlink()
+            raise
 
 
 def _input_cells(sc: Scene) -> FlatMesh | None:
@@ -455,7 +466,9 @@ def _failed_path(e: OSError, writing: Sequence[Path]) -> str:
     written that was touched last (the others of ``writing`` were written before it, or not
     yet created), else the first of them."""
     if e.filename is not None:
-        return os.fsdecode(e.filename)
+        # a VTU is written through `<name>.part` (see _Writer.write): the file is `<name>`
+        name = os.fsdecode(e.filename)
+        return name.removesuffix(".part") if name.endswith(".vtu.part") else name
     best: tuple[int, int] | None = None
     found: Path | None = None
     for i, p in enumerate(writing):
@@ -675,7 +688,9 @@ def run_scene(
             name = f"frame_{len(frames):05d}.vtu"
             enter("frames", ["frames"])
             frames_dir.mkdir(exist_ok=True)
-            enter("frames", [f"frames/{name}"])
+            # (and the file it is written through, see _Writer.write: listed, so that a
+            # kill leaving it does not make the folder look like the user's)
+            enter("frames", [f"frames/{name}", f"frames/{name}.part"])
             writer.write(frames_dir / name)
             recorder.frame()
             frames.append((sim.time, f"frames/{name}"))
@@ -761,7 +776,7 @@ def run_scene(
         and not in_setup
     ):
         try:
-            enter("final", ["final.vtu"])
+            enter("final", ["final.vtu", "final.vtu.part"])
             writer.write(out_dir / "final.vtu")
             final_written = True
             if frames:
