@@ -702,7 +702,8 @@ def test_disk_full_names_the_file(
     assert "Traceback" not in err
     assert s["outputs"]["final"] is None
     # nothing half-written is left: neither the file nor the one it was written through
-    assert not list(out.rglob(suffix)) and not list(out.rglob("*.part"))
+    assert not list(out.rglob(suffix))
+    assert not list(out.rglob("*.part"))
 
 
 def test_ctrl_c_while_a_frame_is_written_leaves_no_truncated_frame(
@@ -729,7 +730,8 @@ def test_ctrl_c_while_a_frame_is_written_leaves_no_truncated_frame(
         real_read = meshio.read(out / "frames" / f)
         assert len(real_read.points) > 0
     pvd = (out / "animation.pvd").read_text()
-    assert "frame_00001.vtu" in pvd and "frame_00002.vtu" not in pvd
+    assert "frame_00001.vtu" in pvd
+    assert "frame_00002.vtu" not in pvd
     assert json.loads((out / "summary.json").read_text())["error"]["type"] == "interrupted"
 
 

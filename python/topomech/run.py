@@ -325,7 +325,7 @@ class _Writer:
         part = path.with_name(path.name + ".part")
         try:
             meshio.write(os.fspath(part), self.mesh(), file_format="vtu")
-            os.replace(part, path)
+            part.replace(path)
         except BaseException:
             with contextlib.suppress(OSError):
                 part.unlink()
