@@ -323,9 +323,9 @@ def test_a_particle_numbering_that_numbers_no_rows_is_refused() -> None:
         (
             np.zeros(6, dtype=np.int64),
             rf"give particle row 0 to vertices at different positions: the vertex of dart "
-            rf"{d[0]} \(value 0\) at .* and the vertex of dart {d[1]} \(value 1\) at ",
+            rf"{d[0]} \(row 0 of the values\) at .* and the vertex of dart {d[1]} \(row 1 of the values\) at ",
         ),
-        (p - 3, r"must not be negative: -\d for the vertex of dart \d+ \(value \d\)"),
+        (p - 3, r"must not be negative: -\d for the vertex of dart \d+ \(row \d of the values\)"),
         (np.where(p == 5, 3_000_000_000, p), r"must be below 6: 3000000000 for the vertex"),
         (np.where(p == 5, 7, p), r"must be below 6: 7 for the vertex of dart"),
     ]
@@ -391,7 +391,7 @@ def test_input_numbering_below_minus_one_is_refused() -> None:
                 ValueError,
                 match=rf"values for '{name}' \({what}: its index in the mesh the map was "
                 rf"built from, or -1 for none\) must be -1 or more: -7 for the {orbit} of "
-                rf"dart {darts[-1]} \(value {len(values) - 1}\)$",
+                rf"dart {darts[-1]} \(row {len(values) - 1} of the values\)$",
             ):
                 g.set_embedding(name, bad)
             assert g.to_bytes() == before, "a refused numbering is not written"
@@ -419,8 +419,8 @@ def test_a_point_twice_in_one_element_is_refused() -> None:
     with pytest.raises(
         ValueError,
         match=r"values for 'point_id' .* must differ between the vertices of one volume: "
-        rf"point 1 for the vertex of dart {darts[rows[1]]} \(value {rows[1]}\) and the vertex "
-        rf"of dart {darts[rows[4]]} \(value {rows[4]}\), both on the volume of dart \d+$",
+        rf"point 1 for the vertex of dart {darts[rows[1]]} \(row {rows[1]} of the values\) and the vertex "
+        rf"of dart {darts[rows[4]]} \(row {rows[4]} of the values\), both on the volume of dart \d+$",
     ):
         g.set_embedding("point_id", bad)
     assert g.to_bytes() == before

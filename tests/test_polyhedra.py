@@ -137,3 +137,32 @@ def test_standard_cells_stay_cells_of_their_kind(tmp_path: Path) -> None:
     path = tmp_path / "tets.vtu"
     write_gmap(g, path)
     assert [b.type for b in meshio.read(path).cells] == ["tetra"]
+
+
+def test_mixed_kinds_to_gmsh_and_a_writer_missing_its_package_say_why(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two cell kinds to .msh: meshio's Gmsh writers take one kind per file (its own message
+    asked for entity tags the map does not have: QA). A writer needing a package that is
+    not installed (XDMF's h5py) names the package instead of calling it a format's limit.
+    Nothing is left written either way."""
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0]], dtype=float)
+    g = GMap.from_mesh(
+        pts, [("quad", np.array([[0, 1, 2, 3]])), ("triangle", np.array([[1, 4, 2]]))]
+    )
+    with pytest.raises(
+        ValueError,
+        match="meshio writes one cell kind per Gmsh file, and the map has quad, triangle",
+    ):
+        write_gmap(g, tmp_path / "mixed.msh")
+    assert not (tmp_path / "mixed.msh").exists()
+
+    def needs_h5py(*a: object, **k: object) -> None:
+        raise ModuleNotFoundError("No module named 'h5py'", name="h5py")
+
+    monkeypatch.setattr(meshio, "write", needs_h5py)
+    with pytest.raises(
+        ValueError, match=r"meshio's xdmf writer needs the Python package 'h5py'.*pip install h5py"
+    ):
+        write_gmap(g, tmp_path / "m.xdmf")
+    assert not (tmp_path / "m.xdmf").exists()

@@ -1082,7 +1082,8 @@ def write_gmap(gmap: GMap, path: PathLike) -> None:
     """Writes a map: a saved G-map (round-trip exact) for ``.tmg``, else its points and cells
     as a mesh file in the format of the extension (``.vtu``, ``.vtk``, ``.msh``, ...).
     Raises ``ValueError`` when the extension names no format or the format cannot hold the
-    map's cells (Gmsh has no polygons, say; STL keeps triangles only and OFF and Medit skip
+    map's cells (Gmsh has no polygons and takes one cell kind per file, say; STL keeps
+    triangles only and OFF and Medit skip
     polygons, which the file read back shows), :class:`topomech.MeshError` naming the file
     and the volume when a cell is no kind a mesh file holds (a general polyhedron after a
     rewrite); nothing is left written then."""
@@ -1110,12 +1111,28 @@ def _write_cells(gmap: GMap, path: PathLike, fmt: str) -> None:
         import meshio
 
         mesh = gmap.to_meshio()
+        kinds = {b.type for b in mesh.cells}
+        if fmt.startswith("gmsh") and len(kinds) > 1:
+            # meshio's Gmsh writers need an entity per cell block (gmsh:dim_tags), which a
+            # map does not have: its message was about that input (QA)
+            raise _unwritable(
+                path,
+                mesh,
+                lambda k: f"meshio writes one cell kind per Gmsh file, and the map has {k}",
+            )
         try:
             meshio.write(os.fspath(path), mesh, file_format=fmt)
         except (MemoryError, KeyboardInterrupt, OSError):
             raise
         except Exception as e:  # meshio's writers raise KeyError for cells they cannot hold
             reason = f"{type(e).__name__}: {e}"
+            if isinstance(e, ModuleNotFoundError):
+                # a format whose writer needs a package not installed (XDMF needs h5py): not a
+                # limit of the format (QA)
+                reason = (
+                    f"meshio's {fmt} writer needs the Python package {e.name!r}, which is not "
+                    f"installed (pip install {e.name})"
+                )
             raise _unwritable(
                 path,
                 mesh,

@@ -672,7 +672,7 @@ def run_scene(
             raise SceneError(
                 f"{where}: mesh.file: the run's output files (final.vtu, the frames) list "
                 f"its cells by kind, and this map's are not of a kind: {e} (step such a map "
-                "from Python, topomech.Simulation, and write it with topomech.write_gmap to "
+                "from Python, topomech.Simulation, and write it with topomech.io.write_gmap to "
                 "a .vtu, every volume a polyhedron, or a .tmg)"
             ) from None
         folder.prepare()

@@ -562,9 +562,10 @@ class Simulation:
         :meth:`GMap.set_embedding`; :class:`ValueError` also when the orbits of one particle
         (a pinched vertex kept as one row) would get different positions, velocities or other
         shared vertex values; :class:`SimulationError` for the embeddings that number rows
-        and elements (``particle``, ``point_id``, ``cell_id``, ``vertex0``, ``face0``), and
-        for values no material has: a ``density``, ``young`` or ``corner_mass`` not positive,
-        a ``poisson`` outside (-1, 0.5), naming the value and its row."""
+        and elements (``particle``, ``point_id``, ``cell_id``, ``vertex0``, ``face0``);
+        :class:`ValueError` for values no material has: a ``density``, ``young`` or
+        ``corner_mass`` not positive, a ``poisson`` outside (-1, 0.5), naming the value and
+        its row."""
         specs = {s.name: s for s in self.embeddings()}
         self._core.set_orbit_embedding(name, as_embedding_array(specs.get(name), values))
 

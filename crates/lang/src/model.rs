@@ -47,8 +47,24 @@ use std::collections::HashMap;
 /// in a step made the total mass -192 and ran on: QA), and a model cannot list them as
 /// forces or jvp outputs (`model-rule`).
 pub const SIMULATION_STATE: &[&str] = &[
-    "position", "rest", "velocity", "force", "fixed", "f_ext", "dx", "dv", "df", "particle",
-    "point_id", "cell_id", "vertex0", "face0", "density", "young", "poisson", "corner_mass",
+    "position",
+    "rest",
+    "velocity",
+    "force",
+    "fixed",
+    "f_ext",
+    "dx",
+    "dv",
+    "df",
+    "particle",
+    "point_id",
+    "cell_id",
+    "vertex0",
+    "face0",
+    "density",
+    "young",
+    "poisson",
+    "corner_mass",
 ];
 
 use crate::ast::{self, ModelArgKind, Pos};

@@ -737,7 +737,7 @@ impl Simulation {
     /// Refuses the embeddings the simulation numbers its rows and elements with (`particle`,
     /// `point_id`, `cell_id`, `vertex0`, `face0`), naming them, and values of the material
     /// and mass embeddings the shipped prelude declares that no material has
-    /// ([`material_problem`]: a `density`, `young` or `corner_mass` not positive, a `poisson`
+    /// ([`material_value_problem`]: a `density`, `young` or `corner_mass` not positive, a `poisson`
     /// outside (-1, 0.5)), naming the embedding, the value and its orbit's index, as the
     /// scene and the constructor refuse them (QA: a negative `corner_mass` made the total
     /// mass -192 and the steps ran).
@@ -753,12 +753,9 @@ impl Simulation {
                 NUMBERING.join(", ")
             )));
         }
-        if let (Some(why), topomech_gmap::ColumnRef::Real(v)) = (material_problem(name), values) {
-            if let Some(k) = v.iter().position(|&x| !why.0(x)) {
-                return Err(PhysicsError::Config(format!(
-                    "'{name}' {}: got {} at orbit {k} (the values are one per orbit, in the order of the embedding's orbits)",
-                    why.1, v[k]
-                )));
+        if let topomech_gmap::ColumnRef::Real(v) = values {
+            if let Some(why) = material_value_problem(name, v) {
+                return Err(PhysicsError::Config(why));
             }
         }
         self.sync_rows()?;
@@ -806,7 +803,7 @@ type ValueRange = (fn(f64) -> bool, &'static str);
 /// (Pa) and the `corner_mass` that vertex masses sum (kg) are positive and finite, `poisson`
 /// lies in (-1, 0.5) (the range in which the isotropic elasticity tensor is positive
 /// definite; Lamé's first parameter diverges at 0.5).
-fn material_problem(name: &str) -> Option<ValueRange> {
+fn material_range(name: &str) -> Option<ValueRange> {
     fn positive(x: f64) -> bool {
         x > 0.0 && x.is_finite()
     }
@@ -818,4 +815,16 @@ fn material_problem(name: &str) -> Option<ValueRange> {
         "poisson" => Some((poisson, "must be in (-1, 0.5)")),
         _ => None,
     }
+}
+
+/// Why `values` (one per orbit, in the order of the embedding's orbits) cannot be written to
+/// the material or mass embedding `name` of the shipped prelude (see `material_range`): the
+/// first value out of range, with its row; `None` when they can, or for another name.
+pub fn material_value_problem(name: &str, values: &[f64]) -> Option<String> {
+    let (ok, must) = material_range(name)?;
+    let k = values.iter().position(|&x| !ok(x))?;
+    Some(format!(
+        "'{name}' {must}: got {:?} at row {k} of the values (one per orbit, in the order of the embedding's orbits)",
+        values[k]
+    ))
 }

@@ -92,7 +92,7 @@ fn check_particle_rows(
         "values for 'particle' (the vertex numbering: a row 0..n-1 for each of the {} vertex orbits)",
         reps.len()
     );
-    let at = |k: usize| format!("the vertex of dart {} (value {k})", reps[k].0);
+    let at = |k: usize| format!("the vertex of dart {} (row {k} of the values)", reps[k].0);
     if let Some(k) = rows.iter().position(|&r| r < 0) {
         return Err(value_error(format!(
             "{what} must not be negative: {} for {}",
@@ -201,7 +201,12 @@ fn check_input_numbering(
     let what = format!(
         "values for '{name}' ({of}: its index in the mesh the map was built from, or -1 for none)"
     );
-    let at = |k: usize| format!("the {orbit_word} of dart {} (value {k})", reps[k].0);
+    let at = |k: usize| {
+        format!(
+            "the {orbit_word} of dart {} (row {k} of the values)",
+            reps[k].0
+        )
+    };
     if let Some(k) = values.iter().position(|&v| v < -1) {
         return Err(value_error(format!(
             "{what} must be -1 or more: {} for {}",

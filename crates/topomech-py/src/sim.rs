@@ -1419,6 +1419,13 @@ impl PySimulation {
             let id = embedding_key(g, name)?;
             guard(|| {
                 let (vals, reps) = orbit_values_arg(g, id, values)?;
+                // a value no material has: a ValueError, as for a NaN (the simulation's
+                // own check, for Rust callers, gives a SimulationError)
+                if let crate::gmap::Gathered::Real(v) = &vals {
+                    if let Some(why) = topomech_physics::material_value_problem(name, v) {
+                        return Err(value_error(why));
+                    }
+                }
                 let e = g.embedding(id);
                 if e.orbit() == OrbitType::vertex(g.dimension()) && !is_additive(name) {
                     check_welded(s, name, e.ty().width(), &vals, &reps)?;
