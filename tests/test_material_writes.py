@@ -77,3 +77,27 @@ def test_a_huge_value_is_named_short() -> None:
     values[0] = 1e308
     with pytest.raises(ValueError, match=r"'poisson' must be in \(-1, 0.5\): got 1e308 at row 0 "):
         sim.set_embedding("poisson", values)
+
+
+def test_complex_values_are_refused_everywhere_they_enter() -> None:
+    """Every other entry point the QA found dropping imaginary parts with only numpy's
+    warning: a vertex field, the gravity and density of a simulation, a plane cut's normal, a
+    blade's points, a point load and a load's function, the flat mesh layout."""
+    from topomech import loads
+
+    sim = tet_box()
+    v = np.zeros((sim.n_vertices, 3)) + 1j
+    with pytest.raises(TypeError, match="must be real numbers"):
+        sim.set_vertex_field("velocity", v)
+    g = sim.gmap()
+    for kw in ({"gravity": np.array([0, -9.81j, 0])}, {"density": np.complex128(1000)}):
+        with pytest.raises(TypeError, match="must be a number, got complex"):
+            topomech.Simulation(g, models=["corotational"], **kw)
+    with pytest.raises(TypeError, match="must be a number, got complex"):
+        sim.cut(np.array([1, 0j, 0]), 0.3)
+    blade = np.array([[0.5, 1.2, -1.0], [0.5, 1.2, 2.0]], dtype=complex)
+    with pytest.raises(TypeError):
+        sim.cut_swept(blade, blade - 1.0)
+    with pytest.raises(loads.LoadError, match="force must be real numbers"):
+        loads.point_load(sim, np.array([0, 0, -5j]), points=[0])
+    assert sim.total_mass() > 0

@@ -11,6 +11,7 @@ error names the cell.
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, NamedTuple
 
@@ -100,12 +101,24 @@ def cell_dimension(cell_type: str) -> int | None:
     return None
 
 
+def real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
+    """``values`` as a contiguous float64 array. Raises :class:`TypeError` for complex values
+    (numpy would drop their imaginary parts with only a ``ComplexWarning``)."""
+    a = np.asarray(values)
+    if a.dtype.kind == "c":
+        raise TypeError(f"{what} must be real numbers, got an array of {a.dtype}")
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def normalize_points(points: Any) -> npt.NDArray[np.float64]:
     """``points`` as float64 ``(N, 3)``; 2 columns get z = 0."""
-    if np.asarray(points).dtype.kind == "c":
-        raise TypeError("points must be real numbers, got complex values")
     try:
-        p = np.asarray(points, dtype=np.float64)
+        with warnings.catch_warnings():
+            # numpy drops the imaginary parts of complex points with only this warning
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            p = np.asarray(points, dtype=np.float64)
+    except np.exceptions.ComplexWarning:
+        raise TypeError("points must be real numbers, got complex values") from None
     except (TypeError, ValueError) as e:
         raise ValueError(f"points must be a numeric array of shape (N, 2) or (N, 3): {e}") from e
     if p.ndim != 2 or p.shape[1] not in (2, 3):

@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _core
-from topomech._cells import FlatMesh, cell_dimension, flat_to_blocks, to_flat
+from topomech._cells import FlatMesh, cell_dimension, flat_to_blocks, real_array, to_flat
 from topomech._core import FileFormatError, MeshError, TopologyError
 
 if TYPE_CHECKING:
@@ -200,7 +200,7 @@ class GMap:
                 f"reorient must be True or False, got {reorient!r} ({type(reorient).__name__})"
             )
         core, report = _core.GMap.from_flat(
-            np.ascontiguousarray(points, dtype=np.float64),
+            real_array(points, "points"),
             list(kinds),
             np.ascontiguousarray(offsets, dtype=np.int64),
             np.ascontiguousarray(connectivity, dtype=np.int64),

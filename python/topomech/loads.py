@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _core
-from topomech._cells import CELL_FACES, KIND_BY_SIZE
+from topomech._cells import CELL_FACES, KIND_BY_SIZE, real_array
 
 if TYPE_CHECKING:
     from topomech.simulation import Simulation
@@ -530,13 +530,24 @@ def _constant(c: float) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.fl
     return lambda q: np.full(len(q), c)
 
 
+def _real(value: Any) -> float:
+    """``float(value)``, refusing a complex (numpy's complex scalars are Python complex, whose
+    ``float`` drops the imaginary part with only a warning) with :class:`TypeError`."""
+    if isinstance(value, complex):
+        raise TypeError("a complex number")
+    return float(value)
+
+
 def _density(value: Any, what: str, size: int) -> Density:
     """A load's density from a constant, a callable, or rule-language expressions."""
     if callable(value):
         fn = value
 
         def checked(q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-            v = np.asarray(fn(q), dtype=np.float64)
+            try:
+                v = real_array(fn(q), f"{what}: the function's values")
+            except TypeError as e:
+                raise LoadError(str(e)) from None
             want = "(n, 3)" if size == 3 else "(n,)"
             if v.shape != ((len(q), 3) if size == 3 else (len(q),)):
                 raise LoadError(
@@ -558,7 +569,7 @@ def _density(value: Any, what: str, size: int) -> Density:
         if isinstance(value, str):
             return _at(compile_expression(value), what, quadrature)
         try:
-            c = float(value)
+            c = _real(value)
         except (TypeError, ValueError):
             raise LoadError(f"{what}: expected a number or an expression, got {value!r}") from None
         if not math.isfinite(c):
@@ -573,7 +584,7 @@ def _density(value: Any, what: str, size: int) -> Density:
             parts.append(_at(compile_expression(v), f"{what}[{i}]", quadrature))
         else:
             try:
-                c = float(v)
+                c = _real(v)
             except (TypeError, ValueError):
                 raise LoadError(
                     f"{what}: expected 3 numbers or expressions, got {value!r}"
@@ -655,7 +666,10 @@ def point_load(
     ``pinched="split"``, a vertex split by a cut) gets ``force`` once, divided equally among
     its rows, so the total does not depend on how the point was split. Rows with no input
     point get ``force`` each. Raises :class:`LoadError` for a bad force or selection."""
-    f = np.asarray(force, dtype=np.float64).reshape(-1)
+    try:
+        f = real_array(force, "force").reshape(-1)
+    except TypeError as e:
+        raise LoadError(str(e)) from None
     if f.shape != (3,) or not np.all(np.isfinite(f)):
         raise LoadError(f"force: expected 3 finite numbers, got {force!r}")
     mask = select_vertices(sim, where=where, points=points, group=group, groups=groups)

@@ -45,6 +45,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _core
+from topomech._cells import real_array
 from topomech._core import DivergenceError, SimulationError
 from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_array
 from topomech._solver_log import SolverWarning
@@ -162,15 +163,6 @@ def _check_solver_keys(cfg: Mapping[str, Any]) -> None:
             "max_iterations: the direct solver iterates nothing (it applies to 'cg', 'pcg' "
             "and 'auto')"
         )
-
-
-def _real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
-    """``values`` as a contiguous float64 array. Raises :class:`TypeError` for complex values
-    (numpy would drop their imaginary parts with only a warning)."""
-    a = np.asarray(values)
-    if a.dtype.kind == "c":
-        raise TypeError(f"{what} must be real numbers, got an array of {a.dtype}")
-    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def _index(v: Any, what: str) -> Any:
@@ -471,7 +463,7 @@ class Simulation:
         vertex, its load is divided equally between the copies (the total is kept). Raises
         :class:`ValueError` for a wrong shape or a non-finite value (naming the row),
         :class:`TypeError` for complex values."""
-        self._core.set_external_forces(_real_array(forces, "external forces"))
+        self._core.set_external_forces(real_array(forces, "external forces"))
 
     def external_forces(self) -> npt.NDArray[np.float64]:
         """The external loads ``f_ext`` ``(V, 3)`` (N); zeros unless set."""
@@ -517,18 +509,18 @@ class Simulation:
         :class:`ValueError` for a wrong shape."""
         a = np.asarray(values)
         if a.dtype != np.bool_:
-            a = a.astype(np.float64)
+            a = real_array(a, f"values for {name!r}")
         self._core.set_vertex_field(name, np.ascontiguousarray(a))
 
     def set_positions(self, positions: Any) -> None:
         """Sets the positions from an array-like ``(V, 3)`` of finite real numbers (complex
         ones raise :class:`TypeError`)."""
-        self._core.set_positions(_real_array(positions, "positions"))
+        self._core.set_positions(real_array(positions, "positions"))
 
     def set_velocities(self, velocities: Any) -> None:
         """Sets the velocities from an array-like ``(V, 3)`` of finite real numbers (complex
         ones raise :class:`TypeError`)."""
-        self._core.set_velocities(_real_array(velocities, "velocities"))
+        self._core.set_velocities(real_array(velocities, "velocities"))
 
     def vertex_field(self, name: str) -> npt.NDArray[Any]:
         """The values of a vertex embedding, one row per vertex (the rows of

@@ -132,9 +132,14 @@ fn integrator_name(i: Integrator) -> &'static str {
     }
 }
 
-/// A finite real: a Python int or float (or a numpy scalar), not a bool.
+/// A finite real: a Python int or float (or a numpy scalar), not a bool, nor a complex (a
+/// numpy complex is a Python complex, whose conversion to float would drop its imaginary part
+/// with only a warning: QA).
 fn real_arg(obj: &Bound<'_, PyAny>, what: &str) -> Result<f64> {
-    if obj.is_instance_of::<PyBool>() || obj.is_instance_of::<PyString>() {
+    if obj.is_instance_of::<PyBool>()
+        || obj.is_instance_of::<PyString>()
+        || obj.is_instance_of::<pyo3::types::PyComplex>()
+    {
         return Err(type_error(format!(
             "{what} must be a number, got {}",
             type_name(obj)
