@@ -529,7 +529,9 @@ pub fn hex_stiffness(
     let (_, sign) = hex_gradients(x, [0.0; 3])?;
     for gp in HEX_NODES {
         let (g, det) = hex_gradients(x, [q * gp[0], q * gp[1], q * gp[2]])?;
-        if det * sign <= 0.0 {
+        // the signs compared, not multiplied: for an element of size 1e-55 both are about
+        // 1e-165 and their product underflowed to 0, calling it twisted (QA)
+        if det == 0.0 || (det > 0.0) != (sign > 0.0) {
             return Err(EvalError(
                 "hexahedron: the Jacobian changes sign inside the element (a twisted element)"
                     .into(),
@@ -636,6 +638,39 @@ mod tests {
 
     /// K is symmetric and its null space holds the six rigid motions: translations and
     /// infinitesimal rotations give zero force (to rounding: entries are O(E), so 1e-9 E).
+    /// A hexahedron's stiffness scales with its size (K ~ E L): a unit cube and the same cube
+    /// scaled by 1e-55 and 1e-90 give K / L equal to 1e-12 relative (a few hundred rounded
+    /// products each). At 1e-55 it was refused as twisted: the product of two Jacobian
+    /// determinants of about 1e-165 underflowed to 0 (QA).
+    #[test]
+    fn hex_stiffness_of_tiny_cubes_scales_with_their_size() {
+        let cube: [[f64; 3]; 8] = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        ];
+        let k1 = hex_stiffness(&cube, 1e6, 0.3).expect("a unit cube");
+        let big = k1.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+        for s in [1e-55, 1e-90] {
+            let x = cube.map(|p| p.map(|v| v * s));
+            let ks = hex_stiffness(&x, 1e6, 0.3).unwrap_or_else(|e| panic!("scale {s}: {e:?}"));
+            for (r1, rs) in k1.iter().zip(&ks) {
+                for (a, b) in r1.iter().zip(rs) {
+                    assert!(
+                        (b / s - a).abs() <= 1e-12 * big,
+                        "scale {s}: {a} against {}",
+                        b / s
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn stiffness_is_symmetric_with_rigid_null_space() {
         let x = [
