@@ -32,6 +32,7 @@ from typing import Any, Callable, TextIO
 from topomech import __version__
 from topomech._cells import MESH_FILE_CELLS, flat_to_blocks, mesh_figures
 from topomech._core import ApplyError, MeshError, RuleError, SceneError, TopomechError
+from topomech._paths import read_text_file
 from topomech.io import DUPLICATES, PINCHED, ImportedMesh, import_mesh, write_format, write_gmap
 from topomech.models import Model, shipped_models
 from topomech.rules import ParamValue, RuleSet
@@ -753,7 +754,7 @@ def _read_rule_files(paths: Sequence[Path]) -> list[tuple[str, str]] | None:
     ok = True
     for p in paths:
         try:
-            sources.append((str(p), p.read_text(encoding="utf-8")))
+            sources.append((str(p), read_text_file(p, "rule file")))
         except UnicodeDecodeError as e:
             _error(f"{p}: cannot read the rule file: not UTF-8 text (byte {e.start})")
             ok = False
