@@ -965,7 +965,9 @@ def _add_apply(sub: Any) -> None:
         help="apply a rule to a mesh or saved G-map and write the result",
         description=(
             "Read INPUT (a mesh file meshio reads, or a saved G-map .tmg), load RULES (a rule "
-            f"file, or {LIBRARY} for the rules shipped for the map's dimension), apply RULE at "
+            f"file, or {LIBRARY} for the rules shipped for the map's dimension; a file that "
+            "declares a model is loaded after the shipped common rules of the map's dimension, "
+            "as check and a simulation load it), apply RULE at "
             "every match (--everywhere) or once at the given hook darts (--at), and write "
             "OUTPUT: a saved G-map for .tmg, else a mesh file in the format of its extension "
             "(.vtu, .vtk, .msh, ...). Prints 'matches: N', 'created: N' and 'deleted: N' (darts) "
@@ -1014,8 +1016,12 @@ def _load_rules(spec: str, dimension: int) -> RuleSet | None:
         return None
     # a file that serves both dimensions (`dimension 2 3`, or no line) is loaded for the map's
     serves_both = all(len(RuleSet.file_dimensions(text)) != 1 for _, text in sources)
+    # a model file is loaded after the shipped common rules (position, rest, dx, mass, ...),
+    # as `topomech check` and a simulation load it
+    with_models = any(_MODEL_DECLARATION.search(text) for _, text in sources)
+    load = RuleSet.from_model_sources if with_models else RuleSet.from_sources
     try:
-        rules = RuleSet.from_sources(sources, dimension if serves_both else None)
+        rules = load(sources, dimension if serves_both else None)
     except RuleError as e:
         for line in [*e.diagnostics, *e.warnings]:
             print(line, file=sys.stderr)
