@@ -1,5 +1,5 @@
-"""Hardening of files in (issue 13): `.tmg` reading is no allocation bomb, a mesh path that
-is an endless stream (`/dev/zero`, a FIFO) is a clean error, `topomech run` refuses a saved
+"""Hardening of files in (issue 13): `.tmg` reading is no allocation bomb, a mesh, map, rule,
+model or scene path that is an endless stream (`/dev/zero`, a FIFO) is a clean error, `topomech run` refuses a saved
 map that is not a valid G-map with its violations, and fuzzing `.tmg` bytes and mesh files
 under a memory limit gives only typed errors or valid maps."""
 
@@ -153,6 +153,103 @@ def test_scene_mesh_file_on_a_fifo_names_mesh_file(tmp_path: Path) -> None:
     scene.write_text(f'[mesh]\nfile = "{pipe.name}"\n[[model]]\nkind = "linear_fem"\n')
     with pytest.raises(topomech.SceneError, match=r"mesh\.file: .*pipe\.msh: not a regular file"):
         load_scene(scene).load_mesh()
+
+
+# ------------------------------------------------------------------ rule, model and scene files
+
+
+def _rule_stream_paths(tmp_path: Path) -> list[Path]:
+    """Rule file paths that are endless streams or never end: a symlink to /dev/zero and a
+    FIFO nobody writes to."""
+    zero = tmp_path / "zero.tmr"
+    zero.symlink_to("/dev/zero")
+    pipe = tmp_path / "ff.tmr"
+    os.mkfifo(pipe)
+    return [Path("/dev/zero"), zero, pipe]
+
+
+def test_rule_and_model_files_that_are_streams_are_refused_before_reading(
+    tmp_path: Path,
+) -> None:
+    """RuleSet.load read /dev/zero until memory ran out and Model.load exhausted memory on it
+    (a FIFO blocked both): now each is refused by name before anything is read, within a
+    memory limit and a timeout, as mesh and map paths are."""
+    paths = _rule_stream_paths(tmp_path)
+    r = run_limited(
+        """
+        import json, sys
+        out = []
+        for p in sys.argv[1:]:
+            try:
+                topomech.RuleSet.load([p], 2)
+                out.append([p, "RuleSet.load", "read", ""])
+            except topomech.RuleError as e:
+                out.append([p, "RuleSet.load", type(e).__name__, str(e)])
+            try:
+                topomech.Model.load(p)
+                out.append([p, "Model.load", "read", ""])
+            except OSError as e:
+                out.append([p, "Model.load", type(e).__name__, str(e)])
+        print(json.dumps(out))
+        """,
+        *map(str, paths),
+        timeout=30,
+    )
+    assert r.returncode == 0, f"exit {r.returncode}: {r.stderr[-2000:]}"
+    results = json.loads(r.stdout)
+    assert [p for p, _, _, _ in results] == [str(p) for p in paths for _ in range(2)]
+    for p, loader, kind, msg in results:
+        assert kind == ("RuleError" if loader == "RuleSet.load" else "OSError"), (p, kind, msg)
+        assert p in msg, (p, loader, msg)
+        assert "not a regular file" in msg, (p, loader, msg)
+
+
+def test_model_load_of_a_directory_names_it(tmp_path: Path) -> None:
+    with pytest.raises(IsADirectoryError, match="is a directory, not a rule file") as e:
+        topomech.Model.load(tmp_path)
+    assert e.value.filename == str(tmp_path)
+
+
+@pytest.mark.parametrize("command", ["check", "models", "apply"])
+def test_cli_on_a_rule_file_that_is_a_stream_exits_2_at_once(tmp_path: Path, command: str) -> None:
+    """`topomech check /dev/zero` grew memory forever and `check ff.tmr` (a FIFO) blocked:
+    both are refused by name with exit 2, as any unreadable rule file is."""
+    sheet = tmp_path / "sheet.obj"
+    sheet.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    for p in _rule_stream_paths(tmp_path):
+        args = {
+            "check": ["check", str(p)],
+            "models": ["models", str(p)],
+            "apply": ["apply", str(sheet), str(p), "r", "--everywhere", "--out", "x.tmg"],
+        }[command]
+        r = subprocess.run(
+            [sys.executable, "-m", "topomech", *args],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=False,
+            cwd=tmp_path,
+        )
+        assert r.returncode == 2, (p, r.returncode, r.stdout, r.stderr[-2000:])
+        assert "Traceback" not in r.stderr, r.stderr[-2000:]
+        assert f"{p}: cannot read the rule file: not a regular file" in r.stderr, r.stderr
+
+
+def test_scene_model_file_and_scene_file_that_are_streams_are_refused(tmp_path: Path) -> None:
+    """A scene `[[model]] file = "/dev/zero"` hung `topomech run`: now the scene's key names
+    it; a scene file that is a FIFO is refused by name too."""
+    for p in _rule_stream_paths(tmp_path):
+        scene = tmp_path / "s.toml"
+        scene.write_text(f'[mesh]\ngenerator = "grid"\n[[model]]\nfile = "{p}"\n')
+        with pytest.raises(
+            topomech.SceneError,
+            match=r"model\[0\]\.file: cannot read the rule file .*: not a regular file",
+        ):
+            load_scene(scene)
+    pipe = tmp_path / "scene.toml"
+    os.mkfifo(pipe)
+    with pytest.raises(topomech.SceneError, match=r"scene\.toml: .*not a regular file"):
+        load_scene(pipe)
 
 
 # ------------------------------------------------------------------ invalid saved maps

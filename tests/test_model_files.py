@@ -26,6 +26,7 @@ import pytest
 import topomech
 from topomech import Model, RuleError, SceneError, SimulationError
 from topomech.cli import main
+from topomech.samples import sample
 
 ANCHOR = """\
 dimension 2
@@ -459,6 +460,28 @@ def test_cli_check_loads_the_shipped_common_rules_for_a_model_file(
     assert capsys.readouterr().out == (
         "ok: 3 rules and 1 model in 1 file (with the shipped common rules of dimension 2)\n"
     )
+
+
+def test_cli_apply_loads_a_model_file_as_check_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`topomech apply` on a model file loads the shipped common rules first, as `check`
+    does: before, `check anchor.tmr` said ok while `apply ... anchor.tmr anchor_init` refused
+    the file with `unknown embedding 'position'` (and 'dx')."""
+    path = _write(tmp_path, "anchor.tmr", ANCHOR)
+    sheet = sample("sheet.obj")
+    out = tmp_path / "x.tmg"
+    args = ["apply", str(sheet), str(path), "anchor_init", "--everywhere", "--param", "k=5"]
+    assert main([*args, "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "unknown embedding" not in captured.err, captured.err
+    assert captured.out.startswith("matches: 81\n"), captured.out
+    assert np.allclose(topomech.GMap.load(out).embedding("k_anchor").values, 5.0)
+    # a file without a model is loaded alone, as before: its undeclared embeddings refused
+    plain = _write(tmp_path, "plain.tmr", ANCHOR.split("model anchor")[0])
+    args = ["apply", str(sheet), str(plain), "anchor_init", "--everywhere", "--param", "k=5"]
+    assert main([*args, "--out", str(out)]) == 2
+    assert "unknown embedding 'position'" in capsys.readouterr().err
 
 
 def _line_col(text: str, needle: str) -> tuple[int, int]:

@@ -189,7 +189,9 @@ def test_prescribed_and_regions() -> None:
         (
             {"models": [{"kind": "stretch_elementary", "young": 1e6}]},
             topomech.SimulationError,
-            "has no parameter 'young' (it has: stiffness, damping): 'young' is the material's",
+            "has no parameter 'young' (it has: stiffness, damping): 'young' is the material's, "
+            "read by the continuous models (declared per_element: corotational, linear_fem, "
+            "...) only; this model does not use it",
         ),
         (
             {"models": [{"kind": "stretch_elementary", "params": {"stiffness": 1.0}}]},
@@ -223,6 +225,27 @@ def test_bad_configurations(kw: dict[str, object], exc: type[Exception], message
     with pytest.raises(exc) as info:
         springs(**kw)
     assert message in str(info.value)
+
+
+@pytest.mark.parametrize(("key", "value"), [("young", 1e5), ("poisson", 0.3)])
+def test_material_key_in_a_continuous_model_says_how_to_set_it_from_python(
+    key: str, value: float
+) -> None:
+    """A continuous model's dict with young or poisson is refused with advice a Python caller
+    can follow (the simulation's keyword, or a region) and the scene's two places for it
+    ([material], or the [[model]] table as the README's beam.toml has it) named correctly:
+    before, the message sent everyone to a scene's [material] only."""
+    with pytest.raises(topomech.SimulationError) as info:
+        topomech.Simulation(beam(), models=[{"kind": "corotational", key: value}])
+    msg = str(info.value)
+    assert f"model 'corotational' has no parameter '{key}'" in msg, msg
+    assert "it is set on the simulation, not in a model's parameters" in msg, msg
+    assert f"Python: Simulation(..., {key}=...)" in msg, msg
+    assert f'regions=[{{"where": ..., "{key}": ...}}]' in msg, msg
+    assert f"or {key} = ... in the model's [[model]] table, which sets the material's" in msg
+    # the advice works: the material given to the simulation
+    sim = topomech.Simulation(beam(), models=["corotational"], **{key: value})
+    sim.step()
 
 
 def test_key_in_config_and_keywords() -> None:

@@ -32,6 +32,7 @@ from typing import Any, Callable, TextIO
 from topomech import __version__
 from topomech._cells import MESH_FILE_CELLS, flat_to_blocks, mesh_figures
 from topomech._core import ApplyError, MeshError, RuleError, SceneError, TopomechError
+from topomech._paths import read_text_file
 from topomech.io import DUPLICATES, PINCHED, ImportedMesh, import_mesh, write_format, write_gmap
 from topomech.models import Model, shipped_models
 from topomech.rules import ParamValue, RuleSet
@@ -753,7 +754,7 @@ def _read_rule_files(paths: Sequence[Path]) -> list[tuple[str, str]] | None:
     ok = True
     for p in paths:
         try:
-            sources.append((str(p), p.read_text(encoding="utf-8")))
+            sources.append((str(p), read_text_file(p, "rule file")))
         except UnicodeDecodeError as e:
             _error(f"{p}: cannot read the rule file: not UTF-8 text (byte {e.start})")
             ok = False
@@ -964,7 +965,9 @@ def _add_apply(sub: Any) -> None:
         help="apply a rule to a mesh or saved G-map and write the result",
         description=(
             "Read INPUT (a mesh file meshio reads, or a saved G-map .tmg), load RULES (a rule "
-            f"file, or {LIBRARY} for the rules shipped for the map's dimension), apply RULE at "
+            f"file, or {LIBRARY} for the rules shipped for the map's dimension; a file that "
+            "declares a model is loaded after the shipped common rules of the map's dimension, "
+            "as check and a simulation load it), apply RULE at "
             "every match (--everywhere) or once at the given hook darts (--at), and write "
             "OUTPUT: a saved G-map for .tmg, else a mesh file in the format of its extension "
             "(.vtu, .vtk, .msh, ...). Prints 'matches: N', 'created: N' and 'deleted: N' (darts) "
@@ -1013,8 +1016,12 @@ def _load_rules(spec: str, dimension: int) -> RuleSet | None:
         return None
     # a file that serves both dimensions (`dimension 2 3`, or no line) is loaded for the map's
     serves_both = all(len(RuleSet.file_dimensions(text)) != 1 for _, text in sources)
+    # a model file is loaded after the shipped common rules (position, rest, dx, mass, ...),
+    # as `topomech check` and a simulation load it
+    with_models = any(_MODEL_DECLARATION.search(text) for _, text in sources)
+    load = RuleSet.from_model_sources if with_models else RuleSet.from_sources
     try:
-        rules = RuleSet.from_sources(sources, dimension if serves_both else None)
+        rules = load(sources, dimension if serves_both else None)
     except RuleError as e:
         for line in [*e.diagnostics, *e.warnings]:
             print(line, file=sys.stderr)

@@ -34,12 +34,12 @@ import numbers
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any, Union
 
 import numpy as np
 
 from topomech import _core
+from topomech._paths import read_text_file
 
 __all__ = ["EXPLICIT_INTEGRATORS", "INTEGRATORS", "Model", "ParamDefault", "ParamValue"]
 
@@ -123,7 +123,8 @@ class Model:
         ``name`` is None), with the parameter values ``params``.
 
         Raises :class:`FileNotFoundError` naming the file when it does not exist,
-        :class:`OSError` when it cannot be read, :class:`UnicodeDecodeError`
+        :class:`OSError` when it cannot be read or is not a regular file (a directory, or a
+        device or FIFO such as ``/dev/zero``: refused before reading), :class:`UnicodeDecodeError`
         when it is not UTF-8, :class:`topomech.RuleError` when the checker refuses it (one
         ``FILE:LINE:COL: error[CONDITION]: message`` line per problem), :class:`ValueError`
         when it declares no model, when ``name`` is None and it declares several, or when it
@@ -151,7 +152,7 @@ class Model:
         :meth:`load`; an empty list for a file without models)."""
         file = str(path)
         try:
-            text = Path(path).read_text(encoding="utf-8")
+            text = read_text_file(path, "rule file")
         except UnicodeDecodeError as e:
             # the same exception, naming the file (the codec's message does not)
             raise UnicodeDecodeError(

@@ -100,7 +100,9 @@ class RuleSet:
         needed when every file serves both, with ``dimension 2 3`` or no dimension line; by
         default the dimension the files say). Raises :class:`FileNotFoundError` naming the
         first file that does not exist, :class:`RuleError` with every error (a file that
-        exists but cannot be read included), ValueError for another dimension."""
+        exists but cannot be read included, and one that is not a regular file: a directory,
+        or a device or FIFO such as ``/dev/zero``, refused before reading), ValueError for
+        another dimension."""
         if isinstance(paths, (str, os.PathLike)):
             paths = [paths]
         return cls(_core.RuleSet.load([os.fspath(p) for p in paths], _dimension(dimension)))

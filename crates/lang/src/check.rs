@@ -617,6 +617,9 @@ fn emb_differences(a: &EmbDecl, b: &EmbDecl, embs: &[EmbDecl]) -> Vec<&'static s
     .collect()
 }
 
+/// The aggregates a derived embedding may take, by the type of its source.
+const DERIVED_TYPES: &str = "sum takes f64, i64, vectors and matrices, mean f64, vectors and matrices, both of the source's type; count takes any type and is i64";
+
 fn check_embedding(
     c: &mut Ctx,
     e: &ast::EmbeddingDecl,
@@ -683,16 +686,47 @@ fn check_embedding(
                 );
                 return None;
             }
-            let expected = if agg == Aggregate::Count {
-                Ty::I64
-            } else {
-                embs[k].ty
+            // what the map can aggregate (GMap::add_derived_embedding): a sum of reals or
+            // integers, a mean of reals, a count of anything
+            let src_ty = embs[k].ty;
+            let defined = match agg {
+                Aggregate::Sum => src_ty.is_real() || src_ty == Ty::I64,
+                Aggregate::Mean => src_ty.is_real(),
+                Aggregate::Count => true,
             };
-            if expected != ty {
+            if !defined {
                 c.error(
                     e.pos,
                     "type",
-                    format!("derived embedding '{}' must have type {expected}", e.name),
+                    format!(
+                        "derived embedding '{}': {} of '{src}' is not defined, '{src}' being {src_ty} ({DERIVED_TYPES})",
+                        e.name,
+                        agg.name()
+                    ),
+                );
+                return None;
+            }
+            let expected = if agg == Aggregate::Count {
+                Ty::I64
+            } else {
+                src_ty
+            };
+            if expected != ty {
+                let why = if agg == Aggregate::Count {
+                    "a count is i64".to_string()
+                } else {
+                    format!(
+                        "a {} has its source's type: '{src}' is {src_ty}",
+                        agg.name()
+                    )
+                };
+                c.error(
+                    e.pos,
+                    "type",
+                    format!(
+                        "derived embedding '{}' must have type {expected} ({why})",
+                        e.name
+                    ),
                 );
                 return None;
             }

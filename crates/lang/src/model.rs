@@ -276,6 +276,9 @@ fn check_model(
     let before = out.len();
     let mn = m.name.as_str();
     let mut params: Vec<ModelParam> = Vec::new();
+    // parameters refused for their type: still known to the model, so that an argument
+    // naming one is not reported a second time as naming no parameter
+    let mut refused: Vec<&str> = Vec::new();
     for p in &m.params {
         if params.iter().any(|q| q.name == p.name) {
             error(
@@ -301,6 +304,7 @@ fn check_model(
                         p.name
                     ),
                 );
+                refused.push(p.name.as_str());
                 continue;
             }
         };
@@ -438,6 +442,10 @@ fn check_model(
             for (a, (pn, pt)) in c.args.iter().zip(&rule.params) {
                 let (arg, ty) = if let ModelArgKind::Param(name) = &a.kind {
                     let Some(p) = params.iter().find(|p| &p.name == name) else {
+                        if refused.contains(&name.as_str()) {
+                            // its type is the error, reported at the parameter
+                            continue;
+                        }
                         let known: Vec<&str> = params.iter().map(|p| p.name.as_str()).collect();
                         error(
                                 out,

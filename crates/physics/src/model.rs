@@ -146,6 +146,29 @@ pub fn shipped_models() -> Vec<ShippedModel> {
     .clone()
 }
 
+/// Why a model's parameters cannot hold the material's `key` (`young`, `poisson` or
+/// `density`), and where it is set instead: on the simulation (Python's keyword, Rust's
+/// [`Config`] field, per region too); in a scene `[material]`, or for `young` and
+/// `poisson` the `[[model]]` table of a continuous model (the scene moves them to its
+/// material). A model that is not continuous (not `per_element`: springs, bending) reads
+/// neither `young` nor `poisson`: the message says so rather than where to put them.
+fn material_key_in_model(m: &Model, key: &str, has: &str) -> String {
+    let name = &m.name;
+    if key != "density" && !m.per_element {
+        return format!(
+            "model '{name}' has no parameter '{key}' (it has: {has}): '{key}' is the material's, read by the continuous models (declared per_element: corotational, linear_fem, ...) only; this model does not use it (its stiffness is among its own parameters)"
+        );
+    }
+    let scene = if key == "density" {
+        format!("[material] {key} = ...")
+    } else {
+        format!("[material] {key} = ..., or {key} = ... in the model's [[model]] table, which sets the material's")
+    };
+    format!(
+        "model '{name}' has no parameter '{key}' (it has: {has}): '{key}' is the material's, one for every model that uses it, so it is set on the simulation, not in a model's parameters (Python: Simulation(..., {key}=...), or regions=[{{\"where\": ..., \"{key}\": ...}}] for some elements; Rust: Config::{key}; a scene: {scene})"
+    )
+}
+
 /// A model as a simulation runs it: its rule calls with their parameters bound.
 #[derive(Clone, Debug)]
 pub(crate) struct RunModel {
@@ -174,11 +197,12 @@ impl RunModel {
             if !m.params.iter().any(|p| &p.name == k) {
                 let known: Vec<&str> = m.params.iter().map(|p| p.name.as_str()).collect();
                 if ["young", "poisson", "density"].contains(&k.as_str()) {
-                    return Err(PhysicsError::Config(format!(
-                        "model '{}' has no parameter '{k}' (it has: {}): '{k}' is the material's, shared by the models that use it; give it to the simulation (Python: Simulation(..., {k}=...); a scene: [material] {k} = ...)",
-                        m.name,
-                        if known.is_empty() { "none".to_string() } else { known.join(", ") }
-                    )));
+                    let has = if known.is_empty() {
+                        "none".to_string()
+                    } else {
+                        known.join(", ")
+                    };
+                    return Err(PhysicsError::Config(material_key_in_model(m, k, &has)));
                 }
                 return Err(PhysicsError::Config(format!(
                     "model '{}' has no parameter '{k}' (it has: {})",

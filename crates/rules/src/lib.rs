@@ -198,13 +198,15 @@ pub fn load_sources_for(
     }
 }
 
-/// Reads, parses and checks rule files. An unreadable file is a diagnostic at 1:1.
+/// Reads, parses and checks rule files. An unreadable file, or one that is not a regular file
+/// (a directory, `/dev/zero`, a FIFO: refused before reading), is a diagnostic at 1:1.
 pub fn load_files(paths: &[&Path]) -> Result<(RuleSet, Vec<Diagnostic>), Vec<Diagnostic>> {
     load_sources(&read_files(paths)?)
 }
 
 /// Reads, parses and checks rule files for maps of dimension `dim` (2 or 3), as
-/// [`load_sources_for`] checks their texts. An unreadable file is a diagnostic at 1:1.
+/// [`load_sources_for`] checks their texts. An unreadable file, or one that is not a regular
+/// file, is a diagnostic at 1:1.
 pub fn load_files_for(
     dim: usize,
     paths: &[&Path],
@@ -212,12 +214,39 @@ pub fn load_files_for(
     load_sources_for(dim, &read_files(paths)?)
 }
 
-/// The `(file name, text)` of each file, or a diagnostic at 1:1 for each unreadable one.
+/// The text of the rule file `path`: a regular file, read up to the size it has when opened.
+/// A directory, device, FIFO or socket (`/dev/zero`, a named pipe: an endless or blocking
+/// stream) is refused before anything is read, as [`topomech_gmap::io::load`] refuses it.
+fn read_rule_file(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let not_a_file = || {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file (a directory, device, FIFO or socket); a rule file is read \
+             only from a regular file",
+        )
+    };
+    // checked before opening too: opening a FIFO waits for a writer
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(not_a_file());
+    }
+    let f = std::fs::File::open(path)?;
+    let meta = f.metadata()?;
+    if !meta.is_file() {
+        return Err(not_a_file());
+    }
+    let mut text = String::new();
+    f.take(meta.len()).read_to_string(&mut text)?;
+    Ok(text)
+}
+
+/// The `(file name, text)` of each file, or a diagnostic at 1:1 for each unreadable one (or
+/// one that is not a regular file).
 fn read_files(paths: &[&Path]) -> Result<Vec<(String, String)>, Vec<Diagnostic>> {
     let mut sources = Vec::new();
     let mut errs = Vec::new();
     for p in paths {
-        match std::fs::read_to_string(p) {
+        match read_rule_file(p) {
             Ok(s) => sources.push((p.display().to_string(), s)),
             Err(e) => errs.push(Diagnostic {
                 file: p.display().to_string(),

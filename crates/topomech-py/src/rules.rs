@@ -400,7 +400,8 @@ impl PyRuleSet {
     /// `dimension` (2 or 3; needed when every file serves both, `dimension 2 3` or no
     /// dimension line; by default the dimension the files say). Raises `FileNotFoundError`
     /// naming the first file that does not exist, else `RuleError` listing every error, an
-    /// unreadable file included.
+    /// unreadable file included (and one that is not a regular file: a directory, or a device
+    /// or FIFO such as `/dev/zero`, refused before anything is read).
     #[staticmethod]
     #[pyo3(signature = (paths, dimension=None))]
     fn load(py: Python<'_>, paths: Vec<PathBuf>, dimension: Option<i64>) -> PyResult<PyRuleSet> {

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from topomech._core import SimulationError
 from topomech._gmap import GMap
-from topomech._paths import missing_file
+from topomech._paths import missing_file, read_text_file
 from topomech.loads import LoadError, MeshGroups, apply_conditions
 from topomech.models import Model
 from topomech.scene._conditions import _fixes, _ground, _initial, _loads
@@ -446,7 +446,7 @@ def load_scene(path: PathLike) -> Scene:
     fix)."""
     p = find_scene(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_text_file(p, "scene file")
     except UnicodeDecodeError as e:
         raise _Fail(str(p))(None, f"not UTF-8 text (byte {e.start})") from None
     except FileNotFoundError:

@@ -347,6 +347,52 @@ fn embedding_write_conflict() {
     ));
 }
 
+/// A derived embedding whose aggregate is not defined for its source's type says so, and
+/// which aggregates take which types, at the declaration's line and column: before, a sum of
+/// a bool said "derived embedding 'w' must have type bool" (as if `w : bool` would do, which
+/// the map then refuses). A wrong type for a defined aggregate says why it is the one.
+#[test]
+fn derived_aggregates_of_a_type_they_do_not_take_are_refused_saying_which_do() {
+    let src = |agg: &str, src_ty: &str, ty: &str| {
+        format!("dimension 2\nembedding s : {src_ty} on <0>\nembedding w : {ty} on <0,1> derived {agg}(s)\n")
+    };
+    let which = "sum takes f64, i64, vectors and matrices, mean f64, vectors and matrices, both of the source's type; count takes any type and is i64";
+    for (agg, src_ty, ty) in [
+        ("sum", "bool", "f64"),
+        ("sum", "bool", "bool"),
+        ("mean", "bool", "f64"),
+        ("mean", "i64", "i64"),
+    ] {
+        let text = src(agg, src_ty, ty);
+        refused(
+            &text,
+            "type",
+            3,
+            &format!(
+                "derived embedding 'w': {agg} of 's' is not defined, 's' being {src_ty} ({which})"
+            ),
+        );
+        let errs = check(&text).unwrap_err();
+        assert_eq!(errs[0].pos.col, 1, "{}", errs[0]);
+        assert!(!errs[0].message.contains("must have type"), "{}", errs[0]);
+    }
+    refused(
+        &src("sum", "vec3", "f64"),
+        "type",
+        3,
+        "derived embedding 'w' must have type vec3 (a sum has its source's type: 's' is vec3)",
+    );
+    refused(
+        &src("count", "bool", "f64"),
+        "type",
+        3,
+        "derived embedding 'w' must have type i64 (a count is i64)",
+    );
+    accepted(&src("count", "bool", "i64"));
+    accepted(&src("sum", "i64", "i64"));
+    accepted(&src("mean", "vec3", "vec3"));
+}
+
 #[test]
 fn warnings_do_not_refuse() {
     let w = check(&with_head(

@@ -23,4 +23,5 @@ mod numbering;
 mod overflow_elements;
 mod plans;
 mod readme;
+mod rule_files;
 mod shared_matches;

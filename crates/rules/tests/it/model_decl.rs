@@ -218,6 +218,33 @@ fn mistakes_are_refused_where_they_are() {
     }
 }
 
+/// A parameter refused for its type is still the model's: an argument naming it gives no
+/// second, false error (`argument 'k' of rule 'anchor_init' names no parameter of the model
+/// (it has: none)` followed the type error before the fix).
+#[test]
+fn a_parameter_of_a_refused_type_is_one_error_not_two() {
+    let model = "model anchor(k: i64 = 10) { init anchor_init(k, vec3(0,0,0)) step anchor_force forces f_anchor }";
+    let errs = errors(model);
+    assert_eq!(errs.len(), 1, "{errs:?}");
+    assert_eq!(errs[0].condition, "type");
+    assert!(
+        errs[0]
+            .message
+            .contains("parameter 'k' has type 'i64'; a model parameter is f64 or vec3"),
+        "{}",
+        errs[0]
+    );
+    // a name that is no parameter at all is still reported
+    let model = "model anchor(k: i64) { init anchor_init(j, vec3(0,0,0)) step anchor_force forces f_anchor }";
+    let errs = errors(model);
+    assert!(
+        errs.iter().any(|d| d
+            .message
+            .contains("argument 'j' of rule 'anchor_init' names no parameter of the model")),
+        "{errs:?}"
+    );
+}
+
 #[test]
 fn duplicate_models_across_files_are_refused() {
     let other = "dimension 3\nmodel anchor { init anchor_init(1, vec3(0,0,0)) step anchor_force forces f_anchor }\n";
