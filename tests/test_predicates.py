@@ -103,6 +103,42 @@ def test_rule_syntax_in_a_simulation_predicate_is_a_bad_predicate(pred: str, col
         assert f": column {col}: expected the end of the expression" in str(e.value)
 
 
+#: What a predicate says it reads when it is given an embedding read (rule syntax).
+READS_ONLY = (
+    "is rule syntax, not allowed here: a predicate (or a load's expression) reads only the "
+    "coordinates x, y, z of the point it is evaluated at"
+)
+
+
+@pytest.mark.parametrize(("table", "key"), TABLES)
+@pytest.mark.parametrize(
+    ("pred", "col", "what"),
+    [
+        ("v.position", 1, "'v.position' reads an embedding"),
+        ("x(v.rest) > 0.5", 3, "'v.rest' reads an embedding"),
+        ("mean<0>(v.position) > 0", 1, "'mean<0>(v.position)' aggregates over an orbit"),
+    ],
+)
+def test_an_embedding_read_in_a_predicate_says_what_a_predicate_reads(
+    pred: str, col: int, what: str, table: str, key: str
+) -> None:
+    """A predicate written in rule syntax, `where = "v.position"`, said `unknown embedding
+    'position'` in a scene's cut (and `x(v.rest) > 0.5` passed a scene's fix): now refused
+    at its column in every key, saying predicates read only x, y, z and their own lets; in
+    a Simulation's configuration too."""
+    with pytest.raises(topomech.SceneError) as e:
+        parse_scene(SCENE + table.format(p=pred)).build()
+    assert e.value.key == key, str(e.value)
+    assert f'bad predicate "{pred}": column {col}: {what}' in str(e.value), str(e.value)
+    assert READS_ONLY in str(e.value)
+    assert "unknown embedding" not in str(e.value)
+    event = {"time": 0.1, "kind": "cut", "where": pred}
+    with pytest.raises(topomech.SimulationError) as e2:
+        topomech.Simulation(bar(), models=["stretch_elementary"], events=[event])
+    assert f'bad cut predicate events[0] "{pred}": column {col}: {what}' in str(e2.value)
+    assert READS_ONLY in str(e2.value)
+
+
 def test_check_predicate_names_the_label_and_the_place() -> None:
     """``_core.check_predicate`` gives the diagnostics of the kernel's own construction."""
     _core.check_predicate("x < 0.5 && abs(y) > 1", "k")

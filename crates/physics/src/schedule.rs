@@ -171,6 +171,9 @@ fn predicate_guard(
     point: &ast::Expr,
 ) -> Result<ast::Expr, topomech_rules::Diagnostic> {
     let pred = build::parse_expression(label, text)?;
+    if let Some(d) = embedding_read_refused(label, &pred) {
+        return Err(d);
+    }
     if let Some(d) = integer_division_refused(label, &pred) {
         return Err(d);
     }
@@ -181,6 +184,69 @@ fn predicate_guard(
     let mut g = build::let_block(lets, pred);
     g.pos = pos;
     Ok(g)
+}
+
+/// What a predicate or a load expression may read, said in the refusal of anything else.
+const PREDICATE_READS: &str = "a predicate (or a load's expression) reads only the coordinates x, y, z of the point it is evaluated at (a vertex's rest position, an element's rest centroid, a cut face's or edge's centroid) and its own 'let' names, with the rule language's operators and built-ins, e.g. x < 1e-9 && y > 0.5";
+
+/// The refusal of an expression of `label` that reads an embedding (`v.position`) or
+/// aggregates over an orbit (`sum<0>(v.rest)`): rule syntax, which a predicate does not
+/// have. Before, `v.position` in a cut's `where` said `unknown embedding 'position'` (the
+/// node and embeddings of the rule built around it leaking through) and `x(v.rest) > 0`
+/// was accepted in a fixed vertex's.
+fn embedding_read_refused(label: &str, e: &ast::Expr) -> Option<topomech_rules::Diagnostic> {
+    embedding_read(e).map(|(at, what)| topomech_rules::Diagnostic {
+        file: label.to_string(),
+        pos: at,
+        severity: topomech_rules::Severity::Error,
+        condition: "name",
+        message: format!("{what} is rule syntax, not allowed here: {PREDICATE_READS}"),
+    })
+}
+
+/// The first embedding read or aggregate in `e`: where, and what it is (`'v.position'
+/// reads an embedding`).
+fn embedding_read(e: &ast::Expr) -> Option<(topomech_rules::ast::Pos, String)> {
+    use ast::ExprKind as K;
+    match &e.kind {
+        K::Read { node, emb } => Some((e.pos, format!("'{node}.{emb}' reads an embedding, which"))),
+        K::Aggregate {
+            kind,
+            orbit,
+            node,
+            emb,
+        } => {
+            let kind = match kind {
+                ast::AggKind::Sum => "sum",
+                ast::AggKind::Mean => "mean",
+                ast::AggKind::Count => "count",
+            };
+            let orbit: Vec<String> = orbit.iter().map(u64::to_string).collect();
+            let of = emb.as_ref().map_or(node.clone(), |m| format!("{node}.{m}"));
+            Some((
+                e.pos,
+                format!(
+                    "'{kind}<{}>({of})' aggregates over an orbit of the map, which",
+                    orbit.join(",")
+                ),
+            ))
+        }
+        K::Binary(_, a, b) => embedding_read(a).or_else(|| embedding_read(b)),
+        K::Unary(_, a) => embedding_read(a),
+        K::If(c, a, b) => embedding_read(c)
+            .or_else(|| embedding_read(a))
+            .or_else(|| embedding_read(b)),
+        K::Call { args, .. } => args.iter().find_map(embedding_read),
+        K::Block(stmts, r) => stmts
+            .iter()
+            .find_map(|st| match st {
+                ast::Stmt::Let { value, .. } | ast::Stmt::Write { value, .. } => {
+                    embedding_read(value)
+                }
+            })
+            .or_else(|| embedding_read(r)),
+        _ => None,
+    }
 }
 
 /// The refusal of an expression of `label` that divides an integer by an integer
@@ -399,6 +465,9 @@ pub fn eval_expression(
 fn expression_rules(label: &str, text: &str) -> Result<RuleSet, PointsError> {
     let refused = |d| PointsError::Refused(vec![d]);
     let e = build::parse_expression(label, text).map_err(refused)?;
+    if let Some(d) = embedding_read_refused(label, &e) {
+        return Err(refused(d));
+    }
     if let Some(d) = integer_division_refused(label, &e) {
         return Err(refused(d));
     }

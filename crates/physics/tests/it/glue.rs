@@ -165,6 +165,73 @@ fn checker_errors_name_the_key_and_the_column() {
     );
 }
 
+/// An embedding read or an aggregate (rule syntax) in a predicate is refused at its column,
+/// saying what a predicate reads: before, `v.position` in a cut's predicate said `unknown
+/// embedding 'position'` (the rule built around it leaking through) and `x(v.position) >
+/// 0.5` was accepted as a fixed vertex's predicate, reading the node of that rule.
+#[test]
+fn embedding_reads_in_a_predicate_say_what_a_predicate_reads() {
+    let m = mesh();
+    let reads = [
+        ("v.position", 1, "'v.position' reads an embedding"),
+        ("x(v.position) > 0.5", 3, "'v.position' reads an embedding"),
+        (
+            "let r = v.rest\nx(r) > 0.5",
+            9,
+            "'v.rest' reads an embedding",
+        ),
+        (
+            "sum<0>(v.rest) > 0",
+            1,
+            "'sum<0>(v.rest)' aggregates over an orbit",
+        ),
+    ];
+    let says = "is rule syntax, not allowed here: a predicate (or a load's expression) reads only the coordinates x, y, z of the point it is evaluated at";
+    for (p, col, what) in reads {
+        let cases: [(&str, &str, SetUp); 2] = [
+            (
+                "fixed-vertex",
+                "fixed[0]",
+                Box::new(|c: &mut Config| c.fixed = vec![p.into()]),
+            ),
+            (
+                "cut",
+                "events[0]",
+                Box::new(|c: &mut Config| {
+                    c.events = vec![TimedEvent {
+                        time: 0.01,
+                        cut: Cut::Where(p.into()),
+                    }];
+                }),
+            ),
+        ];
+        for (kind, key, f) in cases {
+            let Err(e) = sim(&m, f) else {
+                panic!("{key} = {p:?} was accepted")
+            };
+            let msg = e.to_string();
+            let head = format!("bad {kind} predicate {key} {p:?}: column {col}: {what}");
+            assert!(msg.contains(&head), "expected {head:?} in: {msg}");
+            assert!(msg.contains(says), "{msg}");
+            assert!(!msg.contains("unknown embedding"), "{msg}");
+        }
+        match eval_predicate("p", p, &[[0.0; 3]]) {
+            Err(PointsError::Refused(d)) => assert!(d[0].message.contains(says), "{d:?}"),
+            other => panic!("{other:?}"),
+        }
+    }
+    match eval_expression("e", "x + v.rest", &[[0.0; 3]]) {
+        Err(PointsError::Refused(d)) => {
+            assert!(
+                d[0].message.contains("'v.rest' reads an embedding"),
+                "{d:?}"
+            );
+            assert_eq!(d[0].pos.col, 5);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
 /// A chain of 4000 additions is refused with the parser's depth error, not a stack overflow.
 #[test]
 fn a_long_operator_chain_gets_the_depth_error() {
