@@ -7,6 +7,7 @@ keys are refused clearly when wrong."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -156,6 +157,18 @@ SEG = "from = [[1.0, -1.0, 0.5], [1.0, 2.0, 0.5]]\nto = [[1.0, -1.0, 0.6], [1.0,
             "would not move",
         ),
         (
+            # sliding along its own line sweeps nothing either (named here, not left to the
+            # kernel's refusal of the event, which was a traceback in `topomech run`)
+            BLADE + "from = [[1, 0, 0], [1, 1, 0]]\nto = [[1, 2, 0], [1, 3, 0]]\n",
+            "event[0].to",
+            "the blade would slide along its own line, so it would sweep nothing",
+        ),
+        (
+            BLADE + "from = [[1, 0, 0], [1, 1, 0]]\nto = [[1, 1, 0], [1, 0, 0]]\n",
+            "event[0].to",
+            "on the line of event[0].from",
+        ),
+        (
             BLADE + "from = [[1, 1e200, 0], [1, 0, 0]]\nto = [[1, 0, 0], [1, 1, 0]]\n",
             "event[0].from[0][1]",
             "at most 1e100 in magnitude",
@@ -179,6 +192,33 @@ def test_bad_blades(event: str, key: str, problem: str) -> None:
         parse_scene(BOX + "[[event]]\n" + event)
     assert f"{key}: " in str(e.value), str(e.value)
     assert problem in str(e.value)
+
+
+def test_cut_swept_refuses_a_sweep_of_nothing_as_a_blade_event_does() -> None:
+    """`cut_swept(A, A)` (a blade that does not move) and a sweep along the segment's own line
+    returned 0 unsewn silently, while a blade event that does not move is refused as sweeping
+    nothing: the call now refuses both with the words of the blade event's refusal (the same
+    check in the kernel), and a blade event sliding along its line is refused too."""
+    sc = topomech.load_scene("blade_cut")
+    a = [[0.5, -0.2, -0.1], [0.5, 1.2, -0.1]]
+    along = [[0.5, 0.3, -0.1], [0.5, 1.7, -0.1]]  # the same line, moved along it
+    still = (
+        "its segment must move: it is the same segment at its start and at its end, so it "
+        "would sweep nothing"
+    )
+    sliding = (
+        "its segment must move off its own line: its end points at its start and at its end "
+        "lie on one line, so it would sweep nothing"
+    )
+    for end, words in ((a, still), (along, sliding), (a[::-1], sliding)):
+        with pytest.raises(topomech.SimulationError) as e:
+            sc.build().cut_swept(a, end)
+        assert str(e.value) == f"the blade: {words}", str(e.value)
+        event = {"kind": "blade", "start": 0.0, "end": 0.01, "from": a, "to": end}
+        with pytest.raises(ValueError, match=re.escape(f"events[0] (a blade): {words}")):
+            topomech.Simulation(sc.load_gmap(), models=["corotational"], events=[event])
+    # a sweep across its line still cuts
+    assert sc.build().cut_swept(a, [[0.5, -0.2, 1.1], [0.5, 1.2, 1.1]]).unsewn > 0
 
 
 def test_blade_kind_and_timing_refusals(tmp_path: Path) -> None:
@@ -218,11 +258,13 @@ def test_blade_kind_and_timing_refusals(tmp_path: Path) -> None:
     s.step(6)
     assert sum(c["unsewn"] for c in s.topology_changes()) == 32
     far = [[5.0, 0.0, 0.0], [5.0, 1.0, 0.0]]
+    # (not far[::-1]: the same line reversed sweeps nothing, refused when it is set up)
+    far_below = [[5.0, 0.0, -1.0], [5.0, 1.0, -1.0]]
     miss = topomech.Simulation(
         sc.load_gmap(),
         models=["corotational"],
         dt=0.01,
-        events=[{"kind": "blade", "start": 0.0, "end": 0.02, "from": far, "to": far[::-1]}],
+        events=[{"kind": "blade", "start": 0.0, "end": 0.02, "from": far, "to": far_below}],
     )
     miss.step(1)
     with pytest.raises(topomech.TopomechError, match="crossed nothing: it misses the object"):

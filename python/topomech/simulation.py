@@ -348,9 +348,12 @@ class Simulation:
         what it sweeps each step. Returns a :class:`TopologyResult` (0 unsewn when it crosses
         nothing); raises :class:`TypeError` / :class:`ValueError` for points that are not 2
         finite 3-vectors, and :class:`SimulationError` for a segment whose two points
-        coincide or coordinates beyond 1e100 in magnitude. A quad far thinner than it is
-        long (its width below about 1e-12 of its length) is tested with a relative tolerance
-        that treats its thin triangle as degenerate: faces it crosses may stay sewn."""
+        coincide, coordinates beyond 1e100 in magnitude, or a sweep of nothing, refused as a
+        blade event's is: ``end`` the same segment as ``start`` (``its segment must move:
+        ... so it would sweep nothing``), or the four points on one line (the segment
+        sliding along itself). A quad far thinner than it is long (its width below about
+        1e-12 of its length) is tested with a relative tolerance that treats its thin
+        triangle as degenerate: faces it crosses may stay sewn."""
         unsewn, added = self._core.cut_swept(start, end)
         return TopologyResult(unsewn=int(unsewn), added_rows=np.asarray(added, dtype=np.int64))
 

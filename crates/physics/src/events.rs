@@ -63,7 +63,8 @@ impl Blade {
     }
 
     /// Why this blade cannot run, if it cannot: a start before 0, an end not after the start,
-    /// a non-finite time or point, a segment of zero length, or one that does not move.
+    /// a non-finite time or point, a segment of zero length, or one that sweeps nothing (it
+    /// does not move, or slides along its own line).
     pub fn problem(&self) -> Option<String> {
         if !(self.start >= 0.0 && self.start.is_finite()) {
             return Some(format!(
@@ -77,15 +78,47 @@ impl Blade {
                 self.start, self.end
             ));
         }
-        if let Some(why) = segments_problem(&self.from, &self.to) {
-            return Some(why);
-        }
-        // (a sweep of `cut_swept` may stand still: it cuts nothing)
-        (self.from == self.to).then(|| {
-            "its segment must move: `from` and `to` are the same segment, so it would sweep nothing"
-                .to_string()
-        })
+        segments_problem(&self.from, &self.to).or_else(|| sweep_problem(&self.from, &self.to))
     }
+}
+
+/// Why the segment `from` moving to the segment `to` (both of two distinct finite points,
+/// see [`segments_problem`]) sweeps nothing, if it does: it does not move, or its four points
+/// lie on one line (it slides along its own line: every triangle of its quad is flat, and the
+/// crossing test, which gives false for a triangle flat within 1e-12 of its edges, finds
+/// nothing). The same words for a blade event and for `Simulation::cut_swept`.
+fn sweep_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String> {
+    if from == to {
+        return Some(
+            "its segment must move: it is the same segment at its start and at its end, so it \
+             would sweep nothing"
+                .into(),
+        );
+    }
+    // scaled to coordinates of at most 1 in magnitude: the products below cannot overflow
+    let m = from
+        .iter()
+        .chain(to)
+        .flatten()
+        .fold(0.0_f64, |m, x| m.max(x.abs()));
+    let p = [from[0], from[1], to[0], to[1]].map(|q| q.map(|x| x / m));
+    let flat = |a: usize, b: usize, c: usize| {
+        let e1 = [0, 1, 2].map(|i| p[b][i] - p[a][i]);
+        let e2 = [0, 1, 2].map(|i| p[c][i] - p[a][i]);
+        let n = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ];
+        let len = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        len(n) <= 1e-12 * len(e1) * len(e2)
+    };
+    let on_one_line = flat(0, 1, 2) && flat(0, 1, 3) && flat(0, 2, 3) && flat(1, 2, 3);
+    on_one_line.then(|| {
+        "its segment must move off its own line: its end points at its start and at its end \
+         lie on one line, so it would sweep nothing"
+            .into()
+    })
 }
 
 /// The largest vertex coordinate (in magnitude) a plane or predicate cut takes: a guard sums
@@ -431,13 +464,15 @@ impl Simulation {
     /// Cuts now along the quad a blade sweeps moving from the segment `from` to the segment
     /// `to` (each a pair of end points): unsews every face (3D) or edge (2D) between two
     /// elements whose current centroids the quad separates (see [`Blade`]); returns how many,
-    /// and the rows appended for the vertices that split. Nothing crossed is not an error.
+    /// and the rows appended for the vertices that split. Nothing crossed is not an error; a
+    /// sweep of nothing (the same segment at both ends, or four points on one line) is
+    /// refused with the words of [`Blade::problem`], as a blade event's is.
     pub fn cut_swept(
         &mut self,
         from: [[f64; 3]; 2],
         to: [[f64; 3]; 2],
     ) -> Result<TopologyResult, PhysicsError> {
-        if let Some(why) = segments_problem(&from, &to) {
+        if let Some(why) = segments_problem(&from, &to).or_else(|| sweep_problem(&from, &to)) {
             return Err(PhysicsError::Config(format!("the blade: {why}")));
         }
         self.sweep(from, to)

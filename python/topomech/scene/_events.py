@@ -6,6 +6,7 @@ fracture criterion against the mesh once it is known (the Rust side:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -143,21 +144,46 @@ def _blade(t: _Table, fail: _Fail) -> dict[str, Any]:
         raise fail(t.key("end"), f"must be after start ({start:g}), got {end:g}")
     if t.has("time"):
         raise fail(t.key("time"), "a blade moves from start to end: give start and end")
-    blade = {
-        "kind": "blade",
-        "start": start,
-        "end": end,
-        "from": _segment(t, "from", fail),
-        "to": _segment(t, "to", fail),
-    }
-    if blade["from"] == blade["to"]:
+    src, dst = _segment(t, "from", fail), _segment(t, "to", fail)
+    blade = {"kind": "blade", "start": start, "end": end, "from": src, "to": dst}
+    if src == dst:
         raise fail(
             t.key("to"),
             f"the same segment as {t.key('from')}: the blade would not move, so it would "
             "sweep nothing",
         )
+    if _on_one_line([*src, *dst]):
+        raise fail(
+            t.key("to"),
+            f"on the line of {t.key('from')}: the blade would slide along its own line, so "
+            "it would sweep nothing",
+        )
     t.done()
     return blade
+
+
+def _on_one_line(points: list[list[float]]) -> bool:
+    """Whether the 4 points (a blade's segment at its start and at its end, each of two
+    distinct points) lie on one line: every triangle of them flat within 1e-12 of its edges,
+    as the kernel's check of a sweep (``sweep_problem`` in ``crates/physics/src/events.rs``)
+    decides it, so that a scene names the key instead of the kernel refusing the event."""
+    m = max(abs(x) for p in points for x in p)
+    q = [[x / m for x in p] for p in points]
+
+    def norm(v: list[float]) -> float:
+        return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+    def flat(a: int, b: int, c: int) -> bool:
+        e1 = [q[b][i] - q[a][i] for i in range(3)]
+        e2 = [q[c][i] - q[a][i] for i in range(3)]
+        n = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ]
+        return norm(n) <= 1e-12 * norm(e1) * norm(e2)
+
+    return all(flat(*t) for t in ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)))
 
 
 def _fracture(top: _Table, fail: _Fail) -> dict[str, Any] | None:

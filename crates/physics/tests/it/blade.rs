@@ -335,6 +335,64 @@ fn a_blade_that_misses_or_cannot_finish_is_an_error() {
         err.contains("must differ") && err.contains("at its start)"),
         "{err}"
     );
+    // a sweep of nothing is refused by `cut_swept` with a blade event's words, where it
+    // returned 0 unsewn silently: the same segment at both ends, or a segment sliding along
+    // its own line (four points on one line, here at coordinates near 1e100 too: scaled)
+    let err = sim(&mesh, vec![])
+        .cut_swept(still, still)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("the blade: its segment must move: it is the same segment at its start and at its end, so it would sweep nothing"),
+        "{err}"
+    );
+    for (from, to) in [
+        (
+            [[0.5, 0.0, -0.1], [0.5, 0.0, 1.1]],
+            [[0.5, 0.0, 0.4], [0.5, 0.0, 1.6]],
+        ),
+        // reversed: the same line, the ends swapped
+        (
+            [[0.5, 0.0, -0.1], [0.5, 0.0, 1.1]],
+            [[0.5, 0.0, 1.1], [0.5, 0.0, -0.1]],
+        ),
+        (
+            [[1e99, 1e99, 0.0], [2e99, 2e99, 0.0]],
+            [[3e99, 3e99, 0.0], [4e99, 4e99, 0.0]],
+        ),
+    ] {
+        let err = sim(&mesh, vec![])
+            .cut_swept(from, to)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("the blade: its segment must move off its own line: its end points at its start and at its end lie on one line, so it would sweep nothing"),
+            "{err}"
+        );
+        let (g, _) = build(&mesh, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![model("stretch_cumulated", &[])],
+            blades: vec![Blade {
+                start: 0.0,
+                end: 0.003,
+                from,
+                to,
+            }],
+            ..Config::default()
+        };
+        let err = Simulation::new(g, cfg).err().unwrap().to_string();
+        assert!(
+            err.contains("blade 0: its segment must move off its own line"),
+            "{err}"
+        );
+    }
+    // turning about one end point sweeps a triangle: accepted
+    assert!(sim(&mesh, vec![])
+        .cut_swept(
+            [[0.5, -0.5, 0.5], [0.5, 1.5, 0.5]],
+            [[0.5, -0.5, 0.5], [0.5, 1.5, 1.5]],
+        )
+        .is_ok());
     // coordinates whose differences' products would overflow: refused, not a silent miss
     let err = sim(&mesh, vec![])
         .cut_swept(
