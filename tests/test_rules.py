@@ -133,6 +133,31 @@ def test_library_loads_without_warnings(dim: int) -> None:
     assert repr(rules).startswith(f"topomech.RuleSet(dimension={dim}")
 
 
+def test_no_shipped_rule_file_divides_two_integers() -> None:
+    """Every shipped model, glue and topology file loads for each dimension it serves (after
+    the prelude and common rules, as a simulation loads it) without an integer-division
+    warning (a quotient of two integers): each would be printed on every load."""
+    models = Path(__file__).parents[1] / "crates" / "physics" / "models"
+    if not models.is_dir():
+        pytest.skip("the shipped rule files are in the source tree")
+    prelude = ("prelude.tmr", (models / "prelude.tmr").read_text(encoding="utf-8"))
+    loaded = set()
+    for f in sorted(models.glob("*.tmr")):
+        text = f.read_text(encoding="utf-8")
+        for dim in RuleSet.file_dimensions(text) or [2, 3]:
+            common = f"common{dim}d.tmr"
+            sources = [prelude, (common, (models / common).read_text(encoding="utf-8"))]
+            if f.name.startswith("topology") and f.name != "topology.tmr":
+                topology = (models / "topology.tmr").read_text(encoding="utf-8")
+                sources.append(("topology.tmr", topology))
+            if f.name not in {name for name, _ in sources}:
+                sources.append((f.name, text))
+            warned = RuleSet.from_sources(sources, dim).warnings
+            assert not [w for w in warned if "integer-division" in w], warned
+            loaded.add(f.name)
+    assert len(loaded) >= 14, loaded
+
+
 @pytest.mark.parametrize("dim", [-1, 0, 1, 4, 2**70])
 def test_library_of_an_unsupported_dimension(dim: int) -> None:
     with pytest.raises((ValueError, OverflowError)):

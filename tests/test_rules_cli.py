@@ -109,6 +109,29 @@ def test_check_prints_warnings_and_accepts(
     ]
 
 
+def test_check_warns_of_a_quotient_of_two_integers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`a.w = 1 / 2` (0: a quotient of two integers) passed `topomech check` silently, while
+    a cut predicate refuses the same quotient: now a warning at its FILE:LINE:COL, and still
+    ok (an integer quotient may be meant: to_i64(...) says so and silences it)."""
+    path = tmp_path / "half.tmr"
+    path.write_text(
+        "dimension 2\nembedding w : f64 on <0>\n"
+        "rule half {\n  left { a : <0> hook }\n  compute { a.w = 1 / 2 }\n}\n"
+    )
+    assert cli.main(["check", str(path)]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        f"{path}:5:21: warning[integer-division]: rule 'half': a quotient of two integers is "
+        "an integer, rounded toward zero (1 / 2 is 0, 7 / 2 is 3): write a real operand, e.g. "
+        "1.0 / 2, for the real quotient, or to_i64(a / b) where the integer quotient is meant",
+        "ok: 1 rule in 1 file (1 warning)",
+    ]
+    path.write_text(path.read_text().replace("1 / 2", "to_f64(to_i64(1 / 2))"))
+    assert cli.main(["check", str(path)]) == 0
+    assert capsys.readouterr().out == "ok: 1 rule in 1 file\n"
+
+
 def test_check_refuses_with_one_line_per_problem(rule_files: dict[str, Path]) -> None:
     path = rule_files["broken"]
     r = run("check", str(path))

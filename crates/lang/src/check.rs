@@ -1042,6 +1042,7 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
         embs,
         dim,
         index: &index,
+        integer_quotient_meant: false,
     };
     let guard = r.guard.as_ref().and_then(|g| {
         let (e, t) = x.expr(g, &mut env)?;
@@ -1558,6 +1559,9 @@ struct ExprCheck<'a, 'c> {
     embs: &'a [EmbDecl],
     dim: usize,
     index: &'a HashMap<&'a str, usize>,
+    /// Set while checking the argument of `to_i64(a / b)`, read (and cleared) by that
+    /// division: its integer quotient is meant, no `integer-division` warning.
+    integer_quotient_meant: bool,
 }
 
 impl ExprCheck<'_, '_> {
@@ -1694,8 +1698,21 @@ impl ExprCheck<'_, '_> {
                 )
             }
             ExprKind::Binary(op, a, b) => {
+                let meant = std::mem::take(&mut self.integer_quotient_meant);
                 let (ea, ta) = self.expr(a, env)?;
                 let (eb, tb) = self.expr(b, env)?;
+                if *op == BinOp::Div && ta == Ty::I64 && tb == Ty::I64 && !meant {
+                    // as a cut predicate refuses it (there it is always a mistake); here an
+                    // integer quotient may be meant: a warning, silenced by to_i64(a / b)
+                    self.c.warning(
+                        pos,
+                        "integer-division",
+                        format!(
+                            "rule '{}': a quotient of two integers is an integer, rounded toward zero (1 / 2 is 0, 7 / 2 is 3): write a real operand, e.g. 1.0 / 2, for the real quotient, or to_i64(a / b) where the integer quotient is meant",
+                            self.rn
+                        ),
+                    );
+                }
                 match binop_type(*op, ta, tb) {
                     Ok(t) => (TExpr::Bin(*op, Box::new(ea), Box::new(eb)), t),
                     Err(m) => {
@@ -1718,6 +1735,10 @@ impl ExprCheck<'_, '_> {
                 let mut es = Vec::new();
                 let mut ts = Vec::new();
                 for a in args {
+                    // to_i64(a / b): the integer quotient written on purpose
+                    self.integer_quotient_meant = name == "to_i64"
+                        && args.len() == 1
+                        && matches!(a.kind, ExprKind::Binary(BinOp::Div, ..));
                     let (ea, ta) = self.expr(a, env)?;
                     es.push(ea);
                     ts.push(ta);

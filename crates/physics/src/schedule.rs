@@ -240,8 +240,9 @@ fn embedding_read(e: &ast::Expr) -> Option<(topomech_rules::ast::Pos, String)> {
         K::Block(stmts, r) => stmts
             .iter()
             .find_map(|st| match st {
-                ast::Stmt::Let { value, .. } => embedding_read(value),
-                _ => None,
+                ast::Stmt::Let { value, .. } | ast::Stmt::Write { value, .. } => {
+                    embedding_read(value)
+                }
             })
             .or_else(|| embedding_read(r)),
         _ => None,

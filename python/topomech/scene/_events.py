@@ -144,20 +144,15 @@ def _blade(t: _Table, fail: _Fail) -> dict[str, Any]:
         raise fail(t.key("end"), f"must be after start ({start:g}), got {end:g}")
     if t.has("time"):
         raise fail(t.key("time"), "a blade moves from start to end: give start and end")
-    blade = {
-        "kind": "blade",
-        "start": start,
-        "end": end,
-        "from": _segment(t, "from", fail),
-        "to": _segment(t, "to", fail),
-    }
-    if blade["from"] == blade["to"]:
+    src, dst = _segment(t, "from", fail), _segment(t, "to", fail)
+    blade = {"kind": "blade", "start": start, "end": end, "from": src, "to": dst}
+    if src == dst:
         raise fail(
             t.key("to"),
             f"the same segment as {t.key('from')}: the blade would not move, so it would "
             "sweep nothing",
         )
-    if _on_one_line([*blade["from"], *blade["to"]]):
+    if _on_one_line([*src, *dst]):
         raise fail(
             t.key("to"),
             f"on the line of {t.key('from')}: the blade would slide along its own line, so "

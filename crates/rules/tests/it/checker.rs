@@ -404,6 +404,66 @@ fn warnings_do_not_refuse() {
     assert!(w[0].to_string().contains("warning[unused]"));
 }
 
+/// `a.w = 1 / 2` divides two integers (0, written as 0.0): accepted silently before, while a
+/// cut predicate refuses the same quotient. Now a warning `integer-division` at the
+/// division's `file:line:col` (its operator), which does not refuse the file; a real operand, `to_i64(a /
+/// b)` (the integer quotient meant) or reals give none; integer-typed operands of any kind
+/// (a count, an i64 parameter, a let) warn.
+#[test]
+fn a_quotient_of_two_integers_is_a_warning() {
+    let rule = |body: &str| {
+        with_head(&format!(
+            "rule r(n: i64) {{\n  left {{ a : <0,1> hook }}\n  compute {{ {body} }}\n}}"
+        ))
+    };
+    for body in [
+        "a.weight = 1 / 2 + to_f64(n)",
+        "a.weight = to_f64(n / 2)",
+        "a.weight = to_f64(count<0,1>(a) / 3) + to_f64(n)",
+        "let k = n / 4\n    a.weight = to_f64(k)",
+    ] {
+        // at the operator, on the compute line (its body starts at column 13)
+        let col = 13 + body.find('/').unwrap() as u32;
+        let src = rule(body);
+        let w = check(&src).unwrap_or_else(|e| panic!("refused: {e:?}"));
+        let hits: Vec<_> = w
+            .iter()
+            .filter(|d| d.condition == "integer-division")
+            .collect();
+        assert_eq!(hits.len(), 1, "{body}: {w:?}");
+        let d = hits[0];
+        assert_eq!(d.severity, Severity::Warning);
+        assert_eq!((d.pos.line, d.pos.col), (6, col), "{body}: {d}");
+        assert!(d.to_string().starts_with("t.tmr:6:"), "{d}");
+        assert!(d.to_string().contains("warning[integer-division]: rule 'r': a quotient of two integers is an integer, rounded toward zero (1 / 2 is 0, 7 / 2 is 3): write a real operand, e.g. 1.0 / 2, for the real quotient, or to_i64(a / b) where the integer quotient is meant"), "{d}");
+    }
+    for body in [
+        "a.weight = 1.0 / 2 + to_f64(n)",
+        "a.weight = to_f64(n) / 2",
+        "a.weight = to_f64(to_i64(n / 2))",
+        "a.weight = 1.0 / 2.0 + to_f64(n % 2)",
+    ] {
+        let w = check(&rule(body)).unwrap_or_else(|e| panic!("refused: {e:?}"));
+        assert!(
+            w.iter().all(|d| d.condition != "integer-division"),
+            "{body}: {w:?}"
+        );
+    }
+}
+
+/// No shipped rule file divides two integers (each would print the warning on every load).
+#[test]
+fn no_shipped_rule_file_divides_two_integers() {
+    for dim in [2, 3] {
+        let (name, text) = topomech_rules::library(dim).unwrap();
+        let (_, w) = load_sources(&[(name.clone(), text)]).unwrap();
+        assert!(
+            w.iter().all(|d| d.condition != "integer-division"),
+            "{name}: {w:?}"
+        );
+    }
+}
+
 /// `Rule::hook_images`, which lets a patch skip the hook orbits whose match is one found
 /// already (the same footprint): the other end of a spring (both ends `<2,3>`, or both
 /// half-edges `<>`); none where the two ends have other orbit types, or where the hook is
