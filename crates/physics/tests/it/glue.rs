@@ -33,6 +33,28 @@ fn mesh() -> Mesh {
 /// Sets one predicate of a configuration.
 type SetUp = Box<dyn FnOnce(&mut Config)>;
 
+/// A timed predicate cut of predicate `p` (the configuration's `events[0]`).
+fn cut_where(p: &str) -> SetUp {
+    let p = p.to_string();
+    Box::new(move |c: &mut Config| {
+        c.events = vec![TimedEvent {
+            time: 0.01,
+            cut: Cut::Where(p),
+        }];
+    })
+}
+
+/// The message of the refusal of the simulation `f` sets up on `m`, with `p` at `key`: a
+/// configuration error (a panic when it is accepted or refused otherwise).
+fn refused(m: &Mesh, f: SetUp, key: &str, p: &str) -> String {
+    let Err(e) = sim(m, f) else {
+        panic!("{key} = {p:?} was accepted")
+    };
+    let msg = e.to_string();
+    assert!(matches!(e, PhysicsError::Config(_)), "{msg}");
+    msg
+}
+
 /// Predicates that, spliced into rule text as they used to be, closed the guard and defined
 /// rules of their own (the first two made a valid file: the old code built the simulation
 /// with the extra rule `evil`). Each is refused at the column of its first token after the
@@ -82,23 +104,10 @@ fn rule_syntax_in_a_predicate_is_refused_as_a_bad_predicate() {
                     }];
                 }),
             ),
-            (
-                "cut",
-                "events[0]",
-                Box::new(|c: &mut Config| {
-                    c.events = vec![TimedEvent {
-                        time: 0.01,
-                        cut: Cut::Where(p.into()),
-                    }];
-                }),
-            ),
+            ("cut", "events[0]", cut_where(p)),
         ];
         for (kind, key, f) in cases {
-            let Err(e) = sim(&m, f) else {
-                panic!("{key} = {p:?} was accepted")
-            };
-            let msg = e.to_string();
-            assert!(matches!(e, PhysicsError::Config(_)), "{msg}");
+            let msg = refused(&m, f, key, p);
             let head = format!("bad {kind} predicate {key} {p:?}: column {col}: ");
             assert!(msg.contains(&head), "expected {head:?} in: {msg}");
             assert!(msg.contains("expected the end of the expression"), "{msg}");
@@ -194,22 +203,10 @@ fn embedding_reads_in_a_predicate_say_what_a_predicate_reads() {
                 "fixed[0]",
                 Box::new(|c: &mut Config| c.fixed = vec![p.into()]),
             ),
-            (
-                "cut",
-                "events[0]",
-                Box::new(|c: &mut Config| {
-                    c.events = vec![TimedEvent {
-                        time: 0.01,
-                        cut: Cut::Where(p.into()),
-                    }];
-                }),
-            ),
+            ("cut", "events[0]", cut_where(p)),
         ];
         for (kind, key, f) in cases {
-            let Err(e) = sim(&m, f) else {
-                panic!("{key} = {p:?} was accepted")
-            };
-            let msg = e.to_string();
+            let msg = refused(&m, f, key, p);
             let head = format!("bad {kind} predicate {key} {p:?}: column {col}: {what}");
             assert!(msg.contains(&head), "expected {head:?} in: {msg}");
             assert!(msg.contains(says), "{msg}");
