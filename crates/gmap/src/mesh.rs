@@ -1762,6 +1762,9 @@ pub fn extract_polyhedra(g: &GMap) -> Result<(Vec<[f64; 3]>, PolyhedronCells), M
             }
             for i in 0..3 {
                 let y = g.alpha(i, x);
+                if y == x {
+                    continue; // an open face (free alpha0 or alpha1): face_cycle names it
+                }
                 if class[y.index()] == u8::MAX {
                     class[y.index()] = 1 - class[x.index()];
                     darts.push(y);
@@ -1800,19 +1803,29 @@ pub fn extract_polyhedra(g: &GMap) -> Result<(Vec<[f64; 3]>, PolyhedronCells), M
 pub type PolyhedronCells = Vec<Vec<Vec<usize>>>;
 
 /// Six times the signed volume a closed polyhedron's face cycles enclose (positive when their
-/// normals point out), each face fanned from its first point to the polyhedron's first point.
+/// normals point out), each face fanned from its first point to the polyhedron's first point,
+/// in units of the polyhedron's largest extent from that point (so that the sign survives
+/// for tiny or huge coordinates, whose products of three differences would under- or
+/// overflow).
 fn polyhedron_volume(faces: &[Vec<usize>], points: &[[f64; 3]]) -> f64 {
     let Some(&o) = faces.first().and_then(|f| f.first()) else {
         return 0.0;
     };
     let o = points[o];
+    let m = faces
+        .iter()
+        .flatten()
+        .flat_map(|&i| sub(points[i], o))
+        .fold(0.0_f64, |m, v| m.max(v.abs()));
+    if m == 0.0 || !m.is_finite() {
+        return 0.0;
+    }
+    let d = |i: usize| sub(points[i], o).map(|v| v / m);
     let mut v = 0.0;
     for f in faces {
-        let a = sub(points[f[0]], o);
+        let a = d(f[0]);
         for k in 1..f.len().saturating_sub(1) {
-            let b = sub(points[f[k]], o);
-            let c = sub(points[f[k + 1]], o);
-            v += dot(a, cross(b, c));
+            v += dot(a, cross(d(f[k]), d(f[k + 1])));
         }
     }
     v

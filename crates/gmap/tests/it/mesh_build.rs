@@ -511,6 +511,20 @@ fn polyhedra_are_the_cells_with_outward_faces() {
             m.set_real(pos, d, &[-p[0], p[1], p[2]]).expect("writes");
         }
         let (mirrored, mpolys) = extract_polyhedra(&m).expect("polyhedra");
+        // mirrored and tiny, the same cycles (the products of three differences of 1e-110
+        // underflow to 0, and the reversal was missed; the orientation test works in units
+        // of the cell's extent)
+        let mut t = m.clone();
+        for d in t.orbit_representatives(OrbitType::vertex(3)) {
+            let p = t.real(pos, d).to_vec();
+            t.set_real(pos, d, &p.iter().map(|v| v * 1e-110).collect::<Vec<_>>())
+                .expect("writes");
+        }
+        assert_eq!(
+            extract_polyhedra(&t).expect("polyhedra").1,
+            mpolys,
+            "{e:?} tiny"
+        );
         let mut mtotal = 0.0;
         for (faces, same) in mpolys.iter().zip(&polys) {
             let v6 = volume6(&mirrored, faces);
