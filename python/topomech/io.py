@@ -1080,13 +1080,15 @@ def write_format(path: PathLike) -> str:
 
 def write_gmap(gmap: GMap, path: PathLike) -> None:
     """Writes a map: a saved G-map (round-trip exact) for ``.tmg``, else its points and cells
-    as a mesh file in the format of the extension (``.vtu``, ``.vtk``, ``.msh``, ...).
-    Raises ``ValueError`` when the extension names no format or the format cannot hold the
-    map's cells (Gmsh has no polygons and takes one cell kind per file, say; STL keeps
-    triangles only and OFF and Medit skip
-    polygons, which the file read back shows), :class:`topomech.MeshError` naming the file
-    and the volume when a cell is no kind a mesh file holds (a general polyhedron after a
-    rewrite); nothing is left written then."""
+    as a mesh file in the format of the extension (``.vtu``, ``.vtk``, ``.msh``, ...); a
+    ``.vtu`` also takes volumes of no cell kind (general polyhedra after a rewrite), every
+    volume then a VTK polyhedron (see :func:`write_vtu`). Raises ``ValueError`` when the
+    extension names no format or the format cannot hold the map's cells (Gmsh has no
+    polygons and takes one cell kind per file, say; STL keeps triangles only and OFF and
+    Medit skip polygons, which the file read back shows; a writer needs a package that is
+    not installed), :class:`topomech.MeshError` naming the file and the volume when a
+    volume is of no cell kind and the format is not VTU, or when the cells cannot be listed
+    (an open volume); nothing is left written then."""
     fmt = write_format(path)
     if fmt == "tmg":
         gmap.save(path)
