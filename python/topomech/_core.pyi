@@ -27,6 +27,7 @@ __all__ = [
     "__version__",
     "_malloc_tuned",
     "_panic_for_tests",
+    "blade_sweep_problem",
     "box",
     "check_predicate",
     "eval_expression",
@@ -267,6 +268,12 @@ def models() -> list[dict[str, Any]]:
     """The models topomech ships: ``kind``, ``dims``, ``params`` (``{name: default}``, a
     default a float, a list of 3 floats or None for a required parameter), ``param_types``
     (``{name: "f64" | "vec3"}``), ``needs``, ``has_jvp``."""
+
+def blade_sweep_problem(
+    start: Sequence[Sequence[float]], end: Sequence[Sequence[float]]
+) -> str | None:
+    """Why a blade whose segment ``start`` moves to ``end`` sweeps nothing (it does not move,
+    or its four points lie on one line), or None: the kernel's test of blade events."""
 
 def check_predicate(text: str, label: str = "predicate") -> None:
     """Checks a predicate on the rest position ``x``, ``y``, ``z`` as a simulation builds it:

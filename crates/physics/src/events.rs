@@ -86,8 +86,9 @@ impl Blade {
 /// see [`segments_problem`]) sweeps nothing, if it does: it does not move, or its four points
 /// lie on one line (it slides along its own line: every triangle of its quad is flat, and the
 /// crossing test, which gives false for a triangle flat within 1e-12 of its edges, finds
-/// nothing). The same words for a blade event and for `Simulation::cut_swept`.
-fn sweep_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String> {
+/// nothing). The same words for a blade event and for `Simulation::cut_swept`; a scene's
+/// check of its blades calls it too (through the Python bindings), so the test is this one.
+pub fn sweep_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String> {
     if from == to {
         return Some(
             "its segment must move: it is the same segment at its start and at its end, so it \

@@ -33,6 +33,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<sim::PySimulation>()?;
     m.add_function(wrap_pyfunction!(sim::models, m)?)?;
     m.add_function(wrap_pyfunction!(rules::check_predicate, m)?)?;
+    m.add_function(wrap_pyfunction!(rules::blade_sweep_problem, m)?)?;
     m.add_function(wrap_pyfunction!(rules::eval_predicate, m)?)?;
     m.add_function(wrap_pyfunction!(rules::eval_expression, m)?)?;
     m.add_function(wrap_pyfunction!(generators::grid, m)?)?;

@@ -663,6 +663,17 @@ pub(crate) fn check_predicate(text: &str, label: &str) -> PyResult<()> {
     guard(|| topomech_physics::check_predicate(label, text).map_err(Error::Rules))
 }
 
+/// Why a blade whose segment `start` (2 points) moves to the segment `end` sweeps nothing,
+/// or `None` ([`topomech_physics::sweep_problem`]: it does not move, or its four points lie
+/// on one line), for a scene to name its key; both segments of two distinct finite points.
+#[pyfunction]
+pub(crate) fn blade_sweep_problem(
+    start: [[f64; 3]; 2],
+    end: [[f64; 3]; 2],
+) -> PyResult<Option<String>> {
+    guard(|| Ok(topomech_physics::sweep_problem(&start, &end)))
+}
+
 /// The answer of [`topomech_physics::eval_predicate`] and `eval_expression` as the bindings'
 /// error: the checker's diagnostics as `RuleError`, a point where the evaluation failed as
 /// `ValueError` naming the point.

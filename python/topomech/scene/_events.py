@@ -6,10 +6,10 @@ fracture criterion against the mesh once it is known (the Rust side:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
+from topomech import _core
 from topomech.scene._table import (
     _check_predicate,
     _Fail,
@@ -152,7 +152,9 @@ def _blade(t: _Table, fail: _Fail) -> dict[str, Any]:
             f"the same segment as {t.key('from')}: the blade would not move, so it would "
             "sweep nothing",
         )
-    if _on_one_line([*src, *dst]):
+    # the kernel's own test (blade events and Simulation.cut_swept refuse the same): the
+    # segments differ, so what it finds is a slide along the segment's own line
+    if _core.blade_sweep_problem(src, dst) is not None:
         raise fail(
             t.key("to"),
             f"on the line of {t.key('from')}: the blade would slide along its own line, so "
@@ -160,30 +162,6 @@ def _blade(t: _Table, fail: _Fail) -> dict[str, Any]:
         )
     t.done()
     return blade
-
-
-def _on_one_line(points: list[list[float]]) -> bool:
-    """Whether the 4 points (a blade's segment at its start and at its end, each of two
-    distinct points) lie on one line: every triangle of them flat within 1e-12 of its edges,
-    as the kernel's check of a sweep (``sweep_problem`` in ``crates/physics/src/events.rs``)
-    decides it, so that a scene names the key instead of the kernel refusing the event."""
-    m = max(abs(x) for p in points for x in p)
-    q = [[x / m for x in p] for p in points]
-
-    def norm(v: list[float]) -> float:
-        return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-
-    def flat(a: int, b: int, c: int) -> bool:
-        e1 = [q[b][i] - q[a][i] for i in range(3)]
-        e2 = [q[c][i] - q[a][i] for i in range(3)]
-        n = [
-            e1[1] * e2[2] - e1[2] * e2[1],
-            e1[2] * e2[0] - e1[0] * e2[2],
-            e1[0] * e2[1] - e1[1] * e2[0],
-        ]
-        return norm(n) <= 1e-12 * norm(e1) * norm(e2)
-
-    return all(flat(*t) for t in ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)))
 
 
 def _fracture(top: _Table, fail: _Fail) -> dict[str, Any] | None:
