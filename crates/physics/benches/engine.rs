@@ -1076,13 +1076,22 @@ fn profile(spec: &str) {
         );
     };
     let (cells, n) = model.cells(size as usize);
-    let mut sim = model.simulation(&cells);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .expect("a pool");
     pool.install(|| {
+        let t = Instant::now();
+        let mut sim = model.simulation(&cells);
+        let setup = t.elapsed().as_secs_f64();
+        let t = Instant::now();
         sim.step().expect("first step");
+        println!(
+            "{} {n} elements: set-up {:.3} s, first step {:.3} s",
+            model_label(model),
+            setup,
+            t.elapsed().as_secs_f64()
+        );
         let t = Instant::now();
         for _ in 0..steps {
             sim.step().expect("a step");

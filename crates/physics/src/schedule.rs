@@ -608,7 +608,7 @@ fn on_points(
             .map_err(|e| at(e.to_string()))?;
     }
     if !points.is_empty() {
-        let applied = rules.apply_everywhere(&mut g, rule, &Params::new());
+        let applied = rules.apply_once(&mut g, rule, &Params::new());
         // the plan is of this map only: not kept
         rules.clear_plans();
         if let Err(e) = applied {
@@ -975,17 +975,17 @@ impl Simulation {
         )?;
         mark_vertex0(&mut g)?;
         let none = Params::new();
-        rules.apply_everywhere(&mut g, "init_rest", &none)?;
+        rules.apply_once(&mut g, "init_rest", &none)?;
         let material: Params = [
             ("density".to_string(), Val::F(cfg.density)),
             ("young".to_string(), Val::F(cfg.young)),
             ("poisson".to_string(), Val::F(cfg.poisson)),
         ]
         .into();
-        rules.apply_everywhere(&mut g, "set_material", &material)?;
+        rules.apply_once(&mut g, "set_material", &material)?;
         for k in 0..cfg.regions.len() {
             let rep = rules
-                .apply_everywhere(&mut g, &format!("region_{k}"), &none)
+                .apply_once(&mut g, &format!("region_{k}"), &none)
                 .map_err(|e| {
                     let text = &cfg.regions[k].predicate;
                     predicate_failed(&g, "material region", text, PredicateAt::Element, e)
@@ -1002,9 +1002,9 @@ impl Simulation {
         } else {
             ("half_edge_area", "element_area")
         };
-        rules.apply_everywhere(&mut g, he, &none)?;
-        rules.apply_everywhere(&mut g, elem, &none)?;
-        rules.apply_everywhere(&mut g, "lump_mass", &none)?;
+        rules.apply_once(&mut g, he, &none)?;
+        rules.apply_once(&mut g, elem, &none)?;
+        rules.apply_once(&mut g, "lump_mass", &none)?;
         // which support holds each vertex orbit (its representative's index), to refuse a
         // prescribed displacement that moves a vertex another support holds: the last one
         // applied would win silently (nothing to check, and no walk over the map, without
@@ -1020,7 +1020,7 @@ impl Simulation {
         let mut labels: Vec<String> = Vec::new();
         for k in 0..cfg.fixed.len() {
             let rep = rules
-                .apply_everywhere(&mut g, &format!("fix_{k}"), &none)
+                .apply_once(&mut g, &format!("fix_{k}"), &none)
                 .map_err(|e| {
                     predicate_failed(&g, "fix predicate", &cfg.fixed[k], PredicateAt::Vertex, e)
                 })?;
@@ -1039,7 +1039,7 @@ impl Simulation {
             let params: Params = [("d".to_string(), Val::V3(*d))].into();
             let before = supports.as_ref().map(|s| s.positions(&g));
             let rep = rules
-                .apply_everywhere(&mut g, &format!("prescribe_{k}"), &params)
+                .apply_once(&mut g, &format!("prescribe_{k}"), &params)
                 .map_err(|e| {
                     let what = "prescribed-displacement predicate";
                     predicate_failed(&g, what, p, PredicateAt::Vertex, e)
@@ -1070,7 +1070,7 @@ impl Simulation {
         for def in &defs {
             let mut matched = 0;
             for (init, p) in &def.init {
-                matched += rules.apply_everywhere(&mut g, init, p)?.matches;
+                matched += rules.apply_once(&mut g, init, p)?.matches;
             }
             if matched == 0 {
                 return Err(PhysicsError::Model(format!(

@@ -71,7 +71,7 @@ fn assert_engine_finds(
         .find_matches(g, name, &Params::new())
         .unwrap()
         .into_iter()
-        .map(|m| m.darts)
+        .map(|m| m.darts.to_vecs())
         .collect();
     assert!(!want.is_empty(), "{name}: the pattern matches somewhere");
     assert_eq!(got.len(), want.len(), "{name}: as many matches");
@@ -168,7 +168,7 @@ fn reference_flagged(
             continue;
         }
         used.extend(m.darts[hook].iter().copied());
-        out.push(m.darts);
+        out.push(m.darts.to_vecs());
     }
     out
 }

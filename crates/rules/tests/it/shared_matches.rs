@@ -373,3 +373,35 @@ fn a_rule_applied_again_with_another_parameter_of_its_guard_takes_its_new_matche
         assert_eq!(got.matches, want, "t = {t}");
     }
 }
+
+/// `apply_once` (a simulation's set-up rules) writes what `apply_everywhere` writes, bit for
+/// bit, and keeps no plan: the next application of the rule builds one again, where
+/// `apply_everywhere`'s kept plan is reused. A kept plan would hold its rows, and their
+/// index by dart, for a rule that never runs again.
+#[test]
+fn a_rule_applied_once_writes_the_same_values_and_keeps_no_plan() {
+    let none = Params::new();
+    for (rule, emb) in [("edge_len_a", "len_a"), ("edge_len_g", "len_g")] {
+        let (mut g, rules) = setup();
+        let once = rules.apply_once(&mut g, rule, &none).unwrap();
+        assert!(once.matches > 0, "{rule}");
+        assert_eq!(values(&g, emb), alone(rule, emb), "{rule}");
+        assert!(
+            rules.plan_kinds().iter().all(|(r, _)| r != rule),
+            "{rule}: no plan kept after apply_once: {:?}",
+            rules.plan_kinds()
+        );
+        assert_eq!(rules.plan_bytes(), 0, "{rule}");
+        let built = rules.plans_built();
+        rules.apply_everywhere(&mut g, rule, &none).unwrap();
+        assert_eq!(rules.plans_built(), built + 1, "{rule}: planned again");
+        assert!(rules.plan_kinds().iter().any(|(r, _)| r == rule), "{rule}");
+        rules.apply_everywhere(&mut g, rule, &none).unwrap();
+        assert_eq!(
+            rules.plans_built(),
+            built + 1,
+            "{rule}: the kept plan reused"
+        );
+        assert_eq!(values(&g, emb), alone(rule, emb), "{rule}");
+    }
+}
