@@ -193,8 +193,12 @@ pub enum TStmt {
         emb: usize,
         /// The value.
         value: TExpr,
-        /// Orbit positions along which the value is known to be constant: rows joined
-        /// through them share one evaluation.
+        /// Orbit positions along which the value is known to be constant and the node's
+        /// darts stay in one orbit of the embedding (the node's label there is in the
+        /// embedding's orbit type): rows joined through them share one evaluation, and one
+        /// write, since they are one orbit of the embedding. (Rows joined along a position
+        /// that leaves the embedding's orbit, a face's corners for a corner embedding, are
+        /// other orbits: each is written.)
         uniform: Vec<usize>,
     },
 }
@@ -1118,7 +1122,17 @@ fn check_rule(c: &mut Ctx, r: &ast::RuleDecl, dim: usize, embs: &[EmbDecl]) -> O
                     continue;
                 }
                 let u = x.uniform(&e, &local_uniform, arity);
-                let mut uniform: Vec<usize> = u.iter().copied().collect();
+                // the node's labels: its left graph's, or the right graph's for a created node
+                let labels = nodes[k].left.as_ref().or(nodes[k].right.as_ref());
+                let mut uniform: Vec<usize> = u
+                    .iter()
+                    .copied()
+                    .filter(|&t| {
+                        labels.is_some_and(|l| {
+                            l[t].is_some_and(|i| embs[ei].orbit.contains(i as usize))
+                        })
+                    })
+                    .collect();
                 uniform.sort_unstable();
                 writes.push((k, ei, *pos, u));
                 program.push(TStmt::Write {

@@ -327,9 +327,16 @@ impl Parser {
             let expected = "'init', 'step', 'forces', 'jvp', 'needs', 'per_element' or '}'";
             let (kw, kpos) = self.ident(expected)?;
             if seen.contains(&kw) {
+                let hint = match kw.as_str() {
+                    "init" | "step" | "jvp" => format!(
+                        ": list its rules on one line, separated by commas, as in '{kw} a(k), b'"
+                    ),
+                    "forces" => ": list the embeddings on one line, separated by commas".into(),
+                    _ => String::new(),
+                };
                 return Err(SyntaxError {
                     pos: kpos,
-                    message: format!("'{kw}' given twice in model '{}'", m.name),
+                    message: format!("'{kw}' given twice in model '{}'{hint}", m.name),
                 });
             }
             match kw.as_str() {

@@ -753,6 +753,43 @@ pub(crate) fn predicate_failed(
     }
 }
 
+/// An error of model `model`'s init rule `rule` at set-up, with the model, the rule's file
+/// and, where the error names a dart, the element it lies in (by its rest centroid): the
+/// rule's own message names only the dart.
+fn model_init_failed(
+    g: &GMap,
+    rules: &RuleSet,
+    model: &str,
+    rule: &str,
+    e: ApplyError,
+) -> PhysicsError {
+    let dart = match &e {
+        ApplyError::Eval { dart, .. } | ApplyError::NonFinite { dart, .. } => Some(*dart),
+        _ => None,
+    };
+    let Some(dart) = dart else {
+        return e.into();
+    };
+    let file = rules
+        .rule(rule)
+        .map(|r| format!(" (in {})", r.file))
+        .unwrap_or_default();
+    let elem = if g.dimension() == 3 {
+        OrbitType::volume()
+    } else {
+        OrbitType::face(2)
+    };
+    let place = orbit_mean(g, dart, elem, "rest").map_or_else(String::new, |p| {
+        format!(
+            " at the element whose rest centroid is ({}, {}, {})",
+            p[0], p[1], p[2]
+        )
+    });
+    PhysicsError::Model(format!(
+        "model '{model}': its init rule '{rule}'{file} failed{place}: {e}"
+    ))
+}
+
 /// The text of the predicate a glue label (`fixed[k]`, ...) names.
 fn predicate_text(cfg: &Config, label: &str) -> String {
     let Some((key, rest)) = label.split_once('[') else {
@@ -1070,7 +1107,10 @@ impl Simulation {
         for def in &defs {
             let mut matched = 0;
             for (init, p) in &def.init {
-                matched += rules.apply_once(&mut g, init, p)?.matches;
+                matched += rules
+                    .apply_once(&mut g, init, p)
+                    .map_err(|e| model_init_failed(&g, &rules, &def.name, init, e))?
+                    .matches;
             }
             if matched == 0 {
                 return Err(PhysicsError::Model(format!(

@@ -542,3 +542,35 @@ model down(a: f64 = -1.0) { init qa_noop step fr(a) forces fe }
         "{e}"
     );
 }
+
+/// A model's init rule that fails at set-up (here a non-finite value, `k / x` at the
+/// vertices on x = 0) is reported with the model, the rule, its file and the element it
+/// failed in (by its rest centroid), not with a dart number alone (a QA report).
+#[test]
+fn a_failing_init_rule_names_its_model_file_and_element() {
+    let tri = grid([2, 2], [1.0, 1.0], GridElement::Triangle);
+    let text = anchor_file(2).replace("v.k_anchor = k }", "v.k_anchor = k / x(v.rest) }");
+    let (file, body) = written("initfail", "anchor.tmr", &text);
+    let (g, _) = build(&tri, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![model("anchor", &[("k", 1.0)])],
+        model_files: vec![(file.clone(), body)],
+        ..Config::default()
+    };
+    let e = Simulation::new(g, cfg).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!(
+            "model 'anchor': its init rule 'anchor_init' (in {file}) failed at the element whose rest centroid is ("
+        )),
+        "{e}"
+    );
+    assert!(e.contains("non-finite value inf to 'k_anchor'"), "{e}");
+    // the centroid named is that of a triangle touching x = 0 (its x below 1/2)
+    let x: f64 = e
+        .split("rest centroid is (")
+        .nth(1)
+        .and_then(|r| r.split(',').next())
+        .and_then(|x| x.trim().parse().ok())
+        .unwrap();
+    assert!(x > 0.0 && x < 0.5, "{e}");
+}

@@ -20,6 +20,7 @@ mod model_decl;
 mod modeling;
 mod nonfinite;
 mod numbering;
+mod orbit_writes;
 mod overflow_elements;
 mod plans;
 mod readme;

@@ -277,7 +277,7 @@ fn syntax_errors_name_line_and_column() {
         ("model a { needs \"vertices }", "string not closed"),
         (
             "model a { init r init r }",
-            "'init' given twice in model 'a'",
+            "'init' given twice in model 'a': list its rules on one line, separated by commas",
         ),
         ("model a { jvp r df }", "expected '-'"),
         ("model a { bogus }", "expected 'init', 'step', 'forces'"),
