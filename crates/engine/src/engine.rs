@@ -1328,8 +1328,17 @@ impl RuleSet {
         name: &str,
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
-        self.apply_inner(g, name, params, &never, None, None, false)
-            .map(Option::unwrap_or_default)
+        let out = self
+            .apply_inner(g, name, params, &never, None, None, false)
+            .map(Option::unwrap_or_default);
+        // the plan just built (or an earlier one of this rule): dropped
+        if let Some(index) = self.checked.rules.iter().position(|r| r.name == name) {
+            self.plans
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .remove(&index);
+        }
+        out
     }
 
     fn apply_with(
@@ -1346,33 +1355,10 @@ impl RuleSet {
 
     /// The application of [`RuleSet::apply_with`], with the `check` of
     /// [`RuleSet::apply_everywhere_checked`] (`None` only with a check); `keep`: a
-    /// computation rule's plan is kept for the next application (else it is dropped once it
-    /// ran, and built without an index: [`RuleSet::apply_once`]).
+    /// computation rule's plan is built with its index by dart, to be patched after a
+    /// topology change (not for [`RuleSet::apply_once`], which drops it once it ran).
     #[allow(clippy::too_many_arguments)]
     fn apply_inner(
-        &self,
-        g: &mut GMap,
-        name: &str,
-        params: &Params,
-        interrupt: &dyn Fn() -> bool,
-        region: Option<&Region>,
-        check: Option<&crate::compiled::ValueCheck<'_>>,
-        keep: bool,
-    ) -> Result<Option<ApplyReport>, ApplyError> {
-        let out = self.apply_kept(g, name, params, interrupt, region, check, keep);
-        if !keep {
-            if let Some(index) = self.checked.rules.iter().position(|r| r.name == name) {
-                self.plans
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner)
-                    .remove(&index);
-            }
-        }
-        out
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn apply_kept(
         &self,
         g: &mut GMap,
         name: &str,
