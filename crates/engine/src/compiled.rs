@@ -1415,6 +1415,24 @@ impl Rows {
                 let mut slots: Vec<u32> = Vec::new();
                 let mut cnt = Vec::with_capacity(n);
                 offs.push(0);
+                // an aggregate over a sub-orbit of its embedding's orbit (the accumulation's
+                // `sum<1,2,3>(v.f_tensor)` of a force on the vertex) meets one orbit of the
+                // embedding: its row's dart's slot, no walk (the walk finds that one slot)
+                if let Some(e) = ak
+                    .emb
+                    .map(|emb| g.embedding(emb_ids[emb]))
+                    .filter(|e| ak.orbit.is_subset_of(e.orbit()))
+                {
+                    slots.reserve(n);
+                    for row in 0..n {
+                        slots.push(e.slot(dart(ak.node, row)) as u32);
+                        offs.push(slots.len() as u32);
+                        cnt.push(1.0);
+                    }
+                    csr.push((offs, slots));
+                    counts.push(cnt);
+                    continue;
+                }
                 for row in 0..n {
                     let d = dart(ak.node, row);
                     let first = table.row_of[d.index()];

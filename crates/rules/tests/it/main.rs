@@ -26,3 +26,4 @@ mod plans;
 mod readme;
 mod rule_files;
 mod shared_matches;
+mod sub_orbit_aggregates;
