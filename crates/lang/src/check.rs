@@ -1845,6 +1845,14 @@ impl ExprCheck<'_, '_> {
             TExpr::Const(_) | TExpr::Param(_) => all,
             TExpr::Local(k) => locals.get(*k).cloned().unwrap_or(all),
             TExpr::Read { node, emb } => along(*node, self.embs[*emb].orbit),
+            // over a sub-orbit of its embedding's orbit, an aggregate meets one orbit of the
+            // embedding: its value is the embedding's there, constant on that whole orbit
+            TExpr::Agg {
+                orbit,
+                node,
+                emb: Some(e),
+                ..
+            } if orbit.is_subset_of(self.embs[*e].orbit) => along(*node, self.embs[*e].orbit),
             TExpr::Agg { orbit, node, .. } => along(*node, *orbit),
             TExpr::Bin(_, a, b) => {
                 &self.uniform(a, locals, arity) & &self.uniform(b, locals, arity)

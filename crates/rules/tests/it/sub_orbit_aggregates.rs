@@ -3,7 +3,10 @@
 //! vertex) meets one orbit of the embedding: compiled plans take the row's slot without
 //! walking the orbit. The values must be the interpreter's, bit for bit (a sum of one value,
 //! a mean divided by one, a count of one), with the plan evaluator and with native code, on
-//! 1 and 3 threads; and after a topology change, through a patched plan.
+//! 1 and 3 threads; and after a topology change, through a patched plan. The checker knows
+//! such an aggregate is constant on its embedding's whole orbit: `v.out_v = mean<1>(...)`
+//! on `<1,2>` is one value per vertex (it was refused as a write that may differ along
+//! label 2).
 
 use topomech_gmap::generators::{grid, GridElement};
 use topomech_gmap::mesh::{build, BuildOptions};
@@ -28,8 +31,8 @@ rule init_v {
 rule agg {
   left { v : <1,2> hook }
   compute {
-    v.out_v = sum<1,2>(v.velocity) - 0.5 * mean<1,2>(v.velocity)
-    v.out_w = sum<1,2>(v.velocity) + 2.0 * mean<1>(v.velocity) - sum<2>(v.velocity)
+    v.out_v = sum<1,2>(v.velocity) + 2.0 * mean<1>(v.velocity) - sum<2>(v.velocity)
+    v.out_w = sum<1,2>(v.velocity) - 0.5 * mean<>(v.velocity)
     v.out_s = to_f64(count<1,2>(v.velocity)) + to_f64(count<2>(v.velocity)) + x(mean<>(v.velocity))
   }
 }
