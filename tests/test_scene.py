@@ -131,6 +131,23 @@ def test_unknown_keys_name_their_path(text: str, key: str, message: str) -> None
             "mesh.cells[1]",
             "must be >= 1, got 0",
         ),
+        # integers beyond 64 bits (Python's TOML reader takes any size) are refused by key,
+        # not left to overflow in the binding (QA: a traceback, exit 1)
+        (
+            BASE.replace("cells = [4, 1, 1]", "cells = [99999999999999999999, 1, 1]"),
+            "mesh.cells[0]",
+            "must be at most 9223372036854775807 (a 64-bit integer)",
+        ),
+        (
+            BASE.replace("steps = 2", "steps = 9223372036854775808"),
+            "integrator.steps",
+            "must be at most 9223372036854775807",
+        ),
+        (
+            BASE + "[[fix]]\npoints = [0, 99999999999999999999]\n",
+            "fix[1].points[1]",
+            "must be at most 9223372036854775807",
+        ),
         (
             BASE.replace("size = [1.0, 0.2, 0.2]", "size = [1.0, 0.2]"),
             "mesh.size",

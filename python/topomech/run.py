@@ -744,7 +744,8 @@ def run_scene(
                     "message": (
                         f"event[{missed}] ({_describe_event(sc.events[missed])}) separates "
                         f"nothing at step {sim.steps} (t = {sim.time:g}): it misses the object, "
-                        "or every face it meets is open already"
+                        "or every face it meets is open already, or the element centroids it "
+                        "meets lie on it (a centroid on it is on neither side)"
                     ),
                     "step": sim.steps,
                     "event": missed,

@@ -11,6 +11,7 @@ from typing import Any
 
 from topomech.loads import LOAD_KINDS, LoadError, compile_expression, compile_predicate
 from topomech.scene._table import (
+    _INT_MAX,
     _check_predicate,
     _Fail,
     _number,
@@ -18,6 +19,7 @@ from topomech.scene._table import (
     _required_str,
     _show,
     _Table,
+    _too_large,
 )
 
 
@@ -99,6 +101,8 @@ def _selection(t: _Table, fail: _Fail, *, required: bool, in_python: bool = True
             raise fail(f"{t.key('points')}[{i}]", f"expected an integer, got {_show(x)}")
         if x < 0:
             raise fail(f"{t.key('points')}[{i}]", f"point indices are >= 0, got {x}")
+        if x > _INT_MAX:
+            raise fail(f"{t.key('points')}[{i}]", _too_large(x))
     return {"points": list(v)}
 
 

@@ -19,6 +19,15 @@ from typing import Any, overload
 from topomech import _core
 from topomech._core import RuleError, SceneError
 
+#: The largest integer a scene key takes: a signed 64-bit integer (TOML's own range; Python's
+#: reader accepts larger ones, which no count or index of a mesh reaches).
+_INT_MAX = 2**63 - 1
+
+
+def _too_large(v: int) -> str:
+    """The message for an integer beyond :data:`_INT_MAX`."""
+    return f"must be at most {_INT_MAX} (a 64-bit integer), got {v}"
+
 
 def _show(value: Any) -> str:
     """A TOML value as a message shows it: strings quoted, booleans lowercase."""
@@ -87,6 +96,8 @@ class _Table:
             raise self.fail(self.key(k), f"expected an integer, got {_show(v)}")
         if v < minimum:
             raise self.fail(self.key(k), f"must be >= {minimum}, got {v}")
+        if v > _INT_MAX:
+            raise self.fail(self.key(k), _too_large(v))
         return v
 
     @overload
@@ -139,6 +150,8 @@ class _Table:
                 raise self.fail(f"{self.key(k)}[{i}]", f"expected an integer, got {_show(x)}")
             if x < 1:
                 raise self.fail(f"{self.key(k)}[{i}]", f"must be >= 1, got {x}")
+            if x > _INT_MAX:
+                raise self.fail(f"{self.key(k)}[{i}]", _too_large(x))
             out.append(x)
         return tuple(out)
 

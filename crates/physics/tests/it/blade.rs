@@ -444,3 +444,139 @@ fn a_blade_cuts_bodies_of_tiny_coordinates() {
         assert_eq!(got, want, "scale {s}");
     }
 }
+
+/// The faces between two tetrahedra of `s`'s map whose centroid segment crosses the plane
+/// x = 0.5: per face (one dart of it, in the volume on the smaller-x side), the crossing
+/// point's (y, z), and whether the face is still sewn.
+fn faces_across_half(s: &Simulation) -> Vec<(topomech_gmap::Dart, [f64; 2], bool)> {
+    use topomech_gmap::OrbitType;
+    let g = s.gmap();
+    let pos = g.embedding_id("position").unwrap();
+    let centroid = |d| {
+        let darts = g.orbit(d, OrbitType::volume());
+        let mut c = [0.0; 3];
+        for &x in &darts {
+            let p = g.real(pos, x);
+            for k in 0..3 {
+                c[k] += p[k] / darts.len() as f64;
+            }
+        }
+        c
+    };
+    let mut out = Vec::new();
+    for d in g.orbit_representatives(OrbitType::face(3)) {
+        // a face orbit <0,1> of a volume: its other side through alpha_3, sewn or not (an
+        // unsewn face's partner is found by its vertices: the other side of the plane)
+        let (a, b) = if g.is_free(3, d) {
+            continue;
+        } else {
+            (centroid(d), centroid(g.alpha(3, d)))
+        };
+        if (a[0] - 0.5) * (b[0] - 0.5) < 0.0 && a[0] < b[0] {
+            let t = (0.5 - a[0]) / (b[0] - a[0]);
+            out.push((
+                d,
+                [a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])],
+                true,
+            ));
+        }
+    }
+    out
+}
+
+/// Whether the point `x` (y, z) of the plane x = 0.5 lies on the segment `p0(s) p1(s)` for
+/// some s in [0, 1], the end points moving linearly from `from` to `to` (what a blade sweeps),
+/// and how far it is from the boundary of that region (by a fine search over s): `None` where
+/// it is too near the boundary to say.
+fn swept_exactly(x: [f64; 2], from: [[f64; 2]; 2], to: [[f64; 2]; 2]) -> Option<bool> {
+    let n: u32 = 20_000;
+    let mut best = f64::INFINITY;
+    let mut inside = false;
+    let mut prev: Option<f64> = None;
+    for i in 0..=n {
+        let s = f64::from(i) / f64::from(n);
+        let p0 = [0, 1].map(|k| from[0][k] + s * (to[0][k] - from[0][k]));
+        let p1 = [0, 1].map(|k| from[1][k] + s * (to[1][k] - from[1][k]));
+        let d = [p1[0] - p0[0], p1[1] - p0[1]];
+        let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        let r = [x[0] - p0[0], x[1] - p0[1]];
+        // signed distance of x from the segment's line, and where along it
+        let f = (d[0] * r[1] - d[1] * r[0]) / len;
+        let u = (d[0] * r[0] + d[1] * r[1]) / (len * len);
+        if let Some(fp) = prev {
+            if fp * f <= 0.0 && (0.0..=1.0).contains(&u) {
+                inside = true;
+            }
+        }
+        prev = Some(f);
+        // the distance to the region's boundary: to the segments at s = 0 and 1, and to the
+        // paths of the end points (where u leaves [0, 1])
+        if i == 0 || i == n {
+            best = best.min(f.abs());
+        }
+        for e in [p0, p1] {
+            best = best.min(((x[0] - e[0]).powi(2) + (x[1] - e[1]).powi(2)).sqrt());
+        }
+    }
+    (best > 0.05).then_some(inside)
+}
+
+/// A blade that turns while it moves sweeps a ruled surface: a segment in the plane x = 0.5
+/// turning about its middle by 90 degrees sweeps two opposite quadrants, and a bow-tie
+/// motion (its ends crossing over) two opposite wedges. The faces opened must be those whose
+/// centroid segment crosses what it swept (the reference: a fine search over the motion, for
+/// the faces not within 0.05 of the swept region's boundary), whether the sweep is one call
+/// or 50. QA: the quad's two triangles covered the other quadrants too, and one call opened
+/// 24 of the 32 faces across x = 0.5 (the bow-tie, all 32) where 50 calls opened 16.
+#[test]
+fn a_turning_blade_opens_what_it_sweeps_whatever_the_step() {
+    let mesh = cuboid([4, 4, 4], [1.0, 1.0, 1.0], BoxElement::Tetra);
+    for (from, to) in [
+        (
+            [[0.5, 0.5, -1.0], [0.5, 0.5, 2.0]],
+            [[0.5, -1.0, 0.5], [0.5, 2.0, 0.5]],
+        ),
+        (
+            [[0.5, 2.0, -1.0], [0.5, -2.0, 2.0]],
+            [[0.5, -2.0, -1.0], [0.5, 2.0, 2.0]],
+        ),
+    ] {
+        let yz = |s: [[f64; 3]; 2]| [[s[0][1], s[0][2]], [s[1][1], s[1][2]]];
+        let before = faces_across_half(&sim(&mesh, vec![]));
+        assert_eq!(before.len(), 32);
+        let want: Vec<Option<bool>> = before
+            .iter()
+            .map(|(_, x, _)| swept_exactly(*x, yz(from), yz(to)))
+            .collect();
+        let sure = want.iter().filter(|w| w.is_some()).count();
+        assert!(sure >= 24, "{sure} faces clear of the boundary");
+        let lerp = |s: f64| -> [[f64; 3]; 2] {
+            [0, 1].map(|e| std::array::from_fn(|k| from[e][k] + s * (to[e][k] - from[e][k])))
+        };
+        for calls in [1_u32, 50] {
+            let mut s = sim(&mesh, vec![]);
+            let mut opened = 0;
+            for i in 0..calls {
+                let (f, t) = (
+                    lerp(f64::from(i) / f64::from(calls)),
+                    lerp(f64::from(i + 1) / f64::from(calls)),
+                );
+                opened += s.cut_swept(f, t).unwrap().unsewn;
+            }
+            let g = s.gmap();
+            let mut open_here = 0;
+            for ((d, x, _), w) in before.iter().zip(&want) {
+                let open = g.is_free(3, *d);
+                open_here += usize::from(open);
+                if let Some(w) = w {
+                    assert_eq!(open, *w, "{calls} calls: the face crossed at {x:?}");
+                }
+            }
+            assert_eq!(
+                opened, open_here,
+                "{calls} calls: only faces across x = 0.5"
+            );
+            assert!(g.is_valid());
+        }
+    }
+}
