@@ -343,8 +343,11 @@ class Simulation:
         segment ``end`` (each 2 points ``[[x, y, z], [x, y, z]]``, in the positions' unit):
         every face (3D) or edge (2D) between two elements whose current centroids the quad
         separates (the segment between them crosses it) is unsewn and the vertices on it
-        split. Elements are separated along their faces, never split. A blade running during
-        the run is an event (``{"kind": "blade", "start": t0, "end": t1, "from": ...,
+        split. A segment that turns between ``start`` and ``end`` (its end points move
+        linearly) sweeps a ruled surface: the sweep is cut into strips in which it turns by
+        at most 1 degree, each tested as a quad, so one call cuts what many smaller sweeps of
+        the same motion cut. Elements are separated along their faces, never split. A blade
+        running during the run is an event (``{"kind": "blade", "start": t0, "end": t1, "from": ...,
         "to": ...}`` in ``events``; a scene's ``[[event]] kind = "blade"``), which cuts along
         what it sweeps each step. Returns a :class:`TopologyResult` (0 unsewn when it crosses
         nothing); raises :class:`TypeError` / :class:`ValueError` for points that are not 2
