@@ -494,3 +494,27 @@ def test_failed_static_step_is_in_solver_csv(tmp_path: Path) -> None:
     with (Path(out) / "solver.csv").open(newline="") as f:
         rows = list(csv.DictReader(f))
     assert [(r["step"], r["converged"]) for r in rows] == [("1", "0")]
+
+
+def test_a_static_solve_failing_on_capped_linear_solves_says_so() -> None:
+    """A static solve whose Newton directions come from conjugate-gradient solves stopped at
+    `max_iterations` (3 here, on a linear beam under its weight that one direct solve
+    balances) fails naming that cause and what to change, not the load (QA: the message
+    said to try a smaller load or a finer mesh)."""
+    g = topomech.GMap.from_flat(*topomech._core.box(6, 2, 2, 1.0, 0.2, 0.2, "tetra"))
+    sim = topomech.Simulation(
+        g,
+        models=["linear_fem"],
+        integrator="static",
+        linear_solver="pcg",
+        max_iterations=3,
+        dt=1.0,
+        young=1e6,
+        gravity=[0, 0, -9.81],
+        fixed=["x < 1e-9"],
+    )
+    with pytest.raises(topomech.DivergenceError) as e:
+        sim.step()
+    assert "linear solve stopped at max_iterations (3)" in str(e.value)
+    assert "raise integrator.max_iterations, or use the direct solver" in str(e.value)
+    assert "try a smaller load" not in str(e.value)

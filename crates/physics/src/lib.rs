@@ -155,6 +155,9 @@ pub struct Simulation {
     /// Whether [`Simulation::jvp`] takes finite differences of the forces instead of the
     /// models' `jvp` rules (a static solve's fallback, see [`Simulation::solve_static`]).
     fd_jacobian: bool,
+    /// Why the last Newton direction of the static solve in progress is approximate (its
+    /// conjugate-gradient solve stopped at `max_iterations`), to say so if the solve fails.
+    capped_solve: Option<String>,
 }
 
 /// Whether a vertex embedding holds a share of a row's quantity (masses and forces: `mass`,

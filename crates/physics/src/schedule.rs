@@ -1186,6 +1186,7 @@ impl Simulation {
             parts: None,
             forces_written: None,
             fd_jacobian: false,
+            capped_solve: None,
             report: None,
             static_base: Vec::new(),
             solver: linear::SolverCache::default(),

@@ -589,6 +589,7 @@ impl Simulation {
     /// finite-difference products ([`Simulation::jvp_finite_differences`], set through
     /// `fd_jacobian`, which the caller resets).
     fn solve_static_with_fallback(&mut self) -> Result<(), PhysicsError> {
+        self.capped_solve = None;
         let n = self.rows.darts.len();
         self.set_vertex_vec3("velocity", &vec![[0.0; 3]; n])?;
         let x0 = self.vertex_vec3("position")?;
@@ -826,7 +827,10 @@ impl Simulation {
                             "the largest residual force is",
                         ),
                         (None, None) => (
-                            "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
+                            match self.capped_solve.take() {
+                                Some(w) => format!("; {w}"),
+                                None => "; try a smaller load, a finer mesh, or the integrator implicit_euler to find a dynamic path".to_string(),
+                            },
                             worst,
                             "the largest residual force is",
                         ),
@@ -1260,6 +1264,8 @@ impl Simulation {
         choice: LinearSolver,
         lagged: bool,
     ) -> Result<(Vec<[f64; 3]>, usize, bool), PhysicsError> {
+        // (set again below where this direction's solve stops at max_iterations)
+        self.capped_solve = None;
         let n = r.len();
         let zero = vec![[0.0; 3]; n];
         let apply = |sim: &mut Self, z: &[[f64; 3]]| -> Result<Vec<[f64; 3]>, PhysicsError> {
@@ -1310,6 +1316,13 @@ impl Simulation {
             system,
             apply,
         )?;
+        if out.iterations >= max_it && out.relative > NEWTON_LINEAR_TOLERANCE {
+            // the direction is the approximate one found: said if the solve then fails
+            self.capped_solve = Some(format!(
+                "a Newton step's linear solve stopped at max_iterations ({max_it}) with relative residual {:.3e}, above its tolerance {NEWTON_LINEAR_TOLERANCE:e}: raise integrator.max_iterations, or use the direct solver",
+                out.relative
+            ));
+        }
         Ok((out.x, out.iterations, false))
     }
 }
