@@ -630,15 +630,6 @@ impl Simulation {
         let first = self.static_residual(&fixed, None, 1.0)?;
         let norm = rows_norm;
         let scale = load.max(norm(&first)).max(norm(&r0)).max(f64::MIN_POSITIVE);
-        if !scale.is_finite() {
-            return Err(PhysicsError::diverged(
-                self.steps + 1,
-                None,
-                format!(
-                    "the static solve's load overflows: its size is {scale:e} (gravity times mass plus the external loads), beyond what f64 arithmetic can balance; scale the problem (units) or the load down"
-                ),
-            ));
-        }
         let tolerance = self.cfg.tolerance.unwrap_or(STATIC_TOLERANCE);
         let tol = tolerance * scale;
         let free = 3 * fixed.iter().filter(|f| !**f).count();
@@ -668,6 +659,19 @@ impl Simulation {
                 jacobian: if fd { "finite_differences" } else { "rules" },
             }
         };
+        if !scale.is_finite() {
+            // the report says so too (a step that raised describes that step)
+            let mut failed = report(f64::INFINITY, false, 0.0, (0, 0, 0), false);
+            failed.relative_residual = f64::INFINITY;
+            self.record(failed);
+            return Err(PhysicsError::diverged(
+                self.steps + 1,
+                None,
+                format!(
+                    "the static solve's load overflows: its size is {scale:e} (gravity times mass plus the external loads), beyond what f64 arithmetic can balance; scale the problem (units) or the load down"
+                ),
+            ));
+        }
         let mut linear_iterations = 0;
         let mut why: Option<String> = None;
         // the rounding level of the forces: the stiffness applied to the positions is the
