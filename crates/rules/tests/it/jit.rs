@@ -212,7 +212,13 @@ rule r(p: f64, q: vec3) {{
 type Outcome = Result<Vec<u64>, String>;
 
 fn bits(g: &GMap) -> Vec<u64> {
-    ["out_s", "out_v", "out_m"]
+    column_bits(g, &["out_s", "out_v", "out_m"])
+}
+
+/// The bits of every value of the real embeddings `names` of `g`, column after column (for
+/// comparisons bit for bit; `sub_orbit_aggregates` uses it too).
+pub(crate) fn column_bits(g: &GMap, names: &[&str]) -> Vec<u64> {
+    names
         .iter()
         .flat_map(|n| {
             let id = g.require(n).unwrap();

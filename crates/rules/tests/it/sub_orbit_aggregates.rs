@@ -61,18 +61,7 @@ fn sheet(rules: &RuleSet) -> GMap {
 }
 
 fn bits(g: &GMap) -> Vec<u64> {
-    ["out_v", "out_w", "out_s", "out_e"]
-        .iter()
-        .flat_map(|n| {
-            let id = g.require(n).unwrap();
-            g.embedding(id)
-                .real_column()
-                .unwrap()
-                .iter()
-                .map(|x| x.to_bits())
-                .collect::<Vec<_>>()
-        })
-        .collect()
+    crate::jit::column_bits(g, &["out_v", "out_w", "out_s", "out_e"])
 }
 
 /// The two rules applied, a cut, and the two rules applied again (the second time through
