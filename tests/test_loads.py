@@ -238,6 +238,15 @@ def test_external_forces_are_kept_and_balanced() -> None:
         sim.set_external_forces(bad)
     with pytest.raises(ValueError, match="shape"):
         sim.set_external_forces(f[:-1])
+    # a scalar names its own shape, (), not (1,); None and strings are not numbers (numpy
+    # read None as NaN; QA)
+    with pytest.raises(ValueError, match=r"got \(\)"):
+        sim.set_external_forces(np.array(1.0))
+    with pytest.raises(TypeError, match="must be real numbers, got None"):
+        sim.set_external_forces(None)
+    with pytest.raises(TypeError, match="must be real numbers"):
+        sim.set_external_forces([["a", "b", "c"]] * sim.n_vertices)
+    np.testing.assert_array_equal(sim.external_forces(), f)  # nothing written
 
 
 # ------------------------------------------------------------------ against scikit-fem

@@ -102,12 +102,17 @@ def cell_dimension(cell_type: str) -> int | None:
 
 
 def real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
-    """``values`` as a contiguous float64 array. Raises :class:`TypeError` for complex values
-    (numpy would drop their imaginary parts with only a ``ComplexWarning``)."""
+    """``values`` as a contiguous float64 array of the same shape (a 0-d array stays 0-d, so
+    that a shape error names its real shape). Raises :class:`TypeError` for complex values
+    (numpy would drop their imaginary parts with only a ``ComplexWarning``) and for values
+    that are not numbers (``None``, strings: numpy would read ``None`` as NaN)."""
     a = np.asarray(values)
     if a.dtype.kind == "c":
         raise TypeError(f"{what} must be real numbers, got an array of {a.dtype}")
-    return np.ascontiguousarray(a, dtype=np.float64)
+    if a.dtype.kind in "OUSV":
+        shown = "None" if values is None else f"an array of {a.dtype}"
+        raise TypeError(f"{what} must be real numbers, got {shown}")
+    return np.asarray(a, dtype=np.float64, order="C")
 
 
 def normalize_points(points: Any) -> npt.NDArray[np.float64]:
