@@ -1134,8 +1134,12 @@ impl Simulation {
                 // is at that level too, the step is taken: its residual cannot show it is
                 // better, but it comes from the linear solve, which is (a linear model's
                 // displacement, exactly). QA: a load on a stiff beam below the forces'
-                // rounding level was "balanced" at the rest positions, 0 displacement.
-                if res <= stall {
+                // rounding level was "balanced" at the rest positions, 0 displacement. Only a
+                // step far below the object's size is taken: a load at the rounding level
+                // moves the body by about that much over its stiffness, while a step along a
+                // mechanism (a body held at one point, free to turn) may be anything.
+                let small = du.iter().all(|d| norm3(*d) <= 1e-6 * self.size);
+                if res <= stall && small {
                     if let Some((rt, nt, trial)) = full.filter(|f| f.1 <= stall) {
                         self.set_vertex_vec3("position", &trial)?;
                         return Ok(done(true, iterations, linear_iterations, nt, &rt));
