@@ -55,11 +55,7 @@ impl Blade {
     /// `end`), held at the nearer pose outside `[start, end]`.
     pub fn at(&self, t: f64) -> [[f64; 3]; 2] {
         let s = ((t - self.start) / (self.end - self.start)).clamp(0.0, 1.0);
-        let lerp = |a: [f64; 3], b: [f64; 3]| [0, 1, 2].map(|i| a[i] + s * (b[i] - a[i]));
-        [
-            lerp(self.from[0], self.to[0]),
-            lerp(self.from[1], self.to[1]),
-        ]
+        segment_at(&self.from, &self.to, s)
     }
 
     /// Why this blade cannot run, if it cannot: a start before 0, an end not after the start,
@@ -97,11 +93,7 @@ pub fn sweep_problem(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> Option<String>
         );
     }
     // scaled to coordinates of at most 1 in magnitude: the products below cannot overflow
-    let m = from
-        .iter()
-        .chain(to)
-        .flatten()
-        .fold(0.0_f64, |m, x| m.max(x.abs()));
+    let m = largest_coordinate(from, to);
     let p = [from[0], from[1], to[0], to[1]].map(|q| q.map(|x| x / m));
     let flat = |a: usize, b: usize, c: usize| {
         let e1 = [0, 1, 2].map(|i| p[b][i] - p[a][i]);
@@ -421,11 +413,7 @@ const MAX_TURN: f64 = std::f64::consts::PI / 180.0;
 /// what the segment sweeps in it, to within a sliver of that angle's width along the blade.
 pub(crate) fn sweep_strips(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> usize {
     // scaled to coordinates of at most 1 in magnitude: the products cannot overflow
-    let m = from
-        .iter()
-        .chain(to)
-        .flatten()
-        .fold(0.0_f64, |m, x| m.max(x.abs()));
+    let m = largest_coordinate(from, to);
     if m == 0.0 || !m.is_finite() {
         return 1;
     }
@@ -444,6 +432,32 @@ pub(crate) fn sweep_strips(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> usize {
     }
     // (angle <= pi, so at most 180 strips)
     (angle / MAX_TURN).ceil().min(180.0) as usize
+}
+
+/// The largest coordinate, in magnitude, of the segments `from` and `to`.
+fn largest_coordinate(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> f64 {
+    from.iter()
+        .chain(to)
+        .flatten()
+        .fold(0.0_f64, |m, x| m.max(x.abs()))
+}
+
+/// The segment a fraction `s` of the way from `from` to `to`, each end point moving linearly.
+fn segment_at(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2], s: f64) -> [[f64; 3]; 2] {
+    [0, 1].map(|e| std::array::from_fn(|c| from[e][c] + s * (to[e][c] - from[e][c])))
+}
+
+/// The box bounding the quad the segment `from` sweeps moving to `to`: its corners `lo` and
+/// `hi`.
+fn quad_box(from: &[[f64; 3]; 2], to: &[[f64; 3]; 2]) -> ([f64; 3], [f64; 3]) {
+    let (mut lo, mut hi) = (from[0], from[0]);
+    for p in [from[1], to[0], to[1]] {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
 }
 
 /// The parameters of the blade's rule `cut_swept`: the segment `from` moving to `to`.
@@ -526,14 +540,7 @@ impl Simulation {
         // misses the swept quad, so where the box of the positions it reads (whose hull
         // holds both centroids, and so the segment) misses the quad's box: only the faces
         // near the quad are tested
-        let mut lo = from[0];
-        let mut hi = from[0];
-        for p in [from[1], to[0], to[1]] {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = quad_box(&from, &to);
         // and where the quad's box misses the positions' box, grown by far more than the
         // crossing test's tolerance (1e-12 of the quad's edges) and its rounding, no face can
         // open: nothing is searched (a blade before or after it crosses the body costs a
@@ -560,22 +567,13 @@ impl Simulation {
         let strips = sweep_strips(&from, &to);
         let mut n = 0;
         for i in 0..strips {
-            let at = |k: usize| -> [[f64; 3]; 2] {
-                let s = k as f64 / strips as f64;
-                [0, 1].map(|e| std::array::from_fn(|c| from[e][c] + s * (to[e][c] - from[e][c])))
-            };
+            let at = |k: usize| segment_at(&from, &to, k as f64 / strips as f64);
             let (f, t) = if strips == 1 {
                 (from, to)
             } else {
                 (at(i), if i + 1 == strips { to } else { at(i + 1) })
             };
-            let (mut lo, mut hi) = (f[0], f[0]);
-            for p in [f[1], t[0], t[1]] {
-                for k in 0..3 {
-                    lo[k] = lo[k].min(p[k]);
-                    hi[k] = hi[k].max(p[k]);
-                }
-            }
+            let (lo, hi) = quad_box(&f, &t);
             let region = topomech_rules::Region {
                 embedding: "position".into(),
                 lo,
