@@ -64,6 +64,19 @@ def test_complex_arrays_are_refused(setter: str) -> None:
     np.testing.assert_array_equal(sim.positions(), before)
 
 
+@pytest.mark.parametrize("setter", ["set_positions", "set_velocities", "set_external_forces"])
+def test_boolean_arrays_are_refused(setter: str) -> None:
+    """A mask passed where forces or positions were meant (QA: numpy read True as 1.0 and the
+    values were written): refused, nothing written."""
+    sim = tet_box()
+    before = (sim.positions().copy(), sim.velocities().copy(), sim.vertex_field("f_ext").copy())
+    with pytest.raises(TypeError, match="must be real numbers, got booleans"):
+        getattr(sim, setter)(np.ones((sim.n_vertices, 3), dtype=bool))
+    np.testing.assert_array_equal(sim.positions(), before[0])
+    np.testing.assert_array_equal(sim.velocities(), before[1])
+    np.testing.assert_array_equal(sim.vertex_field("f_ext"), before[2])
+
+
 def test_complex_points_are_refused() -> None:
     pts = np.zeros((4, 3), dtype=complex)
     with pytest.raises(TypeError, match="points must be real numbers"):

@@ -104,11 +104,15 @@ def cell_dimension(cell_type: str) -> int | None:
 def real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
     """``values`` as a contiguous float64 array of the same shape (a 0-d array stays 0-d, so
     that a shape error names its real shape). Raises :class:`TypeError` for complex values
-    (numpy would drop their imaginary parts with only a ``ComplexWarning``) and for values
-    that are not numbers (``None``, strings: numpy would read ``None`` as NaN)."""
+    (numpy would drop their imaginary parts with only a ``ComplexWarning``), for booleans
+    (numpy would read ``True`` as 1.0: a mask passed where a force or a position was meant)
+    and for values that are not numbers (``None``, strings: numpy would read ``None`` as
+    NaN)."""
     a = np.asarray(values)
     if a.dtype.kind == "c":
         raise TypeError(f"{what} must be real numbers, got an array of {a.dtype}")
+    if a.dtype.kind == "b":
+        raise TypeError(f"{what} must be real numbers, got booleans")
     if a.dtype.kind in "OUSV":
         shown = "None" if values is None else f"an array of {a.dtype}"
         raise TypeError(f"{what} must be real numbers, got {shown}")
