@@ -533,8 +533,8 @@ class Simulation:
         :meth:`positions`) (``(V,)`` for scalars,
         ``(V, 3)`` for ``vec3``, ``(V, R, C)`` for matrices; masses and forces, ``mass``,
         ``force``, ``f_*``, summed over the orbits of a row). An unknown name, or an embedding
-        on another orbit, raises :class:`EmbeddingError`; :meth:`embedding` reads any embedding, one row per
-        orbit; :meth:`set_vertex_field` writes one row per vertex."""
+        on another orbit, raises :class:`EmbeddingError`; :meth:`embedding` reads any
+        embedding, one row per orbit; :meth:`set_vertex_field` writes one row per vertex."""
         return self._core.embedding(name)
 
     def embedding(self, name: str) -> EmbeddingValues:
