@@ -665,6 +665,90 @@ pub(crate) enum PredicateAt {
 
 /// The mean of the distinct values of the vec3 embedding `name` over the orbit `orbit` of
 /// `d` (what `mean` of the rule language gives); `None` where the map lacks it.
+/// Why `g` cannot be simulated as a closed mesh, if so: a dart free at a dimension below the
+/// map's (a face whose boundary is open, `alpha_0` or `alpha_1` free, or in 3D a volume
+/// whose boundary surface is open, `alpha_2` free). Such a map is a valid G-map, but its
+/// elements are not: the volume and mass rules read a face's or a volume's orbit as closed,
+/// so an open one got a wrong mass and its vertices a NaN velocity (QA). Names the dart and
+/// the centroid of its element's positions.
+fn open_cell(g: &GMap) -> Option<String> {
+    let dim = g.dimension();
+    let (d, i) = g
+        .darts()
+        .find_map(|d| (0..dim).find(|&i| g.is_free(i, d)).map(|i| (d, i)))?;
+    let (what, elem) = match (dim, i) {
+        (3, 2) => ("volume whose boundary surface is open", OrbitType::volume()),
+        (3, _) => ("face whose boundary is open", OrbitType::volume()),
+        _ => ("face whose boundary is open", OrbitType::face(2)),
+    };
+    let at = orbit_mean(g, d, elem, "position").map_or_else(String::new, |c| {
+        format!(
+            " (the element whose centroid is ({}, {}, {}))",
+            c[0], c[1], c[2]
+        )
+    });
+    Some(format!(
+        "the map has a {what}: dart {} is free at alpha_{i}{at}; a simulation needs closed elements \
+         (every alpha_0 and alpha_1{} linked): sew it, or build the map from a mesh",
+        d.0,
+        if dim == 3 { " and alpha_2" } else { "" }
+    ))
+}
+
+/// Refuses a ground plane (`p`, unit normal `n`) with a vertex of `g` on its far side at the
+/// start, by more than 1e-9 of the object's bounding-box diagonal (rounding of a body resting
+/// on the plane passes). The first step would put every such vertex back onto the plane at
+/// once, crushing the elements between into it, with no error (QA: a box through the ground
+/// was flattened to volumes of 1e-19 in one step).
+fn below_ground(g: &GMap, p: [f64; 3], n: [f64; 3]) -> Result<(), PhysicsError> {
+    let Some(id) = g.embedding_id("position") else {
+        return Ok(());
+    };
+    let e = g.embedding(id);
+    let Some(col) = e.real_column().filter(|c| c.len() == 3 * e.n_slots()) else {
+        return Ok(());
+    };
+    // the slots in use (a slot a removed orbit released keeps its last value)
+    let mut used = vec![false; e.n_slots()];
+    for d in g.darts() {
+        used[e.slot(d)] = true;
+    }
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    let mut deepest: Option<(f64, [f64; 3])> = None;
+    for (x, _) in col.chunks_exact(3).zip(&used).filter(|(_, u)| **u) {
+        let x = [x[0], x[1], x[2]];
+        for k in 0..3 {
+            lo[k] = lo[k].min(x[k]);
+            hi[k] = hi[k].max(x[k]);
+        }
+        let d = (x[0] - p[0]) * n[0] + (x[1] - p[1]) * n[1] + (x[2] - p[2]) * n[2];
+        if deepest.is_none_or(|(m, _)| d < m) {
+            deepest = Some((d, x));
+        }
+    }
+    let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+    match deepest {
+        // (+ 0.0: no "-0" in the message, from a normal opposite to gravity)
+        Some((d, x)) if d < -1e-9 * diag => Err(PhysicsError::Config(format!(
+            "ground: the vertex at ({}, {}, {}) starts {} below the plane through ({}, {}, {}) \
+             with normal ({}, {}, {}); a body must start on the side the normal points to (its \
+             first step would put every vertex below onto the plane at once, crushing the \
+             elements between): move the body or the ground",
+            x[0] + 0.0,
+            x[1] + 0.0,
+            x[2] + 0.0,
+            -d,
+            p[0] + 0.0,
+            p[1] + 0.0,
+            p[2] + 0.0,
+            n[0] + 0.0,
+            n[1] + 0.0,
+            n[2] + 0.0
+        ))),
+        _ => Ok(()),
+    }
+}
+
 fn orbit_mean(g: &GMap, d: Dart, orbit: OrbitType, name: &str) -> Option<[f64; 3]> {
     let id = g.embedding_id(name)?;
     if !g.is_alive(d) {
@@ -821,6 +905,9 @@ impl Simulation {
             return Err(PhysicsError::Config(format!(
                 "the map is not a valid G-map: {v} (GMap.violations() in Python, topomech info on its file, list every violation)"
             )));
+        }
+        if let Some(msg) = open_cell(&g) {
+            return Err(PhysicsError::Config(msg));
         }
         if !(cfg.dt > 0.0 && cfg.dt.is_finite()) {
             return Err(PhysicsError::Config(format!(
@@ -1001,6 +1088,10 @@ impl Simulation {
             return Err(PhysicsError::Config(
                 "the map has no 'position' embedding".into(),
             ));
+        }
+        if let Some(ground) = &cfg.ground {
+            let (p, n) = ground.plane(cfg.gravity)?;
+            below_ground(&g, p, n)?;
         }
         // the data the simulation itself reads; each rule adds what it uses when it first runs
         rules.prepare_named(
