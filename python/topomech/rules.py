@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import operator
 import os
-from collections.abc import Mapping, Sequence
+import re
+import stat
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict, Union
 
 from topomech import _core
@@ -78,6 +81,52 @@ def _dimension(dimension: Any) -> int | None:
     raise TypeError(f"dimension must be 2 or 3 (or None), got {dimension!r}")
 
 
+#: A line that starts a model declaration (``model NAME(...) {`` or ``model NAME {``): how
+#: ``topomech check`` tells a model file (checked with the shipped common rules) from a rule
+#: file.
+_MODEL_DECLARATION = re.compile(r"^[ \t]*model[ \t]+[A-Za-z_][A-Za-z0-9_]*[ \t]*[({]", re.MULTILINE)
+
+
+def _add_model_hint(
+    e: RuleError, loader: str, texts: Callable[[], Iterable[tuple[str, str]]]
+) -> None:
+    """Adds a hint as the last line of ``e``'s message when one of the files (``texts()``,
+    called only then: their ``(name, text)``) declares a model and an error is an unknown
+    embedding, the mark of a model file checked without the shipped prelude. ``loader`` is
+    the method that refused them. ``diagnostics`` and ``warnings`` are unchanged."""
+    if not e.args or not any("unknown embedding" in d for d in getattr(e, "diagnostics", [])):
+        return
+    files = [name for name, text in texts() if _MODEL_DECLARATION.search(text)]
+    if not files:
+        return
+    which = (
+        f"{files[0]} declares a model: load it"
+        if len(files) == 1
+        else f"{', '.join(files[:-1])} and {files[-1]} declare models: load them"
+    )
+    hint = (
+        f"hint: {which} with RuleSet.from_model_sources (or topomech.Model.load), which adds "
+        "the shipped prelude and common rules declaring position, rest, velocity, force, "
+        f"mass, dx, ..., as `topomech check` and a simulation do; {loader} does not"
+    )
+    e.args = (f"{e.args[0]}\n{hint}", *e.args[1:])
+
+
+def _read_texts(paths: list[str]) -> Iterable[tuple[str, str]]:
+    """The ``(path, text)`` of each regular file of ``paths`` that reads as UTF-8 (as the
+    kernel reads them: up to the size it has; the others are skipped, the kernel has said
+    why)."""
+    for p in paths:
+        try:
+            st = Path(p).stat()
+            if not stat.S_ISREG(st.st_mode):
+                continue  # a FIFO or device: never opened (it could block or never end)
+            with Path(p).open("rb") as f:
+                yield p, f.read(st.st_size).decode("utf-8")
+        except (OSError, UnicodeDecodeError):
+            continue
+
+
 class RuleSet:
     """Checked rules of one dimension, from one or several rule files sharing their
     embeddings. The kernel object is :attr:`core`; this class adds typing."""
@@ -102,18 +151,40 @@ class RuleSet:
         first file that does not exist, :class:`RuleError` with every error (a file that
         exists but cannot be read included, and one that is not a regular file: a directory,
         or a device or FIFO such as ``/dev/zero``, refused before reading), ValueError for
-        another dimension."""
+        another dimension.
+
+        The files are checked alone. A model file (one that declares a ``model``) uses the
+        embeddings of the shipped prelude and common rules (``position``, ``rest``, ``dx``,
+        ...) without declaring them: load it with :meth:`from_model_sources` (or
+        :meth:`topomech.Model.load`), as ``topomech check`` and a simulation do. Refused here
+        for an unknown embedding, its :class:`RuleError` message ends with a ``hint:`` line
+        saying so (not one of its ``diagnostics``)."""
         if isinstance(paths, (str, os.PathLike)):
             paths = [paths]
-        return cls(_core.RuleSet.load([os.fspath(p) for p in paths], _dimension(dimension)))
+        names = [os.fspath(p) for p in paths]
+        dim = _dimension(dimension)
+        try:
+            core = _core.RuleSet.load(names, dim)
+        except RuleError as e:
+            _add_model_hint(e, "RuleSet.load", lambda: _read_texts(names))
+            raise
+        return cls(core)
 
     @classmethod
     def from_source(
         cls, text: str, name: str = "<string>", dimension: int | None = None
     ) -> RuleSet:
         """Checks the text of a rule file; ``name`` is the file name diagnostics show; for
-        ``dimension`` as :meth:`load` (needed for a ``dimension 2 3`` file)."""
-        return cls(_core.RuleSet.from_source(text, name, _dimension(dimension)))
+        ``dimension`` as :meth:`load` (needed for a ``dimension 2 3`` file). The text is
+        checked alone: a model file is refused as in :meth:`load` (with its ``hint:`` line);
+        :meth:`from_model_sources` loads it."""
+        dim = _dimension(dimension)
+        try:
+            core = _core.RuleSet.from_source(text, name, dim)
+        except RuleError as e:
+            _add_model_hint(e, "RuleSet.from_source", lambda: [(name, text)])
+            raise
+        return cls(core)
 
     @classmethod
     def from_sources(
@@ -122,8 +193,17 @@ class RuleSet:
         """Checks ``(name, text)`` rule files together, for ``dimension`` (2 or 3: needed
         when every file serves both, with ``dimension 2 3`` or no dimension line; by default
         the dimension the files say). Raises :class:`RuleError` with every error at its
-        ``FILE:LINE:COL``, ValueError for another dimension."""
-        return cls(_core.RuleSet.from_sources(list(sources), _dimension(dimension)))
+        ``FILE:LINE:COL``, ValueError for another dimension. The files are checked alone: model
+        files are refused as in :meth:`load` (with its ``hint:`` line);
+        :meth:`from_model_sources` loads them."""
+        sources = list(sources)
+        dim = _dimension(dimension)
+        try:
+            core = _core.RuleSet.from_sources(sources, dim)
+        except RuleError as e:
+            _add_model_hint(e, "RuleSet.from_sources", lambda: sources)
+            raise
+        return cls(core)
 
     @staticmethod
     def file_dimensions(text: str) -> list[int]:

@@ -1190,39 +1190,129 @@ impl PySimulation {
 
     /// Writes a vertex embedding from one value per row: float64 (V,) for `f64`, float64
     /// (V, 3) for `vec3`, bool (V,) for `bool` (every orbit of a row gets its row's value; a
-    /// force, `f_*`, goes to the row's first orbit alone: it is the row's total).
+    /// force, `f_*`, goes to the row's first orbit alone: it is the row's total). For a
+    /// writable vertex embedding (held by the map, or declared by the rules) the values are
+    /// checked against its type here: booleans for a number embedding, or numbers for a bool
+    /// one, are a `TypeError` naming the embedding's type; a wrong shape a `ValueError` naming
+    /// the shape that type takes, `(V, 3)` or `(V,)`. The other cases (unknown, derived or
+    /// non-vertex embeddings, other types) are the kernel's `SimulationError`.
     fn set_vertex_field(
         slf: &Bound<'_, Self>,
         py: Python<'_>,
         name: &str,
         values: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
+        use numpy::{PyArrayDescrMethods as _, PyUntypedArray};
+
         let mut this = exclusive(slf)?;
-        let n = this.sim()?.n_vertices();
+        let sim = this.sim()?;
+        let n = sim.n_vertices();
+        // the type of `name` when the kernel would write it: a stored, not derived vertex
+        // embedding of type f64, vec3 or bool, or one the rules declare so (added on writing)
+        let vertex = OrbitType::vertex(sim.gmap().dimension());
+        let ty = match sim.gmap().embedding_id(name) {
+            Some(id) => {
+                let e = sim.gmap().embedding(id);
+                (e.orbit() == vertex && e.derived().is_none()).then(|| e.ty())
+            }
+            None => sim
+                .rules()
+                .embeddings()
+                .iter()
+                .find(|e| e.name == name && e.orbit == vertex && e.derived.is_none())
+                .and_then(|e| match e.ty {
+                    topomech_rules::Ty::F64 => Some(EmbeddingType::F64),
+                    topomech_rules::Ty::Vec3 => Some(EmbeddingType::Vec3),
+                    topomech_rules::Ty::Bool => Some(EmbeddingType::Bool),
+                    _ => None,
+                }),
+        }
+        .filter(|t| {
+            matches!(
+                t,
+                EmbeddingType::F64 | EmbeddingType::Vec3 | EmbeddingType::Bool
+            )
+        });
         let values = guard(|| {
+            let Some(ty) = ty else {
+                // the kernel refuses the name whatever the values: the generic conversion
+                let shape_err = |shape: &[usize]| {
+                    value_error(format!(
+                        "values for '{name}' must have shape (V,) or (V, 3) with V = {n}, got {}",
+                        shape_str(shape)
+                    ))
+                };
+                if let Ok(a) = array_arg::<bool>(values, "values", "bool") {
+                    if a.shape() != [n] {
+                        return Err(shape_err(a.shape()));
+                    }
+                    return Ok(a.as_array().iter().map(|&b| Value::Bool(b)).collect());
+                }
+                let a = array_arg::<f64>(values, "values", "float64 or bool")?;
+                return match a.shape() {
+                    [m] if *m == n => {
+                        Ok(a.as_array().iter().map(|&x| Value::Real(vec![x])).collect())
+                    }
+                    [m, 3] if *m == n => Ok(a
+                        .as_array()
+                        .rows()
+                        .into_iter()
+                        .map(|r| Value::Real(r.to_vec()))
+                        .collect::<Vec<Value>>()),
+                    s => Err(shape_err(s)),
+                };
+            };
+            // what the type takes: "a vec3", the shape as written and with V's value
+            let (article, wanted, form) = match ty {
+                EmbeddingType::Vec3 => ("a", vec![n, 3], "(V, 3)"),
+                EmbeddingType::F64 => ("an", vec![n], "(V,)"),
+                _ => ("a", vec![n], "(V,)"),
+            };
+            let wanted_str = shape_str(&wanted);
+            let kind = values
+                .cast::<PyUntypedArray>()
+                .ok()
+                .map(|a| a.dtype().kind());
+            let is_bool = ty == EmbeddingType::Bool;
+            if is_bool && matches!(kind, Some(b'i' | b'u' | b'f')) {
+                return Err(type_error(format!(
+                    "'{name}' is a bool embedding: numbers given (it takes booleans of shape \
+                     (V,) = {wanted_str})"
+                )));
+            }
+            if !is_bool && kind == Some(b'b') {
+                return Err(type_error(format!(
+                    "'{name}' is {article} {ty} embedding: booleans given (it takes numbers of \
+                     shape {form} = {wanted_str})"
+                )));
+            }
             let shape_err = |shape: &[usize]| {
                 value_error(format!(
-                    "values for '{name}' must have shape (V,) or (V, 3) with V = {n}, got {}",
+                    "values for '{name}' ({article} {ty} embedding) must have shape {form} = \
+                     {wanted_str}, got {}",
                     shape_str(shape)
                 ))
             };
-            if let Ok(a) = array_arg::<bool>(values, "values", "bool") {
-                if a.shape() != [n] {
+            if is_bool {
+                let a = array_arg::<bool>(values, "values", "bool")?;
+                if a.shape() != wanted.as_slice() {
                     return Err(shape_err(a.shape()));
                 }
                 return Ok(a.as_array().iter().map(|&b| Value::Bool(b)).collect());
             }
-            let a = array_arg::<f64>(values, "values", "float64 or bool")?;
-            match a.shape() {
-                [m] if *m == n => Ok(a.as_array().iter().map(|&x| Value::Real(vec![x])).collect()),
-                [m, 3] if *m == n => Ok(a
-                    .as_array()
+            let a = array_arg::<f64>(values, "values", "float64")?;
+            if a.shape() != wanted.as_slice() {
+                return Err(shape_err(a.shape()));
+            }
+            Ok(if ty == EmbeddingType::Vec3 {
+                a.as_array()
                     .rows()
                     .into_iter()
                     .map(|r| Value::Real(r.to_vec()))
-                    .collect::<Vec<Value>>()),
-                s => Err(shape_err(s)),
-            }
+                    .collect::<Vec<Value>>()
+            } else {
+                a.as_array().iter().map(|&x| Value::Real(vec![x])).collect()
+            })
         })?;
         this.run(py, move |sim| Ok(sim.set_vertex_field(name, &values)?))
     }
