@@ -51,6 +51,7 @@ __all__ = [
     "MeshGroups",
     "apply_conditions",
     "boundary_faces",
+    "check_supports",
     "compile_expression",
     "compile_predicate",
     "held_positions",
@@ -688,7 +689,10 @@ def held_positions(
     sim: Simulation, mask: npt.NDArray[np.bool_], displacement: Sequence[float] | None
 ) -> None:
     """Holds the rows of ``mask`` (fixed), at ``rest + displacement`` when one is given
-    (their velocity set to zero), keeping the rows already held."""
+    (their velocity set to zero), keeping the rows already held. A row held already is moved
+    to the new position: this is how a run moves its held vertices step by step (a scene's
+    ``[[fix]]`` tables that hold one vertex at two positions are refused before, by
+    :func:`check_supports` in :func:`apply_conditions`)."""
     fixed = sim.fixed() | mask
     if displacement is not None:
         x = sim.positions()
@@ -700,38 +704,136 @@ def held_positions(
     sim.set_fixed(fixed)
 
 
+#: How a message refusing two holds of one vertex ends.
+_HELD_ONE_WAY = (
+    "a vertex is held one way (narrow one selection, or give both the same displacement)"
+)
+
+#: A support of :func:`check_supports`: its scene key, its selection and its displacement
+#: (None: held in place).
+Support = tuple[str, Mapping[str, Any], Sequence[float] | None]
+
+
+def _point(p: npt.NDArray[np.float64]) -> str:
+    return str([float(c) for c in p])
+
+
+def _vertex(sim: Simulation, r: int, rest: npt.NDArray[np.float64]) -> str:
+    """Row ``r`` as a message names it: its input point when that differs, its rest
+    position."""
+    pid = int(_point_ids(sim)[r])
+    point = f"input point {pid}, " if pid >= 0 and pid != r else ""
+    return f"vertex {r} ({point}at rest {_point(rest[r])})"
+
+
+def check_supports(
+    sim: Simulation,
+    supports: Sequence[Support],
+    groups: MeshGroups | None = None,
+    masks: Mapping[str, npt.NDArray[np.bool_]] | None = None,
+) -> list[npt.NDArray[np.bool_]]:
+    """Refuses two supports (``(key, selection, displacement or None)``, in the order of the
+    scene's ``[[fix]]`` tables) that hold one vertex at two positions: held in place is the
+    rest position, a displacement ``d`` the position ``rest + d``, compared exactly (no
+    tolerance, as the kernel compares them between predicates), so two supports may hold a
+    vertex both in place or at the same displacement. Raises :class:`LoadError` with ``key``
+    the later support's, naming the vertex (its row, input point and rest position) and the
+    earlier support; or a selection's refusal with its key. ``masks``: selections already
+    made, by key. Returns each support's mask. Changes nothing."""
+    rest = sim.rest_positions()
+    n = sim.n_vertices
+    holder = np.full(n, -1, dtype=np.int64)
+    held_at = np.zeros((n, 3))
+    out: list[npt.NDArray[np.bool_]] = []
+    for j, (key, sel, disp) in enumerate(supports):
+        if masks is not None and key in masks:
+            mask = masks[key]
+        else:
+            try:
+                mask = select_vertices(sim, groups=groups, **sel)
+            except LoadError as e:
+                raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
+        out.append(mask)
+        at = rest if disp is None else rest + np.asarray(disp, dtype=np.float64)
+        both = mask & (holder >= 0)
+        differ = both & np.any(held_at != at, axis=1)
+        if differ.any():
+            r = int(np.argmax(differ))
+            other_key, _, other_disp = supports[int(holder[r])]
+            vertex = _vertex(sim, r, rest)
+            if disp is None:
+                what = (
+                    f"holds {vertex} in place, which {other_key} moves by "
+                    f"{_point(np.asarray(other_disp, dtype=np.float64))}"
+                )
+            else:
+                how = (
+                    "in place"
+                    if other_disp is None
+                    else "at another position (displacement "
+                    f"{_point(np.asarray(other_disp, dtype=np.float64))})"
+                )
+                by = _point(np.asarray(disp, dtype=np.float64))
+                what = f"moves {vertex} by {by}, which {other_key} holds {how}"
+            raise LoadError(f"{what}: {_HELD_ONE_WAY}", key)
+        new = mask & (holder < 0)
+        holder[new] = j
+        held_at[new] = at[new]
+    return out
+
+
 def apply_conditions(
     sim: Simulation, conditions: Mapping[str, Any], groups: MeshGroups | None = None
 ) -> None:
     """Applies the conditions of a scene beyond the kernel's configuration (its
-    :attr:`~topomech.scene.Scene.conditions`): ``held`` (``(key, selection, displacement or
-    None)``: vertices held by points or group), ``loads`` (``(key, {"kind", "force" |
-    "traction" | "pressure", "select"})``) and ``initial`` (``(key, {"select", "velocity",
-    "displacement"})``: fields set on the free vertices of the selection, every vertex when
-    it is empty; a displacement moves the positions, not the rest). Raises
-    :class:`LoadError` with ``key`` the scene key at fault."""
+    :attr:`~topomech.scene.Scene.conditions`) to a simulation as built: ``held`` (``(key,
+    selection, displacement or None)``: vertices held by points or group), ``loads``
+    (``(key, {"kind", "force" | "traction" | "pressure", "select"})``) and ``initial``
+    (``(key, {"select", "velocity", "displacement"})``: fields set on the free vertices of
+    the selection, every vertex when it is empty; a displacement moves the positions, not the
+    rest). ``supports``: every ``[[fix]]`` table as ``(key, selection, displacement or
+    None)``, in order, those by ``where`` (which the kernel applied) included: two that hold
+    one vertex at two positions are refused (see :func:`check_supports`); without it, the
+    ``held`` ones are checked against each other, and a displacement that moves a vertex
+    the simulation holds already is refused. Raises :class:`LoadError` with ``key`` the
+    scene key at fault, having changed nothing."""
     bc = conditions
-    for key, sel, disp in bc.get("held", []):
+    held: list[Support] = list(bc.get("held", []))
+    masks: dict[str, npt.NDArray[np.bool_]] = {}
+    for key, sel, _ in held:
         try:
-            mask = select_vertices(sim, groups=groups, **sel)
+            masks[key] = select_vertices(sim, groups=groups, **sel)
         except LoadError as e:
             raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
-        held_positions(sim, mask, disp)
+    if held:
+        supports = bc.get("supports")
+        if supports is not None:
+            check_supports(sim, supports, groups, masks)
+        else:
+            check_supports(sim, held, groups, masks)
+            for key, _, disp in held:
+                problem = _moved_held(sim, masks[key], disp)
+                if problem is not None:
+                    raise LoadError(problem, key)
+    # everything computed before anything is set: a refusal leaves the simulation as it was
+    fixed = sim.fixed()
+    for key, _, _ in held:
+        fixed = fixed | masks[key]
     loads = bc.get("loads", [])
-    if loads:
-        total = sim.external_forces()
-        for key, load in loads:
-            sel = load["select"]
-            try:
-                if load["kind"] == "point":
-                    total += point_load(sim, load["force"], groups=groups, **sel)
-                elif load["kind"] == "traction":
-                    total += surface_load(sim, traction=load["traction"], groups=groups, **sel)
-                else:
-                    total += surface_load(sim, pressure=load["pressure"], groups=groups, **sel)
-            except LoadError as e:
-                raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
-        sim.set_external_forces(total)
+    total = sim.external_forces() if loads else None
+    for key, load in loads:
+        sel = load["select"]
+        assert total is not None
+        try:
+            if load["kind"] == "point":
+                total += point_load(sim, load["force"], groups=groups, **sel)
+            elif load["kind"] == "traction":
+                total += surface_load(sim, traction=load["traction"], groups=groups, **sel)
+            else:
+                total += surface_load(sim, pressure=load["pressure"], groups=groups, **sel)
+        except LoadError as e:
+            raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
+    initial: list[tuple[npt.NDArray[np.bool_], dict[str, Any]]] = []
     for key, init in bc.get("initial", []):
         try:
             mask = (
@@ -741,7 +843,12 @@ def apply_conditions(
             )
         except LoadError as e:
             raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
-        free = mask & ~sim.fixed()
+        initial.append((mask & ~fixed, init))
+    for key, _, disp in held:
+        held_positions(sim, masks[key], disp)
+    if total is not None:
+        sim.set_external_forces(total)
+    for free, init in initial:
         if init.get("displacement") is not None:
             x = sim.positions()
             x[free] += np.asarray(init["displacement"], dtype=np.float64)
@@ -750,3 +857,22 @@ def apply_conditions(
             v = sim.velocities()
             v[free] = np.asarray(init["velocity"], dtype=np.float64)
             sim.set_velocities(v)
+
+
+def _moved_held(
+    sim: Simulation, mask: npt.NDArray[np.bool_], displacement: Sequence[float] | None
+) -> str | None:
+    """Why holding the rows of ``mask`` at ``rest + displacement`` is refused: it would move
+    a row the simulation holds already (None when it would not)."""
+    if displacement is None:
+        return None
+    x = sim.positions()
+    rest = sim.rest_positions()
+    rows = np.flatnonzero(mask & sim.fixed())
+    moved = np.any(x[rows] != rest[rows] + np.asarray(displacement, dtype=np.float64), axis=1)
+    if not moved.any():
+        return None
+    r = int(rows[np.argmax(moved)])
+    return (
+        f"moves {_vertex(sim, r, rest)}, which is already held at {_point(x[r])}: {_HELD_ONE_WAY}"
+    )

@@ -197,6 +197,22 @@ def _check_dimensions(models: Any, gmap: Any) -> None:
             )
 
 
+def _check_as_scene(cfg: Mapping[str, Any], gmap: Any) -> None:
+    """Refuses, with ``ValueError`` naming the argument (``models[0].stiffness: must be >=
+    0, got -5.0``), what a scene refuses and the kernel does not: a shipped model's
+    parameter out of its range, a region that sets no material value. The checks are the
+    scene's own (:mod:`topomech.scene`), so that the two cannot drift apart."""
+    from topomech.scene._material import check_region_args
+    from topomech.scene._models import check_model_args
+
+    models, regions = cfg.get("models"), cfg.get("regions")
+    if isinstance(models, (list, tuple)):
+        dim = getattr(gmap, "dimension", None)
+        check_model_args(models, dim if isinstance(dim, int) else None)
+    if isinstance(regions, (list, tuple)):
+        check_region_args(regions)
+
+
 class Simulation:
     """Physical models on a copy of a G-map, stepped in time.
 
@@ -272,6 +288,8 @@ class Simulation:
         for where in (cfg, kwargs):
             if where is not None and "max_iterations" in where:
                 where["max_iterations"] = _index(where["max_iterations"], "max_iterations")
+            if where is not None:
+                _check_as_scene(where, gmap)
             if where is not None and isinstance(where.get("models"), (list, tuple)):
                 _check_dimensions(where["models"], gmap)
                 models, files = model_files_of(list(where["models"]))
@@ -503,7 +521,7 @@ class Simulation:
         a = np.asarray(mask)
         if a.dtype != np.bool_:
             raise TypeError(f"mask must be an array of bool, got dtype {a.dtype}")
-        self._core.set_fixed(np.ascontiguousarray(a))
+        self._core.set_fixed(np.asarray(a, order="C"))
 
     def set_vertex_field(self, name: str, values: Any) -> None:
         """Writes the vertex embedding ``name`` from one value per row: ``(V,)`` numbers for an
@@ -511,12 +529,13 @@ class Simulation:
         (every orbit of a row gets the row's value; a force embedding, ``f_*``, is the row's
         total and goes to its first orbit alone). An embedding the rules declare but the map
         does not hold yet is added. Raises :class:`SimulationError` for an unknown, derived or
-        non-vertex embedding, a type mismatch or non-finite values (naming the rows), and
-        :class:`ValueError` for a wrong shape."""
+        non-vertex embedding or non-finite values (naming the rows), :class:`TypeError` for
+        booleans given for a number embedding or numbers for a bool one, and
+        :class:`ValueError` for a wrong shape (naming the shape the embedding's type takes)."""
         a = np.asarray(values)
         if a.dtype != np.bool_:
             a = real_array(a, f"values for {name!r}")
-        self._core.set_vertex_field(name, np.ascontiguousarray(a))
+        self._core.set_vertex_field(name, np.asarray(a, order="C"))
 
     def set_positions(self, positions: Any) -> None:
         """Sets the positions from an array-like ``(V, 3)`` of finite real numbers (complex

@@ -30,20 +30,27 @@ def _fixes(
     list[tuple[str, tuple[float, ...]]],
     list[tuple[str, dict[str, Any], list[float] | None]],
     list[tuple[str, str, str]],
+    list[tuple[str, dict[str, Any], list[float] | None]],
 ]:
     """The ``[[fix]]`` tables: the predicates of the vertices held in place and of those held
     at a displacement (``(predicate, displacement)``), which the kernel takes; the fixes by
     ``points`` or ``group`` (``(key, selection, displacement or None)``), which
-    :func:`topomech.loads.apply_conditions` applies; and ``("fix" or "prescribed",
-    predicate, key)`` for each predicate (see :attr:`Scene.origins`)."""
+    :func:`topomech.loads.apply_conditions` applies; ``("fix" or "prescribed", predicate,
+    key)`` for each predicate (see :attr:`Scene.origins`); and every table as ``(key,
+    selection, displacement or None)``, in order, with which
+    :func:`topomech.loads.apply_conditions` refuses two tables holding one vertex at two
+    positions when one of them selects by ``points`` or ``group`` (the kernel refuses it
+    between predicates)."""
     fixed: list[str] = []
     prescribed: list[tuple[str, tuple[float, ...]]] = []
     held: list[tuple[str, dict[str, Any], list[float] | None]] = []
     origins: list[tuple[str, str, str]] = []
+    supports: list[tuple[str, dict[str, Any], list[float] | None]] = []
     for f in tables:
         sel = _selection(f, fail, required=True, in_python=False)
         disp = f.vector("displacement", 3)
         f.done()
+        supports.append((f.path, sel, None if disp is None else list(disp)))
         if "where" not in sel:
             held.append((f.path, sel, None if disp is None else list(disp)))
             continue
@@ -54,7 +61,7 @@ def _fixes(
         else:
             prescribed.append((pred, disp))
             origins.append(("prescribed", pred, f.key("where")))
-    return fixed, prescribed, held, origins
+    return fixed, prescribed, held, origins, supports
 
 
 def _selection(t: _Table, fail: _Fail, *, required: bool, in_python: bool = True) -> dict[str, Any]:

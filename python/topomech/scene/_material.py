@@ -6,10 +6,15 @@ tables set them too (the Rust side: ``crates/physics/src/config.rs``).
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from topomech.scene._table import _check_predicate, _Fail, _required_str, _Table
+from topomech.scene._table import _ArgFail, _check_predicate, _Fail, _required_str, _Table
+
+#: The material values a region may set (``density`` and ``young`` positive, ``poisson``
+#: in (-1, 0.5)); it sets at least one.
+REGION_VALUES = ("density", "young", "poisson")
 
 
 @dataclass(frozen=True)
@@ -39,15 +44,14 @@ def _material(mat: _Table, fail: _Fail) -> _Material:
         region: dict[str, Any] = {
             "where": _check_predicate(_required_str(r, "where", fail), r.key("where"), fail)
         }
-        for k, pos in (("density", True), ("young", True), ("poisson", False)):
+        for k, pos in zip(REGION_VALUES, (True, True, False)):
             v = r.number(k, positive=pos)
             if v is not None:
                 if k == "poisson":
                     _check_poisson(v, r.key(k), fail)
                 region[k] = v
         r.done()
-        if len(region) == 1:
-            raise fail(r.path, "a region needs density, young or poisson")
+        _check_region_values(region, r.path, fail)
         regions.append(region)
         origins.append(("region", region["where"], r.key("where")))
     mat.done()
@@ -55,6 +59,30 @@ def _material(mat: _Table, fail: _Fail) -> _Material:
     if poisson is not None:
         _check_poisson(poisson, "material.poisson", fail)
     return _Material(density, damping, young, poisson, regions, origins)
+
+
+def _check_region_values(region: Mapping[str, Any], key: str, fail: _Fail) -> None:
+    """Refuses a region (its ``where`` and values, a dict) that sets none of
+    :data:`REGION_VALUES`: it would change nothing. A scene's ``[[material.region]]`` tables
+    and :class:`topomech.Simulation`'s ``regions`` are checked with it."""
+    if not any(k in region for k in REGION_VALUES):
+        raise fail(key, "a region needs density, young or poisson")
+
+
+def check_region_args(regions: Sequence[Any]) -> None:
+    """Refuses, with ``ValueError("regions[i]: problem")``, a region given to
+    :class:`topomech.Simulation` that a scene's ``[[material.region]]`` table refuses and
+    the kernel does not: one that sets no material value (:func:`_check_region_values`).
+    A region that is not a mapping, lacks ``where`` or has an unknown key is left to the
+    kernel, which refuses it with its own message (as it refuses a bad value)."""
+    fail = _ArgFail()
+    for i, region in enumerate(regions):
+        if (
+            isinstance(region, Mapping)
+            and "where" in region
+            and all(k in ("where", *REGION_VALUES) for k in region)
+        ):
+            _check_region_values(region, f"regions[{i}]", fail)
 
 
 def _young_poisson(

@@ -7,14 +7,18 @@ and the check of the models against the mesh's dimension once it is known (the R
 from __future__ import annotations
 
 import difflib
-from collections.abc import Mapping
+import math
+import numbers
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from topomech._core import RuleError, SceneError
 from topomech.models import Model, shipped_models
 from topomech.models import model_files_of as _model_files_pairs
-from topomech.scene._table import _Fail, _or, _required_str, _show, _Table
+from topomech.scene._table import _ArgFail, _Fail, _or, _required_str, _show, _Table
 from topomech.simulation import ModelInfo, available_models
 
 #: Models of the paper that scenes may name but this build does not ship yet.
@@ -84,6 +88,71 @@ def _param(
             f"parameter '{p}' of model '{model}' is {ty}: expected a number, got {_show(v)}",
         )
     return t.number(p, nonneg=nonneg)
+
+
+def _shipped_param(
+    t: _Table, p: str, ty: str, model: str, fail: _Fail
+) -> float | list[float] | None:
+    """The value the model table ``t`` gives the parameter ``p`` of type ``ty`` of the
+    shipped model ``model`` (see :func:`_param`): an ``f64`` one (a stiffness, a damping, a
+    thickness) is >= 0. A scene's ``[[model]]`` tables and :class:`topomech.Simulation`'s
+    ``models`` (:func:`check_model_args`) are checked with it."""
+    return _param(t, p, ty, model, fail, nonneg=True)
+
+
+def _as_read(v: Any, ty: str) -> float | list[float] | None:
+    """A Python API value as a scene's table holds it (a float, or a list of 3 floats for a
+    ``vec3``) when the kernel reads it as a number there (numpy's numbers, a tuple or an
+    array of 3 included); None for any other value, which the kernel refuses with its own
+    message."""
+
+    def real(x: Any) -> float | None:
+        if isinstance(x, (bool, np.bool_)) or not isinstance(x, numbers.Real):
+            return None
+        try:
+            f = float(x)
+        except (OverflowError, TypeError, ValueError):
+            return None
+        return f if math.isfinite(f) else None
+
+    if ty != "vec3":
+        return real(v)
+    if not isinstance(v, (list, tuple, np.ndarray)) or np.ndim(v) != 1 or len(v) != 3:
+        return None
+    items = [real(x) for x in v]
+    return None if any(x is None for x in items) else [x for x in items if x is not None]
+
+
+def check_model_args(models: Sequence[Any], dim: int | None) -> None:
+    """Refuses, with ``ValueError("models[i].param: problem")``, a parameter value given to
+    :class:`topomech.Simulation` for a shipped model (a dict ``{"kind": ..., param:
+    value}``) that a scene's ``[[model]]`` table refuses (:func:`_shipped_param`: a negative
+    stiffness or damping, ...) and the kernel does not. Only the values the kernel reads as
+    numbers of the parameter's type are checked; the others (a wrong type, a number that is
+    not finite; an unknown kind or key, a material key: then the whole model) are left to
+    the kernel, which refuses them with its own message. ``dim``: the map's dimension (None:
+    any). The user's models (:class:`topomech.Model`, a kind declared in ``model_files``)
+    are checked as a scene checks them, by the kernel."""
+    fail = _ArgFail()
+    for i, spec in enumerate(models):
+        if not isinstance(spec, Mapping):
+            continue
+        kind = spec.get("kind")
+        if not isinstance(kind, str) or not _model_entries(kind, dim):
+            continue
+        params = [p for p in _takes(kind, dim) if p not in MATERIAL_KEYS_IN_MODEL]
+        if any(k != "kind" and k not in params for k in spec):
+            continue  # the kernel names the key it does not know first, as a scene does
+        types = _param_types(kind, dim)
+        values: dict[str, Any] = {}
+        for p in params:
+            if p in spec:
+                v = _as_read(spec[p], types.get(p, "f64"))
+                if v is not None:
+                    values[p] = v
+        t = _Table(values, f"models[{i}]", fail)
+        for p in values:
+            _shipped_param(t, p, types.get(p, "f64"), kind, fail)
 
 
 def _check_models(
@@ -175,7 +244,7 @@ def _models(
         for p in takes:
             if p in MATERIAL_KEYS_IN_MODEL:
                 continue
-            v = _param(t, p, types.get(p, "f64"), kind, fail, nonneg=True)
+            v = _shipped_param(t, p, types.get(p, "f64"), kind, fail)
             if v is not None:
                 spec[p] = v
         for p in MATERIAL_KEYS_IN_MODEL:

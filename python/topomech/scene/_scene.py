@@ -86,7 +86,9 @@ class Scene:
     origins: tuple[tuple[str, str, str], ...] = ()
     #: What :meth:`build` applies after the kernel's configuration (see
     #: :func:`topomech.loads.apply_conditions`): ``held`` (fixes by points or group),
-    #: ``loads`` and ``initial``, each entry with its scene key.
+    #: ``supports`` (every ``[[fix]]`` table, ``where`` ones included, to refuse two that
+    #: hold one vertex at two positions), ``loads`` and ``initial``, each entry with its
+    #: scene key.
     conditions: dict[str, Any] = field(default_factory=dict)
     #: The user's models (``[[model]] file = ...``), by index in ``config["models"]``.
     user_models: dict[int, Model] = field(default_factory=dict)
@@ -314,7 +316,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
     origins += _model_origins(models, user_models, top.tables("model"))
     young, poisson = _young_poisson(material, set_by, fail)
 
-    fixed, prescribed, held, fix_origins = _fixes(top.tables("fix"), fail)
+    fixed, prescribed, held, fix_origins, supports = _fixes(top.tables("fix"), fail)
     origins += fix_origins
     loads = _loads(top.tables("load"), fail)
     initial = _initial(top, fail)
@@ -377,7 +379,7 @@ def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | Non
         every_given=every_v is not None,
         fields=fields,
         origins=tuple(origins),
-        conditions={"held": held, "loads": loads, "initial": initial},
+        conditions={"held": held, "supports": supports, "loads": loads, "initial": initial},
         user_models=user_models,
     )
     scene.check_events()

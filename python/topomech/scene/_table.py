@@ -209,6 +209,19 @@ class _Fail:
         return err
 
 
+class _ArgFail(_Fail):
+    """A :class:`_Fail` for the arguments of the Python API (:class:`topomech.Simulation`):
+    raises ``ValueError("KEY: problem")`` itself instead of making a :class:`SceneError`,
+    so that a script's value is refused by the same check, with the same words, as a
+    scene's."""
+
+    def __init__(self) -> None:
+        super().__init__("")
+
+    def __call__(self, key: str | None, problem: str) -> SceneError:
+        raise ValueError(f"{key}: {problem}" if key else problem)
+
+
 #: The longest scene name, in UTF-8 bytes (a file name's limit on common file systems).
 MAX_NAME_BYTES = 255
 
