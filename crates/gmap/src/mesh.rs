@@ -244,6 +244,14 @@ pub struct BuildReport {
     pub non_orientable: bool,
 }
 
+/// The end of the messages refusing non-conforming interfaces and overlapping cells: a run's
+/// own output can hold them, its pieces having moved after a cut (no contact between bodies is
+/// modelled), and a mesh file cannot say they are separate bodies (QA: `final.vtu` refused).
+const SEPARATE_BODIES: &str = "; if these cells belong to separate bodies that touch or \
+    interpenetrate (such as the pieces of a cut after they moved: topomech models no contact \
+    between bodies), a mesh file cannot say so: save the map with GMap.save (.tmg), which \
+    keeps the bodies apart, and read that";
+
 /// A pair of faces of a non-conforming interface (see [`MeshError::NonConforming`]).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FacePair {
@@ -390,7 +398,7 @@ pub enum MeshError {
     },
     /// Non-conforming interfaces: faces (2D: edges) of two cells that share points but do not
     /// match, or that overlap (mismatched diagonals, hanging nodes).
-    #[error("{} non-conforming interface(s): {}", pairs.len(), listed(pairs, |p| format!("face {:?} of cell {} against face {:?} of cell {} ({})", p.face_a, p.a, p.face_b, p.b, p.why)))]
+    #[error("{} non-conforming interface(s): {}{SEPARATE_BODIES}", pairs.len(), listed(pairs, |p| format!("face {:?} of cell {} against face {:?} of cell {} ({})", p.face_a, p.a, p.face_b, p.b, p.why)))]
     NonConforming {
         /// Each pair of faces.
         pairs: Vec<FacePair>,
@@ -399,7 +407,7 @@ pub enum MeshError {
     /// meshes): two interpenetrating tetrahedra, a cell inside another, a triangle lying
     /// across others. Found by the separating axis theorem on simplices; see
     /// `mesh/overlap.rs`.
-    #[error("{} overlapping pair(s) of cells (their interiors intersect): {}", pairs.len(), listed(pairs, |(a, b)| format!("cells {a} and {b}")))]
+    #[error("{} overlapping pair(s) of cells (their interiors intersect): {}{SEPARATE_BODIES}", pairs.len(), listed(pairs, |(a, b)| format!("cells {a} and {b}")))]
     Overlapping {
         /// (cell, cell), the smaller index first, sorted.
         pairs: Vec<(usize, usize)>,
