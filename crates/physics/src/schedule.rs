@@ -1412,8 +1412,14 @@ impl Supports {
         held_by: &[Option<usize>],
     ) -> Option<(usize, usize)> {
         let now = self.positions(g);
+        // compared as numbers, not bits: a zero displacement added to a rest coordinate -0.0
+        // gives +0.0, the same position (found by QA); exactly, as the positions a support
+        // writes are exact (rest + d, the same sum for the same d)
+        #[allow(clippy::float_cmp)]
+        let moved =
+            |r: usize| (0..3).any(|k| f64::from_bits(now[r][k]) != f64::from_bits(before[r][k]));
         (0..self.reps.len()).find_map(|r| match held_by[r] {
-            Some(other) if now[r] != before[r] => Some((r, other)),
+            Some(other) if moved(r) => Some((r, other)),
             _ => None,
         })
     }

@@ -559,4 +559,19 @@ fn supports_holding_one_vertex_differently_are_refused() {
         c.prescribed = vec![("x < 1e-9".into(), d), ("y < 1e-9".into(), d)];
     })
     .unwrap();
+    // a rest coordinate -0.0 held in place and at a zero displacement: rest + 0 is +0.0,
+    // another bit pattern but the same position (refused before: bits were compared)
+    let mut neg = mesh();
+    for p in &mut neg.points {
+        for x in p.iter_mut() {
+            if *x == 0.0 {
+                *x = -0.0;
+            }
+        }
+    }
+    sim(&neg, |c| {
+        c.fixed = vec!["x < 1e-9".into()];
+        c.prescribed = vec![("x < 1e-9".into(), [0.0; 3])];
+    })
+    .unwrap();
 }
