@@ -169,12 +169,18 @@ def test_non_integer_indices_are_refused() -> None:
     [
         (np.zeros((5, 4)), r"points must have shape \(N, 2\) or \(N, 3\), got \(5, 4\)"),
         (np.zeros(5), r"got \(5,\)"),
-        ([["a", "b", "c"]], "numeric"),
     ],
 )
 def test_bad_points_are_value_errors(points: object, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         topomech.GMap.from_mesh(points, [("triangle", [[0, 1, 2]])])
+
+
+def test_points_that_are_not_numbers_are_type_errors() -> None:
+    """Strings are refused as not numbers, as every other real array is (numpy would read
+    "1.0" as 1.0)."""
+    with pytest.raises(TypeError, match="points must be real numbers"):
+        topomech.GMap.from_mesh([["a", "b", "c"]], [("triangle", [[0, 1, 2]])])
 
 
 def test_bad_cells_argument() -> None:

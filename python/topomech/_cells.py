@@ -11,7 +11,6 @@ error names the cell.
 from __future__ import annotations
 
 import re
-import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, NamedTuple
 
@@ -101,33 +100,77 @@ def cell_dimension(cell_type: str) -> int | None:
     return None
 
 
-def real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
-    """``values`` as a contiguous float64 array of the same shape (a 0-d array stays 0-d, so
-    that a shape error names its real shape). Raises :class:`TypeError` for complex values
-    (numpy would drop their imaginary parts with only a ``ComplexWarning``), for booleans
-    (numpy would read ``True`` as 1.0: a mask passed where a force or a position was meant)
-    and for values that are not numbers (``None``, strings: numpy would read ``None`` as
-    NaN)."""
-    a = np.asarray(values)
+def _unmasked(values: Any, what: str) -> Any:
+    """``values``, or the data of a numpy masked array none of whose entries is masked.
+    Raises :class:`ValueError` for a masked array with masked entries (``np.asarray`` would
+    take the values under the mask as if they were valid)."""
+    if isinstance(values, np.ma.MaskedArray):
+        mask = np.ma.getmaskarray(values)
+        if mask.any():
+            raise ValueError(
+                f"{what}: masked entries cannot be taken ({int(mask.sum())} of {mask.size} "
+                "masked); fill them first, e.g. values.filled(0.0)"
+            )
+        return values.data
+    return values
+
+
+def _refuse_non_real(a: npt.NDArray[Any], values: Any, what: str) -> None:
+    """Raises :class:`TypeError` when the array ``a`` (made of ``values``) does not hold real
+    numbers: complex, booleans, dates or durations, strings, objects (see :func:`real_array`)."""
     if a.dtype.kind == "c":
         raise TypeError(f"{what} must be real numbers, got an array of {a.dtype}")
     if a.dtype.kind == "b":
         raise TypeError(f"{what} must be real numbers, got booleans")
+    if a.dtype.kind in "Mm":
+        raise TypeError(
+            f"{what} must be real numbers, got an array of {a.dtype} (dates or durations)"
+        )
     if a.dtype.kind in "OUSV":
         shown = "None" if values is None else f"an array of {a.dtype}"
         raise TypeError(f"{what} must be real numbers, got {shown}")
+
+
+#: What an object array of points may not hold (besides None): not real numbers.
+_NOT_REAL = (bool, np.bool_, str, bytes, complex, np.complexfloating, np.datetime64, np.timedelta64)
+
+
+def real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
+    """``values`` as a contiguous float64 array of the same shape (a 0-d array stays 0-d, so
+    that a shape error names its real shape). Raises :class:`TypeError` for complex values
+    (numpy would drop their imaginary parts with only a ``ComplexWarning``), for booleans
+    (numpy would read ``True`` as 1.0: a mask passed where a force or a position was meant),
+    for dates and durations (``datetime64``, ``timedelta64``: numpy would read them as their
+    counts of units) and for values that are not numbers (``None``, strings, numeric ones
+    included: numpy would read ``None`` as NaN, ``"1.0"`` as 1.0); :class:`ValueError` for a
+    numpy masked array with masked entries (a masked array with none is taken as its
+    data)."""
+    values = _unmasked(values, what)
+    a = np.asarray(values)
+    _refuse_non_real(a, values, what)
     return np.asarray(a, dtype=np.float64, order="C")
 
 
 def normalize_points(points: Any) -> npt.NDArray[np.float64]:
-    """``points`` as float64 ``(N, 3)``; 2 columns get z = 0."""
+    """``points`` as float64 ``(N, 3)``; 2 columns get z = 0. Refuses what
+    :func:`real_array` refuses (complex, booleans, dates, strings, objects, masked
+    entries) with the same errors."""
+    points = _unmasked(points, "points")
     try:
-        with warnings.catch_warnings():
-            # numpy drops the imaginary parts of complex points with only this warning
-            warnings.simplefilter("error", np.exceptions.ComplexWarning)
-            p = np.asarray(points, dtype=np.float64)
-    except np.exceptions.ComplexWarning:
-        raise TypeError("points must be real numbers, got complex values") from None
+        raw = np.asarray(points)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"points must be a numeric array of shape (N, 2) or (N, 3): {e}") from e
+    if raw.dtype.kind == "O":
+        # numbers numpy holds as objects (Python ints beyond int64, fractions) are taken as
+        # before; None, booleans, strings, complex values and dates are refused
+        for v in raw.flat:
+            if v is None or isinstance(v, _NOT_REAL):
+                shown = "None" if v is None else f"{type(v).__name__} {v!r:.40}"
+                raise TypeError(f"points must be real numbers, got {shown}")
+    else:
+        _refuse_non_real(raw, points, "points")
+    try:
+        p = np.asarray(raw, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise ValueError(f"points must be a numeric array of shape (N, 2) or (N, 3): {e}") from e
     if p.ndim != 2 or p.shape[1] not in (2, 3):

@@ -254,7 +254,9 @@ class GMap:
         folded, duplicate, overlapping cells, non-conforming interfaces, ...); when an option
         would accept the mesh the message says which and ``MeshError.option`` holds
         ``(name, value)``.
-        Raises ``ValueError`` for an unknown ``pinched`` or ``duplicates`` value.
+        Raises ``ValueError`` for an unknown ``pinched`` or ``duplicates`` value, and
+        ``TypeError`` for points that are not real numbers (booleans, strings, complex
+        values, dates; ``ValueError`` for a masked array with masked entries).
         """
         flat = to_flat(points, cells, kind)
         # points in a plane pad to z = 0: every volume cell would be flat (refused as

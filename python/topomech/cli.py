@@ -385,12 +385,19 @@ def _add_run(sub: Any) -> None:
 
 
 def _count(text: str) -> int:
+    """A ``--steps`` or ``--every`` count: an integer from 0 to what a scene's
+    ``integrator.steps`` and ``output.every`` take (a signed 64-bit integer), refused with
+    the scene's message otherwise."""
+    from topomech.scene._table import _INT_MAX, _too_large
+
     try:
         n = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
     if n < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
+    if n > _INT_MAX:
+        raise argparse.ArgumentTypeError(_too_large(n))
     return n
 
 

@@ -532,11 +532,29 @@ def _constant(c: float) -> Callable[[npt.NDArray[np.float64]], npt.NDArray[np.fl
 
 
 def _real(value: Any) -> float:
-    """``float(value)``, refusing a complex (numpy's complex scalars are Python complex, whose
-    ``float`` drops the imaginary part with only a warning) with :class:`TypeError`."""
+    """``float(value)``, refusing with :class:`TypeError` a complex (numpy's complex scalars
+    are Python complex, whose ``float`` drops the imaginary part with only a warning) and a
+    boolean (``float(True)`` is 1.0: ``pressure=True`` would be 1 Pa)."""
     if isinstance(value, complex):
         raise TypeError("a complex number")
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError("a boolean")
     return float(value)
+
+
+def _has_boolean(values: Any) -> bool:
+    """Whether ``values`` is, or a list or tuple in it holds, a boolean."""
+    if isinstance(values, (bool, np.bool_)):
+        return True
+    return isinstance(values, (list, tuple)) and any(_has_boolean(v) for v in values)
+
+
+def _no_booleans(values: Any, what: str) -> None:
+    """Raises :class:`LoadError` when the list or tuple ``values`` (a force, a displacement)
+    holds a boolean: numpy reads ``[True, 0, 0]`` as ``[1, 0, 0]`` (an array of booleans is
+    refused by :func:`real_array`)."""
+    if _has_boolean(values):
+        raise LoadError(f"{what}: expected 3 numbers, got a boolean in {values!r}")
 
 
 def _density(value: Any, what: str, size: int) -> Density:
@@ -667,6 +685,7 @@ def point_load(
     ``pinched="split"``, a vertex split by a cut) gets ``force`` once, divided equally among
     its rows, so the total does not depend on how the point was split. Rows with no input
     point get ``force`` each. Raises :class:`LoadError` for a bad force or selection."""
+    _no_booleans(force, "force")
     try:
         f = real_array(force, "force").reshape(-1)
     except TypeError as e:
@@ -693,6 +712,8 @@ def held_positions(
     to the new position: this is how a run moves its held vertices step by step (a scene's
     ``[[fix]]`` tables that hold one vertex at two positions are refused before, by
     :func:`check_supports` in :func:`apply_conditions`)."""
+    if displacement is not None:
+        _no_booleans(displacement, "displacement")
     fixed = sim.fixed() | mask
     if displacement is not None:
         x = sim.positions()

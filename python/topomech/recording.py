@@ -268,6 +268,21 @@ class _Material:
         return young, poisson
 
 
+#: The largest float32: a recorded value beyond it is stored as infinite.
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def _as_float32(a: F64) -> npt.NDArray[np.float32]:
+    """``a`` as float32 for the view data, a value beyond float32's range (a displacement of
+    1e300 m, the stress it gives) recorded as +-inf: non-finite, as the viewer and the
+    previews take it (they leave such vertices out), instead of numpy's overflow warning."""
+    a = np.asarray(a, dtype=np.float64)
+    beyond = np.abs(a) > _F32_MAX  # (NaN compares False: stays NaN)
+    if beyond.any():
+        a = np.where(beyond, np.copysign(np.inf, a), a)
+    return a.astype(np.float32)
+
+
 def _von_mises(sigma: F64) -> F64:
     s = sigma
     return np.asarray(
@@ -571,10 +586,13 @@ class Recorder:
             idx = np.array(rows, dtype=np.int64)
             rest = topo.rest[idx]
             young, poisson = self.material.of(rest.mean(axis=1))
-            vm = element_stress(kind, rest, x[idx], young, poisson, self.strain)
+            with np.errstate(over="ignore", invalid="ignore"):
+                # positions beyond the float range give an infinite or NaN stress: recorded
+                # as non-finite (as those positions are)
+                vm = element_stress(kind, rest, x[idx], young, poisson, self.strain)
             np.add.at(total, idx, np.repeat(vm[:, None], idx.shape[1], axis=1))
             np.add.at(count, idx, 1.0)
-        return (total / np.maximum(count, 1.0)).astype(np.float32)
+        return _as_float32(total / np.maximum(count, 1.0))
 
     @property
     def n_frames(self) -> int:
@@ -589,8 +607,11 @@ class Recorder:
         # everything is computed before anything is recorded: an interruption (Ctrl-C) in
         # between must not leave a frame without its fields (bytes written past the last
         # frame recorded are cut off by write_view)
-        pos = (x - self.origin).astype(np.float32)
-        values = [np.linalg.norm(x - topo.rest, axis=1).astype(np.float32)]
+        pos = _as_float32(x - self.origin)
+        with np.errstate(over="ignore"):
+            # a displacement beyond 1e154 squares to inf: recorded as inf, as in float32
+            disp = np.linalg.norm(x - topo.rest, axis=1)
+        values = [_as_float32(disp)]
         if "von_mises" in self.fields:
             values.append(self._stress(topo, x))
         refs = self._put([(pos, "f4")] + [(v, "f4") for v in values])
@@ -716,7 +737,12 @@ class Recorder:
             try:
                 for t, w in zip((nodes + 1) / 2, weights / 2):
                     self.sim.set_positions(rest + t * d)
-                    self._elastic -= float(w * (self._elastic_forces() * d).sum())
+                    # a displacement far beyond any material's range (1e300 m) does work
+                    # beyond the float range: an infinite or NaN energy, which the summary
+                    # and the plots leave out
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        work = float(w * (self._elastic_forces() * d).sum())
+                    self._elastic -= work
             finally:
                 self.sim.set_positions(x0)
                 self.sim.set_velocities(v0)

@@ -420,10 +420,11 @@ class FrameRenderer:
         n_faces = sum(len(g) for g in groups)
         outline = False
         if groups and n_faces <= 4000:
-            seg = np.concatenate(
-                [np.linalg.norm(xy[g[:, 0]] - xy[g[:, 1]], axis=1) for g in groups]
-            )
-            with np.errstate(invalid="ignore"):
+            # (non-finite positions, recorded for values beyond float32, give NaN lengths)
+            with np.errstate(over="ignore", invalid="ignore"):
+                seg = np.concatenate(
+                    [np.linalg.norm(xy[g[:, 0]] - xy[g[:, 1]], axis=1) for g in groups]
+                )
                 outline = bool(np.nanmedian(seg) / ss > 12) if np.isfinite(seg).any() else False
         coords: list[list[float]] = []
         fills: list[int] = []
@@ -431,9 +432,11 @@ class FrameRenderer:
         depths: list[F64] = []
         for idx in groups:
             p = x[idx]  # (F, n, 3)
-            q = p - p.mean(axis=1, keepdims=True)
-            normal = np.cross(q, np.roll(q, -1, axis=1)).sum(axis=1)
-            norm = np.linalg.norm(normal, axis=1)
+            # faces with a non-finite vertex get NaN normals here, and are left out by ok
+            with np.errstate(over="ignore", invalid="ignore"):
+                q = p - p.mean(axis=1, keepdims=True)
+                normal = np.cross(q, np.roll(q, -1, axis=1)).sum(axis=1)
+                norm = np.linalg.norm(normal, axis=1)
             ok = np.isfinite(p).all(axis=(1, 2)) & (norm > 0)
             if not ok.any():
                 continue

@@ -176,6 +176,27 @@ def _index(v: Any, what: str) -> Any:
         return v
 
 
+#: The most steps one :meth:`Simulation.step` call takes: the kernel's count is a signed
+#: 64-bit integer (as a scene's ``integrator.steps``).
+_MAX_STEPS = 2**63 - 1
+
+
+def _step_count(n: Any) -> int:
+    """``n`` as a number of steps for :meth:`Simulation.step`: an int (numpy's included)
+    from 0 to :data:`_MAX_STEPS`. A bool is refused (``step(True)`` would run one step)."""
+    if isinstance(n, (bool, np.bool_)):
+        raise TypeError(f"n must be an int (a number of steps), got {n!r}")
+    try:
+        k = operator.index(n)
+    except TypeError:
+        raise TypeError(f"n must be an int (a number of steps), got {type(n).__name__}") from None
+    if k < 0:
+        raise ValueError(f"n must be >= 0, got {k}")
+    if k > _MAX_STEPS:
+        raise ValueError(f"n must be at most {_MAX_STEPS} (a 64-bit integer), got {k}")
+    return k
+
+
 def _csr(parts: tuple[Any, Any, Any, int]) -> scipy.sparse.csr_matrix:
     """A ``scipy.sparse.csr_matrix`` from the kernel's ``(indptr, indices, data, n)``."""
     import scipy.sparse
@@ -325,7 +346,10 @@ class Simulation:
         residual and the tolerance; :meth:`solver_report` the details). The state is then the
         one before the failed step. An ``implicit_euler`` step whose ``cg``/``pcg`` stops at
         ``max_iterations`` above its tolerance is taken with the approximate solution and
-        raises one :class:`topomech.SolverWarning` for the call."""
+        raises one :class:`topomech.SolverWarning` for the call. ``n`` is an int from 0 to
+        2**63 - 1 (:class:`TypeError` for another type, a bool included;
+        :class:`ValueError` outside that range)."""
+        n = _step_count(n)
         report = self._core.solver_report()
         before = report["not_converged_steps"] if report is not None else 0
         self._core.step(n)
@@ -485,8 +509,9 @@ class Simulation:
         ``static`` integrator. They replace the loads set before. :mod:`topomech.loads` makes
         them from point forces, tractions and pressures. When a cut or fracture splits a
         vertex, its load is divided equally between the copies (the total is kept). Raises
-        :class:`ValueError` for a wrong shape or a non-finite value (naming the row),
-        :class:`TypeError` for complex values."""
+        :class:`ValueError` for a wrong shape, a non-finite value (naming the row) or masked
+        entries (of a numpy masked array), :class:`TypeError` for values that are not real
+        numbers (complex, booleans, dates, strings)."""
         self._core.set_external_forces(real_array(forces, "external forces"))
 
     def external_forces(self) -> npt.NDArray[np.float64]:
@@ -539,12 +564,14 @@ class Simulation:
 
     def set_positions(self, positions: Any) -> None:
         """Sets the positions from an array-like ``(V, 3)`` of finite real numbers (complex
-        ones raise :class:`TypeError`)."""
+        values, booleans, dates and strings raise :class:`TypeError`; masked entries of a
+        numpy masked array :class:`ValueError`)."""
         self._core.set_positions(real_array(positions, "positions"))
 
     def set_velocities(self, velocities: Any) -> None:
         """Sets the velocities from an array-like ``(V, 3)`` of finite real numbers (complex
-        ones raise :class:`TypeError`)."""
+        values, booleans, dates and strings raise :class:`TypeError`; masked entries of a
+        numpy masked array :class:`ValueError`)."""
         self._core.set_velocities(real_array(velocities, "velocities"))
 
     def vertex_field(self, name: str) -> npt.NDArray[Any]:

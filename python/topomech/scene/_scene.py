@@ -6,6 +6,7 @@ of :mod:`topomech.scene`, and finding and reading scene files (:func:`load_scene
 
 from __future__ import annotations
 
+import difflib
 import re
 import sys
 import warnings
@@ -137,7 +138,7 @@ class Scene:
                     raise self._fail()(
                         f"event[{i}].start",
                         f"t = {t:g} is not before the end of the run (t = {end:g}: "
-                        f"{self.steps} steps of dt {self.dt:g}): the blade would never move",
+                        f"{_n_steps(self.steps)} of dt {self.dt:g}): the blade would never move",
                     )
                 stop = float(e["end"])
                 if stop > end + 1e-9 * self.dt:
@@ -145,8 +146,9 @@ class Scene:
                     warnings.warn(
                         SceneWarning(
                             f"{self._fail().source}: event[{i}].end: t = {stop:g} is after the end "
-                            f"of the run (t = {end:g}: {self.steps} steps of dt {self.dt:g}): the "
-                            "blade stops part-way and cuts only what it crossed by then"
+                            f"of the run (t = {end:g}: {_n_steps(self.steps)} of dt "
+                            f"{self.dt:g}): the blade stops part-way and cuts only what it "
+                            "crossed by then"
                         ),
                         stacklevel=2,
                     )
@@ -155,8 +157,8 @@ class Scene:
             if t > end + 1e-9 * self.dt:
                 raise self._fail()(
                     f"event[{i}].time",
-                    f"t = {t:g} is after the end of the run (t = {end:g}: {self.steps} steps "
-                    f"of dt {self.dt:g}): the event would never happen",
+                    f"t = {t:g} is after the end of the run (t = {end:g}: "
+                    f"{_n_steps(self.steps)} of dt {self.dt:g}): the event would never happen",
                 )
 
     def with_steps(self, steps: int | None = None, every: int | None = None) -> Scene:
@@ -287,7 +289,15 @@ def _output_fields(t: _Table, fail: _Fail) -> tuple[str, ...]:
 
 def parse_scene(text: str, path: PathLike | None = None, *, base: PathLike | None = None) -> Scene:
     """A scene from TOML text. ``path`` names the scene in messages (and is its location:
-    mesh files are relative to its directory, or to ``base``, or to the working directory)."""
+    mesh files are relative to its directory, or to ``base``, or to the working directory).
+    Raises :class:`TypeError` when ``text`` is not a str (bytes included: decode them first)."""
+    if isinstance(text, (bytes, bytearray, memoryview)):
+        raise TypeError(
+            f"text: parse_scene takes the TOML text as str, got {type(text).__name__}: decode "
+            "it first, e.g. data.decode('utf-8')"
+        )
+    if not isinstance(text, str):
+        raise TypeError(f"text: parse_scene takes the TOML text as str, got {type(text).__name__}")
     p = Path(path) if path is not None else None
     fail = _Fail(str(p) if p is not None else "<scene>")
     base_dir = Path(base) if base is not None else (p.parent if p is not None else None)
@@ -436,6 +446,11 @@ def _solver(integ: _Table, kind: str, fail: _Fail) -> dict[str, Any]:
     return out
 
 
+def _n_steps(n: int) -> str:
+    """``1 step``, ``n steps``."""
+    return f"{n} step" if n == 1 else f"{n} steps"
+
+
 def _or_names(names: tuple[str, ...]) -> str:
     return " and ".join(repr(n) for n in names)
 
@@ -477,7 +492,10 @@ def find_scene(spec: PathLike) -> Path:
     name = p.name[: -len(".toml")] if p.name.endswith(".toml") else p.name
     if p.parent == Path() and name in shipped:
         return shipped[name]
+    close = difflib.get_close_matches(name, shipped, n=3) if p.parent == Path() else []
+    hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
     raise missing_file(
         p,
-        f"no such scene file, and no shipped scene of that name (shipped: {', '.join(shipped)})",
+        f"no such scene file, and no shipped scene of that name{hint} "
+        f"(shipped: {', '.join(shipped)})",
     )
