@@ -10,6 +10,11 @@ impl Simulation {
     /// position or velocity) the state before the step is restored and an error names the
     /// step and the vertex.
     pub fn step(&mut self) -> Result<(), PhysicsError> {
+        if self.steps == 0 {
+            // the body may have moved since the set-up checked it (a scene's initial
+            // displacement, `set_positions`)
+            self.check_ground()?;
+        }
         let pos = self.id("position")?;
         let vel = self.id("velocity")?;
         // An explicit step without ground contact writes positions and velocities in one

@@ -1,7 +1,7 @@
 //! Building a simulation: the rules of its models and the glue of a step (accumulation,
 //! fixed and prescribed vertices, material regions, ground), and the set-up they run.
 
-use topomech_gmap::{ColumnMut, Dart, GMap, OrbitType, Value};
+use topomech_gmap::{ColumnMut, ColumnRef, Dart, GMap, OrbitType, Value};
 use topomech_rules::value::BinOp;
 use topomech_rules::{ast, build, parser, ApplyError, Params, RuleSet, Ty, Val};
 
@@ -695,11 +695,13 @@ fn open_cell(g: &GMap) -> Option<String> {
     ))
 }
 
-/// Refuses a ground plane (`p`, unit normal `n`) with a vertex of `g` on its far side at the
-/// start, by more than 1e-9 of the object's bounding-box diagonal (rounding of a body resting
-/// on the plane passes). The first step would put every such vertex back onto the plane at
-/// once, crushing the elements between into it, with no error (QA: a box through the ground
-/// was flattened to volumes of 1e-19 in one step).
+/// Refuses a ground plane (`p`, unit normal `n`) with a free vertex of `g` (not `fixed`: a
+/// held vertex is never projected) on its far side, by more than the larger of 1e-9 of the
+/// free vertices' bounding-box diagonal and 64 ulps of the largest coordinate (of the
+/// vertices and of `p`: the rounding of the plane's equation far from the origin). The first
+/// step would put every such vertex back onto the plane at once, crushing the elements
+/// between into it, with no error (QA: a box through the ground was flattened to volumes of
+/// 1e-19 in one step). A body resting on the plane to rounding passes.
 fn below_ground(g: &GMap, p: [f64; 3], n: [f64; 3]) -> Result<(), PhysicsError> {
     let Some(id) = g.embedding_id("position") else {
         return Ok(());
@@ -708,18 +710,27 @@ fn below_ground(g: &GMap, p: [f64; 3], n: [f64; 3]) -> Result<(), PhysicsError> 
     let Some(col) = e.real_column().filter(|c| c.len() == 3 * e.n_slots()) else {
         return Ok(());
     };
-    // the slots in use (a slot a removed orbit released keeps its last value)
+    let fixed = g.embedding_id("fixed").map(|f| g.embedding(f));
+    // the slots of free vertices in use (a slot a removed orbit released keeps its last
+    // value)
     let mut used = vec![false; e.n_slots()];
     for d in g.darts() {
-        used[e.slot(d)] = true;
+        let held = fixed.is_some_and(
+            |f| matches!(f.column(), ColumnRef::Bool(b) if b.get(f.slot(d)) == Some(&true)),
+        );
+        if !held {
+            used[e.slot(d)] = true;
+        }
     }
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    let mut big = p.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     let mut deepest: Option<(f64, [f64; 3])> = None;
     for (x, _) in col.chunks_exact(3).zip(&used).filter(|(_, u)| **u) {
         let x = [x[0], x[1], x[2]];
         for k in 0..3 {
             lo[k] = lo[k].min(x[k]);
             hi[k] = hi[k].max(x[k]);
+            big = big.max(x[k].abs());
         }
         let d = (x[0] - p[0]) * n[0] + (x[1] - p[1]) * n[1] + (x[2] - p[2]) * n[2];
         if deepest.is_none_or(|(m, _)| d < m) {
@@ -727,23 +738,19 @@ fn below_ground(g: &GMap, p: [f64; 3], n: [f64; 3]) -> Result<(), PhysicsError> 
         }
     }
     let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+    let tol = (1e-9 * diag).max(64.0 * f64::EPSILON * big);
+    // (+ 0.0: no "-0" in the message, from a normal opposite to gravity)
+    let z = |v: [f64; 3]| [v[0] + 0.0, v[1] + 0.0, v[2] + 0.0];
     match deepest {
-        // (+ 0.0: no "-0" in the message, from a normal opposite to gravity)
-        Some((d, x)) if d < -1e-9 * diag => Err(PhysicsError::Config(format!(
-            "ground: the vertex at ({}, {}, {}) starts {} below the plane through ({}, {}, {}) \
-             with normal ({}, {}, {}); a body must start on the side the normal points to (its \
-             first step would put every vertex below onto the plane at once, crushing the \
-             elements between): move the body or the ground",
-            x[0] + 0.0,
-            x[1] + 0.0,
-            x[2] + 0.0,
+        Some((d, x)) if d < -tol => Err(PhysicsError::Config(format!(
+            "ground: the free vertex at {:?} is {:?} below the plane through {:?} with normal \
+             {:?}; a body must start on the side the normal points to (its first step would \
+             put every free vertex below onto the plane at once, crushing the elements \
+             between): move the body or the ground, or hold those vertices",
+            z(x),
             -d,
-            p[0] + 0.0,
-            p[1] + 0.0,
-            p[2] + 0.0,
-            n[0] + 0.0,
-            n[1] + 0.0,
-            n[2] + 0.0
+            z(p),
+            z(n)
         ))),
         _ => Ok(()),
     }
@@ -1089,10 +1096,6 @@ impl Simulation {
                 "the map has no 'position' embedding".into(),
             ));
         }
-        if let Some(ground) = &cfg.ground {
-            let (p, n) = ground.plane(cfg.gravity)?;
-            below_ground(&g, p, n)?;
-        }
         // the data the simulation itself reads; each rule adds what it uses when it first runs
         rules.prepare_named(
             &mut g,
@@ -1301,7 +1304,20 @@ impl Simulation {
                 masses[v]
             )));
         }
+        // after the supports: a held vertex is never projected, so it may start below
+        sim.check_ground()?;
         Ok(sim)
+    }
+
+    /// Refuses a ground plane with a free vertex on its far side now ([`below_ground`]): run
+    /// at set-up and again before the first step, when a scene's initial displacement or a
+    /// user's `set_positions` may have moved the body since.
+    pub(crate) fn check_ground(&self) -> Result<(), PhysicsError> {
+        let Some(ground) = &self.cfg.ground else {
+            return Ok(());
+        };
+        let (p, n) = ground.plane(self.cfg.gravity)?;
+        below_ground(&self.g, p, n)
     }
 }
 

@@ -180,9 +180,33 @@ fn a_body_through_the_ground_is_refused_at_set_up() {
     .unwrap_err();
     let msg = e.to_string();
     assert!(
-        msg.contains("ground: the vertex at (") && msg.contains("starts 0.2 below the plane"),
+        msg.contains("ground: the free vertex at [") && msg.contains("is 0.2 below the plane"),
         "{msg}"
     );
+    // held vertices are never projected: those below may start there
+    sim(&mesh, springs(), |c| {
+        c.gravity = [0.0, 0.0, -9.81];
+        c.ground = Some(Ground::Height(0.2));
+        c.fixed = vec!["z < 0.3".into()];
+    })
+    .unwrap();
+    // moved below after the set-up (a scene's initial displacement, set_positions): the
+    // first step refuses, writing nothing
+    let mut s = sim(&mesh, springs(), |c| {
+        c.gravity = [0.0, 0.0, -9.81];
+        c.ground = Some(Ground::Height(0.0));
+    })
+    .unwrap();
+    let moved: Vec<[f64; 3]> = s
+        .vertex_vec3("position")
+        .unwrap()
+        .iter()
+        .map(|p| [p[0], p[1], p[2] - 0.1])
+        .collect();
+    s.set_vertex_vec3("position", &moved).unwrap();
+    let e = s.step().unwrap_err().to_string();
+    assert!(e.contains("below the plane"), "{e}");
+    assert_eq!(s.vertex_vec3("position").unwrap(), moved);
     // resting on it: accepted, also on a plane through a bottom edge with a tilted normal
     sim(&mesh, springs(), |c| {
         c.gravity = [0.0, 0.0, -9.81];
@@ -207,9 +231,52 @@ fn a_body_through_the_ground_is_refused_at_set_up() {
     })
     .unwrap_err();
     assert!(
-        e.to_string().contains("ground: the vertex at (0, 0, 0)"),
+        e.to_string()
+            .contains("ground: the free vertex at [0.0, 0.0, 0.0]"),
         "{e}"
     );
+    // far from the origin, a tilted plane's equation rounds at the coordinates' scale, not
+    // the body's (QA: a 1 mm body resting on a plane through (1e6, -1e6, 5e5) was refused)
+    let small = cuboid([1, 1, 1], [1e-3, 1e-3, 1e-3], BoxElement::Tetra);
+    let mut seed = 12345u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for _ in 0..30 {
+        let (mut g, _) = build(&small, &BuildOptions::default()).unwrap();
+        let nn = [rnd(), rnd(), 1.0];
+        let l = (nn[0] * nn[0] + nn[1] * nn[1] + 1.0).sqrt();
+        let u = nn.map(|v| v / l);
+        let p0 = [2e6 * rnd(), 2e6 * rnd(), 1e6 * rnd()];
+        // each vertex x put at p0 + x moved along u so that its height over the plane is
+        // its z (the bottom face on the plane, to rounding); every dart read first (the
+        // darts of a vertex share its value)
+        let id = g.embedding_id("position").unwrap();
+        let moved: Vec<_> = g
+            .darts()
+            .map(|d| {
+                let x = g.real(id, d).to_vec();
+                let on = [p0[0] + x[0], p0[1] + x[1], p0[2] + x[2]];
+                let h = (on[0] - p0[0]) * u[0] + (on[1] - p0[1]) * u[1] + (on[2] - p0[2]) * u[2];
+                (d, [0, 1, 2].map(|k| on[k] - (h - x[2]) * u[k]))
+            })
+            .collect();
+        for (d, y) in moved {
+            g.set_real(id, d, &y).unwrap();
+        }
+        let cfg = Config {
+            models: springs(),
+            ground: Some(Ground::Plane {
+                point: p0,
+                normal: Some(nn),
+            }),
+            ..Config::default()
+        };
+        Simulation::new(g, cfg).unwrap();
+    }
 }
 
 /// A map with an open element, valid as a G-map, is refused at set-up naming the free dart
