@@ -711,18 +711,32 @@ def held_positions(
     (their velocity set to zero), keeping the rows already held. A row held already is moved
     to the new position: this is how a run moves its held vertices step by step (a scene's
     ``[[fix]]`` tables that hold one vertex at two positions are refused before, by
-    :func:`check_supports` in :func:`apply_conditions`)."""
-    if displacement is not None:
-        _no_booleans(displacement, "displacement")
+    :func:`check_supports` in :func:`apply_conditions`). Raises :class:`LoadError` for a
+    displacement that is not 3 finite real numbers, having changed nothing."""
+    d = None if displacement is None else _displacement(displacement)
     fixed = sim.fixed() | mask
-    if displacement is not None:
+    if d is not None:
         x = sim.positions()
-        x[mask] = sim.rest_positions()[mask] + np.asarray(displacement, dtype=np.float64)
+        x[mask] = sim.rest_positions()[mask] + d
         sim.set_positions(x)
         v = sim.velocities()
         v[mask] = 0.0
         sim.set_velocities(v)
     sim.set_fixed(fixed)
+
+
+def _displacement(displacement: Any) -> npt.NDArray[np.float64]:
+    """A held displacement as an array of shape ``(3,)``: exactly 3 finite real numbers
+    (booleans refused: numpy reads ``[True, 0, 0]`` as ``[1, 0, 0]``; one number or 2 are
+    refused, not broadcast). Raises :class:`LoadError` naming it."""
+    _no_booleans(displacement, "displacement")
+    try:
+        d = real_array(displacement, "displacement").reshape(-1)
+    except (TypeError, ValueError) as e:
+        raise LoadError(str(e)) from None
+    if d.shape != (3,) or not np.all(np.isfinite(d)):
+        raise LoadError(f"displacement: expected 3 finite numbers, got {displacement!r}")
+    return d
 
 
 #: How a message refusing two holds of one vertex ends.
@@ -775,7 +789,10 @@ def check_supports(
             except LoadError as e:
                 raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
         out.append(mask)
-        at = rest if disp is None else rest + np.asarray(disp, dtype=np.float64)
+        try:
+            at = rest if disp is None else rest + _displacement(disp)
+        except LoadError as e:
+            raise LoadError(str(e), key) from e
         both = mask & (holder >= 0)
         differ = both & np.any(held_at != at, axis=1)
         if differ.any():
@@ -821,8 +838,10 @@ def apply_conditions(
     bc = conditions
     held: list[Support] = list(bc.get("held", []))
     masks: dict[str, npt.NDArray[np.bool_]] = {}
-    for key, sel, _ in held:
+    for key, sel, disp in held:
         try:
+            if disp is not None:
+                _displacement(disp)
             masks[key] = select_vertices(sim, groups=groups, **sel)
         except LoadError as e:
             raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e

@@ -45,7 +45,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _core
-from topomech._cells import real_array
+from topomech._cells import _unmasked, real_array
 from topomech._core import DivergenceError, SimulationError
 from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_array
 from topomech._solver_log import SolverWarning
@@ -218,20 +218,36 @@ def _check_dimensions(models: Any, gmap: Any) -> None:
             )
 
 
-def _check_as_scene(cfg: Mapping[str, Any], gmap: Any) -> None:
+def _check_as_scene(cfg: Mapping[str, Any], gmap: Any, model_files: Any = None) -> None:
     """Refuses, with ``ValueError`` naming the argument (``models[0].stiffness: must be >=
     0, got -5.0``), what a scene refuses and the kernel does not: a shipped model's
     parameter out of its range, a region that sets no material value. The checks are the
-    scene's own (:mod:`topomech.scene`), so that the two cannot drift apart."""
+    scene's own (:mod:`topomech.scene`), so that the two cannot drift apart. ``model_files``:
+    the user's rule files given with the configuration (:func:`_model_files_arg`); a shipped
+    model's name that they declare is the user's model, left to the kernel."""
     from topomech.scene._material import check_region_args
-    from topomech.scene._models import check_model_args
+    from topomech.scene._models import check_model_args, user_model_names
 
     models, regions = cfg.get("models"), cfg.get("regions")
     if isinstance(models, (list, tuple)):
         dim = getattr(gmap, "dimension", None)
-        check_model_args(models, dim if isinstance(dim, int) else None)
+        user = user_model_names(models, model_files)
+        check_model_args(models, dim if isinstance(dim, int) else None, user)
     if isinstance(regions, (list, tuple)):
         check_region_args(regions)
+
+
+def _model_files_arg(*wheres: Mapping[str, Any] | None) -> Any:
+    """The ``model_files`` given in ``config`` and the keyword arguments together: None when
+    neither gives one, else their pairs in one list (or the first value that is not a list
+    or a tuple, which the kernel refuses)."""
+    found = [w["model_files"] for w in wheres if w is not None and w.get("model_files") is not None]
+    if not found:
+        return None
+    for f in found:
+        if not isinstance(f, (list, tuple)):
+            return f
+    return [pair for f in found for pair in f]
 
 
 class Simulation:
@@ -306,11 +322,12 @@ class Simulation:
     ) -> None:
         cfg = dict(config) if config is not None else None
         _check_solver_keys({**(cfg or {}), **kwargs})
+        given_files = _model_files_arg(cfg, kwargs)
         for where in (cfg, kwargs):
             if where is not None and "max_iterations" in where:
                 where["max_iterations"] = _index(where["max_iterations"], "max_iterations")
             if where is not None:
-                _check_as_scene(where, gmap)
+                _check_as_scene(where, gmap, given_files)
             if where is not None and isinstance(where.get("models"), (list, tuple)):
                 _check_dimensions(where["models"], gmap)
                 models, files = model_files_of(list(where["models"]))
@@ -542,8 +559,9 @@ class Simulation:
     def set_fixed(self, mask: Any) -> None:
         """Holds the rows where ``mask`` (bool ``(V,)``) is true in place, frees the others.
         Raises :class:`ValueError` for a wrong shape and :class:`SimulationError` when it
-        would free a vertex without mass (naming them)."""
-        a = np.asarray(mask)
+        would free a vertex without mass (naming them); :class:`ValueError` also for masked
+        entries of a numpy masked array."""
+        a = np.asarray(_unmasked(mask, "mask"))
         if a.dtype != np.bool_:
             raise TypeError(f"mask must be an array of bool, got dtype {a.dtype}")
         self._core.set_fixed(np.asarray(a, order="C"))
@@ -556,8 +574,9 @@ class Simulation:
         does not hold yet is added. Raises :class:`SimulationError` for an unknown, derived or
         non-vertex embedding or non-finite values (naming the rows), :class:`TypeError` for
         booleans given for a number embedding or numbers for a bool one, and
-        :class:`ValueError` for a wrong shape (naming the shape the embedding's type takes)."""
-        a = np.asarray(values)
+        :class:`ValueError` for a wrong shape (naming the shape the embedding's type takes)
+        or masked entries of a numpy masked array."""
+        a = np.asarray(_unmasked(values, f"values for {name!r}"))
         if a.dtype != np.bool_:
             a = real_array(a, f"values for {name!r}")
         self._core.set_vertex_field(name, np.asarray(a, order="C"))

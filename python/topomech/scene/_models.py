@@ -9,12 +9,13 @@ from __future__ import annotations
 import difflib
 import math
 import numbers
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from topomech import _core
 from topomech._core import RuleError, SceneError
 from topomech.models import Model, shipped_models
 from topomech.models import model_files_of as _model_files_pairs
@@ -123,22 +124,62 @@ def _as_read(v: Any, ty: str) -> float | list[float] | None:
     return None if any(x is None for x in items) else [x for x in items if x is not None]
 
 
-def check_model_args(models: Sequence[Any], dim: int | None) -> None:
+def user_model_names(models: Sequence[Any], model_files: Any) -> set[str] | None:
+    """The names of the models the user's rule files declare: those of ``model_files``
+    (``(file, text)`` pairs given to :class:`topomech.Simulation`) and of the
+    :class:`topomech.Model` objects loaded from a file among ``models``. None when a file of
+    ``model_files`` cannot be read as rule files (the kernel refuses it with its own
+    message; which names it declares is then unknown)."""
+    names = {m.name for m in models if isinstance(m, Model) and m.file is not None}
+    if model_files is None:
+        return names
+    if not isinstance(model_files, (list, tuple)):
+        return None
+    for pair in model_files:
+        if (
+            not isinstance(pair, (list, tuple))
+            or len(pair) != 2
+            or not all(isinstance(x, str) for x in pair)
+        ):
+            return None
+        file, text = pair
+        try:
+            # as Model.load_all reads a file: one without a dimension line serves both
+            dimension = None if _core.RuleSet.file_dimensions(text) else 3
+            rules = _core.RuleSet.from_model_sources([(file, text)], dimension)
+            names |= {str(m["name"]) for m in rules.models() if m["file"] == file}
+        except (RuleError, ValueError, TypeError):  # the kernel refuses it with its own message
+            return None
+    return names
+
+
+def check_model_args(
+    models: Sequence[Any], dim: int | None, user_names: Collection[str] | None = ()
+) -> None:
     """Refuses, with ``ValueError("models[i].param: problem")``, a parameter value given to
     :class:`topomech.Simulation` for a shipped model (a dict ``{"kind": ..., param:
-    value}``) that a scene's ``[[model]]`` table refuses (:func:`_shipped_param`: a negative
-    stiffness or damping, ...) and the kernel does not. Only the values the kernel reads as
-    numbers of the parameter's type are checked; the others (a wrong type, a number that is
-    not finite; an unknown kind or key, a material key: then the whole model) are left to
-    the kernel, which refuses them with its own message. ``dim``: the map's dimension (None:
-    any). The user's models (:class:`topomech.Model`, a kind declared in ``model_files``)
-    are checked as a scene checks them, by the kernel."""
+    value}``, or a :class:`topomech.Model` from :meth:`~topomech.Model.shipped`) that a
+    scene's ``[[model]]`` table refuses (:func:`_shipped_param`: a negative stiffness or
+    damping, ...) and the kernel does not. Only the values the kernel reads as numbers of
+    the parameter's type are checked; the others (a wrong type, a number that is not finite;
+    an unknown kind or key, a material key: then the whole model) are left to the kernel,
+    which refuses them with its own message. ``dim``: the map's dimension (None: any). The
+    user's models (:class:`topomech.Model` loaded from a file, a kind declared in
+    ``model_files``: ``user_names``, see :func:`user_model_names`; None when unknown, then
+    nothing is checked) are checked as a scene checks them, by the kernel, also when one has
+    the name of a shipped model (it replaces that model)."""
+    if user_names is None:
+        return
     fail = _ArgFail()
     for i, spec in enumerate(models):
+        if isinstance(spec, Model):
+            if spec.file is not None:
+                continue
+            spec = spec.config_entry()
         if not isinstance(spec, Mapping):
             continue
         kind = spec.get("kind")
-        if not isinstance(kind, str) or not _model_entries(kind, dim):
+        if not isinstance(kind, str) or kind in user_names or not _model_entries(kind, dim):
             continue
         params = [p for p in _takes(kind, dim) if p not in MATERIAL_KEYS_IN_MODEL]
         if any(k != "kind" and k not in params for k in spec):

@@ -202,6 +202,11 @@ class Scene:
             sim = Simulation(g, self.config)
         except SimulationError as e:
             raise fail(self._key_of(str(e)), f"cannot build the simulation: {e}") from e
+        except (ValueError, TypeError) as e:
+            # an argument Simulation's own checks refuse ("models[0].stiffness: ..."): named
+            # by the scene's key when the message names the argument
+            key, problem = _arg_key(str(e))
+            raise fail(key, f"cannot build the simulation: {problem}") from e
         if any(self.conditions.get(k) for k in ("held", "loads", "initial")):
             groups = self.mesh_groups() if self._uses_groups() else None
             try:
@@ -262,6 +267,22 @@ _KERNEL_WHAT = {
     "material region": "region",
     "model": "model",
 }
+
+
+#: The argument of :class:`Simulation` a ``ValueError`` of its checks starts with, and the
+#: scene's key for it.
+_ARG_KEY = re.compile(r"^(models|regions)\[(\d+)\]((?:\.\w+)?): ")
+_ARG_TABLE = {"models": "model", "regions": "material.region"}
+
+
+def _arg_key(message: str) -> tuple[str | None, str]:
+    """The scene's key a refusal of :class:`Simulation`'s arguments names (``models[0].k:
+    ...`` is ``model[0].k``) and the rest of the message; None and the whole message when it
+    names none."""
+    m = _ARG_KEY.match(message)
+    if m is None:
+        return None, message
+    return f"{_ARG_TABLE[m.group(1)]}[{m.group(2)}]{m.group(3)}", message[m.end() :]
 
 
 def _default_every(steps: int) -> int:
