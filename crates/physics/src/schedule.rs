@@ -663,8 +663,6 @@ pub(crate) enum PredicateAt {
     Side,
 }
 
-/// The mean of the distinct values of the vec3 embedding `name` over the orbit `orbit` of
-/// `d` (what `mean` of the rule language gives); `None` where the map lacks it.
 /// Why `g` cannot be simulated as a closed mesh, if so: a dart free at a dimension below the
 /// map's (a face whose boundary is open, `alpha_0` or `alpha_1` free, or in 3D a volume
 /// whose boundary surface is open, `alpha_2` free). Such a map is a valid G-map, but its
@@ -681,12 +679,29 @@ fn open_cell(g: &GMap) -> Option<String> {
         (3, _) => ("face whose boundary is open", OrbitType::volume()),
         _ => ("face whose boundary is open", OrbitType::face(2)),
     };
-    let at = orbit_mean(g, d, elem, "position").map_or_else(String::new, |c| {
-        format!(
-            " (the element whose centroid is ({}, {}, {}))",
-            c[0], c[1], c[2]
-        )
-    });
+    // the mean of the element's distinct points (an open corner splits its vertex into two
+    // orbits at one point: counted once)
+    let mut points: Vec<[u64; 3]> = Vec::new();
+    if let Some(id) = g.embedding_id("position") {
+        let mut marks = topomech_gmap::Marks::with_capacity(g.capacity());
+        g.visit_orbit(d, elem, &mut marks, |x| {
+            let p = g.real(id, x);
+            if let [a, b, c] = p {
+                let key = [a.to_bits(), b.to_bits(), c.to_bits()];
+                if !points.contains(&key) {
+                    points.push(key);
+                }
+            }
+        });
+    }
+    let at = if points.is_empty() {
+        String::new()
+    } else {
+        let c = [0, 1, 2].map(|k| {
+            points.iter().map(|q| f64::from_bits(q[k])).sum::<f64>() / points.len() as f64
+        });
+        format!(" (the element whose centroid is {c:?})")
+    };
     Some(format!(
         "the map has a {what}: dart {} is free at alpha_{i}{at}; a simulation needs closed elements \
          (every alpha_0 and alpha_1{} linked): sew it, or build the map from a mesh",
@@ -756,6 +771,8 @@ fn below_ground(g: &GMap, p: [f64; 3], n: [f64; 3]) -> Result<(), PhysicsError> 
     }
 }
 
+/// The mean of the distinct values of the vec3 embedding `name` over the orbit `orbit` of
+/// `d` (what `mean` of the rule language gives); `None` where the map lacks it.
 fn orbit_mean(g: &GMap, d: Dart, orbit: OrbitType, name: &str) -> Option<[f64; 3]> {
     let id = g.embedding_id(name)?;
     if !g.is_alive(d) {
