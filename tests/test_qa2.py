@@ -15,6 +15,7 @@ import pytest
 
 import topomech
 from topomech import GMap, _core, cli
+from topomech._core import SceneError
 from topomech.loads import LoadError, apply_conditions, held_positions
 from topomech.scene import parse_scene
 
@@ -173,3 +174,12 @@ def test_set_vertex_field_and_set_fixed_refuse_masked_entries() -> None:
     sim.set_fixed(np.ma.masked_array(ok, mask=False))
     assert sim.fixed()[0]
     assert not sim.fixed()[1:].any()
+
+
+def test_an_unknown_model_kind_suggests_the_closest() -> None:
+    """``kind = "neo_hookean"`` said only that the model is unknown (QA)."""
+    text = SCENE.format(model='kind = "neo_hookean"')
+    with pytest.raises(
+        SceneError, match=r"unknown model 'neo_hookean' \(did you mean 'neohookean'\? "
+    ):
+        parse_scene(text)

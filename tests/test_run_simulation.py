@@ -180,7 +180,11 @@ def test_prescribed_and_regions() -> None:
         ({"models": []}, topomech.SimulationError, "no model given"),
         ({"models": [{"stiffness": 1.0}]}, ValueError, "models[0] has no 'kind'"),
         ({"models": [3]}, TypeError, "models[0] must be a model kind (str) or a dict"),
-        ({"models": ["linear_fem"]}, topomech.SimulationError, "needs a mesh of dimension [3]"),
+        (
+            {"models": ["linear_fem"]},
+            topomech.SimulationError,
+            "needs a mesh of dimension 3, this one",
+        ),
         (
             {"models": [{"kind": "stretch_elementary", "stifness": 1.0}]},
             topomech.SimulationError,

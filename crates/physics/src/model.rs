@@ -308,7 +308,8 @@ pub(crate) fn model_files(cfg: &Config, dim: usize) -> Result<Vec<(String, Strin
             )));
         }
         return Err(PhysicsError::Model(format!(
-            "model '{kind}' needs a mesh of dimension {dims:?}, this one has dimension {dim}"
+            "model '{kind}' needs a mesh of dimension {}, this one has dimension {dim}",
+            dims_text(&dims)
         )));
     }
     out.extend(cfg.model_files.iter().cloned());
@@ -332,4 +333,12 @@ pub(crate) fn declared_outputs(
         }
     }
     (Vec::new(), Vec::new())
+}
+
+/// Dimensions as a message says them: `3`, `2 or 3`.
+pub(crate) fn dims_text(dims: &[usize]) -> String {
+    dims.iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(" or ")
 }

@@ -1085,8 +1085,9 @@ impl Simulation {
             })?;
             if !decl.dimensions.contains(&dim) {
                 return Err(PhysicsError::Model(format!(
-                    "model '{}' needs a mesh of dimension {:?}, this one has dimension {dim}",
-                    m.kind, decl.dimensions
+                    "model '{}' needs a mesh of dimension {}, this one has dimension {dim}",
+                    m.kind,
+                    crate::model::dims_text(&decl.dimensions)
                 )));
             }
             defs.push(RunModel::bind(decl, &m.params)?);

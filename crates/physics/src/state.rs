@@ -84,9 +84,11 @@ impl Rows {
         let missing: Vec<usize> = (0..n).filter(|&r| !used[r]).collect();
         if !missing.is_empty() {
             return Err(PhysicsError::Config(format!(
-                "the map's 'particle' numbering has gaps: no vertex has rows {} (rows must be 0..{})",
+                "the map's 'particle' numbering has gaps: no vertex has rows {} (the rows must be \
+                 every number from 0 to {}; a rule that removed vertices leaves gaps: write \
+                 'particle' again, e.g. with GMap.set_embedding)",
                 list_some(&missing, 20),
-                n
+                n - 1
             )));
         }
         if g.embedding_id("point_id").is_none() {

@@ -268,7 +268,9 @@ def _models(
                     t.key("kind"),
                     f"model '{kind}' is not available yet (available: {', '.join(kinds)})",
                 )
-            raise fail(t.key("kind"), f"unknown model '{kind}' (known: {', '.join(kinds)})")
+            close = difflib.get_close_matches(kind, kinds, n=1)
+            hint = f"did you mean '{close[0]}'? " if close else ""
+            raise fail(t.key("kind"), f"unknown model '{kind}' ({hint}known: {', '.join(kinds)})")
         if dim is not None:
             _check_models([{"kind": kind}], dim, _Renumber(fail, i))
         takes = _takes(kind, dim)
