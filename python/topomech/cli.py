@@ -19,7 +19,6 @@ import contextlib
 import io
 import json
 import os
-import re
 import signal
 import sys
 import threading
@@ -35,7 +34,7 @@ from topomech._core import ApplyError, MeshError, RuleError, SceneError, Topomec
 from topomech._paths import read_text_file
 from topomech.io import DUPLICATES, PINCHED, ImportedMesh, import_mesh, write_format, write_gmap
 from topomech.models import Model, shipped_models
-from topomech.rules import ParamValue, RuleSet
+from topomech.rules import _MODEL_DECLARATION, ParamValue, RuleSet
 
 __all__ = ["build_parser", "main"]
 
@@ -789,10 +788,6 @@ def _add_check(sub: Any) -> None:
     )
     p.add_argument("rule_files", metavar="FILE.tmr", nargs="+", type=Path)
     p.set_defaults(run=_run_check)
-
-
-#: A line that starts a model declaration (``model NAME(...) {`` or ``model NAME {``).
-_MODEL_DECLARATION = re.compile(r"^[ \t]*model[ \t]+[A-Za-z_][A-Za-z0-9_]*[ \t]*[({]", re.MULTILINE)
 
 
 def _check_dimensions(sources: list[tuple[str, str]]) -> list[int | None]:

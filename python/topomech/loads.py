@@ -838,10 +838,8 @@ def apply_conditions(
     bc = conditions
     held: list[Support] = list(bc.get("held", []))
     masks: dict[str, npt.NDArray[np.bool_]] = {}
-    for key, sel, disp in held:
+    for key, sel, _ in held:
         try:
-            if disp is not None:
-                _displacement(disp)
             masks[key] = select_vertices(sim, groups=groups, **sel)
         except LoadError as e:
             raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e

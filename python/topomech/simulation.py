@@ -176,14 +176,13 @@ def _index(v: Any, what: str) -> Any:
         return v
 
 
-#: The most steps one :meth:`Simulation.step` call takes: the kernel's count is a signed
-#: 64-bit integer (as a scene's ``integrator.steps``).
-_MAX_STEPS = 2**63 - 1
-
-
 def _step_count(n: Any) -> int:
     """``n`` as a number of steps for :meth:`Simulation.step`: an int (numpy's included)
-    from 0 to :data:`_MAX_STEPS`. A bool is refused (``step(True)`` would run one step)."""
+    from 0 to 2**63 - 1, the kernel's count being a signed 64-bit integer (the scenes'
+    bound, ``_INT_MAX``, and its message). A bool is refused (``step(True)`` would run one
+    step)."""
+    from topomech.scene._table import _INT_MAX, _too_large
+
     if isinstance(n, (bool, np.bool_)):
         raise TypeError(f"n must be an int (a number of steps), got {n!r}")
     try:
@@ -192,8 +191,8 @@ def _step_count(n: Any) -> int:
         raise TypeError(f"n must be an int (a number of steps), got {type(n).__name__}") from None
     if k < 0:
         raise ValueError(f"n must be >= 0, got {k}")
-    if k > _MAX_STEPS:
-        raise ValueError(f"n must be at most {_MAX_STEPS} (a 64-bit integer), got {k}")
+    if k > _INT_MAX:
+        raise ValueError(f"n {_too_large(k)}")
     return k
 
 

@@ -1246,19 +1246,12 @@ impl PySimulation {
                     if a.shape() != [n] {
                         return Err(shape_err(a.shape()));
                     }
-                    return Ok(a.as_array().iter().map(|&b| Value::Bool(b)).collect());
+                    return Ok(bool_values(&a));
                 }
                 let a = array_arg::<f64>(values, "values", "float64 or bool")?;
                 return match a.shape() {
-                    [m] if *m == n => {
-                        Ok(a.as_array().iter().map(|&x| Value::Real(vec![x])).collect())
-                    }
-                    [m, 3] if *m == n => Ok(a
-                        .as_array()
-                        .rows()
-                        .into_iter()
-                        .map(|r| Value::Real(r.to_vec()))
-                        .collect::<Vec<Value>>()),
+                    [m] if *m == n => Ok(real_values(&a, false)),
+                    [m, 3] if *m == n => Ok(real_values(&a, true)),
                     s => Err(shape_err(s)),
                 };
             };
@@ -1298,21 +1291,13 @@ impl PySimulation {
                 if a.shape() != wanted.as_slice() {
                     return Err(shape_err(a.shape()));
                 }
-                return Ok(a.as_array().iter().map(|&b| Value::Bool(b)).collect());
+                return Ok(bool_values(&a));
             }
             let a = array_arg::<f64>(values, "values", "float64")?;
             if a.shape() != wanted.as_slice() {
                 return Err(shape_err(a.shape()));
             }
-            Ok(if ty == EmbeddingType::Vec3 {
-                a.as_array()
-                    .rows()
-                    .into_iter()
-                    .map(|r| Value::Real(r.to_vec()))
-                    .collect::<Vec<Value>>()
-            } else {
-                a.as_array().iter().map(|&x| Value::Real(vec![x])).collect()
-            })
+            Ok(real_values(&a, ty == EmbeddingType::Vec3))
         })?;
         this.run(py, move |sim| Ok(sim.set_vertex_field(name, &values)?))
     }
@@ -1679,4 +1664,23 @@ pub(crate) fn models(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
             Ok(d)
         })
         .collect()
+}
+
+/// One `Value::Bool` per entry of `a` (a `(V,)` mask): the rows of `set_vertex_field`.
+fn bool_values(a: &numpy::PyReadonlyArrayDyn<'_, bool>) -> Vec<Value> {
+    a.as_array().iter().map(|&b| Value::Bool(b)).collect()
+}
+
+/// One `Value::Real` per row of `a`: a vec3 per row of a `(V, 3)` array (`vec3`), else a
+/// scalar per entry of a `(V,)` one: the rows of `set_vertex_field`.
+fn real_values(a: &numpy::PyReadonlyArrayDyn<'_, f64>, vec3: bool) -> Vec<Value> {
+    if vec3 {
+        a.as_array()
+            .rows()
+            .into_iter()
+            .map(|r| Value::Real(r.to_vec()))
+            .collect()
+    } else {
+        a.as_array().iter().map(|&x| Value::Real(vec![x])).collect()
+    }
 }
