@@ -261,6 +261,39 @@ def test_a_refused_support_changes_nothing() -> None:
         assert np.array_equal(b, a)
 
 
+@pytest.mark.parametrize(
+    ("field", "value", "says"),
+    [
+        ("velocity", [1.0, 2.0], "expected 3 finite numbers"),
+        ("velocity", "fast", "must be real numbers"),
+        ("displacement", [0.0, float("nan"), 0.0], "expected 3 finite numbers"),
+        ("displacement", [True, 0, 0], "boolean"),
+        ("displacement", [[0.0, 0.0, 0.0]] * 2, "expected 3 finite numbers"),
+    ],
+)
+def test_an_initial_field_is_checked_before_anything_is_set(
+    field: str, value: Any, says: str
+) -> None:
+    """An ``initial`` velocity or displacement given to apply_conditions directly (not
+    through a scene, whose parser checks it) must be 3 finite numbers: before, a wrong one
+    failed in numpy after the held vertices had moved, or was broadcast. The refusal names
+    the key and field, and changes nothing."""
+    sim, _ = _held_sim()
+    before = (sim.fixed(), sim.positions(), sim.velocities())
+    init = {"velocity": None, "displacement": None, "select": {}}
+    init[field] = value
+    conditions = {
+        "held": [("fix[1]", {"points": [23]}, [0.0, 0.01, 0.0])],
+        "initial": [("initial", init)],
+    }
+    with pytest.raises(LoadError, match=says) as e:
+        apply_conditions(sim, conditions)
+    assert e.value.key == f"initial.{field}"
+    after = (sim.fixed(), sim.positions(), sim.velocities())
+    for b, a in zip(before, after):
+        assert np.array_equal(b, a)
+
+
 def test_apply_conditions_without_supports_checks_the_held_vertices() -> None:
     """Given only ``held`` (no ``supports``), apply_conditions still refuses a displacement
     moving a vertex the simulation holds, naming its key, and changes nothing."""

@@ -729,13 +729,20 @@ def _displacement(displacement: Any) -> npt.NDArray[np.float64]:
     """A held displacement as an array of shape ``(3,)``: exactly 3 finite real numbers
     (booleans refused: numpy reads ``[True, 0, 0]`` as ``[1, 0, 0]``; one number or 2 are
     refused, not broadcast). Raises :class:`LoadError` naming it."""
-    _no_booleans(displacement, "displacement")
+    return _vector(displacement, "displacement")
+
+
+def _vector(value: Any, what: str) -> npt.NDArray[np.float64]:
+    """``value`` (a displacement, a velocity) as an array of shape ``(3,)``: exactly 3
+    finite real numbers, as :func:`_displacement` says. Raises :class:`LoadError` naming
+    ``what``."""
+    _no_booleans(value, what)
     try:
-        d = real_array(displacement, "displacement").reshape(-1)
+        d = real_array(value, what).reshape(-1)
     except (TypeError, ValueError) as e:
         raise LoadError(str(e)) from None
     if d.shape != (3,) or not np.all(np.isfinite(d)):
-        raise LoadError(f"displacement: expected 3 finite numbers, got {displacement!r}")
+        raise LoadError(f"{what}: expected 3 finite numbers, got {value!r}")
     return d
 
 
@@ -881,19 +888,27 @@ def apply_conditions(
             )
         except LoadError as e:
             raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
-        initial.append((mask & ~fixed, init))
+        # each field 3 finite numbers, checked before anything is set
+        fields: dict[str, npt.NDArray[np.float64]] = {}
+        for name in ("displacement", "velocity"):
+            if init.get(name) is not None:
+                try:
+                    fields[name] = _vector(init[name], name)
+                except LoadError as e:
+                    raise LoadError(str(e), f"{key}.{name}") from e
+        initial.append((mask & ~fixed, fields))
     for key, _, disp in held:
         held_positions(sim, masks[key], disp)
     if total is not None:
         sim.set_external_forces(total)
-    for free, init in initial:
-        if init.get("displacement") is not None:
+    for free, fields in initial:
+        if "displacement" in fields:
             x = sim.positions()
-            x[free] += np.asarray(init["displacement"], dtype=np.float64)
+            x[free] += fields["displacement"]
             sim.set_positions(x)
-        if init.get("velocity") is not None:
+        if "velocity" in fields:
             v = sim.velocities()
-            v[free] = np.asarray(init["velocity"], dtype=np.float64)
+            v[free] = fields["velocity"]
             sim.set_velocities(v)
 
 

@@ -608,7 +608,16 @@ fn check_model(
                     "name",
                     format!(
                         "model '{mn}': {what} '{name}' is written by none of its {rules_of} rules ({})",
-                        calls.iter().map(|c| c.rule.as_str()).collect::<Vec<_>>().join(", ")
+                        {
+                            // each rule once (a rule may be both an init and a step rule)
+                            let mut names: Vec<&str> = Vec::new();
+                            for c in calls.iter() {
+                                if !names.contains(&c.rule.as_str()) {
+                                    names.push(&c.rule);
+                                }
+                            }
+                            names.join(", ")
+                        }
                     ),
                 );
             }

@@ -309,6 +309,12 @@ fn outputs_nobody_writes_and_non_finite_defaults_are_refused() {
             "force 'position' is written by none of its init or step rules (anchor_init, anchor_force)",
         ),
         (
+            // a rule both init and step is named once
+            "model m(k: f64 = 1.0, d: vec3 = vec3(0, 0, 0)) {\n  init anchor_init(k, d)\n  step anchor_init(k, d)\n  forces position\n}\n",
+            "position\n}",
+            "force 'position' is written by none of its init or step rules (anchor_init)",
+        ),
+        (
             // a default past the largest float: refused where it is written (the lexer reads
             // no infinity), before the model's own check of finite defaults
             "model m(k: f64 = 1e400, d: vec3 = vec3(0, 0, 0)) {\n  init anchor_init(k, d)\n  step anchor_force\n  forces f_anchor\n}\n",
