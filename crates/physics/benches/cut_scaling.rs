@@ -6,7 +6,11 @@
 //! different x each so that none reuses another's faces. Each cut is timed with the first
 //! step after it (what it costs a run), and reported in steady steps. The compiled guards
 //! the cuts find their faces with are built once before them (`Simulation::prepare_cuts`, as a
-//! simulation does at set-up for the cuts it declares) and timed apart.
+//! simulation does at set-up for the cuts it declares) and timed apart. Last, at each size,
+//! a step with fracture enabled where nothing breaks against a plain step (issue 16: under
+//! 1.2 plain steps at 10^5 tets, reported at 10^6): two fresh simulations of the box, one
+//! with a strain criterion at 50%, stepped in alternation, medians of 9 (the `topology`
+//! bench's measure at 10^5, here at every size).
 //!
 //! Writes `bench/topology_scaling.json` (or `$TOPOMECH_BENCH_OUT/topology_scaling.json`);
 //! `bench/topology_plot.py` draws `bench/topology.png` and the table in
@@ -20,13 +24,19 @@ use std::time::Instant;
 
 use topomech_gmap::generators::{cuboid, BoxElement};
 use topomech_gmap::mesh::{build, BuildOptions};
-use topomech_physics::{Config, ModelSpec, Simulation};
+use topomech_physics::{Config, Criterion, Fracture, ModelSpec, Simulation};
 
 /// Bytes per tetrahedron the simulation needs at most (map, plans, the first step's
 /// planning), for the memory check.
 const BYTES_PER_TET: f64 = 7200.0;
 
 fn simulation(n: [usize; 3]) -> Simulation {
+    simulation_with(n, None)
+}
+
+/// The box of [`simulation`], with a fracture criterion tested after every step when
+/// `fracture` is given.
+fn simulation_with(n: [usize; 3], fracture: Option<Fracture>) -> Simulation {
     let (g, _) = build(
         &cuboid(n, [2.0, 1.0, 1.0], BoxElement::Tetra),
         &BuildOptions::default(),
@@ -41,6 +51,7 @@ fn simulation(n: [usize; 3]) -> Simulation {
         // the undamped box at the default 1 ms goes unstable after about 8 steps; this
         // bench takes 9
         dt: 1e-4,
+        fracture,
         ..Config::default()
     };
     Simulation::new(g, cfg).expect("builds")
@@ -157,7 +168,47 @@ fn main() {
                     if k > 0 { "," } else { "" }
                 );
             }
-            json.push_str("\n    ]}");
+            json.push_str("\n    ]");
+            drop(s);
+            // a step with fracture enabled where nothing breaks (strains stay far below
+            // 50%), against a plain step: two fresh simulations at once, stepped in turn
+            let two = 2.0 * tets as f64 * BYTES_PER_TET;
+            if mem_available().is_some_and(|avail| two > 0.8 * avail) {
+                println!("    a step with fracture enabled: skipped (two simulations do not fit in memory)");
+                json.push_str(", \"fracture_idle\": null}");
+                return;
+            }
+            let mut plain = simulation(n);
+            let mut brittle = simulation_with(
+                n,
+                Some(Fracture {
+                    criterion: Criterion::Strain,
+                    threshold: 0.5,
+                }),
+            );
+            plain.step().expect("steps");
+            brittle.step().expect("steps");
+            let (mut p, mut b) = (Vec::new(), Vec::new());
+            for _ in 0..9 {
+                p.push(seconds(|| black_box(plain.step()).expect("steps")));
+                b.push(seconds(|| black_box(brittle.step()).expect("steps")));
+            }
+            assert!(
+                brittle.topology_changes().is_empty(),
+                "nothing breaks in the fracture-enabled run"
+            );
+            let (pm, bm) = (median(p), median(b));
+            println!(
+                "    a step with fracture enabled, nothing breaking: {:.2} ms = {:.2} plain steps ({:.2} ms; medians of 9 alternated)",
+                bm * 1e3,
+                bm / pm,
+                pm * 1e3
+            );
+            let _ = write!(
+                json,
+                ", \"fracture_idle\": {{\"plain_step_s\": {pm}, \"fracture_step_s\": {bm}, \"steps\": {}}}}}",
+                bm / pm
+            );
         });
     }
     json.push_str("\n  ]\n}\n");
