@@ -611,7 +611,7 @@ fn check_model(
                         {
                             // each rule once (a rule may be both an init and a step rule)
                             let mut names: Vec<&str> = Vec::new();
-                            for c in calls.iter() {
+                            for c in calls {
                                 if !names.contains(&c.rule.as_str()) {
                                     names.push(&c.rule);
                                 }
