@@ -2636,14 +2636,19 @@ impl Plan {
 
     /// Evaluates every match and writes the results into `g`. `Err` leaves `g` unchanged
     /// and means: let the interpreter apply the rule (it reports the error precisely).
+    /// `eager` (without `check`): where the program reads no embedding it writes, a chunked
+    /// run writes each chunk's values as soon as they are evaluated (see
+    /// [`Plan::run_chunked`]); an `Err` may then leave the values of the chunks before the
+    /// failure written, and the inputs unchanged.
     pub(crate) fn run(
         &mut self,
         g: &mut GMap,
         ids: &[EmbeddingId],
         params: &[Val],
         check: Option<&ValueCheck<'_>>,
+        eager: bool,
     ) -> Result<(), Unsupported> {
-        if let Some(done) = self.run_chunked(g, ids, params, check) {
+        if let Some(done) = self.run_chunked(g, ids, params, check, eager) {
             return done;
         }
         self.evaluate(g, ids, params)?;
@@ -2796,6 +2801,7 @@ impl Plan {
         ids: &[EmbeddingId],
         params: &[Val],
         check: Option<&ValueCheck<'_>>,
+        eager: bool,
     ) -> Option<Result<(), Unsupported>> {
         self.chunk_starts.as_ref()?;
         let pvals = param_values(params)?;
@@ -2904,8 +2910,9 @@ impl Plan {
                 // column is a target of one row only (`assemble`: no duplicate writes, and
                 // the written embeddings are distinct columns), and these rows are chunk
                 // `c`'s, so no other thread touches these values; every row was evaluated
-                // before (nothing reads the columns meanwhile), and nothing else holds a
-                // reference into the columns during the run.
+                // before (nothing reads the columns meanwhile), or, eagerly, the rows still
+                // being evaluated read no written column (`reads_written` false), and nothing
+                // else holds a reference into the columns during the run.
                 unsafe {
                     match (write_col[w], width) {
                         (Col::Real(p, _), 1) => store_slots::<1>(p, vals, mine, ch),
@@ -2949,6 +2956,36 @@ impl Plan {
         };
         native::CHUNKED.fetch_add(1, Ordering::Relaxed);
         let parallel = n_chunks >= 4 && rayon::current_num_threads() > 1;
+        // eager: each chunk written as soon as it passes, while its values are in cache
+        // (a cloth step at 10^5 quads, one thread: 5.2 -> 4.8 ms, against writing every
+        // chunk after all are evaluated). No row reads a written embedding, so every
+        // evaluation reads what it would have read before any write, and so does the
+        // interpreter that takes over after a failure.
+        let reads_written = self.prog.cols.iter().any(|&c| {
+            self.prog
+                .writes
+                .iter()
+                .any(|w| w.1 != GUARD_OUT && ids[w.1] == ids[c])
+        });
+        if eager && check.is_none() && !reads_written {
+            let pass = |c: usize| {
+                let ok = one(c);
+                if ok {
+                    store_chunk(c);
+                }
+                ok
+            };
+            let ok = if parallel {
+                (0..n_chunks).into_par_iter().all(pass)
+            } else {
+                (0..n_chunks).all(pass)
+            };
+            return Some(if ok {
+                Ok(())
+            } else {
+                unsupported("an evaluation failed or a value is not finite")
+            });
+        }
         let ok = if parallel {
             (0..n_chunks).into_par_iter().all(one)
         } else {

@@ -1310,7 +1310,7 @@ impl RuleSet {
         params: &Params,
         check: &(dyn Fn(EmbeddingId, &[f64]) -> bool + Sync),
     ) -> Result<Option<ApplyReport>, ApplyError> {
-        self.apply_inner(g, name, params, &never, None, Some(check), true)
+        self.apply_inner(g, name, params, &never, None, Some(check), true, false)
     }
 
     /// [`RuleSet::apply_everywhere`] for a rule applied once (a simulation's set-up: rest
@@ -1329,7 +1329,7 @@ impl RuleSet {
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
         let out = self
-            .apply_inner(g, name, params, &never, None, None, false)
+            .apply_inner(g, name, params, &never, None, None, false, false)
             .map(Option::unwrap_or_default);
         // the plan just built (or an earlier one of this rule): dropped
         if let Some(index) = self.checked.rules.iter().position(|r| r.name == name) {
@@ -1349,14 +1349,38 @@ impl RuleSet {
         interrupt: &dyn Fn() -> bool,
         region: Option<&Region>,
     ) -> Result<ApplyReport, ApplyError> {
-        self.apply_inner(g, name, params, interrupt, region, None, true)
+        self.apply_inner(g, name, params, interrupt, region, None, true, false)
+            .map(Option::unwrap_or_default)
+    }
+
+    /// [`RuleSet::apply_everywhere`] for a computation rule whose written values are
+    /// scratch, rewritten before they are read again (a simulation's forces, at every
+    /// step): its compiled plan writes the values of each part of its rows (a chunk) as
+    /// soon as they are evaluated, while they are in cache, instead of evaluating every row
+    /// before writing any. The same values are written. What differs is a failure: the
+    /// values of the chunks evaluated before it may have been written (the embeddings the
+    /// rule reads are unchanged, and the map stays valid); the error is the one
+    /// [`RuleSet::apply_everywhere`] reports. A rule that reads an embedding it writes, one
+    /// that changes the topology or one without a compiled plan is applied as by
+    /// [`RuleSet::apply_everywhere`].
+    ///
+    /// # Errors
+    /// Those of [`RuleSet::apply_everywhere`].
+    pub fn apply_everywhere_eager(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+    ) -> Result<ApplyReport, ApplyError> {
+        self.apply_inner(g, name, params, &never, None, None, true, true)
             .map(Option::unwrap_or_default)
     }
 
     /// The application of [`RuleSet::apply_with`], with the `check` of
     /// [`RuleSet::apply_everywhere_checked`] (`None` only with a check); `keep`: a
     /// computation rule's plan is built with its index by dart, to be patched after a
-    /// topology change (not for [`RuleSet::apply_once`], which drops it once it ran).
+    /// topology change (not for [`RuleSet::apply_once`], which drops it once it ran);
+    /// `eager`: the writes of [`RuleSet::apply_everywhere_eager`].
     #[allow(clippy::too_many_arguments)]
     fn apply_inner(
         &self,
@@ -1367,6 +1391,7 @@ impl RuleSet {
         region: Option<&Region>,
         check: Option<&crate::compiled::ValueCheck<'_>>,
         keep: bool,
+        eager: bool,
     ) -> Result<Option<ApplyReport>, ApplyError> {
         let poll = &mut Poll::new(interrupt);
         let b = self.bind_for(g, name, params, true)?;
@@ -1481,7 +1506,7 @@ impl RuleSet {
                         applied: 0,
                     });
                 }
-                if p.run(g, &b.ids, &b.params, check).is_ok() {
+                if p.run(g, &b.ids, &b.params, check, eager).is_ok() {
                     return Ok(Some(ApplyReport {
                         matches: p.matches(),
                         evaluations: p.evaluations(),

@@ -478,15 +478,17 @@ impl Simulation {
                     .map_err(|e| PhysicsError::Config(e.to_string()))?;
             }
         }
+        // the forces are rewritten at every step: each chunk of a plan's rows is written as
+        // soon as it is evaluated (on an error, some may be written; the step fails)
         let none = Params::new();
         for def in &self.defs {
             for (r, p) in &def.step {
-                self.rules.apply_everywhere(&mut self.g, r, p)?;
+                self.rules.apply_everywhere_eager(&mut self.g, r, p)?;
             }
         }
         self.forces_written = Some((self.g.identity(), writes(&self.g)));
         self.rules
-            .apply_everywhere(&mut self.g, "accumulate", &none)?;
+            .apply_everywhere_eager(&mut self.g, "accumulate", &none)?;
         Ok(())
     }
 

@@ -198,13 +198,14 @@ impl Simulation {
         self.set_vertex_vec3("dx", dx)?;
         self.set_vertex_vec3("dv", dv)?;
         let none = Params::new();
+        // scratch values, rewritten at every product (see `Simulation::forces`)
         for def in &self.defs {
             for (r, p) in &def.jvp {
-                self.rules.apply_everywhere(&mut self.g, r, p)?;
+                self.rules.apply_everywhere_eager(&mut self.g, r, p)?;
             }
         }
         self.rules
-            .apply_everywhere(&mut self.g, "accumulate_jvp", &none)?;
+            .apply_everywhere_eager(&mut self.g, "accumulate_jvp", &none)?;
         self.vertex_vec3_sum("df")
     }
 

@@ -7,6 +7,7 @@ mod build;
 mod builtins;
 mod checker;
 mod dimension_independent;
+mod eager;
 mod embedding_consistency;
 mod find_all_reference;
 mod fuzz;
