@@ -823,7 +823,8 @@ def test_build_notes_wording() -> None:
     assert notes[0].endswith("19 and 5 more")
     assert "not orientable" in notes[1]
     assert notes[2] == (
-        "2 pinched point(s) (cells touch only there), split into one vertex per side: 3, 9"
+        "2 pinched point(s) (the cells around each meet only there, or along an edge through "
+        "it), split into one vertex per side: 3, 9"
     )
     assert notes[3] == "merged 1 duplicate cell(s), dropped: 5 (= 2)"
     assert notes[4].startswith("1 point(s) used by no cell left out: 7")

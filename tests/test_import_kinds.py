@@ -105,7 +105,7 @@ def test_moebius_strip_is_reported_non_orientable() -> None:
 def test_refusals_without_an_option_have_none() -> None:
     # a bow-tie quad: no option accepts it
     points = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
-    with pytest.raises(topomech.MeshError, match=r"cell 0 \(polygon\): sides") as e:
+    with pytest.raises(topomech.MeshError, match=r"cell 0 \(quad\): sides") as e:
         topomech.GMap.from_mesh(points, [("quad", [[0, 1, 3, 2]])])
     assert e.value.option is None
     assert "to accept it" not in str(e.value)

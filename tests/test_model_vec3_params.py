@@ -190,6 +190,17 @@ def test_with_params_takes_3_real_numbers_for_a_vec3(model: Model, value: Any) -
     assert model.with_params(offset=np.array([1, 2, 3])).values == {"offset": (1.0, 2.0, 3.0)}
 
 
+@pytest.mark.parametrize("value", [np.array(3.0), np.array(3, dtype=np.int32), np.float32(3.0)])
+def test_with_params_takes_a_0d_array_for_an_f64(model: Model, value: Any) -> None:
+    """A 0-d numpy array is one number, as a numpy scalar is (QA: ``np.array(5.0)`` was
+    refused as an ndarray while ``np.float32(5)`` was taken); a 0-d array of something else
+    is refused naming what it holds."""
+    assert model.with_params(k=value).values == {"k": 3.0}
+    assert type(model.with_params(k=value).values["k"]) is float
+    with pytest.raises(TypeError, match="parameter 'k' must be a real number, got bool"):
+        model.with_params(k=np.array(True))
+
+
 @pytest.mark.parametrize(
     ("params", "error", "words"),
     [

@@ -251,6 +251,9 @@ def test_list(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     for name in shipped_scenes():
         assert name in out
+    # a scene beside --list is a mistake, not ignored (QA)
+    assert cli.main(["run", "--list", "beam"]) == 2
+    assert "--list takes no SCENE (got 'beam')" in capsys.readouterr().err
 
 
 def test_default_output_dir(

@@ -165,6 +165,22 @@ def test_a_predicate_cut(tmp_path: Path) -> None:
     assert "error" not in s
     assert s["components"] == 2
     assert [(c["step"], c["kind"]) for c in s["topology_changes"]] == [(2, "cut")]
+    # the cut map itself is saved beside final.vtu (QA: a run's cut map could not be had
+    # from the command line, and final.vtu of pieces that moved into each other is refused
+    # as a mesh): it reads back with its two pieces and the final positions
+    assert s["outputs"]["map"] == "final.tmg"
+    g, _ = topomech.read_gmap(tmp_path / "o" / "final.tmg")
+    counts = g.cell_counts()
+    assert counts["components"] == 2
+    assert {k: counts[k] for k in ("darts", "vertices", "volumes")} == {
+        k: s["mesh"]["final"][k] for k in ("darts", "vertices", "volumes")
+    }
+    final = meshio.read(tmp_path / "o" / "final.vtu")
+    assert np.allclose(np.sort(g.positions(), axis=0), np.sort(final.points, axis=0))
+    # without a change, no map is written
+    plain = topomech.run_scene(box_with(tmp_path, ""), tmp_path / "p")
+    assert plain["outputs"]["map"] is None
+    assert not (tmp_path / "p" / "final.tmg").exists()
 
 
 def test_a_cut_that_misses_stops_the_run(
@@ -202,6 +218,26 @@ def test_an_event_after_the_end(tmp_path: Path, capsys: pytest.CaptureFixture[st
     assert "event[0].time" in err
     assert "after the end of the run" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_run_of_no_step_reaches_no_event(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An event at t = 0 happens at the end of the first step: a run of 0 steps never
+    reaches it, and is refused as a run ending before any event is (QA: it exited 0 with
+    the cut silently not made)."""
+    scene = box_with(
+        tmp_path, '[[event]]\ntime = 0.0\nkind = "cut"\nwhere = "x > 0.9 && x < 1.1"\n'
+    )
+    code, err = run_cli([str(scene), "--out", str(tmp_path / "o"), "--steps", "0"], capsys)
+    assert code == 2
+    assert "event[0].time: t = 0, but the run takes no step (steps = 0)" in err
+    assert not (tmp_path / "o").exists()
+    # one step reaches it
+    code, _ = run_cli(
+        [str(scene), "--out", str(tmp_path / "o1"), "--steps", "1", "--no-preview"], capsys
+    )
+    assert code == 0
 
 
 def test_steps_that_end_before_an_event(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

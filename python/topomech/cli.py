@@ -490,6 +490,8 @@ def _report(s: dict[str, Any], out: Path) -> None:
     for k, v in rows:
         print(f"{k:<11} {v}")
     wrote = [out / "summary.json", out / "final.vtu"]
+    if s["outputs"].get("map"):
+        wrote.append(out / s["outputs"]["map"])
     if s["outputs"]["animation"]:
         wrote.append(out / "animation.pvd")
     frames = f" ({s['frames']} frames in {out / 'frames'})" if s["frames"] else ""
@@ -617,6 +619,9 @@ def _run_scene_cli(
 
 def _run_run(args: argparse.Namespace) -> int:
     if args.list:
+        if args.scene is not None:
+            _error(f"--list takes no SCENE (got {args.scene!r}): list the scenes, or run one")
+            return EXIT_REFUSED
         return _list_scenes()
     if args.scene is None:
         _error("give a SCENE (a .toml file or a shipped scene's name; --list lists them)")

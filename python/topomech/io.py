@@ -946,7 +946,8 @@ def build_notes(g: GMap, pinched_option: str = "merge") -> list[str]:
             else "each kept as one particle"
         )
         notes.append(
-            f"{len(pinched)} pinched point(s) (cells touch only there), {done}: {_listed(pinched)}"
+            f"{len(pinched)} pinched point(s) (the cells around each meet only there, or along an "
+            f"edge through it), {done}: {_listed(pinched)}"
         )
     merged = list(getattr(r, "merged_duplicates", []))
     if merged:

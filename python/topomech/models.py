@@ -233,6 +233,8 @@ class Model:
                 f"{what} is an f64: expected one real number, got a {type(v).__name__} "
                 "(sequences of 3 numbers are for vec3 parameters)"
             )
+        if isinstance(v, np.ndarray) and v.ndim == 0:
+            v = v[()]  # a 0-d array: its one number (refused below unless real)
         if not _is_real(v):
             raise TypeError(f"{what} must be a real number, got {type(v).__name__}")
         try:

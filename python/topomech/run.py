@@ -3,6 +3,10 @@
 :func:`run_scene` writes, under the output directory:
 
 - ``summary.json``: what ran and how it ended (see :func:`run_scene` for the keys);
+- ``final.tmg``, after a topology change (a cut, a fracture): the final map itself with
+  every embedding (:meth:`GMap.save`), which :func:`read_gmap` and ``topomech info`` read
+  back with its pieces apart, where ``final.vtu`` of pieces that moved into each other is
+  refused as a mesh (overlapping cells);
 - ``final.vtu``: the last state, points at the current positions in the simulation's row
   order (the input point order), point data ``displacement``, ``velocity``, ``fixed`` (1 for
   held vertices), ``point_id`` (the input point index of each row) and the scene's
@@ -626,6 +630,7 @@ def run_scene(
         "video": None,
         "energy_plot": None,
         "solver": None,
+        "map": None,
     }
     final_written = False
     input_counts: dict[str, int] | None = None
@@ -780,6 +785,12 @@ def run_scene(
             enter("final", ["final.vtu", "final.vtu.part"])
             writer.write(out_dir / "final.vtu")
             final_written = True
+            if sim.topology_changes():
+                # the cut map itself: its pieces may have moved into each other, which a mesh
+                # file cannot tell apart from one body (final.vtu would be refused as input)
+                enter("final", ["final.tmg"])
+                sim.gmap().save(out_dir / "final.tmg")
+                outputs["map"] = "final.tmg"
             if frames:
                 enter("final", ["animation.pvd"])
                 write_pvd(out_dir / "animation.pvd", frames)

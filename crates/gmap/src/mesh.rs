@@ -94,6 +94,16 @@ impl CellKind {
         }
     }
 
+    /// The name of a cell of this kind with `n` vertices, as a message names it: a polygon
+    /// by its usual name where it has one (`triangle`, `quad`), else [`CellKind::name`].
+    pub const fn name_of(self, n: usize) -> &'static str {
+        match (self, n) {
+            (CellKind::Polygon, 3) => "triangle",
+            (CellKind::Polygon, 4) => "quad",
+            _ => self.name(),
+        }
+    }
+
     /// A short name: `polygon`, `tetra`, `hexahedron`, `wedge`, `pyramid` (meshio's names).
     pub const fn name(self) -> &'static str {
         match self {
@@ -249,8 +259,9 @@ pub struct BuildReport {
 /// modelled), and a mesh file cannot say they are separate bodies (QA: `final.vtu` refused).
 const SEPARATE_BODIES: &str = "; if these cells belong to separate bodies that touch or \
     interpenetrate (such as the pieces of a cut after they moved: topomech models no contact \
-    between bodies), a mesh file cannot say so: save the map with GMap.save (.tmg), which \
-    keeps the bodies apart, and read that";
+    between bodies), a mesh file cannot say so: read the map saved as .tmg instead, which \
+    keeps the bodies apart (`topomech run` writes final.tmg beside final.vtu after a cut; \
+    in Python, GMap.save)";
 
 /// A pair of faces of a non-conforming interface (see [`MeshError::NonConforming`]).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -672,12 +683,7 @@ fn check_cells(mesh: &Mesh) -> Result<usize, MeshError> {
     for (c, (&kind, verts)) in mesh.kinds.iter().zip(&mesh.cells).enumerate() {
         if kind.dimension() != dim {
             // a polygon by its usual name where it has one (a triangle, not "a polygon")
-            let name = match (kind, verts.len()) {
-                (CellKind::Polygon, 3) => "triangle",
-                (CellKind::Polygon, 4) => "quad",
-                _ => kind.name(),
-            };
-            other_dim.push((c, name));
+            other_dim.push((c, kind.name_of(verts.len())));
         }
         let expected = kind.n_vertices();
         let bad_count = match expected {
@@ -888,7 +894,7 @@ fn check_geometry(
                 let k = verts.len();
                 twisted.push((
                     c,
-                    kind.name(),
+                    kind.name_of(k),
                     format!(
                         "sides ({}, {}) and ({}, {}) cross",
                         verts[i],
@@ -900,7 +906,7 @@ fn check_geometry(
             } else if norm(polygon_normal(verts, points)) <= DEGENERATE * l * l {
                 degenerate.push((c, "zero area".into()));
             } else if let Some(why) = polygon_fold(verts, points) {
-                twisted.push((c, kind.name(), why));
+                twisted.push((c, kind.name_of(verts.len()), why));
             }
             cells.push(verts.clone());
             continue;

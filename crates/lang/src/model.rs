@@ -7,7 +7,8 @@
 //!   forces f_anchor                     # force embeddings summed into each vertex's `force`
 //!   jvp    anchor_jvp(k) -> df_anchor   # optional: Jacobian-vector product rules, outputs
 //!   needs  "vertices"                   # optional: said when the model matches nothing
-//!   per_element                         # optional: every element must be matched by init
+//!   per_element                         # optional: every element matched by an init rule
+//!                                       # on elements (hook <0,1,2>, <0,1> in 2D, or <>)
 //! }
 //! ```
 //!
@@ -256,6 +257,17 @@ pub(crate) fn check_models(
                 continue;
             }
             seen.insert(m.name.clone(), (file.clone(), m.pos));
+            // a rule of this file refused for a name another file defines (reported where
+            // it is): the model's call of that name means this file's rule, not the other
+            // one, so nothing more is said of the model (its checks would be of the wrong
+            // rule)
+            let shadowed = m.init.iter().chain(&m.step).chain(&m.jvp).any(|c| {
+                f.rules.iter().any(|r| r.name == c.rule)
+                    && rules.iter().any(|r| r.name == c.rule && &r.file != file)
+            });
+            if shadowed {
+                continue;
+            }
             if let Some(c) = check_model(file, m, fdims, embs, (rules, &written), out) {
                 models.push(c);
             }

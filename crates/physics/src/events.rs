@@ -797,7 +797,8 @@ impl Simulation {
     }
 
     /// Refuses events (and blades) that a run ending at `end_time` would never reach (a blade
-    /// that ends after it is allowed: it cuts what it crossed by then).
+    /// that ends after it is allowed: it cuts what it crossed by then); a run ending at
+    /// `t = 0` takes no step and reaches no event.
     pub fn check_events(&self, end_time: f64) -> Result<(), PhysicsError> {
         for (k, b) in self.cfg.blades.iter().enumerate() {
             if b.start >= end_time {
@@ -808,6 +809,14 @@ impl Simulation {
             }
         }
         for e in &self.cfg.events {
+            // (an event happens at the end of the step that reaches its time: a run ending
+            // at t = 0 takes none)
+            if end_time <= 0.0 {
+                return Err(PhysicsError::Config(format!(
+                    "the event at t = {} is never reached: the run ends at t = {end_time}, before its first step",
+                    e.time
+                )));
+            }
             if e.time > end_time + 1e-9 * self.cfg.dt {
                 return Err(PhysicsError::Config(format!(
                     "the event at t = {} comes after the end of the run (t = {end_time}): it would never happen",

@@ -1216,13 +1216,27 @@ impl Simulation {
         } else {
             OrbitType::face(2)
         });
+        // an element's orbit: every label but the last (<0,1,2> in 3D, <0,1> in 2D)
+        let element_labels: Vec<u8> = (0..dim as u8).collect();
         for def in &defs {
-            let mut matched = 0;
+            // the matches of every init rule, and of those on elements: a hook on the
+            // element's orbit, or on a dart (`<>`: the shipped rules take one dart per
+            // element, `where n0.vertex0`); per_element counts the latter only (a rule on
+            // vertices, edges or corners handles no element)
+            let (mut matched, mut on_elements, mut element_rules) = (0, 0, 0);
             for (init, p) in &def.init {
-                matched += rules
+                let n = rules
                     .apply_once(&mut g, init, p)
                     .map_err(|e| model_init_failed(&g, &rules, &def.name, init, e))?
                     .matches;
+                matched += n;
+                if rules
+                    .rule(init)
+                    .is_ok_and(|r| r.hook_orbit.is_empty() || r.hook_orbit == element_labels)
+                {
+                    on_elements += n;
+                    element_rules += 1;
+                }
             }
             if matched == 0 {
                 return Err(PhysicsError::Model(format!(
@@ -1230,10 +1244,19 @@ impl Simulation {
                     def.name, def.needs
                 )));
             }
-            if def.per_element && matched < elements {
+            if def.per_element && element_rules == 0 {
+                let inits: Vec<&str> = def.init.iter().map(|(r, _)| r.as_str()).collect();
                 return Err(PhysicsError::Model(format!(
-                    "model '{}' handles {} elements of {elements}: it needs {}, and the others would get no force",
-                    def.name, matched, def.needs
+                    "model '{}' is declared per_element (every element handled by an init rule), but none of its init rules ({}) is on elements: a rule whose hook is an element, {}, or one dart of each element ('n0 : <> hook' with 'where n0.vertex0', as the shipped models do); drop per_element, or add such a rule",
+                    def.name,
+                    inits.join(", "),
+                    if dim == 3 { "'e : <0,1,2> hook'" } else { "'e : <0,1> hook'" }
+                )));
+            }
+            if def.per_element && on_elements < elements {
+                return Err(PhysicsError::Model(format!(
+                    "model '{}' handles {on_elements} elements of {elements}: it needs {}, and the others would get no force",
+                    def.name, def.needs
                 )));
             }
         }

@@ -128,8 +128,8 @@ class Scene:
         return _Fail(str(self.path) if self.path is not None else "<scene>")
 
     def check_events(self) -> None:
-        """Refuses an event that the run would never reach (its time after ``steps x dt``),
-        naming ``event[i].time``."""
+        """Refuses an event that the run would never reach (its time after ``steps x dt``,
+        or any time in a run of no step), naming ``event[i].time``."""
         end = self.end_time
         for i, e in enumerate(self.events):
             if e.get("kind") == "blade":
@@ -154,6 +154,13 @@ class Scene:
                     )
                 continue
             t = float(e["time"])
+            if self.steps == 0:
+                # an event happens at the end of the step that reaches its time: none here
+                raise self._fail()(
+                    f"event[{i}].time",
+                    f"t = {t:g}, but the run takes no step (steps = 0): the event would never "
+                    "happen",
+                )
             if t > end + 1e-9 * self.dt:
                 raise self._fail()(
                     f"event[{i}].time",

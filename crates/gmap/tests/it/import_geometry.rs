@@ -56,6 +56,8 @@ fn a_concave_quad_hiding_a_side_is_refused_and_a_flat_corner_is_kept() {
     let m = mesh(CellKind::Polygon, p.clone(), vec![vec![0, 1, 2, 3]]);
     let cells = twisted(&m);
     assert!(cells[0].2.contains("side (1, 2)"), "{cells:?}");
+    // named as the file names it: a quad, not a polygon (QA)
+    assert_eq!(cells[0].1, "quad");
     // a 180-degree corner at point 4 (a vertex on the side from 0 to 1): area 2, accepted
     let m = mesh(CellKind::Polygon, p, vec![vec![0, 4, 1, 3]]);
     assert!(build(&m, &BuildOptions::default()).is_ok());
@@ -88,4 +90,5 @@ fn polygons_must_be_star_shaped_around_their_vertex_centroid() {
     let m = mesh(CellKind::Polygon, c_shape, vec![(0..8).collect()]);
     let cells = twisted(&m);
     assert!(cells[0].2.contains("not star-shaped"), "{cells:?}");
+    assert_eq!(cells[0].1, "polygon");
 }

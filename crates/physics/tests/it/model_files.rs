@@ -184,6 +184,76 @@ fn a_users_model_is_refused_where_it_cannot_run() {
     );
 }
 
+/// `per_element` counts the elements the init rules on elements match (one per element),
+/// not the matches of every init rule: before, a model whose element rule matched only
+/// tetrahedra passed on a mesh of hexahedra because its vertex rule's matches were added
+/// (45 vertices against 16 elements: every element without force), and a model with vertex
+/// rules only passed or failed by how many vertices the mesh had.
+#[test]
+fn per_element_counts_the_elements_its_init_rules_match() {
+    let file = |inits: &str| {
+        format!(
+            "dimension 3
+embedding k_el : f64  on <0,1,2>
+embedding k_v  : f64  on <1,2,3>
+embedding f_el : vec3 on <1,2>
+
+rule el_init(k: f64) {{
+  left {{ e : <0,1,2> hook }}
+  where count<0,1,2>(e) == 24
+  compute {{ e.k_el = k }}
+}}
+rule v_init(k: f64) {{
+  left {{ v : <1,2,3> hook }}
+  compute {{ v.k_v = k }}
+}}
+rule el_force {{
+  left {{ c : <1,2> hook }}
+  compute {{ c.f_el = -c.k_el * (c.position - c.rest) }}
+}}
+model tets(k: f64 = 10.0) {{
+  init   {inits}
+  step   el_force
+  forces f_el
+  needs  \"tetrahedra\"
+  per_element
+}}
+"
+        )
+    };
+    let sim = |element: BoxElement, inits: &str| {
+        let (g, _) = build(
+            &cuboid([4, 2, 2], [1.0, 0.5, 0.5], element),
+            &BuildOptions::default(),
+        )
+        .unwrap();
+        let cfg = Config {
+            models: vec![model("tets", &[])],
+            model_files: vec![written("per_element", "tets.tmr", &file(inits))],
+            ..Config::default()
+        };
+        Simulation::new(g, cfg)
+    };
+    // tetrahedra: every element handled
+    sim(BoxElement::Tetra, "el_init(k), v_init(k)").unwrap();
+    // hexahedra: the element rule matches none of the 16; the vertex rule's 45 matches
+    // handle no element
+    let e = sim(BoxElement::Hexa, "el_init(k), v_init(k)")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("model 'tets' handles 0 elements of 16: it needs tetrahedra"),
+        "{e}"
+    );
+    // no init rule on elements at all
+    let e = sim(BoxElement::Tetra, "v_init(k)").unwrap_err().to_string();
+    assert!(
+        e.contains("model 'tets' is declared per_element")
+            && e.contains("none of its init rules (v_init) is on elements"),
+        "{e}"
+    );
+}
+
 /// A mistake in the user's model file is reported at its file, line and column.
 #[test]
 fn a_bad_model_file_is_reported_where_it_is_wrong() {

@@ -396,6 +396,19 @@ fn bad_events_are_reported() {
     });
     let e = s.check_events(1.0).unwrap_err().to_string();
     assert!(e.contains("after the end of the run"), "{e}");
+    // a run of no step reaches no event, not even one at t = 0 (QA: it was skipped silently)
+    let s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
+        c.events = vec![TimedEvent {
+            time: 0.0,
+            cut: Cut::Plane {
+                normal: [1.0, 0.0, 0.0],
+                offset: 1.0,
+            },
+        }];
+    });
+    assert!(s.check_events(0.001).is_ok());
+    let e = s.check_events(0.0).unwrap_err().to_string();
+    assert!(e.contains("the event at t = 0 is never reached"), "{e}");
     // a predicate cut at a time happens in the run and separates the halves
     let mut s = sim(&mesh, vec![model("stretch_elementary", &[])], |c| {
         c.events = vec![TimedEvent {

@@ -460,3 +460,36 @@ model a { init broken step anchor_force forces f_anchor }
         "{errs:?}"
     );
 }
+
+/// A model calling a rule of its own file that was refused because another file defines the
+/// name (a user's `lump_mass` beside the shipped one) gets only that error: before, the model
+/// was checked against the other file's rule, and a second error blamed it for what that
+/// rule writes or takes (QA).
+#[test]
+fn a_model_calling_its_files_refused_duplicate_rule_gets_one_error() {
+    let first = "dimension 3
+embedding k_a : f64 on <1,2,3>
+rule setup { left { v : <1,2,3> hook } compute { v.k_a = 1.0 } }
+";
+    let other = "dimension 3
+embedding k_b : f64 on <1,2,3>
+embedding f_b : vec3 on <1,2,3>
+rule setup(k: f64) { left { v : <1,2,3> hook } compute { v.k_b = k } }
+rule push { left { v : <1,2,3> hook } compute { v.f_b = v.k_b * vec3(1, 0, 0) } }
+model pushed(k: f64 = 1.0) { init setup(k) step push forces f_b }
+";
+    let d = load_sources(&[
+        ("a.tmr".into(), first.into()),
+        ("b.tmr".into(), other.into()),
+    ])
+    .expect_err("refused");
+    let errs: Vec<&Diagnostic> = d.iter().filter(|d| d.severity == Severity::Error).collect();
+    assert_eq!(errs.len(), 1, "{errs:?}");
+    assert!(
+        errs[0]
+            .message
+            .contains("rule 'setup' is already defined at a.tmr:3:1"),
+        "{}",
+        errs[0]
+    );
+}
