@@ -161,13 +161,13 @@ def test_a_predicate_cut(tmp_path: Path) -> None:
         tmp_path,
         '[[event]]\ntime = 0.002\nkind = "cut"\nwhere = "abs(x - 1.0) < 1e-6"\n',
     )
-    s = topomech.run_scene(scene, tmp_path / "o")
+    s = topomech.run_scene(scene, tmp_path / "o", save_map=True)
     assert "error" not in s
     assert s["components"] == 2
     assert [(c["step"], c["kind"]) for c in s["topology_changes"]] == [(2, "cut")]
-    # the cut map itself is saved beside final.vtu (QA: a run's cut map could not be had
-    # from the command line, and final.vtu of pieces that moved into each other is refused
-    # as a mesh): it reads back with its two pieces and the final positions
+    # asked, the cut map itself is saved beside final.vtu (QA: a run's cut map could not be
+    # had from the command line, and final.vtu of pieces that moved into each other is
+    # refused as a mesh): it reads back with its two pieces and the final positions
     assert s["outputs"]["map"] == "final.tmg"
     g, _ = topomech.read_gmap(tmp_path / "o" / "final.tmg")
     counts = g.cell_counts()
@@ -177,10 +177,13 @@ def test_a_predicate_cut(tmp_path: Path) -> None:
     }
     final = meshio.read(tmp_path / "o" / "final.vtu")
     assert np.allclose(np.sort(g.positions(), axis=0), np.sort(final.points, axis=0))
-    # without a change, no map is written
-    plain = topomech.run_scene(box_with(tmp_path, ""), tmp_path / "p")
+    # without a change, or not asked, no map is written
+    plain = topomech.run_scene(box_with(tmp_path, ""), tmp_path / "p", save_map=True)
     assert plain["outputs"]["map"] is None
     assert not (tmp_path / "p" / "final.tmg").exists()
+    unasked = topomech.run_scene(scene, tmp_path / "q")
+    assert unasked["outputs"]["map"] is None
+    assert not (tmp_path / "q" / "final.tmg").exists()
 
 
 def test_a_cut_that_misses_stops_the_run(
@@ -233,11 +236,15 @@ def test_a_run_of_no_step_reaches_no_event(
     assert code == 2
     assert "event[0].time: t = 0, but the run takes no step (steps = 0)" in err
     assert not (tmp_path / "o").exists()
-    # one step reaches it
+    # one step reaches it; --save-map keeps the cut map
     code, _ = run_cli(
-        [str(scene), "--out", str(tmp_path / "o1"), "--steps", "1", "--no-preview"], capsys
+        [str(scene), "--out", str(tmp_path / "o1"), "--steps", "1", "--no-preview", "--save-map"],
+        capsys,
     )
     assert code == 0
+    assert summary_of(tmp_path / "o1")["outputs"]["map"] == "final.tmg"
+    g, _ = topomech.read_gmap(tmp_path / "o1" / "final.tmg")
+    assert g.cell_counts()["components"] == 2
 
 
 def test_steps_that_end_before_an_event(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

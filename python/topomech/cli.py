@@ -379,6 +379,14 @@ def _add_run(sub: Any) -> None:
             "like the outputs are replaced, the others kept)"
         ),
     )
+    p.add_argument(
+        "--save-map",
+        action="store_true",
+        help=(
+            "after a cut or a fracture, also write DIR/final.tmg: the final map, its pieces "
+            "apart (final.vtu of pieces that moved into each other is refused as a mesh)"
+        ),
+    )
     p.add_argument("--list", action="store_true", help="list the shipped scenes and exit")
     p.set_defaults(run=_run_run)
 
@@ -561,6 +569,7 @@ def _run_scene_cli(
     quiet: bool,
     preview: bool = True,
     overwrite: bool = False,
+    save_map: bool = False,
 ) -> tuple[int, Path | None]:
     """Runs a scene for ``run`` and ``demo``: the exit code and the output directory. Ctrl-C
     and SIGTERM stop the run the same way (:func:`_sigterm_interrupts`), the exit code says
@@ -587,6 +596,7 @@ def _run_scene_cli(
                 preview=preview,
                 overwrite=overwrite,
                 started=_started[0],
+                save_map=save_map,
             )
     except (SceneError, OutputError) as e:
         _error(str(e))
@@ -627,7 +637,14 @@ def _run_run(args: argparse.Namespace) -> int:
         _error("give a SCENE (a .toml file or a shipped scene's name; --list lists them)")
         return EXIT_REFUSED
     code, _ = _run_scene_cli(
-        args.scene, args.out, args.steps, args.every, args.quiet, args.preview, args.overwrite
+        args.scene,
+        args.out,
+        args.steps,
+        args.every,
+        args.quiet,
+        args.preview,
+        args.overwrite,
+        args.save_map,
     )
     return code
 

@@ -3,10 +3,11 @@
 :func:`run_scene` writes, under the output directory:
 
 - ``summary.json``: what ran and how it ended (see :func:`run_scene` for the keys);
-- ``final.tmg``, after a topology change (a cut, a fracture): the final map itself with
-  every embedding (:meth:`GMap.save`), which :func:`read_gmap` and ``topomech info`` read
-  back with its pieces apart, where ``final.vtu`` of pieces that moved into each other is
-  refused as a mesh (overlapping cells);
+- ``final.tmg``, with ``save_map`` (``topomech run --save-map``) after a topology change (a
+  cut, a fracture): the final map itself with every embedding (:meth:`GMap.save`; about 4
+  KB per tetrahedron for a co-rotational run), which :func:`read_gmap` and ``topomech info``
+  read back with its pieces apart, where ``final.vtu`` of pieces that moved into each other
+  is refused as a mesh (overlapping cells);
 - ``final.vtu``: the last state, points at the current positions in the simulation's row
   order (the input point order), point data ``displacement``, ``velocity``, ``fixed`` (1 for
   held vertices), ``point_id`` (the input point index of each row) and the scene's
@@ -539,9 +540,12 @@ def run_scene(
     log: bool | TextIO = False,
     log_interval: float | None = None,
     started: float | None = None,
+    save_map: bool = False,
 ) -> dict[str, Any]:
     """Runs a scene (a :class:`Scene` or a scene file) and writes its outputs under ``out``
-    (default ``out/<scene name>``); ``steps`` and ``every`` override the scene's. Returns the
+    (default ``out/<scene name>``); ``steps`` and ``every`` override the scene's;
+    ``save_map`` writes ``final.tmg`` after a topology change (see the module's
+    documentation). Returns the
     summary written to ``summary.json``: ``scene``, ``name``, ``dimension``, ``models``,
     ``integrator``, ``dt``, ``steps`` (done), ``steps_requested``, ``time``, ``darts``,
     ``vertices``, ``edges``, ``faces``, ``volumes``, ``components`` (connected components of
@@ -785,7 +789,7 @@ def run_scene(
             enter("final", ["final.vtu", "final.vtu.part"])
             writer.write(out_dir / "final.vtu")
             final_written = True
-            if sim.topology_changes():
+            if save_map and sim.topology_changes():
                 # the cut map itself: its pieces may have moved into each other, which a mesh
                 # file cannot tell apart from one body (final.vtu would be refused as input)
                 enter("final", ["final.tmg"])

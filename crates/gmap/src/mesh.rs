@@ -260,8 +260,8 @@ pub struct BuildReport {
 const SEPARATE_BODIES: &str = "; if these cells belong to separate bodies that touch or \
     interpenetrate (such as the pieces of a cut after they moved: topomech models no contact \
     between bodies), a mesh file cannot say so: read the map saved as .tmg instead, which \
-    keeps the bodies apart (`topomech run` writes final.tmg beside final.vtu after a cut; \
-    in Python, GMap.save)";
+    keeps the bodies apart (`topomech run --save-map` writes final.tmg beside final.vtu \
+    after a cut; in Python, GMap.save)";
 
 /// A pair of faces of a non-conforming interface (see [`MeshError::NonConforming`]).
 #[derive(Clone, Debug, PartialEq, Eq)]
