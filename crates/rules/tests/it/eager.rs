@@ -10,6 +10,8 @@ use topomech_gmap::mesh::{build, BuildOptions};
 use topomech_gmap::GMap;
 use topomech_rules::{load_sources, ApplyError, Params, RuleSet, Val};
 
+use crate::nonfinite::on_threads;
+
 const SOURCE: &str = "dimension 2
 embedding position : vec3 on <1,2>
 embedding velocity : vec3 on <1,2>
@@ -64,14 +66,6 @@ fn column(g: &GMap, name: &str) -> Vec<u64> {
         .iter()
         .map(|x| x.to_bits())
         .collect()
-}
-
-fn on_threads(threads: usize, f: impl FnOnce() + Send) {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap()
-        .install(f);
 }
 
 fn pull_at(ax: f64, ay: f64) -> Params {

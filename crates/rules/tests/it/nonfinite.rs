@@ -65,7 +65,7 @@ fn setup(compiled: bool) -> (GMap, RuleSet) {
 }
 
 /// Runs `f` on a rayon pool of `threads` threads.
-fn on_threads(threads: usize, f: impl FnOnce() + Send) {
+pub(crate) fn on_threads(threads: usize, f: impl FnOnce() + Send) {
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
