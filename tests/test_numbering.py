@@ -191,6 +191,8 @@ def test_set_vertex_field_writes_rows_and_names_bad_ones() -> None:
     held[[0, 3]] = True
     sim.set_vertex_field("fixed", held)
     np.testing.assert_array_equal(sim.fixed(), held)
+    v[held] = 0.0  # holding stops a vertex
+    np.testing.assert_array_equal(sim.velocities(), v)
     bad = v.copy()
     bad[2, 0] = np.nan
     bad[5, 1] = np.inf

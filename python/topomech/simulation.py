@@ -319,6 +319,12 @@ class Simulation:
         config: Mapping[str, Any] | None = None,
         **kwargs: Any,
     ) -> None:
+        if config is not None and not isinstance(config, Mapping):
+            # (a list of models passed where the configuration goes, say)
+            raise TypeError(
+                f"config: expected a mapping of configuration keys (models, dt, ...), got a "
+                f"{type(config).__name__}; models go in config['models'] or models=[...]"
+            )
         cfg = dict(config) if config is not None else None
         _check_solver_keys({**(cfg or {}), **kwargs})
         given_files = _model_files_arg(cfg, kwargs)
@@ -556,10 +562,11 @@ class Simulation:
         return ids, list(rows)
 
     def set_fixed(self, mask: Any) -> None:
-        """Holds the rows where ``mask`` (bool ``(V,)``) is true in place, frees the others.
-        Raises :class:`ValueError` for a wrong shape and :class:`SimulationError` when it
-        would free a vertex without mass (naming them); :class:`ValueError` also for masked
-        entries of a numpy masked array."""
+        """Holds the rows where ``mask`` (bool ``(V,)``) is true in place, with zero velocity
+        (a moving vertex held stops), frees the others (keeping their velocity). Raises
+        :class:`ValueError` for a wrong shape and :class:`SimulationError` when it would free
+        a vertex without mass (naming them); :class:`ValueError` also for masked entries of
+        a numpy masked array."""
         a = np.asarray(_unmasked(mask, "mask"))
         if a.dtype != np.bool_:
             raise TypeError(f"mask must be an array of bool, got dtype {a.dtype}")
@@ -589,7 +596,9 @@ class Simulation:
     def set_velocities(self, velocities: Any) -> None:
         """Sets the velocities from an array-like ``(V, 3)`` of finite real numbers (complex
         values, booleans, dates and strings raise :class:`TypeError`; masked entries of a
-        numpy masked array :class:`ValueError`)."""
+        numpy masked array :class:`ValueError`). A held vertex keeps zero velocity: a
+        non-zero one for a held row raises :class:`SimulationError` naming the rows, and
+        nothing is set."""
         self._core.set_velocities(real_array(velocities, "velocities"))
 
     def vertex_field(self, name: str) -> npt.NDArray[Any]:
@@ -608,7 +617,11 @@ class Simulation:
         :meth:`vertex_field`). It reads what no per-vertex array shows: a force on each corner
         of an element (``f_corot`` on ``<1,2>`` in 3D), a per-element stiffness (``k_elem``,
         ``(E, 12, 12)``), a volume. Raises :class:`KeyError` for an unknown name, listing the
-        embeddings."""
+        embeddings; :class:`TypeError` for a name that is not a str."""
+        if not isinstance(name, str):
+            raise TypeError(
+                f"name: expected an embedding's name (a str), got {type(name).__name__}"
+            )
         return EmbeddingValues(*self._core.orbit_embedding(name))
 
     def set_embedding(self, name: str, values: Any) -> None:

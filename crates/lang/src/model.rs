@@ -503,6 +503,34 @@ fn check_model(
     let init = calls(&m.init, "init", out);
     let step = calls(&m.step, "step", out);
     let jvp = calls(&m.jvp, "jvp", out);
+    // per_element: some init rule must be on elements, a hook on the element's orbit
+    // (<0,1,2> in 3D, <0,1> in 2D) or on a dart (<>, one dart per element by a guard, as the
+    // shipped rules take it): a simulation counts those rules' matches against its elements
+    if let Some(pos) = m.per_element {
+        let on_elements = |r: &Rule| {
+            r.hook_orbit.is_empty()
+                || dims
+                    .iter()
+                    .any(|&d| r.hook_orbit.iter().copied().eq(0..d as u8))
+        };
+        let known: Vec<&Rule> = m
+            .init
+            .iter()
+            .filter_map(|c| rules.iter().find(|r| r.name == c.rule))
+            .collect();
+        if known.len() == m.init.len() && !known.iter().any(|r| on_elements(r)) {
+            error(
+                out,
+                file,
+                pos,
+                "model-rule",
+                format!(
+                    "model '{mn}' is declared per_element (every element handled by an init rule), but none of its init rules ({}) is on elements: a rule whose hook is an element ('e : <0,1,2> hook', '<0,1>' in 2D) or one dart of each element ('n0 : <> hook' with 'where n0.vertex0'); drop per_element, or add such a rule",
+                    known.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ")
+                ),
+            );
+        }
+    }
     // a parameter no rule call passes on changes nothing: required, it would make every
     // user give a value that does nothing (an error); with a default, a likely slip (a
     // warning). The material's `young` and `poisson` are not parameters of models.

@@ -19,6 +19,50 @@ fn glue_source() -> (String, String) {
     )
 }
 
+/// Refuses two models whose init rules write one embedding other than with the same rule
+/// and parameters: the embedding holds one value, the last one written, which both models'
+/// step rules would then read (QA: `stretch_elementary` and `stretch_cumulated` share their
+/// springs' stiffness through `stretch_init`; with 1000 and 10, both ran with the later
+/// one's, and the result depended on the order of the models).
+fn shared_init_writes(rules: &RuleSet, defs: &[RunModel]) -> Result<(), PhysicsError> {
+    let embs = rules.embeddings();
+    let writes = |rule: &str| -> Vec<&str> {
+        rules.rule(rule).map_or_else(
+            |_| Vec::new(),
+            |r| {
+                r.program
+                    .iter()
+                    .filter_map(|st| match st {
+                        topomech_rules::check::TStmt::Write { emb, .. } => {
+                            embs.get(*emb).map(|e| e.name.as_str())
+                        }
+                        topomech_rules::check::TStmt::Let(..) => None,
+                    })
+                    .collect()
+            },
+        )
+    };
+    for (k, a) in defs.iter().enumerate() {
+        for (i, b) in defs[..k].iter().enumerate() {
+            for (ra, pa) in &a.init {
+                for (rb, pb) in &b.init {
+                    if ra == rb && pa == pb {
+                        continue; // the same values written twice
+                    }
+                    let wb = writes(rb);
+                    if let Some(e) = writes(ra).into_iter().find(|e| wb.contains(e)) {
+                        return Err(PhysicsError::Model(format!(
+                            "models '{}' (model[{i}]) and '{}' (model[{k}]) both set '{e}' in their init rules ({rb}, {ra}) with other parameters: the embedding holds one value, the last one written, which both models would use; give them the same parameters, or give one its own embeddings (a copy of its rule file with them renamed)",
+                            b.name, a.name
+                        )));
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The label of the built file holding the accumulation rules.
 const ACCUMULATION: &str = "accumulation (built from the models' force embeddings)";
 
@@ -1092,6 +1136,7 @@ impl Simulation {
             }
             defs.push(RunModel::bind(decl, &m.params)?);
         }
+        shared_init_writes(&rules, &defs)?;
         if matches!(
             cfg.integrator,
             Integrator::ImplicitEuler | Integrator::Static

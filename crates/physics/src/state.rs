@@ -584,7 +584,9 @@ impl Simulation {
         Ok(())
     }
 
-    /// Sets a vec3 vertex embedding from values in row order (every orbit of a row).
+    /// Sets a vec3 vertex embedding from values in row order (every orbit of a row), as
+    /// given: no rule of the supports is applied (the solvers write trial velocities with
+    /// it); [`Simulation::set_velocities`] is the user's.
     pub fn set_vertex_vec3(&mut self, name: &str, values: &[[f64; 3]]) -> Result<(), PhysicsError> {
         self.sync_rows()?;
         let id = self.id(name)?;
@@ -610,8 +612,39 @@ impl Simulation {
         Ok(())
     }
 
-    /// Holds the rows where `mask` is true in place (and frees the others). Refuses, naming
-    /// them, to free rows without mass (they could not move).
+    /// Sets the velocities (m/s, row order). Errors: a wrong row count, a held row (`fixed`)
+    /// given a non-zero velocity (see [`Simulation::check_held_velocities`]).
+    pub fn set_velocities(&mut self, velocities: &[[f64; 3]]) -> Result<(), PhysicsError> {
+        self.sync_rows()?;
+        self.check_rows(velocities)?;
+        self.check_held_velocities(|r| velocities[r])?;
+        self.set_vertex_vec3("velocity", velocities)
+    }
+
+    /// A held vertex keeps its position and zero velocity: velocities that give one of the
+    /// held rows (`fixed`) a non-zero velocity are refused, naming the rows (QA: implicit
+    /// Euler moved a held vertex by the velocity it was given, and the kinetic energy and
+    /// momentum counted it). `velocity(r)` is row `r`'s.
+    pub(crate) fn check_held_velocities(
+        &self,
+        velocity: impl Fn(usize) -> [f64; 3],
+    ) -> Result<(), PhysicsError> {
+        let held = self.vertex_bool("fixed")?;
+        let moving: Vec<usize> = (0..held.len())
+            .filter(|&r| held[r] && velocity(r).iter().any(|&x| x != 0.0))
+            .collect();
+        if moving.is_empty() {
+            return Ok(());
+        }
+        Err(PhysicsError::Config(format!(
+            "velocities: vertices {} are held (fixed), and a held vertex keeps zero velocity: give them 0, or free them first (set_fixed)",
+            list_some(&moving, 20)
+        )))
+    }
+
+    /// Holds the rows where `mask` is true in place, with zero velocity (and frees the
+    /// others, keeping their velocity). Refuses, naming them, to free rows without mass
+    /// (they could not move).
     pub fn set_fixed(&mut self, mask: &[bool]) -> Result<(), PhysicsError> {
         self.check_rows(mask)?;
         let m = self.vertex_scalar_sum("mass")?;
@@ -623,6 +656,16 @@ impl Simulation {
                 "cannot free vertices without mass (they must stay fixed): {}",
                 list_some(&bad, 20)
             )));
+        }
+        // a row held from now on stops: its velocity is zero (the integrators leave held
+        // rows as they are, and implicit Euler would move one by its velocity)
+        let vel = self.id("velocity")?;
+        for (&d, &r) in self.rows.orbits.iter().zip(&self.rows.row_of) {
+            if mask[r] {
+                self.g
+                    .set_real(vel, d, &[0.0; 3])
+                    .map_err(|e| PhysicsError::Config(e.to_string()))?;
+            }
         }
         self.set_vertex_bool("fixed", mask)
     }
@@ -701,6 +744,21 @@ impl Simulation {
                 "'{name}' must be finite: not so at vertices {}",
                 list_some(&non_finite, 20)
             )));
+        }
+        // the support's rules: holding stops a vertex (and refuses to free one without
+        // mass); a held vertex has no velocity
+        if name == "fixed" {
+            let mask: Vec<bool> = values
+                .iter()
+                .map(|v| matches!(v, Value::Bool(true)))
+                .collect();
+            return self.set_fixed(&mask);
+        }
+        if name == "velocity" {
+            self.check_held_velocities(|r| match &values[r] {
+                Value::Real(x) => [x[0], x[1], x[2]],
+                _ => [0.0; 3],
+            })?;
         }
         // a force is a row's total: on the row's first orbit, zero on the others (the
         // accumulation sums them, the step shares the sum by mass)

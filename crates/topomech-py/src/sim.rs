@@ -841,7 +841,14 @@ impl PySimulation {
             }
             Ok(rows)
         })?;
-        self.run(py, |sim| Ok(sim.set_vertex_vec3(name, &rows)?))
+        self.run(py, |sim| {
+            if name == "velocity" {
+                // a held vertex keeps zero velocity
+                Ok(sim.set_velocities(&rows)?)
+            } else {
+                Ok(sim.set_vertex_vec3(name, &rows)?)
+            }
+        })
     }
 }
 

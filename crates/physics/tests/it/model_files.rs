@@ -644,3 +644,30 @@ fn a_failing_init_rule_names_its_model_file_and_element() {
         .unwrap();
     assert!(x > 0.0 && x < 0.5, "{e}");
 }
+
+/// Two models whose init rules write one embedding with other parameters are refused: the
+/// embedding holds the last value written, which both models' step rules read (QA: the
+/// elementary springs at 1000 N/m with the cumulated ones at 10 N/m both ran at 10, and in
+/// the other order both at 1000). With the same parameters the value is the same, and the
+/// pair runs.
+#[test]
+fn models_setting_one_embedding_differently_are_refused() {
+    let tri = grid([2, 2], [1.0, 1.0], GridElement::Triangle);
+    let run = |k_elementary: f64, k_cumulated: f64| {
+        let (g, _) = build(&tri, &BuildOptions::default()).unwrap();
+        let cfg = Config {
+            models: vec![
+                model("stretch_elementary", &[("stiffness", k_elementary)]),
+                model("stretch_cumulated", &[("stiffness", k_cumulated)]),
+            ],
+            ..Config::default()
+        };
+        Simulation::new(g, cfg)
+    };
+    let e = run(1000.0, 10.0).unwrap_err().to_string();
+    assert!(
+        e.contains("models 'stretch_elementary' (model[0]) and 'stretch_cumulated' (model[1]) both set 'spring_k' in their init rules (stretch_init, stretch_init) with other parameters"),
+        "{e}"
+    );
+    run(1000.0, 1000.0).unwrap();
+}

@@ -656,9 +656,14 @@ fn set_fixed_and_fields_write_whole_rows() {
     for &d in &darts {
         assert_eq!(s.gmap().value(f, d).unwrap(), Value::Bool(true));
     }
+    // a held vertex keeps zero velocity: a velocity for row 0 is refused while it is held,
+    // and holding it stopped it
     let v: Vec<Value> = (0..n)
         .map(|r| Value::Real(vec![r as f64, 0.0, 1.0]))
         .collect();
+    let e = s.set_vertex_field("velocity", &v).unwrap_err().to_string();
+    assert!(e.contains("vertices 0 are held (fixed)"), "{e}");
+    s.set_fixed(&vec![false; n]).unwrap();
     s.set_vertex_field("velocity", &v).unwrap();
     let vel = s.gmap().require("velocity").unwrap();
     for &d in &darts {

@@ -19,8 +19,9 @@ use topomech_physics::{
 
 fn models() -> Vec<ModelSpec> {
     vec![
+        // (one stiffness: the two spring models share it, `stretch_init`)
         model("stretch_cumulated", &[("stiffness", 1e4)]),
-        model("stretch_elementary", &[("stiffness", 1e3)]),
+        model("stretch_elementary", &[("stiffness", 1e4)]),
         model("corotational", &[]),
     ]
 }
@@ -60,11 +61,20 @@ fn shake(s: &mut Simulation) {
         })
         .collect();
     s.set_vertex_vec3("position", &x).unwrap();
+    // (held vertices keep zero velocity)
+    let held = s.vertex_bool("fixed").unwrap();
     let v: Vec<[f64; 3]> = rest
         .iter()
-        .map(|p| [0.1 * p[1], -0.2 * p[0], 0.05])
+        .zip(&held)
+        .map(|(p, h)| {
+            if *h {
+                [0.0; 3]
+            } else {
+                [0.1 * p[1], -0.2 * p[0], 0.05]
+            }
+        })
         .collect();
-    s.set_vertex_vec3("velocity", &v).unwrap();
+    s.set_velocities(&v).unwrap();
 }
 
 fn close(a: &[[f64; 3]], b: &[[f64; 3]], what: &str) {

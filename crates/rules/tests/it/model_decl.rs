@@ -48,8 +48,13 @@ fn line_of(model: &str, needle: &str) -> u32 {
 
 #[test]
 fn a_declaration_is_parsed_into_a_checked_model() {
-    let model = "model anchor(k: f64 = 10.0, d: vec3 = vec3(0, 0, -1.5), c: f64) {
-  init   anchor_init(k, vec3(1, 2, 3)), anchor_init(2.5, d), anchor_init(c, d)
+    // (per_element wants an init rule on elements: `element_init`, a hook on <0,1,2>)
+    let model = "rule element_init(k: f64) {
+  left { e : <0,1,2> hook }
+  compute { e.k_anchor = k }
+}
+model anchor(k: f64 = 10.0, d: vec3 = vec3(0, 0, -1.5), c: f64) {
+  init   anchor_init(k, vec3(1, 2, 3)), anchor_init(2.5, d), anchor_init(c, d), element_init(k)
   step   anchor_force
   forces f_anchor
   jvp    anchor_jvp -> df_anchor
@@ -68,7 +73,7 @@ fn a_declaration_is_parsed_into_a_checked_model() {
     assert_eq!(m.params[0].default, Some(Val::F(10.0)));
     assert_eq!(m.params[1].default, Some(Val::V3([0.0, 0.0, -1.5])));
     assert_eq!(m.params[2].default, None);
-    assert_eq!(m.init.len(), 3);
+    assert_eq!(m.init.len(), 4);
     assert_eq!(m.init[0].rule, "anchor_init");
     assert_eq!(
         m.init[0].args,
@@ -491,5 +496,31 @@ model pushed(k: f64 = 1.0) { init setup(k) step push forces f_b }
             .contains("rule 'setup' is already defined at a.tmr:3:1"),
         "{}",
         errs[0]
+    );
+}
+
+/// `per_element` without an init rule on elements (a hook on the element's orbit or a dart)
+/// is refused by the checker, at `per_element`: every simulation would refuse the model
+/// (QA: `topomech check` said ok).
+#[test]
+fn per_element_without_an_element_rule_is_refused_where_it_is_written() {
+    let model = "model m(k: f64 = 1.0, d: vec3 = vec3(0, 0, 0)) {
+  init   anchor_init(k, d)
+  step   anchor_force
+  forces f_anchor
+  per_element
+}
+";
+    let errs = errors(model);
+    let e = errs
+        .iter()
+        .find(|d| d.message.contains("is declared per_element"))
+        .unwrap_or_else(|| panic!("{errs:?}"));
+    assert_eq!(e.condition, "model-rule");
+    assert_eq!(e.pos.line, line_of(model, "per_element"));
+    assert!(
+        e.message
+            .contains("none of its init rules (anchor_init) is on elements"),
+        "{e}"
     );
 }
