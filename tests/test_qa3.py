@@ -48,7 +48,7 @@ def test_a_velocity_for_a_held_vertex_is_refused() -> None:
     v = before.copy()
     v[7] = [0.0, 0.0, 1.0]
     for write in (sim.set_velocities, lambda x: sim.set_vertex_field("velocity", x)):
-        with pytest.raises(topomech.SimulationError, match=r"vertices 7 are held \(fixed\)"):
+        with pytest.raises(topomech.SimulationError, match=r"vertex 7 is held \(fixed\)"):
             write(v)
         assert np.array_equal(sim.velocities(), before)
     v[7] = 0.0
@@ -62,5 +62,34 @@ def test_arguments_of_the_wrong_kind_are_named() -> None:
     with pytest.raises(TypeError, match=r"^config: expected a mapping .* got a list"):
         topomech.Simulation(g, [1, 2])  # type: ignore[arg-type]
     sim = topomech.Simulation(g, models=["corotational"])
-    with pytest.raises(TypeError, match=r"^name: expected an embedding's name \(a str\), got int"):
-        sim.embedding(3)  # type: ignore[arg-type]
+    calls = [
+        lambda: sim.embedding(3),  # type: ignore[arg-type]
+        lambda: sim.vertex_field(3),  # type: ignore[arg-type]
+        lambda: sim.set_vertex_field(3, sim.positions()),  # type: ignore[arg-type]
+        lambda: sim.set_embedding(3, sim.positions()),  # type: ignore[arg-type]
+        lambda: g.embedding(3),  # type: ignore[arg-type]
+        lambda: g.set_embedding(3, g.positions()),  # type: ignore[arg-type]
+    ]
+    for call in calls:
+        with pytest.raises(TypeError, match=r"^name: expected an embedding's name \(a str\)"):
+            call()
+
+
+def test_set_embedding_keeps_the_rules_of_the_supports() -> None:
+    """set_embedding was a way round them (QA): a velocity for a held vertex is refused and
+    nothing is written; 'fixed' written whole holds as set_fixed does, stopping the
+    vertices it holds."""
+    sim = _beam()
+    sim.step(5)
+    held = np.zeros(sim.n_vertices, dtype=bool)
+    held[0] = True
+    sim.set_fixed(held)
+    before = sim.embedding("velocity").values
+    with pytest.raises(topomech.SimulationError, match="vertex 0 is held"):
+        sim.set_embedding("velocity", np.ones_like(before))
+    assert np.array_equal(sim.embedding("velocity").values, before)
+    fixed = sim.embedding("fixed").values.copy()
+    fixed[:] = True
+    sim.set_embedding("fixed", fixed)
+    assert sim.fixed().all()
+    assert not sim.velocities().any()

@@ -135,6 +135,15 @@ def _refuse_non_real(a: npt.NDArray[Any], values: Any, what: str) -> None:
 _NOT_REAL = (bool, np.bool_, str, bytes, complex, np.complexfloating, np.datetime64, np.timedelta64)
 
 
+def embedding_name(name: Any) -> str:
+    """``name`` when it is a str (an embedding's name); raises :class:`TypeError` naming
+    the argument otherwise (the kernel's own message names neither the argument nor what it
+    expects)."""
+    if not isinstance(name, str):
+        raise TypeError(f"name: expected an embedding's name (a str), got {type(name).__name__}")
+    return name
+
+
 def real_array(values: Any, what: str) -> npt.NDArray[np.float64]:
     """``values`` as a contiguous float64 array of the same shape (a 0-d array stays 0-d, so
     that a shape error names its real shape). Raises :class:`TypeError` for complex values

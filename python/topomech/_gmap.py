@@ -11,7 +11,14 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _core
-from topomech._cells import FlatMesh, cell_dimension, flat_to_blocks, real_array, to_flat
+from topomech._cells import (
+    FlatMesh,
+    cell_dimension,
+    embedding_name,
+    flat_to_blocks,
+    real_array,
+    to_flat,
+)
 from topomech._core import FileFormatError, MeshError, TopologyError
 
 if TYPE_CHECKING:
@@ -461,7 +468,7 @@ class GMap:
         >>> values.shape, darts.dtype, orbit
         ((3, 3), dtype('int64'), '<1,2>')
         """
-        return EmbeddingValues(*self._core.embedding(name))
+        return EmbeddingValues(*self._core.embedding(embedding_name(name)))
 
     def set_embedding(self, name: str, values: Any) -> None:
         """Writes every value of the stored embedding ``name``: ``values`` has the shape and
@@ -489,6 +496,7 @@ class GMap:
         are. They are not unique: a point split into several vertices (``pinched="split"``,
         a fracture, a cut) keeps its ``point_id`` on each, and the pieces of a cell that a
         rule subdivides keep its ``cell_id``."""
+        name = embedding_name(name)
         specs = {s.name: s for s in self.embeddings()}
         self._core.set_embedding(name, as_embedding_array(specs.get(name), values))
 

@@ -45,7 +45,7 @@ import numpy as np
 import numpy.typing as npt
 
 from topomech import _core
-from topomech._cells import _unmasked, real_array
+from topomech._cells import _unmasked, embedding_name, real_array
 from topomech._core import DivergenceError, SimulationError
 from topomech._gmap import EmbeddingSpec, EmbeddingValues, GMap, as_embedding_array
 from topomech._solver_log import SolverWarning
@@ -582,6 +582,7 @@ class Simulation:
         booleans given for a number embedding or numbers for a bool one, and
         :class:`ValueError` for a wrong shape (naming the shape the embedding's type takes)
         or masked entries of a numpy masked array."""
+        name = embedding_name(name)
         a = np.asarray(_unmasked(values, f"values for {name!r}"))
         if a.dtype != np.bool_:
             a = real_array(a, f"values for {name!r}")
@@ -608,7 +609,7 @@ class Simulation:
         ``force``, ``f_*``, summed over the orbits of a row). An unknown name, or an embedding
         on another orbit, raises :class:`EmbeddingError`; :meth:`embedding` reads any
         embedding, one row per orbit; :meth:`set_vertex_field` writes one row per vertex."""
-        return self._core.embedding(name)
+        return self._core.embedding(embedding_name(name))
 
     def embedding(self, name: str) -> EmbeddingValues:
         """The embedding ``name`` of the simulated map, one row per orbit of its orbit type,
@@ -618,11 +619,7 @@ class Simulation:
         of an element (``f_corot`` on ``<1,2>`` in 3D), a per-element stiffness (``k_elem``,
         ``(E, 12, 12)``), a volume. Raises :class:`KeyError` for an unknown name, listing the
         embeddings; :class:`TypeError` for a name that is not a str."""
-        if not isinstance(name, str):
-            raise TypeError(
-                f"name: expected an embedding's name (a str), got {type(name).__name__}"
-            )
-        return EmbeddingValues(*self._core.orbit_embedding(name))
+        return EmbeddingValues(*self._core.orbit_embedding(embedding_name(name)))
 
     def set_embedding(self, name: str, values: Any) -> None:
         """Writes every value of the stored embedding ``name`` in the layout of
@@ -640,7 +637,10 @@ class Simulation:
         and elements (``particle``, ``point_id``, ``cell_id``, ``vertex0``, ``face0``);
         :class:`ValueError` for values no material has: a ``density``, ``young`` or
         ``corner_mass`` not positive, a ``poisson`` outside (-1, 0.5), naming the value and
-        its row."""
+        its row; :class:`SimulationError` for a non-zero velocity given to a held vertex
+        (``velocity``; a held vertex keeps zero velocity), and ``fixed`` holds as
+        :meth:`set_fixed` does (stopping the vertices it holds)."""
+        name = embedding_name(name)
         specs = {s.name: s for s in self.embeddings()}
         self._core.set_orbit_embedding(name, as_embedding_array(specs.get(name), values))
 

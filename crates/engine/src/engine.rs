@@ -1310,7 +1310,17 @@ impl RuleSet {
         params: &Params,
         check: &(dyn Fn(EmbeddingId, &[f64]) -> bool + Sync),
     ) -> Result<Option<ApplyReport>, ApplyError> {
-        self.apply_inner(g, name, params, &never, None, Some(check), true, false)
+        self.apply_inner(
+            g,
+            name,
+            params,
+            &never,
+            None,
+            Some(check),
+            true,
+            false,
+            None,
+        )
     }
 
     /// [`RuleSet::apply_everywhere`] for a rule applied once (a simulation's set-up: rest
@@ -1329,7 +1339,7 @@ impl RuleSet {
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
         let out = self
-            .apply_inner(g, name, params, &never, None, None, false, false)
+            .apply_inner(g, name, params, &never, None, None, false, false, None)
             .map(Option::unwrap_or_default);
         // the plan just built (or an earlier one of this rule): dropped
         if let Some(index) = self.checked.rules.iter().position(|r| r.name == name) {
@@ -1341,6 +1351,42 @@ impl RuleSet {
         out
     }
 
+    /// [`RuleSet::apply_once`], with a hook dart of each match of the computation rule
+    /// (one of the darts of its hook node), where the application found its matches (it
+    /// does at its first run: `None` otherwise, say for a rule applied before without being
+    /// dropped). What a simulation tells the elements a model's init rules handled by.
+    ///
+    /// # Errors
+    /// Those of [`RuleSet::apply_everywhere`].
+    pub fn apply_once_hooks(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+    ) -> Result<(ApplyReport, Option<Vec<Dart>>), ApplyError> {
+        let mut hooks = None;
+        let out = self
+            .apply_inner(
+                g,
+                name,
+                params,
+                &never,
+                None,
+                None,
+                false,
+                false,
+                Some(&mut hooks),
+            )
+            .map(Option::unwrap_or_default);
+        if let Some(index) = self.checked.rules.iter().position(|r| r.name == name) {
+            self.plans
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .remove(&index);
+        }
+        out.map(|r| (r, hooks))
+    }
+
     fn apply_with(
         &self,
         g: &mut GMap,
@@ -1349,7 +1395,7 @@ impl RuleSet {
         interrupt: &dyn Fn() -> bool,
         region: Option<&Region>,
     ) -> Result<ApplyReport, ApplyError> {
-        self.apply_inner(g, name, params, interrupt, region, None, true, false)
+        self.apply_inner(g, name, params, interrupt, region, None, true, false, None)
             .map(Option::unwrap_or_default)
     }
 
@@ -1372,7 +1418,7 @@ impl RuleSet {
         name: &str,
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
-        self.apply_inner(g, name, params, &never, None, None, true, true)
+        self.apply_inner(g, name, params, &never, None, None, true, true, None)
             .map(Option::unwrap_or_default)
     }
 
@@ -1380,7 +1426,9 @@ impl RuleSet {
     /// [`RuleSet::apply_everywhere_checked`] (`None` only with a check); `keep`: a
     /// computation rule's plan is built with its index by dart, to be patched after a
     /// topology change (not for [`RuleSet::apply_once`], which drops it once it ran);
-    /// `eager`: the writes of [`RuleSet::apply_everywhere_eager`].
+    /// `eager`: the writes of [`RuleSet::apply_everywhere_eager`]; `hooks`: where to put a
+    /// hook dart of each match of a computation rule, when its matches are found (a plan
+    /// built now; see [`RuleSet::apply_once_hooks`]).
     #[allow(clippy::too_many_arguments)]
     fn apply_inner(
         &self,
@@ -1392,6 +1440,7 @@ impl RuleSet {
         check: Option<&crate::compiled::ValueCheck<'_>>,
         keep: bool,
         eager: bool,
+        mut hooks: Option<&mut Option<Vec<Dart>>>,
     ) -> Result<Option<ApplyReport>, ApplyError> {
         let poll = &mut Poll::new(interrupt);
         let b = self.bind_for(g, name, params, true)?;
@@ -1442,6 +1491,15 @@ impl RuleSet {
             self.builds
                 .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let matches = self.matches_of(g, &b, poll)?;
+            if let Some(h) = hooks.as_mut() {
+                let hook = b.rule.hooks[0];
+                **h = Some(
+                    matches
+                        .iter()
+                        .filter_map(|m| m.darts.get(hook).and_then(|d| d.first().copied()))
+                        .collect(),
+                );
+            }
             let index_of =
                 if keep && patchable(b.rule, b.embs) && (self.compile || matches.is_empty()) {
                     // a plan without matches keeps the guard's embeddings only: a rule without

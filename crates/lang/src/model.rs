@@ -507,25 +507,34 @@ fn check_model(
     // (<0,1,2> in 3D, <0,1> in 2D) or on a dart (<>, one dart per element by a guard, as the
     // shipped rules take it): a simulation counts those rules' matches against its elements
     if let Some(pos) = m.per_element {
-        let on_elements = |r: &Rule| {
-            r.hook_orbit.is_empty()
-                || dims
-                    .iter()
-                    .any(|&d| r.hook_orbit.iter().copied().eq(0..d as u8))
+        // (the hook's labels as a set: <2,0,1> is <0,1,2>)
+        let on_elements = |r: &Rule, d: usize| {
+            let mut h = r.hook_orbit.clone();
+            h.sort_unstable();
+            h.is_empty() || h.iter().copied().eq(0..d as u8)
         };
         let known: Vec<&Rule> = m
             .init
             .iter()
             .filter_map(|c| rules.iter().find(|r| r.name == c.rule))
             .collect();
-        if known.len() == m.init.len() && !known.iter().any(|r| on_elements(r)) {
+        // every dimension the model runs in needs one (a file of `dimension 2 3`)
+        let missing = dims
+            .iter()
+            .find(|&&d| !known.iter().any(|r| on_elements(r, d)));
+        if let (true, Some(&d)) = (known.len() == m.init.len(), missing) {
+            let in_dim = if dims.len() > 1 {
+                format!(" in {d}D")
+            } else {
+                String::new()
+            };
             error(
                 out,
                 file,
                 pos,
                 "model-rule",
                 format!(
-                    "model '{mn}' is declared per_element (every element handled by an init rule), but none of its init rules ({}) is on elements: a rule whose hook is an element ('e : <0,1,2> hook', '<0,1>' in 2D) or one dart of each element ('n0 : <> hook' with 'where n0.vertex0'); drop per_element, or add such a rule",
+                    "model '{mn}' is declared per_element (every element handled by an init rule), but none of its init rules ({}) is on elements{in_dim}: a rule whose hook is an element ('e : <0,1,2> hook', '<0,1>' in 2D) or one dart of each element ('n0 : <> hook' with 'where n0.vertex0'); drop per_element, or add such a rule",
                     known.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ")
                 ),
             );

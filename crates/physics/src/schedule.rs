@@ -19,48 +19,107 @@ fn glue_source() -> (String, String) {
     )
 }
 
-/// Refuses two models whose init rules write one embedding other than with the same rule
-/// and parameters: the embedding holds one value, the last one written, which both models'
-/// step rules would then read (QA: `stretch_elementary` and `stretch_cumulated` share their
-/// springs' stiffness through `stretch_init`; with 1000 and 10, both ran with the later
-/// one's, and the result depended on the order of the models).
-fn shared_init_writes(rules: &RuleSet, defs: &[RunModel]) -> Result<(), PhysicsError> {
+/// The embeddings the init rules of a model write (by name, each once).
+fn init_writes(rules: &RuleSet, def: &RunModel) -> Vec<String> {
     let embs = rules.embeddings();
-    let writes = |rule: &str| -> Vec<&str> {
-        rules.rule(rule).map_or_else(
-            |_| Vec::new(),
-            |r| {
-                r.program
-                    .iter()
-                    .filter_map(|st| match st {
-                        topomech_rules::check::TStmt::Write { emb, .. } => {
-                            embs.get(*emb).map(|e| e.name.as_str())
-                        }
-                        topomech_rules::check::TStmt::Let(..) => None,
-                    })
-                    .collect()
-            },
-        )
-    };
-    for (k, a) in defs.iter().enumerate() {
-        for (i, b) in defs[..k].iter().enumerate() {
-            for (ra, pa) in &a.init {
-                for (rb, pb) in &b.init {
-                    if ra == rb && pa == pb {
-                        continue; // the same values written twice
-                    }
-                    let wb = writes(rb);
-                    if let Some(e) = writes(ra).into_iter().find(|e| wb.contains(e)) {
-                        return Err(PhysicsError::Model(format!(
-                            "models '{}' (model[{i}]) and '{}' (model[{k}]) both set '{e}' in their init rules ({rb}, {ra}) with other parameters: the embedding holds one value, the last one written, which both models would use; give them the same parameters, or give one its own embeddings (a copy of its rule file with them renamed)",
-                            b.name, a.name
-                        )));
+    let mut out: Vec<String> = Vec::new();
+    for (rule, _) in &def.init {
+        let Ok(r) = rules.rule(rule) else { continue };
+        for st in &r.program {
+            if let topomech_rules::check::TStmt::Write { emb, .. } = st {
+                if let Some(e) = embs.get(*emb) {
+                    if !out.contains(&e.name) {
+                        out.push(e.name.clone());
                     }
                 }
             }
         }
     }
-    Ok(())
+    out
+}
+
+/// The bits of the NaN that marks the values of an embedding no init rule has written yet
+/// (a quiet NaN with a payload no arithmetic produces).
+const MARKER: u64 = 0x7ff8_7a3d_c0de_0001;
+
+/// The embeddings the init rules of a model read (by name, each once): the rules' reads,
+/// aggregates and guards.
+fn init_reads(rules: &RuleSet, def: &RunModel) -> Vec<String> {
+    use topomech_rules::check::{TExpr, TStmt};
+    fn walk(e: &TExpr, out: &mut Vec<usize>) {
+        match e {
+            TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
+            TExpr::Read { emb, .. } => out.push(*emb),
+            TExpr::Agg { emb, .. } => out.extend(emb.iter().copied()),
+            TExpr::Bin(_, a, c) => {
+                walk(a, out);
+                walk(c, out);
+            }
+            TExpr::Un(_, a) | TExpr::ToReal(a) => walk(a, out),
+            TExpr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
+            TExpr::If(c, a, d) => {
+                walk(c, out);
+                walk(a, out);
+                walk(d, out);
+            }
+            TExpr::Block(lets, r) => {
+                for (_, v) in lets {
+                    walk(v, out);
+                }
+                walk(r, out);
+            }
+        }
+    }
+    let embs = rules.embeddings();
+    let mut ids: Vec<usize> = Vec::new();
+    for (rule, _) in &def.init {
+        let Ok(r) = rules.rule(rule) else { continue };
+        for st in &r.program {
+            match st {
+                TStmt::Let(_, v) | TStmt::Write { value: v, .. } => walk(v, &mut ids),
+            }
+        }
+        if let Some(guard) = &r.guard {
+            walk(guard, &mut ids);
+        }
+    }
+    let mut out: Vec<String> = Vec::new();
+    for i in ids {
+        if let Some(e) = embs.get(i) {
+            if !out.contains(&e.name) {
+                out.push(e.name.clone());
+            }
+        }
+    }
+    out
+}
+
+/// How many distinct orbits of type `o` the darts of `darts` lie in (each orbit walked once).
+fn distinct_orbits(g: &GMap, darts: &[Dart], o: OrbitType) -> usize {
+    let mut seen = vec![false; g.capacity()];
+    let mut count = 0;
+    for &d in darts {
+        if !g.is_alive(d) || seen[d.index()] {
+            continue;
+        }
+        for x in g.orbit(d, o) {
+            seen[x.index()] = true;
+        }
+        count += 1;
+    }
+    count
+}
+
+/// Every value of an embedding's column, bit for bit (empty for one the map lacks).
+fn column_bits(g: &GMap, name: &str) -> Vec<u64> {
+    let Some(id) = g.embedding_id(name) else {
+        return Vec::new();
+    };
+    match g.embedding(id).column() {
+        ColumnRef::Real(v) => v.iter().map(|x| x.to_bits()).collect(),
+        ColumnRef::Int(v) => v.iter().map(|&x| x as u64).collect(),
+        ColumnRef::Bool(v) => v.iter().map(|&b| u64::from(b)).collect(),
+    }
 }
 
 /// The label of the built file holding the accumulation rules.
@@ -1136,7 +1195,6 @@ impl Simulation {
             }
             defs.push(RunModel::bind(decl, &m.params)?);
         }
-        shared_init_writes(&rules, &defs)?;
         if matches!(
             cfg.integrator,
             Integrator::ImplicitEuler | Integrator::Static
@@ -1256,32 +1314,102 @@ impl Simulation {
                 supports.claim(&g, &mut held_by, labels.len() - 1);
             }
         }
-        let elements = g.count_orbits(if dim == 3 {
+        let element_orbit = if dim == 3 {
             OrbitType::volume()
         } else {
             OrbitType::face(2)
-        });
+        };
+        let elements = g.count_orbits(element_orbit);
         // an element's orbit: every label but the last (<0,1,2> in 3D, <0,1> in 2D)
         let element_labels: Vec<u8> = (0..dim as u8).collect();
-        for def in &defs {
-            // the matches of every init rule, and of those on elements: a hook on the
-            // element's orbit, or on a dart (`<>`: the shipped rules take one dart per
-            // element, `where n0.vertex0`); per_element counts the latter only (a rule on
-            // vertices, edges or corners handles no element)
-            let (mut matched, mut on_elements, mut element_rules) = (0, 0, 0);
-            for (init, p) in &def.init {
-                let n = rules
-                    .apply_once(&mut g, init, p)
-                    .map_err(|e| model_init_failed(&g, &rules, &def.name, init, e))?
-                    .matches;
-                matched += n;
-                if rules
-                    .rule(init)
-                    .is_ok_and(|r| r.hook_orbit.is_empty() || r.hook_orbit == element_labels)
-                {
-                    on_elements += n;
-                    element_rules += 1;
+        // Two models whose init rules write one embedding share its values: the last one
+        // written, which both models' step rules read. Where the later model writes other
+        // values than the earlier one did, it is refused (QA: `stretch_elementary` and
+        // `stretch_cumulated` share `spring_k` through `stretch_init`; with 1000 and 10, both
+        // ran at the later one's stiffness, and the result depended on the order of the
+        // models). Equal values (the same parameters; the rest-shape data two hyperelastic
+        // models both compute) pass.
+        //
+        // Both checks see which values an init rule wrote: before a model's init rules run,
+        // each embedding to check is filled with a marker NaN no rule computes (an
+        // embedding its own init rules read is left alone, and checked by its changes); after
+        // them, a value that is not the marker was written, and the others get back what
+        // they held.
+        let writes_of: Vec<Vec<String>> = defs.iter().map(|d| init_writes(&rules, d)).collect();
+        let shared: Vec<String> = writes_of
+            .iter()
+            .flatten()
+            .filter(|n| writes_of.iter().filter(|w| w.contains(n)).count() > 1)
+            .cloned()
+            .collect();
+        // per embedding written by two models or more: (model, values written, all values)
+        let mut set_by: Vec<(String, usize, Vec<bool>, Vec<u64>)> = Vec::new();
+        for (k, def) in defs.iter().enumerate() {
+            let reads = init_reads(&rules, def);
+            // the shared embeddings this model writes (created now, as the first run of the
+            // rules writing them would), marked unless its own init rules read them
+            let mine: Vec<&str> = writes_of[k]
+                .iter()
+                .filter(|n| shared.contains(n))
+                .map(String::as_str)
+                .collect();
+            rules.prepare_named(&mut g, &mine)?;
+            let marked: Vec<(String, topomech_gmap::EmbeddingId, Vec<f64>)> = mine
+                .iter()
+                .filter(|n| !reads.iter().any(|r| r == *n))
+                .filter_map(|n| {
+                    let id = g.embedding_id(n)?;
+                    let ColumnRef::Real(v) = g.embedding(id).column() else {
+                        return None;
+                    };
+                    Some(((*n).to_string(), id, v.to_vec()))
+                })
+                .collect();
+            for (_, id, _) in &marked {
+                if let Ok(ColumnMut::Real(v)) = g.column_mut(*id) {
+                    v.fill(f64::from_bits(MARKER));
                 }
+            }
+            // the matches of every init rule, and the elements the rules on elements handle
+            // (a hook on the element's orbit, or on a dart: the shipped rules take one dart
+            // per element, `where n0.vertex0`): the distinct elements of their hook darts,
+            // not their matches (24 a tetrahedron for a dart rule without that guard); a
+            // rule on vertices, edges or corners handles no element
+            let (mut matched, mut element_rules) = (0, 0);
+            let mut element_hooks: Option<Vec<Dart>> = Some(Vec::new());
+            let mut element_matches = 0;
+            for (init, p) in &def.init {
+                let (report, hooks) = rules
+                    .apply_once_hooks(&mut g, init, p)
+                    .map_err(|e| model_init_failed(&g, &rules, &def.name, init, e))?;
+                matched += report.matches;
+                if rules.rule(init).is_ok_and(|r| {
+                    // (the labels as a set: <2,0,1> is <0,1,2>)
+                    let mut h = r.hook_orbit.clone();
+                    h.sort_unstable();
+                    h.is_empty() || h == element_labels
+                }) {
+                    element_rules += 1;
+                    element_matches += report.matches;
+                    match (element_hooks.as_mut(), hooks) {
+                        (Some(all), Some(h)) => all.extend(h),
+                        _ => element_hooks = None,
+                    }
+                }
+            }
+            // what the init rules wrote of each marked embedding; the rest restored
+            let mut written_of: Vec<(String, Vec<bool>)> = Vec::new();
+            for (name, id, before) in marked {
+                let Ok(ColumnMut::Real(v)) = g.column_mut(id) else {
+                    continue;
+                };
+                let written: Vec<bool> = v.iter().map(|x| x.to_bits() != MARKER).collect();
+                for ((x, w), b) in v.iter_mut().zip(&written).zip(&before) {
+                    if !w {
+                        *x = *b;
+                    }
+                }
+                written_of.push((name, written));
             }
             if matched == 0 {
                 return Err(PhysicsError::Model(format!(
@@ -1298,11 +1426,47 @@ impl Simulation {
                     if dim == 3 { "'e : <0,1,2> hook'" } else { "'e : <0,1> hook'" }
                 )));
             }
-            if def.per_element && on_elements < elements {
-                return Err(PhysicsError::Model(format!(
-                    "model '{}' handles {on_elements} elements of {elements}: it needs {}, and the others would get no force",
-                    def.name, def.needs
-                )));
+            if def.per_element {
+                // (the matches where the hooks were not recorded: a rule applied before)
+                let on_elements = element_hooks
+                    .map_or(element_matches, |h| distinct_orbits(&g, &h, element_orbit));
+                if on_elements < elements {
+                    return Err(PhysicsError::Model(format!(
+                        "model '{}' handles {on_elements} elements of {elements}: it needs {}, and the others would get no force",
+                        def.name, def.needs
+                    )));
+                }
+            }
+            for name in mine {
+                let now = column_bits(&g, name);
+                // what this model wrote: its marked values; one that reads the embedding in
+                // its own init rules was not marked: every value it changed
+                let written: Vec<bool> = match written_of.iter().find(|(n, _)| n == name) {
+                    Some((_, w)) => w.clone(),
+                    None => match set_by.iter().rev().find(|(n, _, _, _)| n == name) {
+                        Some((_, _, _, before)) => {
+                            before.iter().zip(&now).map(|(b, n)| b != n).collect()
+                        }
+                        None => vec![true; now.len()],
+                    },
+                };
+                // a value both models wrote, to other values (on disjoint parts of the mesh,
+                // a tetrahedra model and a hexahedra one, each writes its own slots)
+                let conflict = set_by
+                    .iter()
+                    .find(|(n, _, w, before)| {
+                        n == name
+                            && before.len() == now.len()
+                            && (0..now.len()).any(|x| w[x] && written[x] && before[x] != now[x])
+                    })
+                    .map(|(_, i, _, _)| *i);
+                if let Some(i) = conflict {
+                    return Err(PhysicsError::Model(format!(
+                        "models '{}' (model[{i}]) and '{}' (model[{k}]) both set '{name}' in their init rules, to other values: the embedding holds one value, the last one written, which both models would use; give them the same parameters, or give one its own embeddings (a copy of its rule file with them renamed)",
+                        defs[i].name, def.name
+                    )));
+                }
+                set_by.push((name.to_string(), k, written, now));
             }
         }
         // the derived data of what the models stored (cumulated springs, tensors) exists from

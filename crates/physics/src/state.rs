@@ -636,8 +636,13 @@ impl Simulation {
         if moving.is_empty() {
             return Ok(());
         }
+        let (which, are, them) = if moving.len() == 1 {
+            ("vertex", "is", "it")
+        } else {
+            ("vertices", "are", "them")
+        };
         Err(PhysicsError::Config(format!(
-            "velocities: vertices {} are held (fixed), and a held vertex keeps zero velocity: give them 0, or free them first (set_fixed)",
+            "velocities: {which} {} {are} held (fixed), and a held vertex keeps zero velocity: give {them} 0, or free {them} first (set_fixed)",
             list_some(&moving, 20)
         )))
     }
@@ -820,9 +825,46 @@ impl Simulation {
         }
         self.sync_rows()?;
         let id = self.id(name)?;
+        // the values before, slot by slot (a write changes values only, never the slots)
+        let before: Option<(Vec<f64>, Vec<bool>)> = match name {
+            "velocity" | "fixed" => match self.g.embedding(id).column() {
+                topomech_gmap::ColumnRef::Real(v) => Some((v.to_vec(), Vec::new())),
+                topomech_gmap::ColumnRef::Bool(v) => Some((Vec::new(), v.to_vec())),
+                topomech_gmap::ColumnRef::Int(_) => None,
+            },
+            _ => None,
+        };
         self.g
             .set_orbit_values(id, values)
-            .map_err(|e| PhysicsError::Config(e.to_string()))
+            .map_err(|e| PhysicsError::Config(e.to_string()))?;
+        let Some(before) = before else {
+            return Ok(());
+        };
+        let restore = |g: &mut GMap| match g.column_mut(id) {
+            Ok(topomech_gmap::ColumnMut::Real(v)) if v.len() == before.0.len() => {
+                v.copy_from_slice(&before.0);
+            }
+            Ok(topomech_gmap::ColumnMut::Bool(v)) if v.len() == before.1.len() => {
+                v.copy_from_slice(&before.1);
+            }
+            _ => {}
+        };
+        // the supports' rules, as `set_fixed` and `set_velocities` keep them (QA: this way
+        // round them, a held vertex kept a velocity, and implicit Euler moved it): holding
+        // goes through `set_fixed`; a velocity for a held row is refused; either way the
+        // embedding is as it was before a refusal
+        let outcome = if name == "fixed" {
+            let mask = self.vertex_bool("fixed");
+            restore(&mut self.g);
+            mask.and_then(|m| self.set_fixed(&m))
+        } else {
+            self.vertex_vec3("velocity")
+                .and_then(|v| self.check_held_velocities(|r| v[r]))
+        };
+        if outcome.is_err() {
+            restore(&mut self.g);
+        }
+        outcome
     }
 
     /// Total mass (sum of the vertex masses).

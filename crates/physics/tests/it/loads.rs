@@ -486,7 +486,7 @@ fn holding_a_moving_vertex_stops_it() {
         w[first] = [0.0, 0.0, 1.0];
         let e = s.set_velocities(&w).unwrap_err().to_string();
         assert!(
-            e.contains(&format!("vertices {first} are held (fixed)")),
+            e.contains(&format!("vertex {first} is held (fixed)")),
             "{e}"
         );
         assert_eq!(

@@ -207,6 +207,11 @@ rule v_init(k: f64) {{
   left {{ v : <1,2,3> hook }}
   compute {{ v.k_v = k }}
 }}
+rule left_half(k: f64) {{
+  left {{ n0 : <> hook }}
+  where x(mean<0,1,2>(n0.rest)) < 0.5
+  compute {{ n0.k_el = k }}
+}}
 rule el_force {{
   left {{ c : <1,2> hook }}
   compute {{ c.f_el = -c.k_el * (c.position - c.rest) }}
@@ -243,6 +248,16 @@ model tets(k: f64 = 10.0) {{
         .to_string();
     assert!(
         e.contains("model 'tets' handles 0 elements of 16: it needs tetrahedra"),
+        "{e}"
+    );
+    // a dart rule without a one-dart guard: 24 matches a tetrahedron, on the left half of
+    // the box only; the matches (24 x 48) outnumber the 96 elements, the elements handled
+    // (48) do not
+    let e = sim(BoxElement::Tetra, "left_half(k)")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("model 'tets' handles 48 elements of 96: it needs tetrahedra"),
         "{e}"
     );
     // no init rule on elements at all
@@ -645,11 +660,12 @@ fn a_failing_init_rule_names_its_model_file_and_element() {
     assert!(x > 0.0 && x < 0.5, "{e}");
 }
 
-/// Two models whose init rules write one embedding with other parameters are refused: the
+/// Two models whose init rules write one embedding to other values are refused: the
 /// embedding holds the last value written, which both models' step rules read (QA: the
 /// elementary springs at 1000 N/m with the cumulated ones at 10 N/m both ran at 10, and in
-/// the other order both at 1000). With the same parameters the value is the same, and the
-/// pair runs.
+/// the other order both at 1000). With the same parameters the values are the same, and the
+/// pair runs; so do two models that compute the same data by different rules (the
+/// rest-shape inverse `hyper_dm_inv` of both hyperelastic models).
 #[test]
 fn models_setting_one_embedding_differently_are_refused() {
     let tri = grid([2, 2], [1.0, 1.0], GridElement::Triangle);
@@ -666,8 +682,30 @@ fn models_setting_one_embedding_differently_are_refused() {
     };
     let e = run(1000.0, 10.0).unwrap_err().to_string();
     assert!(
-        e.contains("models 'stretch_elementary' (model[0]) and 'stretch_cumulated' (model[1]) both set 'spring_k' in their init rules (stretch_init, stretch_init) with other parameters"),
+        e.contains("models 'stretch_elementary' (model[0]) and 'stretch_cumulated' (model[1]) both set 'spring_k' in their init rules, to other values"),
         "{e}"
     );
     run(1000.0, 1000.0).unwrap();
+    // a value of zero written is a value too (the elementary springs' default damping 0,
+    // the cumulated ones' 0.1)
+    let (g, _) = build(&tri, &BuildOptions::default()).unwrap();
+    let cfg = Config {
+        models: vec![
+            model("stretch_elementary", &[]),
+            model("stretch_cumulated", &[("damping", 0.1)]),
+        ],
+        ..Config::default()
+    };
+    let e = Simulation::new(g, cfg).unwrap_err().to_string();
+    assert!(e.contains("both set 'spring_c'"), "{e}");
+    let (g, _) = build(
+        &cuboid([2, 1, 1], [1.0, 0.5, 0.5], BoxElement::Tetra),
+        &BuildOptions::default(),
+    )
+    .unwrap();
+    let cfg = Config {
+        models: vec![model("neohookean", &[]), model("stvk", &[])],
+        ..Config::default()
+    };
+    Simulation::new(g, cfg).unwrap();
 }

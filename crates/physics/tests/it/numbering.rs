@@ -662,7 +662,7 @@ fn set_fixed_and_fields_write_whole_rows() {
         .map(|r| Value::Real(vec![r as f64, 0.0, 1.0]))
         .collect();
     let e = s.set_vertex_field("velocity", &v).unwrap_err().to_string();
-    assert!(e.contains("vertices 0 are held (fixed)"), "{e}");
+    assert!(e.contains("vertex 0 is held (fixed)"), "{e}");
     s.set_fixed(&vec![false; n]).unwrap();
     s.set_vertex_field("velocity", &v).unwrap();
     let vel = s.gmap().require("velocity").unwrap();
