@@ -1338,17 +1338,7 @@ impl RuleSet {
         name: &str,
         params: &Params,
     ) -> Result<ApplyReport, ApplyError> {
-        let out = self
-            .apply_inner(g, name, params, &never, None, None, false, false, None)
-            .map(Option::unwrap_or_default);
-        // the plan just built (or an earlier one of this rule): dropped
-        if let Some(index) = self.checked.rules.iter().position(|r| r.name == name) {
-            self.plans
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .remove(&index);
-        }
-        out
+        self.apply_once_inner(g, name, params, None)
     }
 
     /// [`RuleSet::apply_once`], with a hook dart of each match of the computation rule
@@ -1365,26 +1355,30 @@ impl RuleSet {
         params: &Params,
     ) -> Result<(ApplyReport, Option<Vec<Dart>>), ApplyError> {
         let mut hooks = None;
+        let report = self.apply_once_inner(g, name, params, Some(&mut hooks))?;
+        Ok((report, hooks))
+    }
+
+    /// [`RuleSet::apply_once`], with the hooks of [`RuleSet::apply_once_hooks`] where
+    /// `hooks` asks for them.
+    fn apply_once_inner(
+        &self,
+        g: &mut GMap,
+        name: &str,
+        params: &Params,
+        hooks: Option<&mut Option<Vec<Dart>>>,
+    ) -> Result<ApplyReport, ApplyError> {
         let out = self
-            .apply_inner(
-                g,
-                name,
-                params,
-                &never,
-                None,
-                None,
-                false,
-                false,
-                Some(&mut hooks),
-            )
+            .apply_inner(g, name, params, &never, None, None, false, false, hooks)
             .map(Option::unwrap_or_default);
+        // the plan just built (or an earlier one of this rule): dropped
         if let Some(index) = self.checked.rules.iter().position(|r| r.name == name) {
             self.plans
                 .lock()
                 .unwrap_or_else(std::sync::PoisonError::into_inner)
                 .remove(&index);
         }
-        out.map(|r| (r, hooks))
+        out
     }
 
     fn apply_with(

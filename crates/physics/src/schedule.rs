@@ -45,31 +45,14 @@ const MARKER: u64 = 0x7ff8_7a3d_c0de_0001;
 /// The embeddings the init rules of a model read (by name, each once): the rules' reads,
 /// aggregates and guards.
 fn init_reads(rules: &RuleSet, def: &RunModel) -> Vec<String> {
-    use topomech_rules::check::{TExpr, TStmt};
-    fn walk(e: &TExpr, out: &mut Vec<usize>) {
-        match e {
-            TExpr::Const(_) | TExpr::Param(_) | TExpr::Local(_) => {}
+    use topomech_rules::check::{visit, TExpr, TStmt};
+    let walk = |e: &TExpr, out: &mut Vec<usize>| {
+        visit(e, &mut |x| match x {
             TExpr::Read { emb, .. } => out.push(*emb),
             TExpr::Agg { emb, .. } => out.extend(emb.iter().copied()),
-            TExpr::Bin(_, a, c) => {
-                walk(a, out);
-                walk(c, out);
-            }
-            TExpr::Un(_, a) | TExpr::ToReal(a) => walk(a, out),
-            TExpr::Call(_, args) => args.iter().for_each(|a| walk(a, out)),
-            TExpr::If(c, a, d) => {
-                walk(c, out);
-                walk(a, out);
-                walk(d, out);
-            }
-            TExpr::Block(lets, r) => {
-                for (_, v) in lets {
-                    walk(v, out);
-                }
-                walk(r, out);
-            }
-        }
-    }
+            _ => {}
+        });
+    };
     let embs = rules.embeddings();
     let mut ids: Vec<usize> = Vec::new();
     for (rule, _) in &def.init {
