@@ -1313,11 +1313,10 @@ impl Simulation {
         // models). Equal values (the same parameters; the rest-shape data two hyperelastic
         // models both compute) pass.
         //
-        // Both checks see which values an init rule wrote: before a model's init rules run,
-        // each embedding to check is filled with a marker NaN no rule computes (an
-        // embedding its own init rules read is left alone, and checked by its changes); after
-        // them, a value that is not the marker was written, and the others get back what
-        // they held.
+        // To see which values a model's init rules wrote, each such embedding is filled with
+        // a marker NaN no rule computes before they run (an embedding its own init rules read
+        // is left alone, and checked by its changes); after them, a value that is not the
+        // marker was written, and the others get back what they held.
         let writes_of: Vec<Vec<String>> = defs.iter().map(|d| init_writes(&rules, d)).collect();
         let shared: Vec<String> = writes_of
             .iter()
