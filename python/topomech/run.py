@@ -792,8 +792,10 @@ def run_scene(
             if save_map and sim.topology_changes():
                 # the cut map itself: its pieces may have moved into each other, which a mesh
                 # file cannot tell apart from one body (final.vtu would be refused as input)
-                enter("final", ["final.tmg"])
-                sim.gmap().save(out_dir / "final.tmg")
+                # (written whole, then renamed: an interruption leaves no truncated map)
+                enter("final", ["final.tmg", "final.tmg.part"])
+                sim.gmap().save(out_dir / "final.tmg.part")
+                (out_dir / "final.tmg.part").replace(out_dir / "final.tmg")
                 outputs["map"] = "final.tmg"
             if frames:
                 enter("final", ["animation.pvd"])
