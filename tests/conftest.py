@@ -33,6 +33,37 @@ VOLUME_FACES: dict[str, list[tuple[int, ...]]] = {
     "wedge": [(0, 1, 2), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)],
     "pyramid": [(0, 1, 2, 3), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)],
 }
+
+#: The README's anchor model ("Writing a model"): per-vertex springs to the rest positions,
+#: on a surface, with its Jacobian rule.
+ANCHOR = """\
+dimension 2
+embedding k_anchor  : f64  on <1,2>
+embedding f_anchor  : vec3 on <1,2>
+embedding df_anchor : vec3 on <1,2>
+
+rule anchor_init(k: f64) {
+  left { v : <1,2> hook }
+  compute { v.k_anchor = k }
+}
+rule anchor_force {
+  left { v : <1,2> hook }
+  compute { v.f_anchor = -v.k_anchor * (v.position - v.rest) }
+}
+rule anchor_jvp {
+  left { v : <1,2> hook }
+  compute { v.df_anchor = -v.k_anchor * v.dx }
+}
+
+model anchor(k: f64 = 10.0) {
+  init   anchor_init(k)
+  step   anchor_force
+  forces f_anchor
+  jvp    anchor_jvp -> df_anchor
+  needs  "vertices"
+}
+"""
+
 SURFACE_TYPES = {"triangle", "quad", "polygon"}
 
 

@@ -28,33 +28,7 @@ from topomech import Model, RuleError, SceneError, SimulationError
 from topomech.cli import main
 from topomech.samples import sample
 
-ANCHOR = """\
-dimension 2
-embedding k_anchor  : f64  on <1,2>
-embedding f_anchor  : vec3 on <1,2>
-embedding df_anchor : vec3 on <1,2>
-
-rule anchor_init(k: f64) {
-  left { v : <1,2> hook }
-  compute { v.k_anchor = k }
-}
-rule anchor_force {
-  left { v : <1,2> hook }
-  compute { v.f_anchor = -v.k_anchor * (v.position - v.rest) }
-}
-rule anchor_jvp {
-  left { v : <1,2> hook }
-  compute { v.df_anchor = -v.k_anchor * v.dx }
-}
-
-model anchor(k: f64 = 10.0) {
-  init   anchor_init(k)
-  step   anchor_force
-  forces f_anchor
-  jvp    anchor_jvp -> df_anchor
-  needs  "vertices"
-}
-"""
+from conftest import ANCHOR
 
 #: The same model without Jacobian rules (explicit integrators only).
 ANCHOR_NO_JVP = ANCHOR.replace("  jvp    anchor_jvp -> df_anchor\n", "")

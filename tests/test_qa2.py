@@ -19,33 +19,14 @@ from topomech._core import SceneError
 from topomech.loads import LoadError, apply_conditions, held_positions
 from topomech.scene import parse_scene
 
+from conftest import ANCHOR
+
 #: The README's anchor model ("Writing a model"), under the name of a shipped model.
-SHADOW = """dimension 2
-embedding k_anchor  : f64  on <1,2>
-embedding f_anchor  : vec3 on <1,2>
-embedding df_anchor : vec3 on <1,2>
-
-rule anchor_init(k: f64) {
-  left { v : <1,2> hook }
-  compute { v.k_anchor = k }
-}
-rule anchor_force {
-  left { v : <1,2> hook }
-  compute { v.f_anchor = -v.k_anchor * (v.position - v.rest) }
-}
-rule anchor_jvp {
-  left { v : <1,2> hook }
-  compute { v.df_anchor = -v.k_anchor * v.dx }
-}
-
-model stretch_elementary(stiffness: f64 = 10.0) {
-  init   anchor_init(stiffness)
-  step   anchor_force
-  forces f_anchor
-  jvp    anchor_jvp -> df_anchor
-  needs  "vertices"
-}
-"""
+SHADOW = ANCHOR.replace(
+    "model anchor(k: f64 = 10.0) {\n  init   anchor_init(k)",
+    "model stretch_elementary(stiffness: f64 = 10.0) {\n  init   anchor_init(stiffness)",
+)
+assert SHADOW != ANCHOR
 
 SCENE = """
 name = "shadow"

@@ -713,7 +713,7 @@ def held_positions(
     ``[[fix]]`` tables that hold one vertex at two positions are refused before, by
     :func:`check_supports` in :func:`apply_conditions`). Raises :class:`LoadError` for a
     displacement that is not 3 finite real numbers, having changed nothing."""
-    d = None if displacement is None else _displacement(displacement)
+    d = None if displacement is None else _vector(displacement, "displacement")
     fixed = sim.fixed() | mask
     if d is not None:
         x = sim.positions()
@@ -725,16 +725,10 @@ def held_positions(
     sim.set_fixed(fixed)
 
 
-def _displacement(displacement: Any) -> npt.NDArray[np.float64]:
-    """A held displacement as an array of shape ``(3,)``: exactly 3 finite real numbers
-    (booleans refused: numpy reads ``[True, 0, 0]`` as ``[1, 0, 0]``; one number or 2 are
-    refused, not broadcast). Raises :class:`LoadError` naming it."""
-    return _vector(displacement, "displacement")
-
-
 def _vector(value: Any, what: str) -> npt.NDArray[np.float64]:
-    """``value`` (a displacement, a velocity) as an array of shape ``(3,)``: exactly 3
-    finite real numbers, as :func:`_displacement` says. Raises :class:`LoadError` naming
+    """``value`` (a held or initial displacement, a velocity) as an array of shape ``(3,)``:
+    exactly 3 finite real numbers (booleans refused: numpy reads ``[True, 0, 0]`` as ``[1,
+    0, 0]``; one number or 2 are refused, not broadcast). Raises :class:`LoadError` naming
     ``what``."""
     _no_booleans(value, what)
     try:
@@ -797,7 +791,7 @@ def check_supports(
                 raise LoadError(str(e), f"{key}.{e.subkey}" if e.subkey else key) from e
         out.append(mask)
         try:
-            at = rest if disp is None else rest + _displacement(disp)
+            at = rest if disp is None else rest + _vector(disp, "displacement")
         except LoadError as e:
             raise LoadError(str(e), key) from e
         both = mask & (holder >= 0)

@@ -198,7 +198,7 @@ impl Call {
 }
 
 /// The names of the embeddings `rule`'s program writes, in program order.
-fn written_by<'a>(rule: &'a Rule, embs: &'a [EmbDecl]) -> impl Iterator<Item = &'a str> {
+pub fn written_by<'a>(rule: &'a Rule, embs: &'a [EmbDecl]) -> impl Iterator<Item = &'a str> {
     rule.program.iter().filter_map(move |st| match st {
         crate::check::TStmt::Write { emb, .. } => embs.get(*emb).map(|e| e.name.as_str()),
         crate::check::TStmt::Let(..) => None,
@@ -274,6 +274,16 @@ pub(crate) fn check_models(
         }
     }
     models
+}
+
+/// Whether `rule` runs on the elements of a map of dimension `dim`, one match per element
+/// as `per_element` counts them: its hook is on the element's orbit (`<0,1,2>` in 3D,
+/// `<0,1>` in 2D; the labels as a set, `<2,0,1>` is `<0,1,2>`) or on a dart (`<>`: the
+/// shipped rules take one dart per element, `where n0.vertex0`).
+pub fn hook_on_elements(rule: &Rule, dim: usize) -> bool {
+    let mut h = rule.hook_orbit.clone();
+    h.sort_unstable();
+    h.is_empty() || h.iter().copied().eq(0..dim as u8)
 }
 
 #[allow(clippy::too_many_lines)]
@@ -507,12 +517,6 @@ fn check_model(
     // (<0,1,2> in 3D, <0,1> in 2D) or on a dart (<>, one dart per element by a guard, as the
     // shipped rules take it): a simulation counts those rules' matches against its elements
     if let Some(pos) = m.per_element {
-        // (the hook's labels as a set: <2,0,1> is <0,1,2>)
-        let on_elements = |r: &Rule, d: usize| {
-            let mut h = r.hook_orbit.clone();
-            h.sort_unstable();
-            h.is_empty() || h.iter().copied().eq(0..d as u8)
-        };
         let known: Vec<&Rule> = m
             .init
             .iter()
@@ -521,7 +525,7 @@ fn check_model(
         // every dimension the model runs in needs one (a file of `dimension 2 3`)
         let missing = dims
             .iter()
-            .find(|&&d| !known.iter().any(|r| on_elements(r, d)));
+            .find(|&&d| !known.iter().any(|r| hook_on_elements(r, d)));
         if let (true, Some(&d)) = (known.len() == m.init.len(), missing) {
             let in_dim = if dims.len() > 1 {
                 format!(" in {d}D")

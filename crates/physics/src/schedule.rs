@@ -21,17 +21,12 @@ fn glue_source() -> (String, String) {
 
 /// The embeddings the init rules of a model write (by name, each once).
 fn init_writes(rules: &RuleSet, def: &RunModel) -> Vec<String> {
-    let embs = rules.embeddings();
     let mut out: Vec<String> = Vec::new();
     for (rule, _) in &def.init {
         let Ok(r) = rules.rule(rule) else { continue };
-        for st in &r.program {
-            if let topomech_rules::check::TStmt::Write { emb, .. } = st {
-                if let Some(e) = embs.get(*emb) {
-                    if !out.contains(&e.name) {
-                        out.push(e.name.clone());
-                    }
-                }
+        for name in topomech_rules::model::written_by(r, rules.embeddings()) {
+            if !out.iter().any(|n| n == name) {
+                out.push(name.to_string());
             }
         }
     }
@@ -79,18 +74,18 @@ fn init_reads(rules: &RuleSet, def: &RunModel) -> Vec<String> {
 
 /// How many distinct orbits of type `o` the darts of `darts` lie in (each orbit walked once).
 fn distinct_orbits(g: &GMap, darts: &[Dart], o: OrbitType) -> usize {
-    let mut seen = vec![false; g.capacity()];
-    let mut count = 0;
-    for &d in darts {
-        if !g.is_alive(d) || seen[d.index()] {
-            continue;
-        }
-        for x in g.orbit(d, o) {
-            seen[x.index()] = true;
-        }
-        count += 1;
-    }
-    count
+    let mut marks = topomech_gmap::Marks::with_capacity(g.capacity());
+    darts
+        .iter()
+        .filter(|&&d| {
+            // a dart of an orbit walked before is marked already
+            let fresh = g.is_alive(d) && !marks.is_marked(d);
+            if fresh {
+                g.visit_orbit(d, o, &mut marks, |_| {});
+            }
+            fresh
+        })
+        .count()
 }
 
 /// Every value of an embedding's column, bit for bit (empty for one the map lacks).
@@ -1303,8 +1298,6 @@ impl Simulation {
             OrbitType::face(2)
         };
         let elements = g.count_orbits(element_orbit);
-        // an element's orbit: every label but the last (<0,1,2> in 3D, <0,1> in 2D)
-        let element_labels: Vec<u8> = (0..dim as u8).collect();
         // Two models whose init rules write one embedding share its values: the last one
         // written, which both models' step rules read. Where the later model writes other
         // values than the earlier one did, it is refused (QA: `stretch_elementary` and
@@ -1357,7 +1350,7 @@ impl Simulation {
             // per element, `where n0.vertex0`): the distinct elements of their hook darts,
             // not their matches (24 a tetrahedron for a dart rule without that guard); a
             // rule on vertices, edges or corners handles no element
-            let (mut matched, mut element_rules) = (0, 0);
+            let mut matched = 0;
             let mut element_hooks: Option<Vec<Dart>> = Some(Vec::new());
             let mut element_matches = 0;
             for (init, p) in &def.init {
@@ -1365,13 +1358,10 @@ impl Simulation {
                     .apply_once_hooks(&mut g, init, p)
                     .map_err(|e| model_init_failed(&g, &rules, &def.name, init, e))?;
                 matched += report.matches;
-                if rules.rule(init).is_ok_and(|r| {
-                    // (the labels as a set: <2,0,1> is <0,1,2>)
-                    let mut h = r.hook_orbit.clone();
-                    h.sort_unstable();
-                    h.is_empty() || h == element_labels
-                }) {
-                    element_rules += 1;
+                if rules
+                    .rule(init)
+                    .is_ok_and(|r| topomech_rules::model::hook_on_elements(r, dim))
+                {
                     element_matches += report.matches;
                     match (element_hooks.as_mut(), hooks) {
                         (Some(all), Some(h)) => all.extend(h),
@@ -1399,15 +1389,8 @@ impl Simulation {
                     def.name, def.needs
                 )));
             }
-            if def.per_element && element_rules == 0 {
-                let inits: Vec<&str> = def.init.iter().map(|(r, _)| r.as_str()).collect();
-                return Err(PhysicsError::Model(format!(
-                    "model '{}' is declared per_element (every element handled by an init rule), but none of its init rules ({}) is on elements: a rule whose hook is an element, {}, or one dart of each element ('n0 : <> hook' with 'where n0.vertex0', as the shipped models do); drop per_element, or add such a rule",
-                    def.name,
-                    inits.join(", "),
-                    if dim == 3 { "'e : <0,1,2> hook'" } else { "'e : <0,1> hook'" }
-                )));
-            }
+            // (a per_element model without an init rule on elements is refused by the
+            // checker, `hook_on_elements`)
             if def.per_element {
                 // (the matches where the hooks were not recorded: a rule applied before)
                 let on_elements = element_hooks

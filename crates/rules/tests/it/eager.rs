@@ -10,6 +10,7 @@ use topomech_gmap::mesh::{build, BuildOptions};
 use topomech_gmap::GMap;
 use topomech_rules::{load_sources, ApplyError, Params, RuleSet, Val};
 
+use crate::column_bits as column;
 use crate::nonfinite::on_threads;
 
 const SOURCE: &str = "dimension 2
@@ -56,16 +57,6 @@ fn setup() -> (GMap, RuleSet) {
         .apply_everywhere(&mut g, "init_corner", &Params::new())
         .unwrap();
     (g, rules)
-}
-
-fn column(g: &GMap, name: &str) -> Vec<u64> {
-    let id = g.require(name).unwrap();
-    g.embedding(id)
-        .real_column()
-        .unwrap()
-        .iter()
-        .map(|x| x.to_bits())
-        .collect()
 }
 
 fn pull_at(ax: f64, ay: f64) -> Params {

@@ -23,13 +23,7 @@ fn quad_map(n: usize) -> GMap {
 }
 
 fn positions(g: &GMap) -> Vec<u64> {
-    let id = g.require("position").unwrap();
-    g.embedding(id)
-        .real_column()
-        .unwrap()
-        .iter()
-        .map(|x| x.to_bits())
-        .collect()
+    crate::column_bits(g, "position")
 }
 
 fn library2() -> RuleSet {

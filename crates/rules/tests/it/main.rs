@@ -28,3 +28,15 @@ mod readme;
 mod rule_files;
 mod shared_matches;
 mod sub_orbit_aggregates;
+
+/// Every value of the real embedding `name` of `g`, bit for bit (a column compared before
+/// and after, or between two maps).
+pub(crate) fn column_bits(g: &topomech_gmap::GMap, name: &str) -> Vec<u64> {
+    let id = g.require(name).unwrap();
+    g.embedding(id)
+        .real_column()
+        .unwrap()
+        .iter()
+        .map(|x| x.to_bits())
+        .collect()
+}

@@ -23,13 +23,7 @@ rule drift(dt: f64, g: vec3) {
 ";
 
 fn positions(g: &GMap) -> Vec<u64> {
-    let id = g.require("position").unwrap();
-    g.embedding(id)
-        .real_column()
-        .unwrap()
-        .iter()
-        .map(|x| x.to_bits())
-        .collect()
+    crate::column_bits(g, "position")
 }
 
 fn run(compiled: bool, threads: usize) -> Vec<u64> {
